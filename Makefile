@@ -1,0 +1,30 @@
+# One command each: `make demo` (sets up .venv and runs the main job) and `make test`.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+
+.PHONY: setup demo test bench clean
+
+$(STAMP): pyproject.toml
+	test -d $(VENV) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e ".[dev]"
+	touch $(STAMP)
+
+setup: $(STAMP)
+
+demo: $(STAMP)
+	$(PY) -m data_gen --out reports/demo-dataset-$$(date +%Y%m%d-%H%M%S) --count 20 --preset hard --seed 0 --workers 2
+	$(PY) benchmarks/datagen_accuracy.py
+	$(PY) benchmarks/datagen_speed.py --quick
+
+test: $(STAMP)
+	$(PY) -m pytest -q; rc=$$?; if [ $$rc -eq 5 ]; then echo "pytest: no tests collected"; exit 0; fi; exit $$rc
+
+bench: $(STAMP)
+	$(PY) benchmarks/datagen_accuracy.py
+	$(PY) benchmarks/datagen_speed.py
+
+clean:
+	rm -rf $(VENV) .pytest_cache reports

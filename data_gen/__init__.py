@@ -1,0 +1,43 @@
+"""data_gen: synthetic chessboards with exact ground truth (numpy + OpenCV, no TensorFlow).
+
+Quick use::
+
+    from data_gen import make_sample
+    s = make_sample("noisy", seed=0, index=3)   # s.image (H, W) uint8, s.label dict
+    s.corners, s.visible                        # (cols·rows, 2) px (x, y), (cols·rows,) bool
+
+Command line: ``python -m data_gen --out DIR --count N --preset NAME --seed S``.
+"""
+
+from .board import Board, sample_board
+from .camera import Camera, distort_normalized, sample_camera, undistort_normalized
+from .dataset import DatasetConfig, write_dataset
+from .degrade import DEGRADATIONS, apply_degradations
+from .pose import PoseConfig, project_points, sample_pose
+from .presets import PRESETS, Preset, Rule, get_preset
+from .render import render_board
+from .sample import Sample, make_sample, make_sequence
+
+__all__ = [
+    "Board",
+    "Camera",
+    "DEGRADATIONS",
+    "DatasetConfig",
+    "PRESETS",
+    "PoseConfig",
+    "Preset",
+    "Rule",
+    "Sample",
+    "apply_degradations",
+    "distort_normalized",
+    "get_preset",
+    "make_sample",
+    "make_sequence",
+    "project_points",
+    "render_board",
+    "sample_board",
+    "sample_camera",
+    "sample_pose",
+    "undistort_normalized",
+    "write_dataset",
+]

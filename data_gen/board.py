@@ -1,0 +1,148 @@
+"""A printed chessboard: pattern, square size, white margin and paper grey levels.
+
+Board frame: inner corner (c, r) is at (c·s, r·s, 0), s the square size (any unit, the same
+unit as the pose translation). Squares span X in [-s, cols·s] and Y in [-s, rows·s]; the paper
+adds a white margin m around them. The top-left square (the one touching inner corner (0, 0)
+from above-left) is black, as on OpenCV's sample board.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Board", "sample_board", "parse_pattern", "check_pattern"]
+
+MIN_PATTERN = (3, 3)
+MAX_PATTERN = (20, 15)
+
+
+def parse_pattern(text: str) -> tuple[int, int]:
+    """Parse ``"9x6"`` into ``(9, 6)`` = (cols, rows) of inner corners."""
+    parts = str(text).lower().replace("×", "x").split("x")
+    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+        raise ValueError(f"pattern must look like COLSxROWS, e.g. 9x6, got {text!r}")
+    return int(parts[0]), int(parts[1])
+
+
+def check_pattern(pattern_size) -> tuple[int, int]:
+    try:
+        cols, rows = (int(v) for v in pattern_size)
+    except (TypeError, ValueError):
+        raise ValueError(f"pattern_size must be (cols, rows), got {pattern_size!r}") from None
+    lo_c, lo_r = MIN_PATTERN
+    hi_c, hi_r = MAX_PATTERN
+    # Accept either orientation of the largest pattern (20x15 or 15x20).
+    if min(cols, rows) < min(lo_c, lo_r) or max(cols, rows) > max(hi_c, hi_r) or min(cols, rows) > min(hi_c, hi_r):
+        raise ValueError(
+            f"pattern_size must be between {lo_c}x{lo_r} and {hi_c}x{hi_r} inner corners, got {cols}x{rows}"
+        )
+    return cols, rows
+
+
+@dataclass(frozen=True)
+class Board:
+    """A chessboard target.
+
+    Attributes
+    ----------
+    pattern_size : (cols, rows) inner corners.
+    square_size : side of one square (board units, e.g. mm).
+    margin : white paper border around the outer squares, in squares (0.25 = a quarter square).
+    black, white : printed grey levels in [0, 1] (paper is never pure 0/1).
+    """
+
+    pattern_size: tuple[int, int]
+    square_size: float = 1.0
+    margin: float = 0.5
+    black: float = 0.1
+    white: float = 0.85
+
+    def __post_init__(self):
+        object.__setattr__(self, "pattern_size", check_pattern(self.pattern_size))
+        if not self.square_size > 0:
+            raise ValueError(f"square_size must be > 0, got {self.square_size}")
+        if self.margin < 0:
+            raise ValueError(f"margin must be >= 0, got {self.margin}")
+        if not (0.0 <= self.black < self.white <= 1.0):
+            raise ValueError(f"need 0 <= black < white <= 1, got black={self.black}, white={self.white}")
+
+    @property
+    def cols(self) -> int:
+        return self.pattern_size[0]
+
+    @property
+    def rows(self) -> int:
+        return self.pattern_size[1]
+
+    def object_points(self) -> np.ndarray:
+        """(cols·rows, 3) float64 inner-corner positions, OpenCV order (index = r·cols + c)."""
+        c, r = np.meshgrid(np.arange(self.cols), np.arange(self.rows))
+        pts = np.stack([c.ravel(), r.ravel(), np.zeros(c.size)], axis=1)
+        return pts.astype(np.float64) * self.square_size
+
+    def paper_bounds(self) -> tuple[float, float, float, float]:
+        """(x0, y0, x1, y1) of the paper in board units."""
+        s = self.square_size
+        m = self.margin * s
+        return (-s - m, -s - m, self.cols * s + m, self.rows * s + m)
+
+    def centre(self) -> np.ndarray:
+        """(3,) centre of the inner-corner grid, board units."""
+        s = self.square_size
+        return np.array([(self.cols - 1) * s / 2.0, (self.rows - 1) * s / 2.0, 0.0])
+
+    def classify(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+        """Class of board-plane points: 0 black square, 1 white (square or margin), 2 off the paper.
+
+        X, Y : (...) float arrays in board units (NaN = not on the plane). Returns (...) uint8.
+        """
+        s = self.square_size
+        x0, y0, x1, y1 = self.paper_bounds()
+        with np.errstate(invalid="ignore"):
+            on_paper = (X >= x0) & (X < x1) & (Y >= y0) & (Y < y1)
+            i = np.floor(X / s) + 1.0
+            j = np.floor(Y / s) + 1.0
+            in_squares = (i >= 0) & (i <= self.cols) & (j >= 0) & (j <= self.rows)
+            black = in_squares & (np.mod(i + j, 2.0) == 0.0)
+        out = np.full(np.shape(X), 2, dtype=np.uint8)
+        out[on_paper] = 1
+        out[on_paper & black] = 0
+        return out
+
+    def to_dict(self) -> dict:
+        return {
+            "pattern_size": list(self.pattern_size),
+            "square_size": self.square_size,
+            "margin": self.margin,
+            "black": self.black,
+            "white": self.white,
+        }
+
+
+def sample_board(
+    rng: np.random.Generator,
+    *,
+    pattern_size: tuple[int, int] | None = None,
+    cols_range: tuple[int, int] = (3, 20),
+    rows_range: tuple[int, int] = (3, 15),
+    margin_range: tuple[float, float] = (0.15, 1.0),
+    black_range: tuple[float, float] = (0.04, 0.22),
+    white_range: tuple[float, float] = (0.7, 0.95),
+    square_size: float = 25.0,
+) -> Board:
+    """Draw a board; ``pattern_size`` fixes (cols, rows), otherwise they are drawn from the ranges."""
+    if pattern_size is None:
+        cols = int(rng.integers(cols_range[0], cols_range[1] + 1))
+        rows = int(rng.integers(rows_range[0], rows_range[1] + 1))
+        if rows > cols:  # landscape boards are the common case, like the 20x15 maximum
+            cols, rows = rows, cols
+        pattern_size = (cols, rows)
+    return Board(
+        pattern_size=pattern_size,
+        square_size=square_size,
+        margin=float(rng.uniform(*margin_range)),
+        black=float(rng.uniform(*black_range)),
+        white=float(rng.uniform(*white_range)),
+    )

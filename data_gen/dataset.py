@@ -1,0 +1,133 @@
+"""Write a dataset to disk in the format of ``../shared/DESIGN.md``.
+
+Layout::
+
+    DIR/index.csv          file, label, condition, camera_id, seed, index, width, height
+    DIR/images/NNNNNN.png  8-bit grey
+    DIR/labels/NNNNNN.json
+    DIR/meta.json          generator version and full config
+
+The whole dataset is built in a temporary sibling folder and renamed into place at the end, so
+an interrupted run never leaves a half-written DIR. Output bytes depend only on the arguments,
+never on ``workers``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import multiprocessing as mp
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+from tqdm import tqdm
+
+from .presets import get_preset
+from .sample import GENERATOR_VERSION, make_sample
+
+__all__ = ["DatasetConfig", "write_dataset", "check_output_dir"]
+
+INDEX_COLUMNS = ("file", "label", "condition", "camera_id", "seed", "index", "width", "height")
+
+
+@dataclass(frozen=True)
+class DatasetConfig:
+    """Arguments of ``python -m data_gen``."""
+
+    out: Path
+    count: int
+    preset: str
+    seed: int = 0
+    size: tuple[int, int] | None = None
+    pattern: tuple[int, int] | None = None
+    workers: int = 1
+
+    def to_meta(self) -> dict:
+        return {
+            "generator": "data_gen",
+            "version": GENERATOR_VERSION,
+            "preset": self.preset,
+            "count": self.count,
+            "seed": self.seed,
+            "size": list(self.size) if self.size else None,
+            "pattern": list(self.pattern) if self.pattern else None,
+            "preset_config": get_preset(self.preset).to_dict(),
+        }
+
+
+def check_output_dir(out: Path) -> None:
+    """Raise ``ValueError`` unless ``out`` can be created (or is an empty folder) and is writable."""
+    out = Path(out)
+    if out.exists():
+        if not out.is_dir():
+            raise ValueError(f"--out {out}: exists and is not a folder")
+        if any(out.iterdir()):
+            raise ValueError(f"--out {out}: folder is not empty; choose a new folder")
+    parent = out.parent if str(out.parent) else Path(".")
+    while not parent.exists():
+        parent = parent.parent
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"--out {out}: cannot write in {parent}")
+
+
+def _json_bytes(obj) -> bytes:
+    return (json.dumps(obj, indent=1) + "\n").encode()
+
+
+def _render_one(job: tuple) -> list:
+    """Worker: render image ``index`` and write its PNG and JSON into the staging folder."""
+    stage, preset, seed, index, size, pattern = job
+    sample = make_sample(preset, seed, index, size=size, pattern=pattern)
+    name = f"{index:06d}"
+    ok, png = cv2.imencode(".png", sample.image, [cv2.IMWRITE_PNG_COMPRESSION, 3])
+    if not ok:
+        raise RuntimeError(f"PNG encoding failed for image {index}")
+    Path(stage, "images", name + ".png").write_bytes(png.tobytes())
+    Path(stage, "labels", name + ".json").write_bytes(_json_bytes(sample.label))
+    w, h = sample.label["image_size"]
+    return [f"images/{name}.png", f"labels/{name}.json", sample.label["condition"], sample.label["camera_id"], seed, index, w, h]
+
+
+def write_dataset(cfg: DatasetConfig, *, progress: bool = True) -> Path:
+    """Render ``cfg.count`` images into ``cfg.out``; returns the folder."""
+    out = Path(cfg.out)
+    check_output_dir(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+    try:
+        (stage / "images").mkdir()
+        (stage / "labels").mkdir()
+        jobs = [(str(stage), cfg.preset, cfg.seed, i, cfg.size, cfg.pattern) for i in range(cfg.count)]
+        bar = tqdm(total=cfg.count, desc=f"data_gen {cfg.preset}", unit="img", disable=not progress)
+        rows = []
+        if cfg.workers > 1 and cfg.count > 1:
+            with mp.get_context("spawn").Pool(cfg.workers) as pool:
+                for row in pool.imap(_render_one, jobs, chunksize=max(1, min(16, cfg.count // (4 * cfg.workers)))):
+                    rows.append(row)
+                    bar.update()
+        else:
+            for job in jobs:
+                rows.append(_render_one(job))
+                bar.update()
+        bar.close()
+        buf = io.StringIO()
+        writer = csv.writer(buf, lineterminator="\n")
+        writer.writerow(INDEX_COLUMNS)
+        writer.writerows(rows)
+        (stage / "index.csv").write_text(buf.getvalue())
+        (stage / "meta.json").write_bytes(_json_bytes(cfg.to_meta()))
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(stage, 0o777 & ~umask)  # mkdtemp makes it private; a dataset is a normal folder
+        if out.exists():
+            out.rmdir()  # checked empty above
+        os.rename(stage, out)
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    return out

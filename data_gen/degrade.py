@@ -1,0 +1,200 @@
+"""Image degradations that real cameras and scenes produce, each with a severity parameter.
+
+Every function takes a float32 (H, W) image in [0, 1] (values above 1 are allowed before the
+sensor clips) and returns a new float32 image. Random ones take an explicit
+``rng: np.random.Generator``. Units: grey levels on the 0–255 scale for noise, px for blur,
+fractions for shading. :data:`PIPELINE_ORDER` is the physical order in which
+:func:`apply_degradations` applies them: scene lighting, optics, sensor, encoding.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+__all__ = [
+    "gaussian_noise",
+    "shot_noise",
+    "gaussian_blur",
+    "motion_blur",
+    "defocus",
+    "contrast",
+    "illumination_gradient",
+    "vignetting",
+    "shadow",
+    "exposure",
+    "jpeg",
+    "salt_pepper",
+    "quantize",
+    "apply_degradations",
+    "DEGRADATIONS",
+    "PIPELINE_ORDER",
+]
+
+
+def illumination_gradient(img: np.ndarray, rng: np.random.Generator, *, strength: float) -> np.ndarray:
+    """Multiply by a linear ramp from ``1 - strength`` to 1 across the image, at a random angle."""
+    h, w = img.shape
+    angle = rng.uniform(0.0, 2.0 * math.pi)
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    proj = xx * math.cos(angle) + yy * math.sin(angle)
+    ramp = (proj - proj.min()) / max(float(np.ptp(proj)), 1e-6)
+    return img * (1.0 - strength * ramp).astype(np.float32)
+
+
+def vignetting(img: np.ndarray, rng: np.random.Generator, *, strength: float) -> np.ndarray:
+    """Radial fall-off: the image corners get ``1 - strength`` of the centre's light (cos⁴-like)."""
+    del rng
+    h, w = img.shape
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    r2 = ((xx - (w - 1) / 2.0) ** 2 + (yy - (h - 1) / 2.0) ** 2) / (((w - 1) / 2.0) ** 2 + ((h - 1) / 2.0) ** 2)
+    return img * (1.0 - strength * r2).astype(np.float32)
+
+
+def shadow(img: np.ndarray, rng: np.random.Generator, *, strength: float, softness: float = 1.0) -> np.ndarray:
+    """A hard-edged shadow: a random polygon whose light is reduced by ``strength``.
+
+    ``softness`` is the penumbra width (Gaussian σ, px).
+    """
+    h, w = img.shape
+    n = int(rng.integers(3, 7))
+    centre = rng.uniform([0.0, 0.0], [w, h])
+    radius = rng.uniform(0.3, 0.8) * max(w, h)
+    angles = np.sort(rng.uniform(0.0, 2.0 * math.pi, size=n))
+    radii = radius * rng.uniform(0.5, 1.0, size=n)
+    poly = np.stack([centre[0] + radii * np.cos(angles), centre[1] + radii * np.sin(angles)], axis=1)
+    mask = np.zeros((h, w), np.uint8)
+    cv2.fillPoly(mask, [np.round(poly * 16).astype(np.int32)], 255, lineType=cv2.LINE_AA, shift=4)
+    m = mask.astype(np.float32) / 255.0
+    if softness > 0:
+        m = cv2.GaussianBlur(m, (0, 0), softness)
+    return img * (1.0 - strength * m)
+
+
+def contrast(img: np.ndarray, rng: np.random.Generator, *, factor: float, mid: float = 0.5) -> np.ndarray:
+    """Compress intensities towards ``mid``: ``mid + factor·(img - mid)``; factor < 1 lowers contrast."""
+    del rng
+    return (mid + factor * (img - mid)).astype(np.float32)
+
+
+def exposure(img: np.ndarray, rng: np.random.Generator, *, gain: float) -> np.ndarray:
+    """Scale the light by ``gain``: > 1 over-exposes (clips at white), < 1 under-exposes."""
+    del rng
+    return (img * gain).astype(np.float32)
+
+
+def gaussian_blur(img: np.ndarray, rng: np.random.Generator, *, sigma: float) -> np.ndarray:
+    """Optical blur, Gaussian with standard deviation ``sigma`` px."""
+    del rng
+    if sigma <= 0:
+        return img.copy()
+    return cv2.GaussianBlur(img, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
+
+
+def motion_blur(img: np.ndarray, rng: np.random.Generator, *, length: float, angle: float | None = None) -> np.ndarray:
+    """Linear motion blur over ``length`` px at ``angle`` degrees (random if None)."""
+    if length <= 1:
+        return img.copy()
+    if angle is None:
+        angle = rng.uniform(0.0, 180.0)
+    size = int(math.ceil(length)) | 1
+    size += 2
+    kernel = np.zeros((size * 8, size * 8), np.uint8)
+    c = (size * 8 - 1) / 2.0
+    dx = math.cos(math.radians(angle)) * length * 4.0
+    dy = math.sin(math.radians(angle)) * length * 4.0
+    p0 = (round((c - dx) * 16), round((c - dy) * 16))
+    p1 = (round((c + dx) * 16), round((c + dy) * 16))
+    cv2.line(kernel, p0, p1, 255, thickness=8, lineType=cv2.LINE_AA, shift=4)
+    k = cv2.resize(kernel.astype(np.float32), (size, size), interpolation=cv2.INTER_AREA)
+    k /= k.sum()
+    return cv2.filter2D(img, -1, k, borderType=cv2.BORDER_REFLECT)
+
+
+def defocus(img: np.ndarray, rng: np.random.Generator, *, radius: float) -> np.ndarray:
+    """Defocus blur: convolution with an anti-aliased disk of ``radius`` px."""
+    del rng
+    if radius <= 0.5:
+        return img.copy()
+    size = 2 * int(math.ceil(radius)) + 1
+    ss = 8
+    big = np.zeros((size * ss, size * ss), np.uint8)
+    c = (size * ss - 1) / 2.0
+    cv2.circle(big, (round(c * 16), round(c * 16)), round(radius * ss * 16), 255, -1, cv2.LINE_AA, shift=4)
+    k = cv2.resize(big.astype(np.float32), (size, size), interpolation=cv2.INTER_AREA)
+    k /= k.sum()
+    return cv2.filter2D(img, -1, k, borderType=cv2.BORDER_REFLECT)
+
+
+def shot_noise(img: np.ndarray, rng: np.random.Generator, *, photons: float) -> np.ndarray:
+    """Poisson photon noise; ``photons`` is the count collected at white (1.0). Fewer = noisier."""
+    lam = np.clip(img, 0.0, None).astype(np.float64) * photons
+    return (rng.poisson(lam) / photons).astype(np.float32)
+
+
+def gaussian_noise(img: np.ndarray, rng: np.random.Generator, *, sigma: float) -> np.ndarray:
+    """Additive white Gaussian read noise with standard deviation ``sigma`` grey levels (0–255)."""
+    noise = rng.standard_normal(img.shape, dtype=np.float32) * np.float32(sigma / 255.0)
+    return img + noise
+
+
+def quantize(img: np.ndarray) -> np.ndarray:
+    """Clip to [0, 1] and round to uint8, like a sensor's ADC. Returns (H, W) uint8."""
+    return np.clip(np.rint(img * 255.0), 0, 255).astype(np.uint8)
+
+
+def jpeg(img: np.ndarray, rng: np.random.Generator, *, quality: int) -> np.ndarray:
+    """JPEG round trip at ``quality`` (1–100) on the 8-bit image."""
+    del rng
+    ok, buf = cv2.imencode(".jpg", quantize(img), [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    if not ok:
+        raise RuntimeError("JPEG encoding failed")
+    return cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE).astype(np.float32) / 255.0
+
+
+def salt_pepper(img: np.ndarray, rng: np.random.Generator, *, fraction: float) -> np.ndarray:
+    """Set ``fraction`` of the pixels to 0 or 1 (half each)."""
+    out = img.copy()
+    u = rng.random(img.shape)
+    out[u < fraction / 2.0] = 0.0
+    out[(u >= fraction / 2.0) & (u < fraction)] = 1.0
+    return out
+
+
+DEGRADATIONS = {
+    "illumination_gradient": illumination_gradient,
+    "vignetting": vignetting,
+    "shadow": shadow,
+    "contrast": contrast,
+    "exposure": exposure,
+    "defocus": defocus,
+    "gaussian_blur": gaussian_blur,
+    "motion_blur": motion_blur,
+    "shot_noise": shot_noise,
+    "gaussian_noise": gaussian_noise,
+    "jpeg": jpeg,
+    "salt_pepper": salt_pepper,
+}
+
+# Scene light, then lens, then sensor, then encoding and transmission.
+PIPELINE_ORDER = tuple(DEGRADATIONS)
+
+
+def apply_degradations(img: np.ndarray, steps: list[dict], rng: np.random.Generator) -> np.ndarray:
+    """Apply ``steps`` (each ``{"name": ..., **params}``) in :data:`PIPELINE_ORDER`, then quantize.
+
+    Returns (H, W) uint8. Unknown names raise ``ValueError``.
+    """
+    for step in steps:
+        if step["name"] not in DEGRADATIONS:
+            raise ValueError(f"unknown degradation {step['name']!r}; known: {', '.join(DEGRADATIONS)}")
+    ordered = sorted(steps, key=lambda s: PIPELINE_ORDER.index(s["name"]))
+    out = img.astype(np.float32, copy=True)
+    for step in ordered:
+        params = {k: v for k, v in step.items() if k != "name"}
+        if step["name"] in ("jpeg", "salt_pepper"):
+            out = quantize(out).astype(np.float32) / 255.0  # the sensor has clipped by now
+        out = DEGRADATIONS[step["name"]](out, rng, **params)
+    return quantize(out)

@@ -1,0 +1,149 @@
+"""Board poses like a person waving a printed board in front of a camera.
+
+A pose is ``(rvec, tvec)`` mapping board coordinates to camera coordinates (``T_cam_board``),
+as in ``cv2.projectPoints``. The camera looks along +z; x right, y down.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .board import Board
+from .camera import Camera
+
+__all__ = ["PoseConfig", "sample_pose", "project_points", "imaged_mask", "in_frame", "FRAMING"]
+
+FRAMING = ("inside", "partial", "any")
+
+
+@dataclass(frozen=True)
+class PoseConfig:
+    """How poses are drawn.
+
+    tilt_max_deg : largest angle between the board normal and the optical axis (degrees).
+    fill : range of the paper's apparent diagonal as a fraction of the image diagonal.
+    framing : "inside" (whole paper in frame), "partial" (some inner corners cut by the frame,
+        at least ``min_visible_fraction`` of them in frame) or "any".
+    max_view_angle_deg : largest angle between the board normal and any line of sight.
+    """
+
+    tilt_max_deg: float = 60.0
+    fill: tuple[float, float] = (0.25, 0.8)
+    framing: str = "inside"
+    min_visible_fraction: float = 0.3
+    max_view_angle_deg: float = 80.0
+    roll_deg: tuple[float, float] = (0.0, 360.0)
+
+    def __post_init__(self):
+        if self.framing not in FRAMING:
+            raise ValueError(f"framing must be one of {FRAMING}, got {self.framing!r}")
+
+
+def project_points(points: np.ndarray, rvec, tvec, camera: Camera) -> np.ndarray:
+    """(N, 3) board points -> (N, 2) float64 pixels via ``cv2.projectPoints``."""
+    pts, _ = cv2.projectPoints(
+        np.asarray(points, dtype=np.float64).reshape(-1, 1, 3),
+        np.asarray(rvec, dtype=np.float64).reshape(3, 1),
+        np.asarray(tvec, dtype=np.float64).reshape(3, 1),
+        camera.K,
+        camera.dist,
+    )
+    return pts.reshape(-1, 2)
+
+
+def _rotation(tilt: float, tilt_axis: float, roll: float) -> np.ndarray:
+    """Roll about the board normal, then tilt about an in-plane axis at angle ``tilt_axis``."""
+    r_roll, _ = cv2.Rodrigues(np.array([0.0, 0.0, roll]))
+    axis = np.array([math.cos(tilt_axis), math.sin(tilt_axis), 0.0])
+    r_tilt, _ = cv2.Rodrigues(axis * tilt)
+    return r_tilt @ r_roll
+
+
+def in_frame(uv: np.ndarray, size: tuple[int, int], border: float = 0.0) -> np.ndarray:
+    """(N,) bool: points (N, 2) px at least ``border`` px inside the image's outer edge.
+
+    The outer edge of a (w, h) image is x in [-0.5, w - 0.5], y in [-0.5, h - 0.5];
+    ``border=0.5`` keeps points within the hull of the pixel centres.
+    """
+    w, h = size
+    lo = -0.5 + border
+    with np.errstate(invalid="ignore"):
+        return (uv[:, 0] >= lo) & (uv[:, 0] <= w - 1 - lo) & (uv[:, 1] >= lo) & (uv[:, 1] <= h - 1 - lo)
+
+
+def imaged_mask(points_cam: np.ndarray, camera: Camera) -> np.ndarray:
+    """(N,) bool: points in front of the camera and inside the distortion model's monotonic domain."""
+    z = points_cam[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.hypot(points_cam[:, 0] / z, points_cam[:, 1] / z)
+    return (z > 0) & (r < camera.r_mono)
+
+
+def _acceptable(camera: Camera, board: Board, R: np.ndarray, t: np.ndarray, cfg: PoseConfig) -> bool:
+    x0, y0, x1, y1 = board.paper_bounds()
+    paper = np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0]], dtype=np.float64)
+    paper_cam = paper @ R.T + t
+    if np.any(paper_cam[:, 2] <= 0):
+        return False
+    # The camera must see the printed side, at a bounded grazing angle everywhere.
+    normal = R[:, 2]
+    cosang = (paper_cam @ normal) / np.linalg.norm(paper_cam, axis=1)
+    if np.any(cosang < math.cos(math.radians(cfg.max_view_angle_deg))):
+        return False
+    inner = board.object_points() @ R.T + t
+    imaged = imaged_mask(inner, camera)
+    rvec = cv2.Rodrigues(R)[0]
+    if cfg.framing == "inside":
+        if not np.all(imaged_mask(paper_cam, camera)):
+            return False
+        return bool(np.all(in_frame(project_points(paper, rvec, t, camera), camera.image_size)))
+    inside = imaged & in_frame(project_points(board.object_points(), rvec, t, camera), camera.image_size)
+    frac = inside.mean()
+    if cfg.framing == "partial":
+        return bool(cfg.min_visible_fraction <= frac < 1.0)
+    return bool(frac >= cfg.min_visible_fraction)
+
+
+def sample_pose(
+    rng: np.random.Generator, camera: Camera, board: Board, cfg: PoseConfig = PoseConfig(), *, max_tries: int = 400
+) -> tuple[np.ndarray, np.ndarray]:
+    """Draw ``(rvec, tvec)``, each (3,) float64, satisfying ``cfg``.
+
+    The board centre is aimed at a pixel drawn uniformly over the image (so boards reach the
+    image corners), its distance set by the apparent size ``cfg.fill``; then it is rolled
+    about its normal and tilted about a random in-plane axis by up to ``cfg.tilt_max_deg``.
+    """
+    w, h = camera.image_size
+    diag_px = math.hypot(w, h)
+    x0, y0, x1, y1 = board.paper_bounds()
+    paper_diag = math.hypot(x1 - x0, y1 - y0)
+    f = math.sqrt(camera.fx * camera.fy)
+    for attempt in range(max_tries):
+        fill = rng.uniform(*cfg.fill)
+        if cfg.framing == "inside":
+            fill *= max(0.4, 1.0 - attempt / max_tries)  # shrink if big boards keep failing
+        tilt = math.radians(cfg.tilt_max_deg) * math.sqrt(rng.uniform())  # favour larger tilts a bit
+        tilt_axis = rng.uniform(0.0, 2.0 * math.pi)
+        roll = math.radians(rng.uniform(*cfg.roll_deg))
+        R = _rotation(tilt, tilt_axis, roll)
+        if cfg.framing == "partial":
+            target = np.array([rng.uniform(-0.3, 1.3) * w, rng.uniform(-0.3, 1.3) * h])
+        else:
+            target = np.array([rng.uniform(0.0, w - 1.0), rng.uniform(0.0, h - 1.0)])
+        ray = camera.pixel_to_normalized(target)
+        if not np.all(np.isfinite(ray)):
+            continue
+        # Distance from the apparent size; distortion and tilt change it a little, which is fine.
+        z = f * paper_diag / (fill * diag_px)
+        centre_cam = z * np.array([ray[0], ray[1], 1.0])
+        t = centre_cam - R @ board.centre()
+        if _acceptable(camera, board, R, t, cfg):
+            return cv2.Rodrigues(R)[0].ravel(), t
+    raise RuntimeError(
+        f"no acceptable pose for a {board.cols}x{board.rows} board with framing={cfg.framing!r} "
+        f"after {max_tries} tries; widen PoseConfig.fill or tilt"
+    )

@@ -1,0 +1,199 @@
+"""Named scene recipes: which cameras, boards, poses, clutter and degradations to draw.
+
+A :class:`Preset` is a frozen description; :func:`data_gen.sample.make_sample` turns a preset,
+a seed and an image index into one image with its labels. Degradation rules name a function of
+:mod:`data_gen.degrade` and give each parameter as a fixed value or a ``(lo, hi)`` uniform range.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, replace
+
+from .pose import PoseConfig
+
+__all__ = ["Rule", "Preset", "PRESETS", "get_preset", "COMMON_SIZES"]
+
+COMMON_SIZES = ((640, 480), (800, 600), (1024, 768), (1280, 720), (1280, 960), (1920, 1080))
+INT_PARAMS = {"quality"}
+
+
+@dataclass(frozen=True)
+class Rule:
+    """Apply degradation ``name`` with probability ``p``; ``params`` maps name -> value | (lo, hi)."""
+
+    name: str
+    p: float = 1.0
+    params: tuple[tuple[str, object], ...] = ()
+
+    @staticmethod
+    def of(name: str, p: float = 1.0, **params) -> "Rule":
+        return Rule(name, p, tuple(sorted(params.items())))
+
+
+@dataclass(frozen=True)
+class Preset:
+    """A scene recipe. Ranges are ``(lo, hi)``, drawn uniformly."""
+
+    name: str
+    description: str
+    sizes: tuple[tuple[int, int], ...] = ((640, 480),)
+    hfov_deg: tuple[float, float] = (40.0, 90.0)
+    distortion: tuple[str, ...] = ("none", "mild")
+    pattern: tuple[int, int] | None = None
+    cols_range: tuple[int, int] = (3, 12)
+    rows_range: tuple[int, int] = (3, 9)
+    pose: PoseConfig = field(default_factory=PoseConfig)
+    partial_probability: float = 0.0
+    board_probability: float = 1.0
+    clutter: tuple[float, float] = (0.0, 1.0)
+    checker_distractors: tuple[float, float] = (0.0, 0.0)
+    occlusion_probability: float = 0.0
+    occlusion_severity: tuple[float, float] = (0.1, 0.3)
+    rules: tuple[Rule, ...] = ()
+    views_per_camera: int = 1
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+_OPTICS = Rule.of("gaussian_blur", sigma=0.6)  # every real lens blurs a little
+
+PRESETS: dict[str, Preset] = {}
+
+
+def _add(p: Preset) -> None:
+    PRESETS[p.name] = p
+
+
+_add(Preset(
+    name="clean",
+    description="Sharp, well-lit boards fully in frame; only the mild blur of a real lens (σ=0.6 px).",
+    pose=PoseConfig(tilt_max_deg=45.0, fill=(0.3, 0.8)),
+    clutter=(0.0, 0.5),
+    rules=(_OPTICS,),
+))
+_add(Preset(
+    name="noisy",
+    description="Sensor noise: Gaussian σ 5–40 grey levels, often with photon shot noise.",
+    pose=PoseConfig(tilt_max_deg=45.0, fill=(0.3, 0.8)),
+    rules=(_OPTICS, Rule.of("shot_noise", 0.5, photons=(100.0, 2000.0)), Rule.of("gaussian_noise", sigma=(5.0, 40.0))),
+))
+_add(Preset(
+    name="blur",
+    description="Optical blur σ 0.6–3.5 px, with motion blur and defocus.",
+    pose=PoseConfig(tilt_max_deg=45.0, fill=(0.3, 0.8)),
+    rules=(
+        Rule.of("gaussian_blur", sigma=(0.6, 3.5)),
+        Rule.of("motion_blur", 0.35, length=(3.0, 12.0)),
+        Rule.of("defocus", 0.35, radius=(1.5, 4.0)),
+        Rule.of("gaussian_noise", sigma=2.0),
+    ),
+))
+_add(Preset(
+    name="distorted",
+    description="Wide-angle lenses (HFOV 70–120°) with strong barrel (k1 to -0.45) or pincushion distortion.",
+    hfov_deg=(70.0, 120.0),
+    distortion=("strong", "strong", "pincushion"),
+    pose=PoseConfig(tilt_max_deg=60.0, fill=(0.3, 0.9)),
+    rules=(_OPTICS, Rule.of("gaussian_noise", sigma=2.0)),
+))
+_add(Preset(
+    name="occluded",
+    description="Objects in front of the board hide some corners (flagged invisible).",
+    pose=PoseConfig(tilt_max_deg=45.0, fill=(0.35, 0.8)),
+    occlusion_probability=1.0,
+    occlusion_severity=(0.08, 0.3),
+    rules=(_OPTICS, Rule.of("gaussian_noise", sigma=2.0)),
+))
+_add(Preset(
+    name="partial",
+    description="Boards partly out of frame: some inner corners fall outside the image.",
+    pose=PoseConfig(tilt_max_deg=45.0, fill=(0.4, 1.0), framing="partial"),
+    partial_probability=1.0,
+    rules=(_OPTICS, Rule.of("gaussian_noise", sigma=2.0)),
+))
+_add(Preset(
+    name="clutter",
+    description="Board-free images: clutter, text and checker-like patches that are not a board.",
+    board_probability=0.0,
+    clutter=(1.0, 4.0),
+    checker_distractors=(1.0, 4.0),
+    rules=(_OPTICS, Rule.of("gaussian_noise", 0.5, sigma=(2.0, 20.0))),
+))
+
+_HARD_RULES = (
+    Rule.of("illumination_gradient", 0.4, strength=(0.2, 0.7)),
+    Rule.of("vignetting", 0.3, strength=(0.2, 0.6)),
+    Rule.of("shadow", 0.3, strength=(0.3, 0.7), softness=(0.5, 3.0)),
+    Rule.of("contrast", 0.3, factor=(0.2, 0.6)),
+    Rule.of("exposure", 0.3, gain=(0.3, 2.2)),
+    Rule.of("gaussian_blur", sigma=(0.6, 3.0)),
+    Rule.of("motion_blur", 0.2, length=(3.0, 10.0)),
+    Rule.of("defocus", 0.2, radius=(1.5, 3.5)),
+    Rule.of("shot_noise", 0.4, photons=(50.0, 1000.0)),
+    Rule.of("gaussian_noise", sigma=(5.0, 50.0)),
+    Rule.of("jpeg", 0.4, quality=(8, 60)),
+    Rule.of("salt_pepper", 0.25, fraction=(0.005, 0.06)),
+)
+_add(Preset(
+    name="hard",
+    description="Everything at once: wide lenses, steep tilt, clutter, occlusion, partial views, heavy degradations.",
+    sizes=COMMON_SIZES,
+    hfov_deg=(40.0, 120.0),
+    distortion=("none", "mild", "strong", "pincushion"),
+    pose=PoseConfig(tilt_max_deg=60.0, fill=(0.2, 0.9)),
+    partial_probability=0.25,
+    clutter=(1.0, 4.0),
+    checker_distractors=(0.5, 3.0),
+    occlusion_probability=0.3,
+    rules=_HARD_RULES,
+))
+_add(Preset(
+    name="train",
+    description="A broad mix for training the corner CNN: clean to hard, all patterns, lenses and degradations.",
+    hfov_deg=(40.0, 120.0),
+    distortion=("none", "mild", "mild", "strong", "pincushion"),
+    cols_range=(3, 20),
+    rows_range=(3, 15),
+    pose=PoseConfig(tilt_max_deg=60.0, fill=(0.2, 0.95)),
+    partial_probability=0.25,
+    clutter=(0.0, 4.0),
+    checker_distractors=(0.0, 3.0),
+    occlusion_probability=0.2,
+    rules=(
+        Rule.of("illumination_gradient", 0.25, strength=(0.1, 0.7)),
+        Rule.of("vignetting", 0.2, strength=(0.1, 0.6)),
+        Rule.of("shadow", 0.15, strength=(0.2, 0.7), softness=(0.5, 3.0)),
+        Rule.of("contrast", 0.2, factor=(0.15, 0.8)),
+        Rule.of("exposure", 0.2, gain=(0.3, 2.2)),
+        Rule.of("gaussian_blur", sigma=(0.4, 3.0)),
+        Rule.of("motion_blur", 0.15, length=(2.0, 10.0)),
+        Rule.of("defocus", 0.15, radius=(1.0, 3.5)),
+        Rule.of("shot_noise", 0.3, photons=(50.0, 2000.0)),
+        Rule.of("gaussian_noise", 0.8, sigma=(1.0, 50.0)),
+        Rule.of("jpeg", 0.25, quality=(8, 80)),
+        Rule.of("salt_pepper", 0.15, fraction=(0.002, 0.06)),
+    ),
+))
+_add(Preset(
+    name="calib",
+    description="Calibration sequences: 20 views per camera (mild or strong barrel), noise σ=10.",
+    hfov_deg=(50.0, 110.0),
+    distortion=("mild", "strong"),
+    pattern=(9, 6),
+    pose=PoseConfig(tilt_max_deg=50.0, fill=(0.3, 0.8)),
+    rules=(_OPTICS, Rule.of("gaussian_noise", sigma=10.0)),
+    views_per_camera=20,
+))
+
+
+def get_preset(name: str | Preset, **overrides) -> Preset:
+    """Look up a preset by name (or pass one through), optionally with fields replaced."""
+    if isinstance(name, Preset):
+        preset = name
+    else:
+        try:
+            preset = PRESETS[name]
+        except KeyError:
+            raise ValueError(f"unknown preset {name!r}; choose from: {', '.join(PRESETS)}") from None
+    return replace(preset, **overrides) if overrides else preset

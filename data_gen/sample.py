@@ -1,0 +1,172 @@
+"""One image with exact labels, made in memory from (preset, seed, index).
+
+Seeding: image ``index`` belongs to camera ``index // views_per_camera``. The camera, the
+board and (unless fixed) the image size come from ``default_rng([seed, camera_id, 0])``; the
+pose, background, occluders and degradations from ``default_rng([seed, index, 1])``. So every
+image depends only on (preset, seed, index, size, pattern): the same on any worker.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .background import make_background
+from .board import Board, sample_board
+from .camera import Camera, sample_camera
+from .degrade import apply_degradations
+from .occlude import draw_occluders, occluded, sample_occluders
+from .pose import PoseConfig, imaged_mask, in_frame, project_points, sample_pose
+from .presets import INT_PARAMS, Preset, Rule, get_preset
+from .render import render_board
+
+__all__ = ["Sample", "make_sample", "make_sequence", "draw_steps", "scene_for"]
+
+GENERATOR_VERSION = "1.0"
+
+
+@dataclass(frozen=True)
+class Sample:
+    """A rendered image and its labels.
+
+    image : (H, W) uint8 grey.
+    label : dict in the dataset's label format (see ``../shared/DESIGN.md``), JSON-ready.
+    """
+
+    image: np.ndarray
+    label: dict
+
+    @property
+    def corners(self) -> np.ndarray:
+        """(cols·rows, 2) float64 (x, y) px, OpenCV order; empty when there is no board."""
+        return np.asarray(self.label["corners"], dtype=np.float64).reshape(-1, 2)
+
+    @property
+    def visible(self) -> np.ndarray:
+        """(cols·rows,) bool."""
+        return np.asarray(self.label["visible"], dtype=bool)
+
+
+def _draw(rng: np.random.Generator, value):
+    if isinstance(value, (tuple, list)) and len(value) == 2:
+        return float(rng.uniform(value[0], value[1]))
+    return value
+
+
+def draw_steps(rules: tuple[Rule, ...], rng: np.random.Generator) -> list[dict]:
+    """Decide which degradations apply and draw their parameters: ``[{"name": ..., **params}]``."""
+    steps = []
+    for rule in rules:
+        if rng.random() < rule.p:
+            step = {"name": rule.name}
+            for key, value in rule.params:
+                v = _draw(rng, value)
+                step[key] = int(round(v)) if key in INT_PARAMS else v
+            steps.append(step)
+    return steps
+
+
+def scene_for(preset: Preset, seed: int, camera_id: int, size=None, pattern=None) -> tuple[Camera, Board]:
+    """The camera and board shared by all views of ``camera_id``."""
+    rng = np.random.default_rng([seed, camera_id, 0])
+    if size is None:
+        size = preset.sizes[int(rng.integers(len(preset.sizes)))]
+    cam = sample_camera(rng, size, hfov_deg=preset.hfov_deg, distortion=preset.distortion)
+    board = sample_board(
+        rng,
+        pattern_size=pattern or preset.pattern,
+        cols_range=preset.cols_range,
+        rows_range=preset.rows_range,
+    )
+    return cam, board
+
+
+def make_sample(
+    preset: str | Preset,
+    seed: int,
+    index: int = 0,
+    *,
+    size: tuple[int, int] | None = None,
+    pattern: tuple[int, int] | None = None,
+) -> Sample:
+    """Render image ``index`` of the dataset (preset, seed).
+
+    size : (width, height) to force; default: the preset's sizes.
+    pattern : (cols, rows) inner corners to force; default: the preset's.
+    """
+    p = get_preset(preset)
+    if index < 0 or seed < 0:
+        raise ValueError(f"seed and index must be >= 0, got seed={seed}, index={index}")
+    camera_id = index // p.views_per_camera
+    cam, board = scene_for(p, seed, camera_id, size, pattern)
+    rng = np.random.default_rng([seed, index, 1])
+    w, h = cam.image_size
+
+    has_board = bool(rng.random() < p.board_probability)
+    background = make_background(
+        rng, (w, h), clutter=_draw(rng, p.clutter), checker_distractors=_draw(rng, p.checker_distractors)
+    )
+    label = {
+        "image_size": [w, h],
+        "pattern_size": list(board.pattern_size),
+        "square_size": board.square_size,
+        "K": cam.K.tolist(),
+        "dist": cam.dist.tolist(),
+        "rvec": None,
+        "tvec": None,
+        "corners": [],
+        "visible": [],
+        "condition": p.name,
+        "camera_id": camera_id,
+        "seed": seed,
+        "index": index,
+        "has_board": has_board,
+        "board": board.to_dict(),
+        "framing": None,
+        "occluders": [],
+    }
+    img = background
+    if has_board:
+        framing = "partial" if rng.random() < p.partial_probability else p.pose.framing
+        pose_cfg = PoseConfig(**{**p.pose.__dict__, "framing": framing})
+        rvec, tvec = sample_pose(rng, cam, board, pose_cfg)
+        img = render_board(cam, board, rvec, tvec, background)
+        obj = board.object_points()
+        corners = project_points(obj, rvec, tvec, cam)
+        R = cv2.Rodrigues(rvec.reshape(3, 1))[0]
+        visible = imaged_mask(obj @ R.T + tvec, cam) & in_frame(corners, (w, h), border=0.5)
+        polys: list[np.ndarray] = []
+        if rng.random() < p.occlusion_probability and visible.any():
+            polys = sample_occluders(
+                rng, corners[visible], severity=_draw(rng, p.occlusion_severity), count=int(rng.integers(1, 3))
+            )
+            img = draw_occluders(img, polys, rng)
+            visible &= ~occluded(corners, polys)
+        label.update(
+            rvec=rvec.tolist(),
+            tvec=tvec.tolist(),
+            corners=corners.tolist(),
+            visible=visible.tolist(),
+            framing=framing,
+            occluders=[poly.tolist() for poly in polys],
+        )
+    steps = draw_steps(p.rules, rng)
+    image = apply_degradations(img, steps, rng)
+    label["degradations"] = steps
+    return Sample(image=image, label=label)
+
+
+def make_sequence(
+    preset: str | Preset = "calib",
+    seed: int = 0,
+    camera_id: int = 0,
+    *,
+    size: tuple[int, int] | None = None,
+    pattern: tuple[int, int] | None = None,
+) -> list[Sample]:
+    """All ``views_per_camera`` views of one camera: a calibration sequence sharing ``camera_id``."""
+    p = get_preset(preset)
+    n = p.views_per_camera
+    return [make_sample(p, seed, camera_id * n + v, size=size, pattern=pattern) for v in range(n)]
