@@ -220,9 +220,10 @@ def _sample_distortion(rng: np.random.Generator, level: str) -> np.ndarray:
         k3 = 0.0
     elif level == "strong":
         k1 = rng.uniform(-0.45, -0.25)
-        # k2 >= 0.45·k1² keeps 1 + 3k1·u + 5k2·u² > 0 for all u, i.e. a monotonic map everywhere.
-        k2 = rng.uniform(0.47, 0.8) * k1 * k1
-        k3 = rng.uniform(-0.004, 0.0)
+        # k2 > 0.45·k1² keeps 1 + 3k1·u + 5k2·u² > 0 for all u (a monotonic radial map); the
+        # margin to 0.55 leaves room for a small negative k3, as real wide-angle fits have.
+        k2 = rng.uniform(0.55, 0.9) * k1 * k1
+        k3 = rng.uniform(-0.002, 0.0)
     elif level == "pincushion":
         k1 = rng.uniform(0.05, 0.25)
         k2 = rng.uniform(-0.02, 0.05)

@@ -71,7 +71,7 @@ def check_output_dir(out: Path) -> None:
     parent = out.parent if str(out.parent) else Path(".")
     while not parent.exists():
         parent = parent.parent
-    if not os.access(parent, os.W_OK | os.X_OK):
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
         raise ValueError(f"--out {out}: cannot write in {parent}")
 
 

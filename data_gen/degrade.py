@@ -62,7 +62,7 @@ def shadow(img: np.ndarray, rng: np.random.Generator, *, strength: float, softne
     n = int(rng.integers(3, 7))
     centre = rng.uniform([0.0, 0.0], [w, h])
     radius = rng.uniform(0.3, 0.8) * max(w, h)
-    angles = np.sort(rng.uniform(0.0, 2.0 * math.pi, size=n))
+    angles = (np.arange(n) + rng.uniform(0.0, 1.0, size=n)) * (2.0 * math.pi / n)  # encloses the centre
     radii = radius * rng.uniform(0.5, 1.0, size=n)
     poly = np.stack([centre[0] + radii * np.cos(angles), centre[1] + radii * np.sin(angles)], axis=1)
     mask = np.zeros((h, w), np.uint8)

@@ -36,7 +36,7 @@ def sample_occluders(
         radius = severity * diag * rng.uniform(0.7, 1.3)
         if rng.random() < 0.5:  # blob: star-convex polygon
             n = int(rng.integers(5, 11))
-            a = np.sort(rng.uniform(0.0, 2.0 * math.pi, size=n))
+            a = (np.arange(n) + rng.uniform(0.0, 1.0, size=n)) * (2.0 * math.pi / n)  # encloses the centre
             r = radius * rng.uniform(0.5, 1.0, size=n)
             poly = np.stack([centre[0] + r * np.cos(a), centre[1] + r * np.sin(a)], axis=1)
         else:  # bar: a long rotated rectangle, like an arm or a ruler across the board
