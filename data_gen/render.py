@@ -39,23 +39,53 @@ def fibonacci_lattice(n: int = 89) -> np.ndarray:
     return np.stack([s, t], axis=1)
 
 
-@functools.lru_cache(maxsize=4)
-def _corner_rays(camera_key: tuple) -> np.ndarray:
-    """Undistorted normalized rays at every pixel corner, (H+1, W+1, 2) float64 (NaN = not imaged)."""
-    K = np.array(camera_key[0]).reshape(3, 3)
-    dist = np.array(camera_key[1])
-    w, h = camera_key[2]
-    cam = Camera(K, dist, (w, h))
-    us = np.arange(w + 1, dtype=np.float64) - 0.5
-    vs = np.arange(h + 1, dtype=np.float64) - 0.5
+def _corner_rays(camera: Camera, box: tuple[int, int, int, int]) -> np.ndarray:
+    """Undistorted rays at the pixel corners of ``box`` = (x0, y0, x1, y1), pixels x0..x1-1.
+
+    Returns (y1-y0+1, x1-x0+1, 2) float64, NaN where not imaged.
+    """
+    x0, y0, x1, y1 = box
+    uu, vv = np.meshgrid(np.arange(x0, x1 + 1) - 0.5, np.arange(y0, y1 + 1) - 0.5)
+    return camera.pixel_to_normalized(np.stack([uu, vv], axis=-1))
+
+
+def _corner_span(a: np.ndarray) -> np.ndarray:
+    """(H+1, W+1) values at pixel corners -> (H, W) bool: do a pixel's four corners differ?"""
+    q = (a[:-1, :-1], a[:-1, 1:], a[1:, :-1], a[1:, 1:])
+    return np.maximum.reduce(q) != np.minimum.reduce(q)
+
+
+def _active_box(camera: Camera, board: Board, rvec, tvec, step: int = 16):
+    """Pixel box (x0, y0, x1, y1) that holds all of the paper, or None if none of it is imaged.
+
+    A coarse grid of pixel corners (every ``step`` px) is mapped to the board; a coarse cell is
+    kept when its board-space bounding box, padded by a quarter of its size for curvature,
+    meets the paper, or when the plane or the lens model ends inside it.
+    """
+    w, h = camera.image_size
+    us = np.append(np.arange(0, w, step), w) - 0.5
+    vs = np.append(np.arange(0, h, step), h) - 0.5
     uu, vv = np.meshgrid(us, vs)
-    rays = cam.pixel_to_normalized(np.stack([uu, vv], axis=-1))
-    rays.setflags(write=False)
-    return rays
-
-
-def _camera_key(camera: Camera) -> tuple:
-    return (tuple(camera.K.ravel().tolist()), tuple(camera.dist.tolist()), tuple(camera.image_size))
+    X, Y = board_coordinates(camera.pixel_to_normalized(np.stack([uu, vv], axis=-1)), rvec, tvec)
+    qx = np.stack([X[:-1, :-1], X[:-1, 1:], X[1:, :-1], X[1:, 1:]])
+    qy = np.stack([Y[:-1, :-1], Y[:-1, 1:], Y[1:, :-1], Y[1:, 1:]])
+    nan = np.isnan(qx) | np.isnan(qy)
+    all_nan = nan.all(axis=0)
+    lo_x, hi_x = np.where(nan, np.inf, qx).min(0), np.where(nan, -np.inf, qx).max(0)
+    lo_y, hi_y = np.where(nan, np.inf, qy).min(0), np.where(nan, -np.inf, qy).max(0)
+    with np.errstate(invalid="ignore"):
+        pad_x, pad_y = 0.25 * (hi_x - lo_x), 0.25 * (hi_y - lo_y)
+        px0, py0, px1, py1 = board.paper_bounds()
+        hit = (hi_x + pad_x >= px0) & (lo_x - pad_x <= px1) & (hi_y + pad_y >= py0) & (lo_y - pad_y <= py1)
+    active = (hit & ~all_nan) | (nan.any(axis=0) & ~all_nan)
+    if not active.any():
+        return None
+    rows, cols = np.nonzero(active)
+    x0 = max(int(us[cols.min()] + 0.5) - 2, 0)
+    x1 = min(int(us[cols.max() + 1] + 0.5) + 2, w)
+    y0 = max(int(vs[rows.min()] + 0.5) - 2, 0)
+    y1 = min(int(vs[rows.max() + 1] + 0.5) + 2, h)
+    return x0, y0, x1, y1
 
 
 def board_coordinates(rays: np.ndarray, rvec, tvec) -> tuple[np.ndarray, np.ndarray]:
@@ -100,34 +130,30 @@ def render_board(
     w, h = camera.image_size
     if background.shape != (h, w):
         raise ValueError(f"background must be (H, W) = {(h, w)}, got {background.shape}")
-    rays = _corner_rays(_camera_key(camera))
+    out = background.astype(np.float32, copy=True)
+    box = _active_box(camera, board, rvec, tvec)
+    if box is None:
+        return out
+    bx0, by0, bx1, by1 = box
+    crop = out[by0:by1, bx0:bx1]  # a view: writes land in ``out``
+    bg = background[by0:by1, bx0:bx1]
+    rays = _corner_rays(camera, box)
     X, Y = board_coordinates(rays, rvec, tvec)
-    cls = board.classify(X, Y)  # (H+1, W+1)
-    levels = np.array([board.black, board.white], dtype=np.float32)
-
-    c00, c10, c01, c11 = cls[:-1, :-1], cls[:-1, 1:], cls[1:, :-1], cls[1:, 1:]
-    uniform = (c00 == c10) & (c00 == c01) & (c00 == c11)
+    cls = board.classify(X, Y)  # (h+1, w+1) at the box's pixel corners
+    c00 = cls[:-1, :-1]
+    uniform = ~_corner_span(cls)
 
     # Near an X-junction two edges meet; a thin wedge can hide between pixel corners, so
     # supersample a 1-px ring around every pixel whose corners span two square indices both ways.
     s = board.square_size
     with np.errstate(invalid="ignore"):
-        gi = np.floor(X / s)
-        gj = np.floor(Y / s)
-    gi = np.nan_to_num(gi, nan=-1e9)
-    gj = np.nan_to_num(gj, nan=-1e9)
-    span_i = np.maximum.reduce([gi[:-1, :-1], gi[:-1, 1:], gi[1:, :-1], gi[1:, 1:]]) != np.minimum.reduce(
-        [gi[:-1, :-1], gi[:-1, 1:], gi[1:, :-1], gi[1:, 1:]]
-    )
-    span_j = np.maximum.reduce([gj[:-1, :-1], gj[:-1, 1:], gj[1:, :-1], gj[1:, 1:]]) != np.minimum.reduce(
-        [gj[:-1, :-1], gj[:-1, 1:], gj[1:, :-1], gj[1:, 1:]]
-    )
-    junction = (span_i & span_j & (c00 != 2)).astype(np.uint8)
+        gi = np.nan_to_num(np.floor(X / s), nan=-1e9)
+        gj = np.nan_to_num(np.floor(Y / s), nan=-1e9)
+    junction = (_corner_span(gi) & _corner_span(gj) & (c00 != 2)).astype(np.uint8)
     mixed = ~uniform | cv2.dilate(junction, np.ones((3, 3), np.uint8)).astype(bool)
 
-    out = background.astype(np.float32, copy=True)
     on_paper = uniform & (c00 != 2)
-    out[on_paper] = levels[c00[on_paper]]
+    crop[on_paper] = np.array([board.black, board.white], dtype=np.float32)[c00[on_paper]]
 
     rows, cols = np.nonzero(mixed)
     if rows.size:
@@ -147,13 +173,12 @@ def render_board(
             + t_off[..., None] * b[:, None, :]
             + (s_off * t_off)[..., None] * c[:, None, :]
         )  # (E, n, 2)
-        sX, sY = board_coordinates(sub, rvec, tvec)
-        scls = board.classify(sX, sY)  # (E, n)
+        scls = board.classify(*board_coordinates(sub, rvec, tvec))  # (E, n)
         n = float(samples)
         frac_black = (scls == 0).sum(axis=1) / n
         frac_white = (scls == 1).sum(axis=1) / n
         frac_off = 1.0 - frac_black - frac_white
-        out[rows, cols] = (
-            frac_black * board.black + frac_white * board.white + frac_off * background[rows, cols]
-        ).astype(np.float32)
+        crop[rows, cols] = (frac_black * board.black + frac_white * board.white + frac_off * bg[rows, cols]).astype(
+            np.float32
+        )
     return out
