@@ -5,6 +5,7 @@ import json
 import cv2
 import numpy as np
 
+from aicalib_tf.baselines import opencv_classic
 from aicalib_tf.metrics import align_to_truth, corner_error_stats
 from data_gen import make_sample, make_sequence
 from data_gen.dataset import DatasetConfig, write_dataset
@@ -14,13 +15,11 @@ def test_opencv_corners_agree_with_ground_truth_on_clean_renders():
     # The reference pipeline of ../shared/data/README.md: findChessboardCorners, then
     # cornerSubPix with a 5 px half-window. Clean renders carry the lens blur σ = 0.6 px.
     errs = []
-    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
     for i in range(14):
         s = make_sample("clean", 0, i, pattern=(9, 6))
-        ok, c = cv2.findChessboardCorners(s.image, (9, 6))
+        ok, c = opencv_classic(s.image, (9, 6), half_window=5)
         if not ok:
             continue
-        c = cv2.cornerSubPix(s.image, c, (5, 5), (-1, -1), crit).reshape(-1, 2)
         errs.append(np.linalg.norm(align_to_truth(c, s.corners, (9, 6)) - s.corners, axis=1))
     st = corner_error_stats(np.concatenate(errs))
     assert st["count"] >= 500
