@@ -51,3 +51,10 @@ def test_steep_tilts_are_reached():
         R = cv2.Rodrigues(np.array(lab["rvec"]))[0]
         tilts.append(np.degrees(np.arccos(R[2, 2])))
     assert max(tilts) > 45 and max(tilts) <= 60.01
+
+
+@pytest.mark.parametrize("pattern, size", [((3, 3), (64, 48)), ((20, 15), (640, 480)), ((15, 20), (1920, 1080))])
+def test_extreme_patterns_and_sizes(pattern, size):
+    s = make_sample("clean", 0, 0, size=size, pattern=pattern)
+    assert s.image.shape == (size[1], size[0])
+    assert s.corners.shape == (pattern[0] * pattern[1], 2) and s.visible.all()
