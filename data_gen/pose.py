@@ -101,7 +101,8 @@ def _acceptable(camera: Camera, board: Board, R: np.ndarray, t: np.ndarray, cfg:
         if not np.all(imaged_mask(paper_cam, camera)):
             return False
         return bool(np.all(in_frame(project_points(paper, rvec, t, camera), camera.image_size)))
-    inside = imaged & in_frame(project_points(board.object_points(), rvec, t, camera), camera.image_size)
+    # The same test as the labels' visible flags: within the hull of the pixel centres.
+    inside = imaged & in_frame(project_points(board.object_points(), rvec, t, camera), camera.image_size, border=0.5)
     frac = inside.mean()
     if cfg.framing == "partial":
         return bool(cfg.min_visible_fraction <= frac < 1.0)
@@ -118,14 +119,16 @@ def sample_pose(
     about its normal and tilted about a random in-plane axis by up to ``cfg.tilt_max_deg``.
     """
     w, h = camera.image_size
-    diag_px = math.hypot(w, h)
+    # Apparent size is relative to the diagonal of a square of the image's area, so that very
+    # elongated images (2000x200) do not ask for boards that cannot fit.
+    diag_px = math.sqrt(2.0 * w * h)
     x0, y0, x1, y1 = board.paper_bounds()
     paper_diag = math.hypot(x1 - x0, y1 - y0)
     f = math.sqrt(camera.fx * camera.fy)
     for attempt in range(max_tries):
         fill = rng.uniform(*cfg.fill)
         if cfg.framing == "inside":
-            fill *= max(0.4, 1.0 - attempt / max_tries)  # shrink if big boards keep failing
+            fill *= max(0.1, 1.0 - attempt / max_tries)  # shrink if big boards keep failing
         tilt = math.radians(cfg.tilt_max_deg) * math.sqrt(rng.uniform())  # favour larger tilts a bit
         tilt_axis = rng.uniform(0.0, 2.0 * math.pi)
         roll = math.radians(rng.uniform(*cfg.roll_deg))

@@ -83,6 +83,22 @@ def scene_for(preset: Preset, seed: int, camera_id: int, size=None, pattern=None
     return cam, board
 
 
+def _occluders_leaving_corners(rng, corners, visible, p: Preset, tries: int = 10) -> list[np.ndarray]:
+    """Occluders that hide some corners but leave at least a quarter of the visible ones.
+
+    A board hidden entirely is a board-free image, which is the ``clutter`` preset's job.
+    Returns [] if ``tries`` draws all hide too much.
+    """
+    for _ in range(tries):
+        polys = sample_occluders(
+            rng, corners[visible], severity=_draw(rng, p.occlusion_severity), count=int(rng.integers(1, 3))
+        )
+        left = visible & ~occluded(corners, polys)
+        if left.sum() >= max(1, 0.25 * visible.sum()):
+            return polys
+    return []
+
+
 def make_sample(
     preset: str | Preset,
     seed: int,
@@ -139,9 +155,7 @@ def make_sample(
         visible = imaged_mask(obj @ R.T + tvec, cam) & in_frame(corners, (w, h), border=0.5)
         polys: list[np.ndarray] = []
         if rng.random() < p.occlusion_probability and visible.any():
-            polys = sample_occluders(
-                rng, corners[visible], severity=_draw(rng, p.occlusion_severity), count=int(rng.integers(1, 3))
-            )
+            polys = _occluders_leaving_corners(rng, corners, visible, p)
             img = draw_occluders(img, polys, rng)
             visible &= ~occluded(corners, polys)
         label.update(

@@ -61,7 +61,8 @@ def test_sampled_cameras_are_realistic_and_monotonic(level, hfov):
             cam = sample_camera(rng, size, hfov_deg=hfov, distortion=level)
             assert cam.image_size == size
             assert 39.5 <= cam.horizontal_fov_deg() <= 120.5
-            corners = cam.pixel_to_normalized(np.array([[-0.5, -0.5], [size[0] - 0.5, size[1] - 0.5]]))
+            w, h = size
+            corners = cam.pixel_to_normalized(np.array([[-0.5, -0.5], [w - 0.5, -0.5], [-0.5, h - 0.5], [w - 0.5, h - 0.5]]))
             assert np.all(np.isfinite(corners))
             if level == "strong":
                 assert cam.dist[0] <= -0.25

@@ -53,6 +53,17 @@ def test_steep_tilts_are_reached():
     assert max(tilts) > 45 and max(tilts) <= 60.01
 
 
+def test_occluded_boards_keep_some_corners_and_narrow_images_work():
+    for i in range(12):
+        s = make_sample("hard", 1, i, size=(32, 32))
+        if s.label["has_board"]:
+            assert s.visible.any()
+    for size in [(32, 400), (2000, 200), (300, 32)]:
+        for i in range(3):
+            s = make_sample("occluded", 0, i, size=size)
+            assert s.visible.any()
+
+
 @pytest.mark.parametrize("pattern, size", [((3, 3), (64, 48)), ((20, 15), (640, 480)), ((15, 20), (1920, 1080))])
 def test_extreme_patterns_and_sizes(pattern, size):
     s = make_sample("clean", 0, 0, size=size, pattern=pattern)
