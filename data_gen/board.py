@@ -102,13 +102,12 @@ class Board:
         x0, y0, x1, y1 = self.paper_bounds()
         with np.errstate(invalid="ignore"):
             on_paper = (X >= x0) & (X < x1) & (Y >= y0) & (Y < y1)
-            i = np.floor(X / s) + 1.0
-            j = np.floor(Y / s) + 1.0
-            in_squares = (i >= 0) & (i <= self.cols) & (j >= 0) & (j <= self.rows)
-            black = in_squares & (np.mod(i + j, 2.0) == 0.0)
+            in_squares = on_paper & (X >= -s) & (X < self.cols * s) & (Y >= -s) & (Y < self.rows * s)
+            # Square (floor(X/s), floor(Y/s)); the one at (-1, -1) is black, so black <=> even sum.
+            parity = (np.floor(X / s) + np.floor(Y / s))[in_squares].astype(np.int64) & 1
         out = np.full(np.shape(X), 2, dtype=np.uint8)
         out[on_paper] = 1
-        out[on_paper & black] = 0
+        out[in_squares] = parity.astype(np.uint8)
         return out
 
     def to_dict(self) -> dict:

@@ -91,21 +91,29 @@ def _active_box(camera: Camera, board: Board, rvec, tvec, step: int = 16):
     return x0, y0, x1, y1
 
 
+def plane_homogeneous(rays: np.ndarray, rvec, tvec) -> np.ndarray:
+    """Board-plane point of each normalized ray in homogeneous form.
+
+    rays : (..., 2) undistorted normalized (x, y). Returns (..., 3) q with board
+    (X, Y) = (q0 / q2, q1 / q2); q2 > 0 exactly when the plane is in front of the camera.
+    q is linear in the ray, so it may be interpolated wherever the rays may.
+    """
+    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
+    Hi = np.linalg.inv(np.column_stack([R[:, 0], R[:, 1], np.asarray(tvec, dtype=np.float64).ravel()]))
+    return rays @ Hi[:, :2].T + Hi[:, 2]
+
+
+def _dehomogenize(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        front = q[..., 2] > 0
+        X = np.where(front, q[..., 0] / q[..., 2], np.nan)
+        Y = np.where(front, q[..., 1] / q[..., 2], np.nan)
+    return X, Y
+
+
 def board_coordinates(rays: np.ndarray, rvec, tvec) -> tuple[np.ndarray, np.ndarray]:
     """Intersect normalized rays (..., 2) with the board plane; returns board X, Y (NaN behind)."""
-    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
-    Hm = np.column_stack([R[:, 0], R[:, 1], np.asarray(tvec, dtype=np.float64).ravel()])
-    Hi = np.linalg.inv(Hm)
-    x = rays[..., 0]
-    y = rays[..., 1]
-    q0 = Hi[0, 0] * x + Hi[0, 1] * y + Hi[0, 2]
-    q1 = Hi[1, 0] * x + Hi[1, 1] * y + Hi[1, 2]
-    q2 = Hi[2, 0] * x + Hi[2, 1] * y + Hi[2, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        front = q2 > 0
-        X = np.where(front, q0 / q2, np.nan)
-        Y = np.where(front, q1 / q2, np.nan)
-    return X, Y
+    return _dehomogenize(plane_homogeneous(rays, rvec, tvec))
 
 
 def render_board(
@@ -142,8 +150,8 @@ def render_board(
     bx0, by0, bx1, by1 = box
     crop = out[by0:by1, bx0:bx1]  # a view: writes land in ``out``
     bg = background[by0:by1, bx0:bx1]
-    rays = _corner_rays(camera, box)
-    X, Y = board_coordinates(rays, rvec, tvec)
+    q = plane_homogeneous(_corner_rays(camera, box), rvec, tvec)  # (h+1, w+1, 3)
+    X, Y = _dehomogenize(q)
     cls = board.classify(X, Y)  # (h+1, w+1) at the box's pixel corners
     c00 = cls[:-1, :-1]
     # A pixel is filled directly only if no square edge or paper edge crosses it: its corners
@@ -159,8 +167,8 @@ def render_board(
 
     on_paper = uniform & (c00 != 2)
     crop[on_paper] = np.array([board.black, board.white], dtype=np.float32)[c00[on_paper]]
-    _supersample(crop, bg, rays, board, rvec, tvec, ~uniform & ~junction, samples)
-    _supersample(crop, bg, rays, board, rvec, tvec, junction, junction_samples)
+    _supersample(crop, bg, q, board, ~uniform & ~junction, samples)
+    _supersample(crop, bg, q, board, junction, junction_samples)
     return out
 
 
@@ -181,31 +189,31 @@ def _board_cell_span(A: np.ndarray, square: float, paper: tuple[float, float]) -
     return _corner_span(cell)
 
 
-def _supersample(crop, bg, rays, board: Board, rvec, tvec, mask: np.ndarray, samples: int) -> None:
-    """Fill the pixels of ``mask`` in ``crop`` by averaging ``samples`` lattice points each."""
+def _supersample(crop, bg, q: np.ndarray, board: Board, mask: np.ndarray, samples: int) -> None:
+    """Fill the pixels of ``mask`` in ``crop`` by averaging ``samples`` lattice points each.
+
+    q : (h+1, w+1, 3) homogeneous board points at the pixel corners; inside a pixel they are
+    interpolated bilinearly (the same as interpolating the rays, since q is linear in them).
+    """
     rows, cols = np.nonzero(mask)
-    if rows.size:
-        lat = fibonacci_lattice(samples)
-        s_off = lat[None, :, 0]
-        t_off = lat[None, :, 1]
-        r00 = rays[rows, cols]
-        r10 = rays[rows, cols + 1]
-        r01 = rays[rows + 1, cols]
-        r11 = rays[rows + 1, cols + 1]
-        a = r10 - r00
-        b = r01 - r00
-        c = r11 - r10 - r01 + r00
-        sub = (
-            r00[:, None, :]
-            + s_off[..., None] * a[:, None, :]
-            + t_off[..., None] * b[:, None, :]
-            + (s_off * t_off)[..., None] * c[:, None, :]
-        )  # (E, n, 2)
-        scls = board.classify(*board_coordinates(sub, rvec, tvec))  # (E, n)
-        n = float(samples)
-        frac_black = (scls == 0).sum(axis=1) / n
-        frac_white = (scls == 1).sum(axis=1) / n
-        frac_off = 1.0 - frac_black - frac_white
-        crop[rows, cols] = (frac_black * board.black + frac_white * board.white + frac_off * bg[rows, cols]).astype(
-            np.float32
-        )
+    if not rows.size:
+        return
+    lat = fibonacci_lattice(samples).astype(np.float32)
+    s_off, t_off = lat[:, 0], lat[:, 1]
+    st_off = s_off * t_off
+    q00 = q[rows, cols].astype(np.float32)
+    q10 = q[rows, cols + 1].astype(np.float32)
+    q01 = q[rows + 1, cols].astype(np.float32)
+    q11 = q[rows + 1, cols + 1].astype(np.float32)
+    a, b, c = q10 - q00, q01 - q00, q11 - q10 - q01 + q00
+    q0, q1, q2 = (
+        q00[:, k, None] + a[:, k, None] * s_off + b[:, k, None] * t_off + c[:, k, None] * st_off for k in range(3)
+    )  # each (E, n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q2 = np.where(q2 > 0, q2, np.nan)  # behind the camera: not on the board
+        scls = board.classify(q0 / q2, q1 / q2)  # (E, n)
+    n = float(samples)
+    frac_black = np.count_nonzero(scls == 0, axis=1) / n
+    frac_white = np.count_nonzero(scls == 1, axis=1) / n
+    frac_off = 1.0 - frac_black - frac_white
+    crop[rows, cols] = (frac_black * board.black + frac_white * board.white + frac_off * bg[rows, cols]).astype(np.float32)
