@@ -65,10 +65,10 @@ def test_corners_beyond_the_lens_domain_or_behind_are_invisible():
 
 def test_renders_of_generated_scenes_match_brute_force():
     from data_gen import Board, Camera, render_board
-    from data_gen.render import board_coordinates
+
+    from .brute_force import BACKGROUND, brute_force_render
 
     S = 24
-    offs = (np.arange(S) + 0.5) / S - 0.5
     for preset, pattern in [("distorted", (20, 15)), ("partial", None), ("hard", None)]:
         lab = make_sample(preset, 3, 1, size=(80, 60), pattern=pattern).label
         assert lab["has_board"]
@@ -76,14 +76,8 @@ def test_renders_of_generated_scenes_match_brute_force():
         b = lab["board"]
         board = Board(tuple(lab["pattern_size"]), lab["square_size"], b["margin"], b["black"], b["white"])
         rvec, tvec = np.array(lab["rvec"]), np.array(lab["tvec"])
-        img = render_board(cam, board, rvec, tvec, np.full((60, 80), 0.5, np.float32))
-        uu, vv = np.meshgrid(np.arange(80.0), np.arange(60.0))
-        acc = np.zeros((60, 80))
-        for dy in offs:
-            for dx in offs:
-                cls = board.classify(*board_coordinates(cam.pixel_to_normalized(np.stack([uu + dx, vv + dy], -1)), rvec, tvec))
-                acc += np.choose(cls, [board.black, board.white, 0.5])
-        diff = np.abs(img - acc / S**2) / (board.white - board.black)
+        img = render_board(cam, board, rvec, tvec, np.full((60, 80), BACKGROUND, np.float32))
+        diff = np.abs(img - brute_force_render(cam, board, rvec, tvec, S)) / (board.white - board.black)
         # Both renderers quantise coverage: 1/24 of a pixel here, 1/89 (1/233 at junctions) there.
         assert diff.max() < 1 / 24 + 1 / 89, (preset, diff.max())
         assert diff.mean() < 2e-3

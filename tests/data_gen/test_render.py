@@ -7,7 +7,9 @@ import pytest
 from data_gen.board import Board
 from data_gen.camera import Camera
 from data_gen.pose import project_points
-from data_gen.render import board_coordinates, fibonacci_lattice, render_board
+from data_gen.render import fibonacci_lattice, render_board
+
+from .brute_force import BACKGROUND, brute_force_render
 
 BLACK, WHITE, BG = 0.1, 0.9, 0.5
 TOL = 1.0 / 89 + 1e-6  # one lattice sample of coverage
@@ -64,19 +66,8 @@ def test_adaptive_renderer_matches_brute_force():
     R = cv2.Rodrigues(np.array([0.5, 0.3, 0.0]))[0] @ cv2.Rodrigues(np.array([0.0, 0.0, 0.4]))[0]
     tvec = np.array([0.0, 0.0, 90.0]) - R @ board.centre()
     rvec = cv2.Rodrigues(R)[0].ravel()
-    bg = np.full((h, w), 0.5, np.float32)
-    img = render_board(cam, board, rvec, tvec, bg)
-    # Brute force: 16 x 16 point samples per pixel, each undistorted exactly.
-    S = 16
-    offs = (np.arange(S) + 0.5) / S - 0.5
-    uu, vv = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
-    acc = np.zeros((h, w))
-    for dy in offs:
-        for dx in offs:
-            rays = cam.pixel_to_normalized(np.stack([uu + dx, vv + dy], axis=-1))
-            cls = board.classify(*board_coordinates(rays, rvec, tvec))
-            acc += np.choose(cls, [board.black, board.white, 0.5])
-    ref = acc / S**2
+    img = render_board(cam, board, rvec, tvec, np.full((h, w), BACKGROUND, np.float32))
+    ref = brute_force_render(cam, board, rvec, tvec, 16)
     diff = np.abs(img - ref)
     assert diff.max() < (1 / 16 + 1 / 89) * (board.white - board.black)
     assert diff.mean() < 2e-3
