@@ -15,7 +15,7 @@ import numpy as np
 from .board import Board
 from .camera import Camera
 
-__all__ = ["PoseConfig", "sample_pose", "project_points", "imaged_mask", "in_frame", "FRAMING"]
+__all__ = ["PoseConfig", "sample_pose", "project_points", "corner_visibility", "imaged_mask", "in_frame", "FRAMING"]
 
 FRAMING = ("inside", "partial", "any")
 
@@ -83,6 +83,20 @@ def imaged_mask(points_cam: np.ndarray, camera: Camera) -> np.ndarray:
     return (z > 0) & (r < camera.r_mono)
 
 
+def corner_visibility(board: Board, rvec, tvec, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+    """Project the inner corners and flag those a detector could see, occluders aside.
+
+    Returns (corners (cols·rows, 2) float64 px from ``cv2.projectPoints``, visible (cols·rows,)
+    bool): in front of the camera, inside the lens model's monotonic domain, and within the hull
+    of the pixel centres. The pose sampler and the labels both use this one rule.
+    """
+    obj = board.object_points()
+    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
+    corners = project_points(obj, rvec, tvec, camera)
+    imaged = imaged_mask(obj @ R.T + np.asarray(tvec, dtype=np.float64).ravel(), camera)
+    return corners, imaged & in_frame(corners, camera.image_size, border=0.5)
+
+
 def _acceptable(camera: Camera, board: Board, R: np.ndarray, t: np.ndarray, cfg: PoseConfig) -> bool:
     x0, y0, x1, y1 = board.paper_bounds()
     paper = np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0]], dtype=np.float64)
@@ -94,16 +108,12 @@ def _acceptable(camera: Camera, board: Board, R: np.ndarray, t: np.ndarray, cfg:
     cosang = (paper_cam @ normal) / np.linalg.norm(paper_cam, axis=1)
     if np.any(cosang < math.cos(math.radians(cfg.max_view_angle_deg))):
         return False
-    inner = board.object_points() @ R.T + t
-    imaged = imaged_mask(inner, camera)
     rvec = cv2.Rodrigues(R)[0]
     if cfg.framing == "inside":
         if not np.all(imaged_mask(paper_cam, camera)):
             return False
         return bool(np.all(in_frame(project_points(paper, rvec, t, camera), camera.image_size)))
-    # The same test as the labels' visible flags: within the hull of the pixel centres.
-    inside = imaged & in_frame(project_points(board.object_points(), rvec, t, camera), camera.image_size, border=0.5)
-    frac = inside.mean()
+    frac = corner_visibility(board, rvec, t, camera)[1].mean()
     if cfg.framing == "partial":
         return bool(cfg.min_visible_fraction <= frac < 1.0)
     return bool(frac >= cfg.min_visible_fraction)

@@ -52,9 +52,14 @@ def _corner_rays(camera: Camera, box: tuple[int, int, int, int]) -> np.ndarray:
     return camera.pixel_to_normalized(np.stack([uu, vv], axis=-1))
 
 
+def _pixel_corners(a: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(H+1, W+1) values at pixel corners -> four (H, W) views: top-left, top-right, bottom-left, bottom-right."""
+    return a[:-1, :-1], a[:-1, 1:], a[1:, :-1], a[1:, 1:]
+
+
 def _corner_span(a: np.ndarray) -> np.ndarray:
     """(H+1, W+1) values at pixel corners -> (H, W) bool: do a pixel's four corners differ?"""
-    q = (a[:-1, :-1], a[:-1, 1:], a[1:, :-1], a[1:, 1:])
+    q = _pixel_corners(a)
     return np.maximum.reduce(q) != np.minimum.reduce(q)
 
 
@@ -70,12 +75,11 @@ def _active_box(camera: Camera, board: Board, rvec, tvec, step: int = 16):
     vs = np.append(np.arange(0, h, step), h) - 0.5
     uu, vv = np.meshgrid(us, vs)
     X, Y = board_coordinates(camera.pixel_to_normalized(np.stack([uu, vv], axis=-1)), rvec, tvec)
-    qx = np.stack([X[:-1, :-1], X[:-1, 1:], X[1:, :-1], X[1:, 1:]])
-    qy = np.stack([Y[:-1, :-1], Y[:-1, 1:], Y[1:, :-1], Y[1:, 1:]])
-    nan = np.isnan(qx) | np.isnan(qy)
+    nan = np.stack(_pixel_corners(np.isnan(X) | np.isnan(Y)))  # X and Y are NaN together
     all_nan = nan.all(axis=0)
-    lo_x, hi_x = np.where(nan, np.inf, qx).min(0), np.where(nan, -np.inf, qx).max(0)
-    lo_y, hi_y = np.where(nan, np.inf, qy).min(0), np.where(nan, -np.inf, qy).max(0)
+    # NaN-ignoring ranges over each cell's corners (NaN only where all four are NaN).
+    lo_x, hi_x = np.fmin.reduce(_pixel_corners(X)), np.fmax.reduce(_pixel_corners(X))
+    lo_y, hi_y = np.fmin.reduce(_pixel_corners(Y)), np.fmax.reduce(_pixel_corners(Y))
     with np.errstate(invalid="ignore"):
         pad_x, pad_y = 0.25 * (hi_x - lo_x), 0.25 * (hi_y - lo_y)
         px0, py0, px1, py1 = board.paper_bounds()
@@ -174,7 +178,7 @@ def render_board(
 
 def _corner_range_meets(A: np.ndarray, lo: float, hi: float) -> np.ndarray:
     """(H, W) bool: does the range of A over a pixel's four corners meet [lo, hi]? (NaN ignored)"""
-    q = (A[:-1, :-1], A[:-1, 1:], A[1:, :-1], A[1:, 1:])
+    q = _pixel_corners(A)
     with np.errstate(invalid="ignore"):
         return (np.fmax.reduce(q) >= lo) & (np.fmin.reduce(q) <= hi)
 

@@ -8,9 +8,8 @@ image depends only on (preset, seed, index, size, pattern): the same on any work
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
-import cv2
 import numpy as np
 
 from .background import make_background
@@ -18,7 +17,7 @@ from .board import Board, sample_board
 from .camera import Camera, sample_camera
 from .degrade import apply_degradations
 from .occlude import draw_occluders, occluded, sample_occluders
-from .pose import PoseConfig, imaged_mask, in_frame, project_points, sample_pose
+from .pose import corner_visibility, sample_pose
 from .presets import INT_PARAMS, Preset, Rule, get_preset
 from .render import render_board
 
@@ -146,13 +145,9 @@ def make_sample(
     img = background
     if has_board:
         framing = "partial" if rng.random() < p.partial_probability else p.pose.framing
-        pose_cfg = PoseConfig(**{**p.pose.__dict__, "framing": framing})
-        rvec, tvec = sample_pose(rng, cam, board, pose_cfg)
+        rvec, tvec = sample_pose(rng, cam, board, replace(p.pose, framing=framing))
         img = render_board(cam, board, rvec, tvec, background)
-        obj = board.object_points()
-        corners = project_points(obj, rvec, tvec, cam)
-        R = cv2.Rodrigues(rvec.reshape(3, 1))[0]
-        visible = imaged_mask(obj @ R.T + tvec, cam) & in_frame(corners, (w, h), border=0.5)
+        corners, visible = corner_visibility(board, rvec, tvec, cam)
         polys: list[np.ndarray] = []
         if rng.random() < p.occlusion_probability and visible.any():
             polys = _occluders_leaving_corners(rng, corners, visible, p)
