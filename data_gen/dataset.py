@@ -23,6 +23,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 import cv2
 from tqdm import tqdm
@@ -30,7 +31,7 @@ from tqdm import tqdm
 from .presets import get_preset
 from .sample import GENERATOR_VERSION, make_sample
 
-__all__ = ["DatasetConfig", "write_dataset", "check_output_dir"]
+__all__ = ["DatasetConfig", "write_dataset", "check_output_dir", "iter_samples"]
 
 INDEX_COLUMNS = ("file", "label", "condition", "camera_id", "seed", "index", "width", "height")
 
@@ -91,6 +92,26 @@ def _render_one(job: tuple) -> list:
     Path(stage, "labels", name + ".json").write_bytes(_json_bytes(sample.label))
     w, h = sample.label["image_size"]
     return [f"images/{name}.png", f"labels/{name}.json", sample.label["condition"], sample.label["camera_id"], seed, index, w, h]
+
+
+def _make_one(job: tuple):
+    preset, seed, index, size, pattern = job
+    return make_sample(preset, seed, index, size=size, pattern=pattern)
+
+
+def iter_samples(preset, seed: int, indices, *, size=None, pattern=None, workers: int = 1) -> Iterator:
+    """Yield ``make_sample(preset, seed, i)`` for each i in ``indices``, in order.
+
+    preset : a preset name or a ``Preset`` (overrides travel to the workers).
+    workers : processes (spawned, so a parent holding TensorFlow is safe). Output never depends on it.
+    """
+    jobs = [(preset, seed, int(i), size, pattern) for i in indices]
+    if workers > 1 and len(jobs) > 1:
+        with mp.get_context("spawn").Pool(workers) as pool:
+            yield from pool.imap(_make_one, jobs, chunksize=max(1, min(16, len(jobs) // (4 * workers))))
+    else:
+        for job in jobs:
+            yield _make_one(job)
 
 
 def write_dataset(cfg: DatasetConfig, *, progress: bool = True) -> Path:

@@ -32,3 +32,17 @@ def test_shift_gives_exactly_the_shift():
 def test_wrong_sizes_are_rejected():
     with pytest.raises(ValueError, match="need 12 corners"):
         align_to_truth(np.zeros((11, 2)), np.zeros((12, 2)), (4, 3))
+
+
+def test_match_points_is_one_to_one_and_closest_first():
+    from aicalib_tf.metrics import match_points, point_detection_stats
+
+    truth = np.array([[0.0, 0.0], [10.0, 0.0]])
+    pred = np.array([[0.3, 0.0], [0.1, 0.0], [10.0, 0.9], [50.0, 50.0]])
+    ip, it, d = match_points(pred, truth, 1.0)
+    assert sorted(zip(ip.tolist(), it.tolist())) == [(1, 0), (2, 1)]
+    np.testing.assert_allclose(sorted(d), [0.1, 0.9])
+    stats = point_detection_stats([(pred, truth), (np.zeros((0, 2)), np.array([[5.0, 5.0]]))])
+    assert stats["matched"] == 2 and stats["predicted"] == 4 and stats["true"] == 3
+    assert stats["precision"] == 0.5 and abs(stats["recall"] - 2 / 3) < 1e-12
+    assert abs(stats["loc_median_px"] - 0.5) < 1e-12

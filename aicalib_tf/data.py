@@ -1,0 +1,193 @@
+"""Training and validation data for the corner CNNs, from data_gen (Keras ``PyDataset``).
+
+A run first renders a *pool* of data_gen images in memory (seeded, in worker processes): full
+640×480 scenes of the ``train`` preset with every lens, pose and degradation, plus board-free
+clutter images. Batches are then cut from the pool on the fly, so every epoch sees new crops:
+
+* corner-map model: random 128×128 crops (most of them around board corners), a random one of the
+  8 flips/rotations, and a random grey inversion (an inverted X-junction is still one);
+* patch classifier: balanced 32×32 patches, half centred on corners and half negatives, of which
+  half are hard negatives (saddle-point candidates away from any corner: edges, T- and L-junctions,
+  text, blobs, noise) and half are random places.
+
+Checker-like distractor patches are left out of training images: their X-junctions are real, so
+a local detector should fire on them; telling them from the board is the grid assembly's job.
+
+Batch ``i`` of epoch ``e`` depends only on (seed, e, i), so the same seed gives the same data order.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import keras
+import numpy as np
+from tqdm import tqdm
+
+from data_gen.dataset import iter_samples
+from data_gen.presets import get_preset
+
+from .candidates import saddle_points
+from .corner_map import STRIDE, encode_corners
+from .inference import extract_patches
+from .model import PATCH_SIZE
+
+__all__ = ["Pool", "render_pool", "CornerMapBatches", "PatchBatches", "CROP_SIZE"]
+
+CROP_SIZE = 128
+IMAGE_SIZE = (640, 480)
+BOARD_FREE_FRACTION = 0.1
+
+
+@dataclass(frozen=True)
+class Pool:
+    """Rendered images held in memory.
+
+    images : (N, H, W) uint8. corners : N arrays (k, 2) float32, the visible corners (x, y) px.
+    mean, std : (N,) float32 grey statistics of each image (for standardising crops like whole images).
+    """
+
+    images: np.ndarray
+    corners: list
+    mean: np.ndarray
+    std: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.images)
+
+    def standardized(self, i: int, img: np.ndarray) -> np.ndarray:
+        """A crop of image ``i`` standardised with the whole image's statistics."""
+        return (img.astype(np.float32) - self.mean[i]) / max(float(self.std[i]), 1e-3)
+
+
+def render_pool(count: int, seed: int, *, preset: str = "train", workers: int = 1, progress: bool = True,
+                size: tuple[int, int] = IMAGE_SIZE) -> Pool:
+    """Render ``count`` images: ~90% ``preset`` scenes and ~10% board-free clutter, all seeded.
+
+    Distractor checkers are switched off (see the module docstring).
+    """
+    if count < 1:
+        raise ValueError(f"pool needs at least 1 image, got {count}")
+    boards = get_preset(preset, checker_distractors=(0.0, 0.0))
+    clutter = get_preset("clutter", checker_distractors=(0.0, 0.0))
+    n_free = int(round(BOARD_FREE_FRACTION * count)) if count >= 10 else 0
+    w, h = size
+    images = np.empty((count, h, w), np.uint8)
+    corners = []
+    jobs = [(boards, range(count - n_free)), (clutter, range(n_free))]
+    bar = tqdm(total=count, desc=f"rendering {preset} pool", unit="img", disable=not progress)
+    k = 0
+    for p, indices in jobs:
+        for s in iter_samples(p, seed, indices, size=size, workers=workers):
+            images[k] = s.image
+            corners.append(s.corners[s.visible].astype(np.float32) if s.label["has_board"] else np.zeros((0, 2), np.float32))
+            k += 1
+            bar.update()
+    bar.close()
+    flat = images.reshape(count, -1).astype(np.float32)
+    return Pool(images, corners, flat.mean(axis=1), flat.std(axis=1))
+
+
+def _dihedral(img: np.ndarray, pts: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Apply flip/rotation ``k`` in 0..7 to a square image (S, S) and its points (n, 2) (x, y)."""
+    s = img.shape[0] - 1
+    x, y = pts[:, 0], pts[:, 1]
+    if k & 1:  # transpose
+        img, x, y = img.T, y, x
+    if k & 2:  # flip left-right
+        img, x = img[:, ::-1], s - x
+    if k & 4:  # flip up-down
+        img, y = img[::-1, :], s - y
+    return np.ascontiguousarray(img), np.stack([x, y], axis=1)
+
+
+class CornerMapBatches(keras.utils.PyDataset):
+    """Batches (B, 128, 128, 1) float32 -> corner-map targets (B, 32, 32, 3) for the default model."""
+
+    def __init__(self, pool: Pool, *, batch_size: int, steps: int, seed: int, epoch: int = 0,
+                 corner_bias: float = 0.8, **kwargs):
+        super().__init__(**kwargs)
+        self.pool, self.batch_size, self.steps, self.seed = pool, batch_size, steps, seed
+        self.epoch, self.corner_bias = epoch, corner_bias
+
+    def __len__(self) -> int:
+        return self.steps
+
+    def on_epoch_end(self) -> None:
+        self.epoch += 1
+
+    def __getitem__(self, idx: int):
+        rng = np.random.default_rng([self.seed, self.epoch, idx, 7])
+        s = CROP_SIZE
+        x = np.empty((self.batch_size, s, s, 1), np.float32)
+        y = np.empty((self.batch_size, s // STRIDE, s // STRIDE, 3), np.float32)
+        for b in range(self.batch_size):
+            i = int(rng.integers(len(self.pool)))
+            img, pts = self.pool.images[i], self.pool.corners[i]
+            h, w = img.shape
+            if len(pts) and rng.random() < self.corner_bias:
+                cx, cy = pts[int(rng.integers(len(pts)))]
+                x0 = int(np.clip(cx - rng.uniform(8, s - 8), 0, w - s))
+                y0 = int(np.clip(cy - rng.uniform(8, s - 8), 0, h - s))
+            else:
+                x0, y0 = int(rng.integers(w - s + 1)), int(rng.integers(h - s + 1))
+            crop = self.pool.standardized(i, img[y0 : y0 + s, x0 : x0 + s])
+            local = pts - np.array([x0, y0], np.float32)
+            crop, local = _dihedral(crop, local, int(rng.integers(8)))
+            if rng.random() < 0.5:
+                crop = -crop
+            x[b, :, :, 0] = crop
+            y[b] = encode_corners(local, (s, s))
+        return x, y
+
+
+class PatchBatches(keras.utils.PyDataset):
+    """Balanced batches (B, 32, 32, 1) float32 -> (B, 1) labels for the report's patch classifier."""
+
+    def __init__(self, pool: Pool, *, batch_size: int, steps: int, seed: int, epoch: int = 0, **kwargs):
+        super().__init__(**kwargs)
+        self.pool, self.batch_size, self.steps, self.seed, self.epoch = pool, batch_size, steps, seed, epoch
+        self.hard = [self._hard_negatives(i) for i in range(len(pool))]
+
+    def _hard_negatives(self, i: int) -> np.ndarray:
+        cand = saddle_points(self.pool.images[i], max_points=300)
+        pts = self.pool.corners[i]
+        if len(pts) == 0 or len(cand) == 0:
+            return cand
+        d2 = ((cand[:, None, :] - pts[None, :, :]) ** 2).sum(-1).min(axis=1)
+        return cand[d2 > 3.0**2]
+
+    def __len__(self) -> int:
+        return self.steps
+
+    def on_epoch_end(self) -> None:
+        self.epoch += 1
+
+    def __getitem__(self, idx: int):
+        rng = np.random.default_rng([self.seed, self.epoch, idx, 11])
+        n = self.batch_size
+        x = np.empty((n, PATCH_SIZE, PATCH_SIZE, 1), np.float32)
+        y = (np.arange(n) < n // 2).astype(np.float32)[:, None]
+        with_corners = [i for i in range(len(self.pool)) if len(self.pool.corners[i])] or [0]
+        for b in range(n):
+            if y[b, 0] == 1.0:
+                i = with_corners[int(rng.integers(len(with_corners)))]
+                pts = self.pool.corners[i]
+                p = np.rint(pts[int(rng.integers(len(pts)))]).astype(np.int64)
+            else:
+                i = int(rng.integers(len(self.pool)))
+                h, w = self.pool.images[i].shape
+                hard = self.hard[i]
+                if len(hard) and rng.random() < 0.5:
+                    p = hard[int(rng.integers(len(hard)))].astype(np.int64)
+                else:
+                    p = np.array([rng.integers(w), rng.integers(h)])
+                    pts = self.pool.corners[i]
+                    if len(pts) and (((pts - p) ** 2).sum(1) < 9.0).any():
+                        p = p + 4  # nudge off a corner; rare
+            patch = self.pool.standardized(i, extract_patches(self.pool.images[i], p[None])[0])
+            k = int(rng.integers(8))
+            # corner at (16, 16) ± 0.5; the flips keep it within a pixel of the centre
+            patch, _ = _dihedral(patch, np.zeros((0, 2), np.float32), k)
+            x[b, :, :, 0] = -patch if rng.random() < 0.5 else patch
+        return x, y

@@ -1,0 +1,244 @@
+"""Train a corner CNN on data_gen images: ``python -m aicalib_tf.train``.
+
+Examples::
+
+    python -m aicalib_tf.train --arch default --out runs/default            # the shipped default
+    python -m aicalib_tf.train --arch report --out runs/report              # the report's network
+    python -m aicalib_tf.train --out runs/default --resume                  # continue a killed run
+
+A run renders a seeded pool of ``--preset`` images in memory, then trains on crops cut from it
+(see :mod:`aicalib_tf.data`). After each epoch it scores corner precision, recall (a match is
+within 1 px) and localisation error on a fixed validation set (preset ``--preset``, seed 900001,
+never trained on) and saves a checkpoint. RUN_DIR receives:
+
+    config.json        the effective configuration (written first, atomically)
+    checkpoint.keras   the model after the last finished epoch, with its optimiser state
+    state.json         how many epochs are finished
+    log.csv            one row per epoch: loss and the validation metrics
+    tensorboard/       TensorBoard logs
+    model.keras        the final model (atomically, at the end)
+    metrics.json       the final validation metrics, wall time and parameter count
+
+Determinism: the same seed gives the same pool, crops and data order. On CPU the weights are
+reproducible run to run when TensorFlow's op determinism is on (it is, see ``--no-determinism``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+__all__ = ["TrainConfig", "train", "main", "VALIDATION_SEED"]
+
+VALIDATION_SEED = 900001
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Arguments of ``python -m aicalib_tf.train``."""
+
+    out: str
+    arch: str = "default"
+    epochs: int = 30
+    steps: int = 200
+    batch_size: int = 32
+    seed: int = 0
+    preset: str = "train"
+    pool_images: int = 3000
+    val_images: int = 64
+    learning_rate: float = 2e-3
+    workers: int = 2
+    threshold: float = 0.5
+    determinism: bool = True
+
+    def check(self) -> None:
+        """Raise ``ValueError`` naming the first bad option."""
+        from data_gen.presets import PRESETS
+
+        from .model import ARCHITECTURES
+
+        if self.arch not in ARCHITECTURES:
+            raise ValueError(f"--arch: unknown architecture {self.arch!r}; choose from: {', '.join(ARCHITECTURES)}")
+        if self.preset not in PRESETS:
+            raise ValueError(f"--preset: unknown preset {self.preset!r}; choose from: {', '.join(PRESETS)}")
+        for name in ("epochs", "steps", "batch_size", "pool_images", "val_images", "workers"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
+        if self.seed < 0:
+            raise ValueError(f"--seed must be >= 0, got {self.seed}")
+        if not 0.0 < self.learning_rate < 1.0:
+            raise ValueError(f"--learning-rate must be in (0, 1), got {self.learning_rate}")
+        if not 0.0 < self.threshold < 1.0:
+            raise ValueError(f"--threshold must be in (0, 1), got {self.threshold}")
+
+
+def _write_json(path: Path, obj) -> None:
+    from .io import atomic_write_text
+
+    atomic_write_text(path, json.dumps(obj, indent=2) + "\n")
+
+
+def validation_set(preset: str, count: int, *, workers: int = 1, progress: bool = True):
+    """The fixed validation images: (images (N, 480, 640) uint8, corners list of (k, 2))."""
+    from .data import render_pool
+
+    pool = render_pool(count, VALIDATION_SEED, preset=preset, workers=workers, progress=progress)
+    return pool.images, pool.corners
+
+
+def evaluate_points(model, images, corners, threshold: float = 0.5) -> dict:
+    """Corner precision/recall/localisation of ``model`` on whole images (see metrics.point_detection_stats)."""
+    from .inference import corner_points
+    from .metrics import point_detection_stats
+
+    pairs = [(corner_points(model, img, threshold)[0], gt) for img, gt in zip(images, corners)]
+    return point_detection_stats(pairs, max_distance=1.0)
+
+
+def _callbacks(cfg: TrainConfig, run: Path, val, initial_epoch: int):
+    import keras
+
+    from .model import save_model
+
+    class Validation(keras.callbacks.Callback):
+        """Adds val_precision, val_recall, val_f1 and val_loc_px to the epoch logs."""
+
+        def on_epoch_end(self, epoch, logs=None):
+            stats = evaluate_points(self.model, *val, cfg.threshold)
+            logs = logs if logs is not None else {}
+            logs.update(val_precision=stats["precision"], val_recall=stats["recall"],
+                        val_f1=stats["f1"], val_loc_px=stats["loc_median_px"])
+            print(f"\n  validation: precision {stats['precision']:.4f}  recall {stats['recall']:.4f}  "
+                  f"loc median {stats['loc_median_px']:.3f} px  ({stats['true']} corners)", flush=True)
+
+    class Checkpoint(keras.callbacks.Callback):
+        """Saves the model with its optimiser state, then the finished-epoch count (both atomically)."""
+
+        def on_epoch_end(self, epoch, logs=None):
+            save_model(self.model, run / "checkpoint.keras")
+            _write_json(run / "state.json", {"epochs_done": epoch + 1})
+
+    return [
+        Validation(),  # first: it adds to the logs that the CSV logger writes
+        keras.callbacks.CSVLogger(str(run / "log.csv"), append=initial_epoch > 0),
+        keras.callbacks.TensorBoard(str(run / "tensorboard"), write_graph=False, profile_batch=0),
+        Checkpoint(),
+    ]
+
+
+def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True) -> dict:
+    """Train as ``cfg`` says and write RUN_DIR; returns the final metrics dict.
+
+    resume : continue the run in ``cfg.out`` from its last checkpoint (its config.json wins
+        over ``cfg`` except for ``epochs``).
+    """
+    cfg.check()
+    run = Path(cfg.out)
+    if resume:
+        if not (run / "state.json").is_file() or not (run / "checkpoint.keras").is_file():
+            raise ValueError(f"--resume: {run} holds no checkpoint to resume from")
+        saved = json.loads((run / "config.json").read_text())
+        known = {f.name for f in fields(TrainConfig)}
+        cfg = TrainConfig(**{**{k: v for k, v in saved.items() if k in known}, "epochs": cfg.epochs, "out": str(run)})
+        initial_epoch = int(json.loads((run / "state.json").read_text())["epochs_done"])
+    else:
+        if (run / "checkpoint.keras").exists() or (run / "model.keras").exists():
+            raise ValueError(f"--out {run}: already holds a run; use --resume or a new folder")
+        run.mkdir(parents=True, exist_ok=True)
+        initial_epoch = 0
+    _write_json(run / "config.json", asdict(cfg))
+
+    import keras
+    import tensorflow as tf
+
+    from .data import CornerMapBatches, PatchBatches, render_pool
+    from .model import build_model, compile_model, file_sha256, load_model, save_model
+
+    keras.utils.set_random_seed(cfg.seed)
+    if cfg.determinism:
+        tf.config.experimental.enable_op_determinism()
+    t0 = time.perf_counter()
+    pool = render_pool(cfg.pool_images, cfg.seed, preset=cfg.preset, workers=cfg.workers, progress=progress)
+    val = validation_set(cfg.preset, cfg.val_images, workers=cfg.workers, progress=progress)
+    batches_cls = CornerMapBatches if cfg.arch == "default" else PatchBatches
+    batches = batches_cls(pool, batch_size=cfg.batch_size, steps=cfg.steps, seed=cfg.seed, epoch=initial_epoch)
+    if resume:
+        model = load_model(run / "checkpoint.keras", compile=True)
+    else:
+        model = compile_model(build_model(cfg.arch), cfg.learning_rate)
+    prep_s = time.perf_counter() - t0
+    if initial_epoch < cfg.epochs:
+        schedule = keras.callbacks.LearningRateScheduler(
+            lambda e, lr: cfg.learning_rate * (0.5 * (1 + __import__("math").cos(__import__("math").pi * e / cfg.epochs)))
+        )
+        model.fit(batches, epochs=cfg.epochs, initial_epoch=initial_epoch, verbose=1 if progress else 2,
+                  callbacks=[schedule, *_callbacks(cfg, run, val, initial_epoch)])
+    final = run / "model.keras"
+    save_model(model, final)
+    stats = evaluate_points(model, *val, cfg.threshold)
+    previous = json.loads((run / "metrics.json").read_text()) if resume and (run / "metrics.json").exists() else {}
+    metrics = {
+        **stats,
+        "arch": cfg.arch,
+        "params": int(model.count_params()),
+        "epochs": cfg.epochs,
+        "resumed_at_epoch": initial_epoch if resume else None,
+        "data_prep_s": round(prep_s, 1),
+        "wall_s_this_process": round(time.perf_counter() - t0, 1),
+        "validation": {"preset": cfg.preset, "seed": VALIDATION_SEED, "images": cfg.val_images, "match_px": 1.0},
+        "sha256": file_sha256(final),
+        "size_bytes": final.stat().st_size,
+        **({"previous": previous} if previous else {}),
+    }
+    _write_json(run / "metrics.json", metrics)
+    return metrics
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="python -m aicalib_tf.train", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    d = TrainConfig(out="")
+    ap.add_argument("--out", required=True, metavar="RUN_DIR", help="run folder (created)")
+    ap.add_argument("--arch", default=d.arch, help="default | report (default: %(default)s)")
+    ap.add_argument("--epochs", type=int, default=d.epochs, help="epochs (default: %(default)s)")
+    ap.add_argument("--steps", type=int, default=d.steps, help="batches per epoch (default: %(default)s)")
+    ap.add_argument("--batch-size", type=int, default=d.batch_size, help="(default: %(default)s)")
+    ap.add_argument("--seed", type=int, default=d.seed, help="data and initialisation seed (default: %(default)s)")
+    ap.add_argument("--preset", default=d.preset, help="data_gen preset to train on (default: %(default)s)")
+    ap.add_argument("--pool-images", type=int, default=d.pool_images, help="images rendered for training (default: %(default)s)")
+    ap.add_argument("--val-images", type=int, default=d.val_images, help="validation images (default: %(default)s)")
+    ap.add_argument("--learning-rate", type=float, default=d.learning_rate, help="peak Adam rate, cosine decay (default: %(default)s)")
+    ap.add_argument("--workers", type=int, default=d.workers, help="rendering processes (default: %(default)s)")
+    ap.add_argument("--threshold", type=float, default=d.threshold, help="corner weight for validation (default: %(default)s)")
+    ap.add_argument("--no-determinism", action="store_true", help="allow non-deterministic TensorFlow ops")
+    ap.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
+    ap.add_argument("--quiet", action="store_true", help="no progress bars")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+    args = _parser().parse_args(argv)
+    cfg = TrainConfig(
+        out=args.out, arch=args.arch, epochs=args.epochs, steps=args.steps, batch_size=args.batch_size,
+        seed=args.seed, preset=args.preset, pool_images=args.pool_images, val_images=args.val_images,
+        learning_rate=args.learning_rate, workers=args.workers, threshold=args.threshold,
+        determinism=not args.no_determinism,
+    )
+    try:
+        metrics = train(cfg, resume=args.resume, progress=not args.quiet)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"done: precision {metrics['precision']:.4f}, recall {metrics['recall']:.4f}, "
+          f"loc median {metrics['loc_median_px']:.3f} px; model {Path(cfg.out) / 'model.keras'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
