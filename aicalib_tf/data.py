@@ -105,7 +105,7 @@ class CornerMapBatches(keras.utils.PyDataset):
     """Batches (B, 128, 128, 1) float32 -> corner-map targets (B, 32, 32, 3) for the default model."""
 
     def __init__(self, pool: Pool, *, batch_size: int, steps: int, seed: int, epoch: int = 0,
-                 corner_bias: float = 0.8, **kwargs):
+                 corner_bias: float = 0.6, **kwargs):
         super().__init__(**kwargs)
         self.pool, self.batch_size, self.steps, self.seed = pool, batch_size, steps, seed
         self.epoch, self.corner_bias = epoch, corner_bias

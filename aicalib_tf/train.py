@@ -44,12 +44,12 @@ class TrainConfig:
 
     out: str
     arch: str = "default"
-    epochs: int = 30
-    steps: int = 200
+    epochs: int = 40
+    steps: int = 500
     batch_size: int = 32
     seed: int = 0
     preset: str = "train"
-    pool_images: int = 3000
+    pool_images: int = 4000
     val_images: int = 64
     learning_rate: float = 2e-3
     workers: int = 2

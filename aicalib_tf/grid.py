@@ -1,0 +1,256 @@
+"""Grid assembly: unordered corner points -> a lattice of (i, j) grid positions (pure numpy).
+
+A chessboard's inner corners form a lattice that perspective and lens distortion bend but keep
+locally regular: each corner's neighbours along a grid line sit about one step away, and the
+step changes slowly. :func:`assemble_grids` finds such lattices among the candidate points:
+
+1. Seed: a point, two of its near neighbours at an angle (steps u and v), and all 8 points of
+   the 3×3 lattice they predict, each found within a tolerance.
+2. Grow: extrapolate every grid line one step outwards (quadratically when three points are
+   known, so barrel distortion's curvature is followed), accept a new row or column when most
+   of its predictions find a point, and repeat in all four directions.
+3. Fill holes: predict missing inside cells from their neighbours.
+
+Grids are returned largest first, each point used by at most one grid. Which grid is the board,
+and the ids of its corners, is decided later (see :mod:`aicalib_tf.detect`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Grid", "assemble_grids", "edge_contrast"]
+
+TOLERANCE = 0.3  # of the local step: how far a predicted corner may be from the point it takes
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A lattice of points.
+
+    index : (K,) int, rows into the candidate points. ij : (K, 2) int, (i, j) lattice positions
+    with min 0 along each axis (i counts steps along one grid direction, j along the other).
+    """
+
+    index: np.ndarray
+    ij: np.ndarray
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(number of i positions, number of j positions)."""
+        return (int(self.ij[:, 0].max()) + 1, int(self.ij[:, 1].max()) + 1)
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+
+class _Lattice:
+    """Mutable (i, j) -> point index map while a grid grows."""
+
+    def __init__(self, pts: np.ndarray, free: np.ndarray):
+        self.pts, self.free = pts, free
+        self.cells: dict[tuple[int, int], int] = {}
+
+    def nearest_free(self, pred: np.ndarray, tol: np.ndarray) -> np.ndarray:
+        """For predictions (M, 2) and tolerances (M,), the free point index within tol, or -1."""
+        d2 = ((pred[:, None, :] - self.pts[None, :, :]) ** 2).sum(-1)
+        d2[:, ~self.free] = np.inf
+        best = np.argmin(d2, axis=1)
+        ok = d2[np.arange(len(pred)), best] <= tol**2
+        return np.where(ok, best, -1)
+
+    def take(self, cell: tuple[int, int], k: int) -> None:
+        self.cells[cell] = int(k)
+        self.free[k] = False
+
+    def p(self, cell) -> np.ndarray | None:
+        k = self.cells.get(cell)
+        return None if k is None else self.pts[k]
+
+
+def _predict(lat: _Lattice, cell: tuple[int, int], back: tuple[int, int]) -> tuple[np.ndarray, float] | None:
+    """Predict the point at ``cell`` from the line of known points behind it (direction ``back``)."""
+    i, j = cell
+    di, dj = back
+    p1 = lat.p((i + di, j + dj))
+    p2 = lat.p((i + 2 * di, j + 2 * dj))
+    if p1 is None or p2 is None:
+        return None
+    p3 = lat.p((i + 3 * di, j + 3 * dj))
+    step = float(np.linalg.norm(p1 - p2))
+    if p3 is None:
+        return 2 * p1 - p2, step
+    # quadratic extrapolation follows the curvature of distorted lines
+    return 3 * p1 - 3 * p2 + p3, step
+
+
+def _grow_side(lat: _Lattice, axis: int, sign: int) -> bool:
+    """Try to add one row/column beyond the current extent on one side. True if added."""
+    keys = np.array(list(lat.cells.keys()))
+    edge = keys[:, axis].max() if sign > 0 else keys[:, axis].min()
+    new = edge + sign
+    back = (-sign, 0) if axis == 0 else (0, -sign)
+    others = np.unique(keys[:, 1 - axis])
+    cells, preds, tols = [], [], []
+    for o in others:
+        cell = (new, int(o)) if axis == 0 else (int(o), new)
+        got = _predict(lat, cell, back)
+        if got is not None:
+            cells.append(cell)
+            preds.append(got[0])
+            tols.append(TOLERANCE * got[1])
+    if not cells:
+        return False
+    found = lat.nearest_free(np.array(preds), np.array(tols))
+    hits = [(c, k) for c, k in zip(cells, found) if k >= 0]
+    if len(hits) < max(2, 0.5 * len(cells)) or len({k for _, k in hits}) < len(hits):
+        return False
+    for c, k in hits:
+        lat.take(c, k)
+    return True
+
+
+def _parallelogram(lat: _Lattice, cell: tuple[int, int]) -> list[tuple[np.ndarray, float]]:
+    """Predictions of ``cell`` from three known neighbours forming a parallelogram with it."""
+    i, j = cell
+    out = []
+    for di in (-1, 1):
+        for dj in (-1, 1):
+            a, b, c = lat.p((i + di, j)), lat.p((i, j + dj)), lat.p((i + di, j + dj))
+            if a is not None and b is not None and c is not None:
+                out.append((a + b - c, float(min(np.linalg.norm(a - c), np.linalg.norm(b - c)))))
+    return out
+
+
+def _fill_holes(lat: _Lattice, passes: int = 10) -> None:
+    """Take points for missing cells inside the grid's extent, predicted from known neighbours."""
+    keys = np.array(list(lat.cells.keys()))
+    (i0, j0), (i1, j1) = keys.min(0), keys.max(0)
+    for _ in range(passes):
+        added = False
+        for i in range(i0, i1 + 1):
+            for j in range(j0, j1 + 1):
+                if (i, j) in lat.cells:
+                    continue
+                preds = [got for back in ((-1, 0), (1, 0), (0, -1), (0, 1))
+                         if (got := _predict(lat, (i, j), back)) is not None]
+                preds += _parallelogram(lat, (i, j))
+                if not preds:
+                    continue
+                pred = np.mean([p for p, _ in preds], axis=0)
+                tol = TOLERANCE * min(s for _, s in preds)
+                k = lat.nearest_free(pred[None], np.array([tol]))[0]
+                if k >= 0:
+                    lat.take((i, j), k)
+                    added = True
+        if not added:
+            break
+
+
+def edge_contrast(gray: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """How strongly the segments p→q look like an edge between two squares.
+
+    Between neighbouring corners along a grid line the board has a black square on one side and a
+    white one on the other; along a diagonal both sides are the same square. Samples at 35%, 50%
+    and 65% of the way, a quarter of the length to each side.
+    gray : (H, W) float32. p, q : (M, 2) px. Returns (M,) float32, |mean left − mean right|.
+    """
+    import cv2
+
+    p = np.asarray(p, np.float64).reshape(-1, 2)
+    q = np.asarray(q, np.float64).reshape(-1, 2)
+    d = q - p
+    n = np.stack([-d[:, 1], d[:, 0]], axis=1) * 0.25
+    t = np.array([0.35, 0.5, 0.65])[None, :, None]
+    mid = p[:, None, :] + t * d[:, None, :]
+    left, right = mid + n[:, None, :], mid - n[:, None, :]
+    g = np.asarray(gray, np.float32)
+
+    def sample(xy):
+        return cv2.remap(g, xy[..., 0].astype(np.float32), xy[..., 1].astype(np.float32), cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_REPLICATE)
+
+    return np.abs(sample(left).mean(axis=1) - sample(right).mean(axis=1)).astype(np.float32)
+
+
+def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, gray: np.ndarray | None = None) -> bool:
+    """Try to place a 3×3 lattice centred on point ``k``; True (and cells taken) on success.
+
+    Any two independent lattice steps generate the same points, so a diagonal step would give a
+    sheared grid. With ``gray``, only steps along square edges are used (see :func:`edge_contrast`);
+    pairs of steps are tried most orthogonal first.
+    """
+    p = lat.pts[k]
+    steps = lat.pts[neighbours] - p
+    if gray is not None:  # keep the steps that run along edges between squares
+        contrast = edge_contrast(gray, np.repeat(p[None], len(neighbours), 0), lat.pts[neighbours])
+        along = contrast >= 0.5 * contrast.max()
+        neighbours, steps = neighbours[along], steps[along]
+    pairs = []
+    for a in range(len(neighbours)):
+        for b in range(a + 1, len(neighbours)):
+            u, v = steps[a], steps[b]
+            nu, nv = np.linalg.norm(u), np.linalg.norm(v)
+            if nu < 1.0 or nv < 1.0 or not 0.5 <= nu / nv <= 2.0:
+                continue
+            cos = abs(float(u @ v)) / (nu * nv)
+            if cos < 0.95:  # otherwise nearly collinear: not two grid directions
+                pairs.append((cos, a, b))
+    offs = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)]
+    for _, a, b in sorted(pairs):
+        u, v = steps[a], steps[b]
+        tol = TOLERANCE * min(np.linalg.norm(u), np.linalg.norm(v))
+        preds = np.array([p + di * u + dj * v for di, dj in offs])
+        found = lat.nearest_free(preds, np.full(len(offs), tol))
+        if np.all(found >= 0) and len(set(found.tolist())) == 8 and k not in found:
+            lat.take((0, 0), k)
+            for (di, dj), f in zip(offs, found):
+                lat.take((di, dj), f)
+            return True
+    return False
+
+
+def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray: np.ndarray | None = None,
+                   min_size: int = 9, neighbours: int = 6) -> list[Grid]:
+    """Find lattices among candidate corner points.
+
+    points : (N, 2) float (x, y) px. scores : (N,) or None; seeds are tried strongest first.
+    gray : (H, W) float32 image, smoothed; lets seeds tell grid lines from diagonals. Without it,
+        a strongly skewed board can come out as a sheared lattice.
+    min_size : the fewest points a grid may have. neighbours : near points tried as seed steps.
+    Returns grids, largest first; they share no point.
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    n = len(pts)
+    if n < 9:
+        return []
+    order = np.argsort(-np.asarray(scores), kind="stable") if scores is not None else np.arange(n)
+    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
+    np.fill_diagonal(d2, np.inf)
+    near = np.argsort(d2, axis=1)[:, : min(neighbours, n - 1)]
+    free = np.ones(n, bool)
+    grids = []
+    for k in order:
+        if not free[k]:
+            continue
+        lat = _Lattice(pts, free)
+        if not _seed(lat, int(k), near[k], gray):
+            continue
+        grown = True
+        while grown:
+            grown = False
+            for axis in (0, 1):
+                for sign in (1, -1):
+                    while _grow_side(lat, axis, sign):
+                        grown = True
+        _fill_holes(lat)
+        if len(lat.cells) < min_size:
+            for kk in lat.cells.values():  # give the points back for other seeds
+                free[kk] = True
+            continue
+        ij = np.array(list(lat.cells.keys()))
+        grids.append(Grid(index=np.array(list(lat.cells.values())), ij=ij - ij.min(0)))
+    grids.sort(key=len, reverse=True)
+    return grids

@@ -1,0 +1,71 @@
+import numpy as np
+import pytest
+
+pytest.importorskip("keras")
+
+from aicalib_tf.data import CROP_SIZE, CornerMapBatches, PatchBatches, _dihedral, render_pool  # noqa: E402
+from aicalib_tf.corner_map import decode_map  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def pool():
+    return render_pool(10, seed=3, workers=1, progress=False)
+
+
+def test_pool_holds_images_and_visible_corners(pool):
+    assert pool.images.shape == (10, 480, 640) and pool.images.dtype == np.uint8
+    assert len(pool.corners) == 10
+    assert sum(len(c) for c in pool.corners) > 0
+    assert len(pool.corners[-1]) == 0  # the last tenth is board-free clutter
+    for c in pool.corners:
+        assert c.shape[1:] == (2,)
+        assert np.all((c >= -0.5) & (c <= [639.5, 479.5]))
+
+
+@pytest.mark.parametrize("k", range(8))
+def test_dihedral_moves_points_with_the_pixels(k):
+    img = np.zeros((16, 16), np.float32)
+    pts = np.array([[3.0, 5.0], [12.0, 1.0]], np.float32)
+    for x, y in pts.astype(int):
+        img[y, x] = 1.0
+    out, moved = _dihedral(img, pts, k)
+    for x, y in moved:
+        assert out[int(y), int(x)] == 1.0
+    assert out.sum() == 2.0
+
+
+def test_crop_batches_are_deterministic_and_labels_sit_on_x_junctions(pool):
+    a = CornerMapBatches(pool, batch_size=8, steps=3, seed=5)
+    b = CornerMapBatches(pool, batch_size=8, steps=3, seed=5)
+    x1, y1 = a[1]
+    x2, y2 = b[1]
+    np.testing.assert_array_equal(x1, x2)
+    np.testing.assert_array_equal(y1, y2)
+    assert x1.shape == (8, CROP_SIZE, CROP_SIZE, 1) and y1.shape == (8, CROP_SIZE // 4, CROP_SIZE // 4, 3)
+    assert not np.array_equal(a[2][0], x1)
+    a.on_epoch_end()
+    assert not np.array_equal(a[1][0], x1)  # a new epoch gives new crops
+    # labelled corners are X-junctions of the crop: diagonal quadrants agree and differ from the
+    # other diagonal. Noise can be strong, so compare the average contrast with random places.
+    def diag_contrast(img, x, y):
+        q = [img[y - 3 : y - 1, x - 3 : x - 1].mean(), img[y - 3 : y - 1, x + 2 : x + 4].mean(),
+             img[y + 2 : y + 4, x + 2 : x + 4].mean(), img[y + 2 : y + 4, x - 3 : x - 1].mean()]
+        return abs((q[0] + q[2]) - (q[1] + q[3]))
+
+    rng = np.random.default_rng(0)
+    at_corners, at_random = [], []
+    for img, target in zip(x1[..., 0], y1):
+        for x, y in decode_map(target, 0.5)[0]:
+            if 4 <= x < CROP_SIZE - 5 and 4 <= y < CROP_SIZE - 5:
+                at_corners.append(diag_contrast(img, int(round(x)), int(round(y))))
+                at_random.append(diag_contrast(img, *rng.integers(4, CROP_SIZE - 5, 2)))
+    assert len(at_corners) > 10
+    assert np.mean(at_corners) > 2.5 * np.mean(at_random)
+
+
+def test_patch_batches_are_balanced(pool):
+    pb = PatchBatches(pool, batch_size=16, steps=2, seed=1)
+    x, y = pb[0]
+    assert x.shape == (16, 32, 32, 1) and y.shape == (16, 1)
+    assert y.sum() == 8
+    np.testing.assert_array_equal(pb[0][0], x)

@@ -1,0 +1,53 @@
+import cv2
+import numpy as np
+import pytest
+
+from aicalib_tf.grid import assemble_grids
+from data_gen import make_sample
+from data_gen.presets import get_preset
+
+
+def _same_lattice(ij: np.ndarray, truth_cr: np.ndarray) -> bool:
+    """True if grid positions ij equal the true (col, row) up to a flip/transposition and shift."""
+    for m in (np.array([[1, 0], [0, 1]]), np.array([[0, 1], [1, 0]])):
+        for s in ([1, 1], [1, -1], [-1, 1], [-1, -1]):
+            t = (truth_cr @ m) * np.array(s)
+            t = t - t.min(0)
+            if np.array_equal(t, ij):
+                return True
+    return False
+
+
+@pytest.mark.parametrize("preset, seed", [("clean", 0), ("distorted", 1), ("distorted", 2), ("clean", 3), ("distorted", 4), ("distorted", 5)])
+def test_true_corners_assemble_into_one_full_lattice(preset, seed):
+    s = make_sample(preset, seed, 0, pattern=(9, 6))
+    rng = np.random.default_rng(seed)
+    pts = s.corners + rng.normal(0, 0.2, s.corners.shape)
+    gray = cv2.GaussianBlur(s.image.astype(np.float32), (0, 0), 1.0)
+    grids = assemble_grids(pts, gray=gray)
+    assert len(grids) == 1
+    g = grids[0]
+    assert len(g) == 54 and sorted(g.shape) == [6, 9]
+    cr = np.stack([g.index % 9, g.index // 9], 1)
+    assert _same_lattice(g.ij, cr)
+
+
+def test_clutter_points_and_missing_corners():
+    s = make_sample("clean", 5, 0, pattern=(9, 6))
+    rng = np.random.default_rng(5)
+    keep = np.ones(54, bool)
+    keep[[10, 11, 30, 44]] = False  # holes inside the board
+    clutter = rng.uniform([0, 0], [640, 480], (80, 2))
+    pts = np.concatenate([s.corners[keep], clutter])
+    grids = assemble_grids(pts, gray=s.image.astype(np.float32))
+    g = grids[0]
+    board = g.index[g.index < keep.sum()]
+    assert len(board) == 50 and len(g) == 50  # every true corner, no clutter point
+    idx = np.flatnonzero(keep)[g.index]
+    assert _same_lattice(g.ij, np.stack([idx % 9, idx // 9], 1))
+
+
+def test_too_few_or_scattered_points_give_no_grid():
+    assert assemble_grids(np.zeros((5, 2))) == []
+    rng = np.random.default_rng(0)
+    assert all(len(g) < 20 for g in assemble_grids(rng.uniform(0, 640, (300, 2))))

@@ -1,0 +1,97 @@
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("keras")
+
+from aicalib_tf.train import main  # noqa: E402
+
+TINY = ["--steps", "3", "--batch-size", "4", "--pool-images", "4", "--val-images", "2", "--workers", "1", "--quiet"]
+
+
+def _cli(*args, timeout=240):
+    env = {**os.environ, "TF_CPP_MIN_LOG_LEVEL": "3"}
+    return subprocess.Popen([sys.executable, "-m", "aicalib_tf.train", *args], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("arch", ["default", "report"])
+def test_tiny_run_writes_every_file(tmp_path, arch):
+    run = tmp_path / "run"
+    assert main(["--arch", arch, "--out", str(run), "--epochs", "2", *TINY]) == 0
+    for name in ["config.json", "checkpoint.keras", "state.json", "log.csv", "model.keras", "metrics.json"]:
+        assert (run / name).is_file(), name
+    assert (run / "tensorboard").is_dir()
+    assert not list(run.glob("*partial*"))
+    lines = (run / "log.csv").read_text().splitlines()
+    assert lines[0].split(",")[0] == "epoch" and "val_recall" in lines[0] and len(lines) == 3
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["arch"] == arch and metrics["params"] > 0 and len(metrics["sha256"]) == 64
+    assert json.loads((run / "config.json").read_text())["arch"] == arch
+
+
+@pytest.mark.slow
+def test_killed_run_resumes_from_its_last_checkpoint(tmp_path):
+    run = tmp_path / "run"
+    proc = _cli("--out", str(run), "--epochs", "40", *TINY)
+    state = run / "state.json"
+    deadline = time.time() + 180
+    while time.time() < deadline and proc.poll() is None:
+        if state.is_file() and json.loads(state.read_text())["epochs_done"] >= 2:
+            break
+        time.sleep(0.2)
+    assert proc.poll() is None, proc.stdout.read()
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    done = json.loads(state.read_text())["epochs_done"]
+    assert 2 <= done < 40 and not (run / "model.keras").exists()
+    resumed = _cli("--out", str(run), "--epochs", str(done + 2), "--resume")
+    out, _ = resumed.communicate(timeout=240)
+    assert resumed.returncode == 0, out
+    assert json.loads(state.read_text())["epochs_done"] == done + 2
+    epochs = [int(line.split(",")[0]) for line in (run / "log.csv").read_text().splitlines()[1:]]
+    assert epochs[-2:] == [done, done + 1]  # continued where it stopped, not from scratch
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["resumed_at_epoch"] == done and (run / "model.keras").is_file()
+
+
+def test_same_seed_gives_the_same_weights(tmp_path):
+    import numpy as np
+
+    from aicalib_tf.model import load_model
+
+    weights = []
+    for name in ("a", "b"):
+        assert main(["--out", str(tmp_path / name), "--epochs", "1", "--seed", "4", *TINY]) == 0
+        weights.append(load_model(tmp_path / name / "model.keras").get_weights())
+    for wa, wb in zip(*weights):
+        np.testing.assert_array_equal(wa, wb)
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--arch", "resnet"], "unknown architecture"),
+        (["--preset", "nope"], "unknown preset"),
+        (["--epochs", "0"], "--epochs must be >= 1"),
+        (["--resume"], "holds no checkpoint"),
+    ],
+)
+def test_bad_options_exit_2_with_a_clear_message(tmp_path, capsys, args, message):
+    assert main(["--out", str(tmp_path / "run"), *args]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_refuses_to_overwrite_a_run(tmp_path, capsys):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "model.keras").write_bytes(b"x")
+    assert main(["--out", str(run), *TINY]) == 2
+    assert "already holds a run" in capsys.readouterr().err
