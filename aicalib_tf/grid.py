@@ -30,12 +30,14 @@ TOLERANCE = 0.3  # of the local step: how far a predicted corner may be from the
 class Grid:
     """A lattice of points.
 
-    index : (K,) int, rows into the candidate points. ij : (K, 2) int, (i, j) lattice positions
-    with min 0 along each axis (i counts steps along one grid direction, j along the other).
+    index : (K,) int, rows into the candidate points, or -1 for a point the ``propose`` callback
+    found. ij : (K, 2) int, (i, j) lattice positions with min 0 along each axis (i counts steps
+    along one grid direction, j along the other). points : (K, 2) float (x, y) px.
     """
 
     index: np.ndarray
     ij: np.ndarray
+    points: np.ndarray
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -47,27 +49,50 @@ class Grid:
 
 
 class _Lattice:
-    """Mutable (i, j) -> point index map while a grid grows."""
+    """Mutable (i, j) -> point index map while a grid grows.
 
-    def __init__(self, pts: np.ndarray, free: np.ndarray):
-        self.pts, self.free = pts, free
+    propose : optional callable (pred (M, 2), step (M,)) -> (M, 2) points with NaN rows where no
+    corner is there; asked for predictions that no free candidate point matches.
+    limit : the largest extent (number of i or j positions) a grid may reach.
+    """
+
+    def __init__(self, pts: np.ndarray, free: np.ndarray, propose=None, limit: int | None = None):
+        self.pts, self.free, self.n0 = pts, free, len(pts)
         self.cells: dict[tuple[int, int], int] = {}
+        self.propose, self.limit = propose, limit
+        self.extra: list[np.ndarray] = []
 
-    def nearest_free(self, pred: np.ndarray, tol: np.ndarray) -> np.ndarray:
-        """For predictions (M, 2) and tolerances (M,), the free point index within tol, or -1."""
+    def point(self, k: int) -> np.ndarray:
+        return self.pts[k] if k < self.n0 else self.extra[k - self.n0]
+
+    def find(self, pred: np.ndarray, tol: np.ndarray, allow_propose: bool = True) -> np.ndarray:
+        """For predictions (M, 2) and tolerances (M,), a point index within tol, or -1."""
         d2 = ((pred[:, None, :] - self.pts[None, :, :]) ** 2).sum(-1)
         d2[:, ~self.free] = np.inf
         best = np.argmin(d2, axis=1)
         ok = d2[np.arange(len(pred)), best] <= tol**2
-        return np.where(ok, best, -1)
+        found = np.where(ok, best, -1)
+        miss = np.flatnonzero(~ok)
+        if self.propose is not None and allow_propose and len(miss):
+            got = self.propose(pred[miss], tol[miss] / TOLERANCE)
+            for m, q in zip(miss, got):
+                if np.all(np.isfinite(q)) and np.sum((q - pred[m]) ** 2) <= tol[m] ** 2:
+                    self.extra.append(np.asarray(q, np.float64))
+                    found[m] = self.n0 + len(self.extra) - 1
+        return found
 
     def take(self, cell: tuple[int, int], k: int) -> None:
         self.cells[cell] = int(k)
-        self.free[k] = False
+        if k < self.n0:
+            self.free[k] = False
 
     def p(self, cell) -> np.ndarray | None:
         k = self.cells.get(cell)
-        return None if k is None else self.pts[k]
+        return None if k is None else self.point(k)
+
+    def extent(self, axis: int) -> int:
+        keys = np.array(list(self.cells.keys()))
+        return int(keys[:, axis].max() - keys[:, axis].min() + 1)
 
 
 def _predict(lat: _Lattice, cell: tuple[int, int], back: tuple[int, int]) -> tuple[np.ndarray, float] | None:
@@ -103,7 +128,9 @@ def _grow_side(lat: _Lattice, axis: int, sign: int) -> bool:
             tols.append(TOLERANCE * got[1])
     if not cells:
         return False
-    found = lat.nearest_free(np.array(preds), np.array(tols))
+    if lat.limit is not None and lat.extent(axis) >= lat.limit:
+        return False
+    found = lat.find(np.array(preds), np.array(tols), allow_propose=lat.limit is not None)
     hits = [(c, k) for c, k in zip(cells, found) if k >= 0]
     if len(hits) < max(2, 0.5 * len(cells)) or len({k for _, k in hits}) < len(hits):
         return False
@@ -141,7 +168,7 @@ def _fill_holes(lat: _Lattice, passes: int = 10) -> None:
                     continue
                 pred = np.mean([p for p, _ in preds], axis=0)
                 tol = TOLERANCE * min(s for _, s in preds)
-                k = lat.nearest_free(pred[None], np.array([tol]))[0]
+                k = lat.find(pred[None], np.array([tol]))[0]
                 if k >= 0:
                     lat.take((i, j), k)
                     added = True
@@ -203,7 +230,7 @@ def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, gray: np.ndarray | None
         u, v = steps[a], steps[b]
         tol = TOLERANCE * min(np.linalg.norm(u), np.linalg.norm(v))
         preds = np.array([p + di * u + dj * v for di, dj in offs])
-        found = lat.nearest_free(preds, np.full(len(offs), tol))
+        found = lat.find(preds, np.full(len(offs), tol), allow_propose=False)
         if np.all(found >= 0) and len(set(found.tolist())) == 8 and k not in found:
             lat.take((0, 0), k)
             for (di, dj), f in zip(offs, found):
@@ -213,13 +240,16 @@ def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, gray: np.ndarray | None
 
 
 def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray: np.ndarray | None = None,
-                   min_size: int = 9, neighbours: int = 6) -> list[Grid]:
+                   min_size: int = 9, neighbours: int = 6, propose=None, limit: int | None = None) -> list[Grid]:
     """Find lattices among candidate corner points.
 
     points : (N, 2) float (x, y) px. scores : (N,) or None; seeds are tried strongest first.
     gray : (H, W) float32 image, smoothed; lets seeds tell grid lines from diagonals. Without it,
         a strongly skewed board can come out as a sheared lattice.
     min_size : the fewest points a grid may have. neighbours : near points tried as seed steps.
+    propose : optional callable that looks for a corner where the lattice predicts one and no
+        candidate is (see ``_Lattice``); it fills holes, and with ``limit`` also extends edges.
+    limit : the largest number of positions along either grid axis (e.g. max(cols, rows)).
     Returns grids, largest first; they share no point.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
@@ -235,7 +265,7 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
     for k in order:
         if not free[k]:
             continue
-        lat = _Lattice(pts, free)
+        lat = _Lattice(pts, free, propose, limit)
         if not _seed(lat, int(k), near[k], gray):
             continue
         grown = True
@@ -251,6 +281,8 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
                 free[kk] = True
             continue
         ij = np.array(list(lat.cells.keys()))
-        grids.append(Grid(index=np.array(list(lat.cells.values())), ij=ij - ij.min(0)))
+        ks = list(lat.cells.values())
+        grids.append(Grid(index=np.array([k if k < n else -1 for k in ks]), ij=ij - ij.min(0),
+                          points=np.array([lat.point(k) for k in ks])))
     grids.sort(key=len, reverse=True)
     return grids

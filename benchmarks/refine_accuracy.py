@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 
 import numpy as np
 
@@ -30,7 +31,7 @@ REFINERS = {
 
 def condition(noise: float):
     rules = (Rule.of("gaussian_blur", sigma=0.6),) + ((Rule.of("gaussian_noise", sigma=noise),) if noise else ())
-    return get_preset("clean", rules=rules, name=f"noise{noise:g}")
+    return replace(get_preset("clean", rules=rules), name=f"noise{noise:g}")
 
 
 def main(argv=None) -> int:

@@ -1,0 +1,256 @@
+"""Chessboard detection with the CNN: image -> ordered board (``python -m aicalib_tf.detect``).
+
+Pipeline: CNN corner weights -> peaks (:mod:`aicalib_tf.inference`) -> saddle-point refinement
+on the original image (:mod:`aicalib_tf.refine`) -> grid assembly (:mod:`aicalib_tf.grid`) ->
+ordered board.
+
+Order of a full board (OpenCV's, row-major: index = r·cols + c). A board read from the front
+keeps its handedness, so only its rotations are ambiguous: 180°, and 90° too for a square
+pattern. They are resolved like ``cv2.findChessboardCorners`` (measured on data_gen boards):
+
+* cols + rows odd (e.g. 9x6): the board's colours tell 180° apart. Corner 0 is the one whose
+  outer diagonal square is black (the square beyond it, away from corners 1 and ``cols``).
+* otherwise (both even, both odd, or square): the first row is above the last row in the
+  image, and for a square pattern the first row also runs left to right.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from .grid import Grid, assemble_grids
+from .io import load_image
+from .refine import refine_saddle
+
+__all__ = ["Detection", "detect_corners", "find_chessboard_corners", "order_full_board"]
+
+
+@dataclass(frozen=True)
+class Detection:
+    """A detected chessboard.
+
+    corners : (N, 2) float32 (x, y) px, in OpenCV order when ``complete``.
+    ids : (N, 2) int32, (col, row) of each corner on the board.
+    scores : (N,) float32 CNN corner weights in [0, 1]; 0 for a corner the CNN missed that was
+        recovered where the grid predicts one (saddle fit and ring test on the image).
+    pattern_size : (cols, rows) inner corners (the found grid's size when none was given).
+    complete : every corner of ``pattern_size`` is present.
+    image_size : (width, height) px.
+    """
+
+    corners: np.ndarray
+    ids: np.ndarray
+    scores: np.ndarray
+    pattern_size: tuple[int, int] | None
+    complete: bool
+    image_size: tuple[int, int]
+    candidates: int = field(default=0, compare=False)
+
+    @property
+    def found(self) -> bool:
+        return len(self.corners) > 0
+
+
+_DEFAULT_MODEL = None
+
+
+def _default_model():
+    global _DEFAULT_MODEL
+    if _DEFAULT_MODEL is None:
+        from .model import load_model
+
+        _DEFAULT_MODEL = load_model("default")
+    return _DEFAULT_MODEL
+
+
+def _refine(gray: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Saddle refinement with a window that fits inside the local squares."""
+    if len(pts) < 2:
+        return refine_saddle(gray, pts, sigma=1.0, radius=3)
+    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
+    np.fill_diagonal(d2, np.inf)
+    spacing = np.sqrt(d2.min(axis=1))
+    radius = np.clip(np.round(0.45 * spacing), 2, 5).astype(int)
+    out = pts.astype(np.float32).copy()
+    ok = np.zeros(len(pts), bool)
+    for r in np.unique(radius):
+        sel = radius == r
+        out[sel], ok[sel] = refine_saddle(gray, pts[sel], sigma=0.4 * r, radius=int(r))
+    return out, ok
+
+
+def _dedupe(pts: np.ndarray, scores: np.ndarray, min_distance: float = 1.5) -> np.ndarray:
+    """Indices of points to keep: of points closer than ``min_distance`` px, only the strongest."""
+    order = np.argsort(-scores, kind="stable")
+    d2 = ((pts[order, None, :] - pts[None, order, :]) ** 2).sum(-1)
+    close = d2 < min_distance**2
+    alive = np.ones(len(order), bool)
+    for a in range(len(order)):
+        if alive[a]:
+            close_after = close[a].copy()
+            close_after[: a + 1] = False
+            alive &= ~close_after
+    return order[alive]
+
+
+_RING = np.stack([np.cos(np.linspace(0, 2 * np.pi, 16, endpoint=False)),
+                  np.sin(np.linspace(0, 2 * np.pi, 16, endpoint=False))], 1)
+
+
+def ring_symmetry(gray: np.ndarray, pts: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """X-junction evidence on a ring around each point.
+
+    An X-junction is point-symmetric (I(p + d) = I(p − d)) and its ring alternates two dark and
+    two bright arcs. gray : (H, W) float32. pts : (M, 2) px. radius : (M,) px.
+    Returns amplitude (M,) (mean |I − mean| on the ring) and asymmetry (M,) (mean |I(θ) − I(θ + π)|).
+    """
+    xy = pts[:, None, :] + radius[:, None, None] * _RING[None]
+    ring = cv2.remap(gray, xy[..., 0].astype(np.float32), xy[..., 1].astype(np.float32), cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REPLICATE)
+    amp = np.abs(ring - ring.mean(axis=1, keepdims=True)).mean(axis=1)
+    asym = np.abs(ring[:, :8] - ring[:, 8:]).mean(axis=1)
+    return amp, asym
+
+
+def _proposer(gray: np.ndarray, smooth: np.ndarray, ref_amp: float):
+    """Look for a corner at each grid prediction: saddle refinement plus the ring test."""
+
+    def propose(pred: np.ndarray, step: np.ndarray) -> np.ndarray:
+        out = np.full(pred.shape, np.nan)
+        h, w = gray.shape
+        inside = (pred[:, 0] >= 1) & (pred[:, 0] <= w - 2) & (pred[:, 1] >= 1) & (pred[:, 1] <= h - 2)
+        for k in np.flatnonzero(inside):
+            r = int(np.clip(np.round(0.45 * step[k]), 2, 5))
+            q, ok = refine_saddle(gray, pred[k : k + 1], sigma=0.4 * r, radius=r, max_shift=0.3 * step[k])
+            if not ok[0]:
+                continue
+            amp, asym = ring_symmetry(smooth, q.astype(np.float64), np.array([0.3 * step[k]]))
+            if amp[0] >= 0.5 * ref_amp and asym[0] <= 0.35 * amp[0]:
+                out[k] = q[0]
+        return out
+
+    return propose
+
+
+def _square_colour(gray: np.ndarray, p: np.ndarray) -> float:
+    x, y = float(p[0]), float(p[1])
+    return float(cv2.getRectSubPix(gray, (3, 3), (x, y)).mean())
+
+
+def order_full_board(corners: np.ndarray, pattern_size: tuple[int, int], gray: np.ndarray) -> np.ndarray:
+    """Reorder a full board's corners (any admissible reading) by the module's rule.
+
+    corners : (cols·rows, 2) in some row-major reading of the board with the right handedness.
+    Returns the (cols·rows, 2) corners in the rule's order.
+    """
+    from .metrics import board_symmetries
+
+    cols, rows = pattern_size
+    best, best_key = None, None
+    for perm in board_symmetries(pattern_size):
+        c = corners[perm]
+        dy = c[(rows - 1) * cols, 1] - c[0, 1]
+        dx = c[cols - 1, 0] - c[0, 0]
+        if (cols + rows) % 2 == 1 and cols != rows:
+            outer = c[0] - 0.5 * (c[1] - c[0]) - 0.5 * (c[cols] - c[0])
+            inner = c[0] + 0.5 * (c[1] - c[0]) - 0.5 * (c[cols] - c[0])
+            key = (_square_colour(gray, inner) - _square_colour(gray, outer), 0.0)
+        else:
+            key = (float(dy > 0), float(dx > 0) + 1e-6 * (dx + dy))
+        if best_key is None or key > best_key:
+            best, best_key = c, key
+    return best
+
+
+def _handed(grid_ij: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Flip j if needed so that the i and j directions have the image's handedness (x right, y down).
+
+    A board seen from the front keeps its handedness, so the board's (col, row) axes must too.
+    """
+    a = np.concatenate([grid_ij.astype(np.float64), np.ones((len(grid_ij), 1))], axis=1)
+    (u, v, _), *_ = np.linalg.lstsq(a, pts.astype(np.float64), rcond=None)
+    if u[0] * v[1] - u[1] * v[0] < 0:
+        return np.stack([grid_ij[:, 0], grid_ij[:, 1].max() - grid_ij[:, 1]], 1)
+    return grid_ij
+
+
+def _board_from_grid(grid: Grid, scores, pattern_size, gray, size) -> Detection | None:
+    ij = _handed(grid.ij, grid.points)
+    a, b = grid.shape
+    if pattern_size is None:
+        cols, rows = a, b
+    else:
+        cols, rows = pattern_size
+        if (a, b) == (rows, cols) and a != b:
+            # the grid's i runs along the board's rows: swap roles, keeping handedness
+            ij = np.stack([ij[:, 1], ij[:, 0]], 1)
+            ij = np.stack([ij[:, 0], ij[:, 1].max() - ij[:, 1]], 1)
+            a, b = b, a
+        if (a, b) != (cols, rows):
+            return None
+    full = len(grid) == cols * rows
+    if not full:
+        return None
+    corners = np.zeros((cols * rows, 2), np.float32)
+    sc = np.zeros(cols * rows, np.float32)
+    idx = ij[:, 1] * cols + ij[:, 0]
+    corners[idx] = grid.points
+    sc[idx] = np.where(grid.index >= 0, scores[grid.index], 0.0)
+    ordered = order_full_board(corners, (cols, rows), gray)
+    perm = np.array([int(np.argmin(((corners - p) ** 2).sum(1))) for p in ordered])
+    ids = np.stack(np.meshgrid(np.arange(cols), np.arange(rows)), -1).reshape(-1, 2).astype(np.int32)
+    return Detection(ordered.astype(np.float32), ids, sc[perm], (cols, rows), True, size)
+
+
+def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=None,
+                   threshold: float = 0.5) -> Detection:
+    """Find a chessboard's inner corners.
+
+    image : path or array (see :func:`aicalib_tf.io.load_image`).
+    pattern_size : (cols, rows) inner corners; None returns the largest grid found.
+    model : a loaded corner model (default: the shipped ``models/default.keras``).
+    Returns a :class:`Detection`; ``found`` is False when no board is there.
+    """
+    from .inference import corner_points
+
+    gray = load_image(image)
+    h, w = gray.shape
+    if pattern_size is not None:
+        from data_gen.board import check_pattern
+
+        check_pattern(pattern_size)
+    empty = Detection(np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
+                      pattern_size, False, (w, h))
+    if h < 8 or w < 8:
+        return empty
+    model = model if model is not None else _default_model()
+    pts, scores = corner_points(model, gray, threshold)
+    if len(pts) < 9:
+        return empty
+    refined, ok = _refine(gray, pts)
+    refined, scores = refined[ok], scores[ok]
+    keep = _dedupe(refined, scores)
+    refined, scores = refined[keep], scores[keep]
+    smooth = cv2.GaussianBlur(gray, (0, 0), 1.0)
+    propose = None
+    if len(refined) >= 9:
+        spacing = np.sqrt(np.sort(((refined[:, None] - refined[None]) ** 2).sum(-1), axis=1)[:, 1])
+        amp, _ = ring_symmetry(smooth, refined.astype(np.float64), 0.3 * spacing)
+        propose = _proposer(gray, smooth, float(np.median(amp[: max(9, len(amp) // 2)])))
+    limit = max(pattern_size) if pattern_size is not None else None
+    for grid in assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit):
+        det = _board_from_grid(grid, scores, pattern_size, smooth, (w, h))
+        if det is not None:
+            return det
+    return empty
+
+
+def find_chessboard_corners(image, pattern_size: tuple[int, int], *, model=None) -> tuple[bool, np.ndarray | None]:
+    """Drop-in for ``cv2.findChessboardCorners``: (found, corners (cols·rows, 1, 2) float32 or None)."""
+    det = detect_corners(image, pattern_size, model=model)
+    if not det.complete:
+        return False, None
+    return True, det.corners.reshape(-1, 1, 2).copy()
