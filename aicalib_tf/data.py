@@ -84,8 +84,9 @@ def render_pool(count: int, seed: int, *, preset: str = "train", workers: int = 
             k += 1
             bar.update()
     bar.close()
-    flat = images.reshape(count, -1).astype(np.float32)
-    return Pool(images, corners, flat.mean(axis=1), flat.std(axis=1))
+    mean = np.array([img.mean() for img in images], np.float32)  # per image: no float copy of the pool
+    std = np.array([img.std() for img in images], np.float32)
+    return Pool(images, corners, mean, std)
 
 
 def _dihedral(img: np.ndarray, pts: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:

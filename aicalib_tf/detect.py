@@ -66,20 +66,47 @@ def _default_model():
     return _DEFAULT_MODEL
 
 
-def _refine(gray: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Saddle refinement with a window that fits inside the local squares."""
-    if len(pts) < 2:
-        return refine_saddle(gray, pts, sigma=1.0, radius=3)
-    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
-    np.fill_diagonal(d2, np.inf)
-    spacing = np.sqrt(d2.min(axis=1))
-    radius = np.clip(np.round(0.45 * spacing), 2, 5).astype(int)
-    out = pts.astype(np.float32).copy()
+class _Smoothed:
+    """The image smoothed for each refinement radius r (σ = 0.4·r), made once per image on demand."""
+
+    def __init__(self, gray: np.ndarray):
+        self.gray, self.cache = gray, {}
+
+    def __getitem__(self, r: int) -> np.ndarray:
+        if r not in self.cache:
+            self.cache[r] = cv2.GaussianBlur(self.gray, (0, 0), 0.4 * r)
+        return self.cache[r]
+
+
+def _radius(spacing: np.ndarray) -> np.ndarray:
+    """Refinement window half-size (px) that fits inside squares of ``spacing`` px: 2..5."""
+    return np.clip(np.round(0.45 * np.asarray(spacing, np.float64)), 2, 5).astype(int)
+
+
+def _refine(smoothed: _Smoothed, pts: np.ndarray, spacing: np.ndarray, max_shift: np.ndarray | None = None):
+    """Saddle refinement with a window that fits inside the local squares.
+
+    pts : (N, 2). spacing : (N,) px, the local corner spacing. max_shift : (N,) px or None.
+    Returns refined (N, 2) float32 and ok (N,) bool.
+    """
+    radius = _radius(spacing)
+    out = np.asarray(pts, np.float32).copy()
     ok = np.zeros(len(pts), bool)
     for r in np.unique(radius):
         sel = radius == r
-        out[sel], ok[sel] = refine_saddle(gray, pts[sel], sigma=0.4 * r, radius=int(r))
+        out[sel], ok[sel] = refine_saddle(smoothed[int(r)], pts[sel], sigma=0.0, radius=int(r))
+    if max_shift is not None:
+        ok &= np.linalg.norm(out - pts, axis=1) <= max_shift
     return out, ok
+
+
+def _nearest_spacing(pts: np.ndarray) -> np.ndarray:
+    """(N,) distance from each point to its nearest other point (px); 8 when alone."""
+    if len(pts) < 2:
+        return np.full(len(pts), 8.0)
+    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
+    np.fill_diagonal(d2, np.inf)
+    return np.sqrt(d2.min(axis=1))
 
 
 def _dedupe(pts: np.ndarray, scores: np.ndarray, min_distance: float = 1.5) -> np.ndarray:
@@ -115,21 +142,20 @@ def ring_symmetry(gray: np.ndarray, pts: np.ndarray, radius: np.ndarray) -> tupl
     return amp, asym
 
 
-def _proposer(gray: np.ndarray, smooth: np.ndarray, ref_amp: float):
+def _proposer(smoothed: _Smoothed, ring_image: np.ndarray, ref_amp: float):
     """Look for a corner at each grid prediction: saddle refinement plus the ring test."""
 
     def propose(pred: np.ndarray, step: np.ndarray) -> np.ndarray:
         out = np.full(pred.shape, np.nan)
-        h, w = gray.shape
+        h, w = ring_image.shape
         inside = (pred[:, 0] >= 1) & (pred[:, 0] <= w - 2) & (pred[:, 1] >= 1) & (pred[:, 1] <= h - 2)
-        for k in np.flatnonzero(inside):
-            r = int(np.clip(np.round(0.45 * step[k]), 2, 5))
-            q, ok = refine_saddle(gray, pred[k : k + 1], sigma=0.4 * r, radius=r, max_shift=0.3 * step[k])
-            if not ok[0]:
-                continue
-            amp, asym = ring_symmetry(smooth, q.astype(np.float64), np.array([0.3 * step[k]]))
-            if amp[0] >= 0.5 * ref_amp and asym[0] <= 0.35 * amp[0]:
-                out[k] = q[0]
+        k = np.flatnonzero(inside)
+        if len(k) == 0:
+            return out
+        q, ok = _refine(smoothed, pred[k], step[k], max_shift=0.3 * step[k])
+        amp, asym = ring_symmetry(ring_image, q.astype(np.float64), 0.3 * step[k])
+        ok &= (amp >= 0.5 * ref_amp) & (asym <= 0.35 * amp)
+        out[k[ok]] = q[ok]
         return out
 
     return propose
@@ -230,16 +256,17 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     pts, scores = corner_points(model, gray, threshold)
     if len(pts) < 9:
         return empty
-    refined, ok = _refine(gray, pts)
+    smoothed = _Smoothed(gray)
+    refined, ok = _refine(smoothed, pts, _nearest_spacing(pts))
     refined, scores = refined[ok], scores[ok]
     keep = _dedupe(refined, scores)
     refined, scores = refined[keep], scores[keep]
     smooth = cv2.GaussianBlur(gray, (0, 0), 1.0)
     propose = None
     if len(refined) >= 9:
-        spacing = np.sqrt(np.sort(((refined[:, None] - refined[None]) ** 2).sum(-1), axis=1)[:, 1])
+        spacing = _nearest_spacing(refined)
         amp, _ = ring_symmetry(smooth, refined.astype(np.float64), 0.3 * spacing)
-        propose = _proposer(gray, smooth, float(np.median(amp[: max(9, len(amp) // 2)])))
+        propose = _proposer(smoothed, smooth, float(np.median(amp[: max(9, len(amp) // 2)])))
     limit = max(pattern_size) if pattern_size is not None else None
     for grid in assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit):
         det = _board_from_grid(grid, scores, pattern_size, smooth, (w, h))

@@ -1,0 +1,83 @@
+"""Ship trained runs: copy each run's model into models/ and write models/MODEL_CARD.md.
+
+    python -m aicalib_tf.model_card runs/default runs/report [--out models]
+
+Each RUN_DIR must hold ``model.keras``, ``config.json`` and ``metrics.json`` from
+``python -m aicalib_tf.train``. The model is copied to ``OUT/<arch>.keras`` (atomically) and the
+card records, per model: the exact training command, preset, seed, wall time, parameter count,
+validation metrics, file size and sha256.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from .io import atomic_write_bytes, atomic_write_text
+
+__all__ = ["train_command", "card_section", "main"]
+
+_FLAGS = ("arch", "epochs", "steps", "batch_size", "seed", "preset", "pool_images", "val_images", "learning_rate")
+
+
+def train_command(config: dict) -> str:
+    """The ``python -m aicalib_tf.train`` command line that reproduces ``config``."""
+    parts = ["python -m aicalib_tf.train", f"--out runs/{config['arch']}"]
+    parts += [f"--{k.replace('_', '-')} {config[k]}" for k in _FLAGS]
+    return " ".join(parts)
+
+
+def card_section(config: dict, metrics: dict) -> str:
+    """The Markdown section of one model."""
+    minutes = metrics.get("wall_s_total", metrics["wall_s_this_process"]) / 60.0
+    v = metrics["validation"]
+    return "\n".join([
+        f"## `{config['arch']}.keras`",
+        "",
+        f"- Training command: `{train_command(config)}`",
+        f"- Data: data_gen preset `{config['preset']}` (checker distractors off; 10% board-free clutter images), "
+        f"{config['pool_images']} rendered 640×480 images, seed {config['seed']}.",
+        f"- Wall time on the 2-core CPU, rendering included: {minutes:.1f} min.",
+        f"- Parameters: {metrics['params']:,}. File: {metrics['size_bytes'] / 1e6:.2f} MB.",
+        f"- sha256: `{metrics['sha256']}`",
+        f"- Validation ({v['images']} images of preset `{v['preset']}`, seed {v['seed']}, never trained on; "
+        f"a match is within {v['match_px']:g} px of a visible true corner, corner weight ≥ {config['threshold']}):",
+        "",
+        "  | precision | recall | F1 | localisation median px | p95 px |",
+        "  | --- | --- | --- | --- | --- |",
+        f"  | {metrics['precision']:.4f} | {metrics['recall']:.4f} | {metrics['f1']:.4f} | "
+        f"{metrics['loc_median_px']:.3f} | {metrics['loc_p95_px']:.3f} |",
+        "",
+    ])
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m aicalib_tf.model_card", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("runs", nargs="+", type=Path, help="run folders of python -m aicalib_tf.train")
+    ap.add_argument("--out", type=Path, default=Path("models"))
+    ap.add_argument("--intro", type=Path, help="Markdown put before the per-model sections")
+    args = ap.parse_args(argv)
+    sections = []
+    for run in args.runs:
+        try:
+            config = json.loads((run / "config.json").read_text())
+            metrics = json.loads((run / "metrics.json").read_text())
+            data = (run / "model.keras").read_bytes()
+        except (OSError, ValueError) as exc:
+            print(f"error: {run}: not a finished training run ({exc})", file=sys.stderr)
+            return 2
+        args.out.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(args.out / f"{config['arch']}.keras", data)
+        atomic_write_bytes(args.out / f"{config['arch']}_log.csv", (run / "log.csv").read_bytes())
+        sections.append(card_section(config, metrics))
+    intro = args.intro.read_text() if args.intro else "# Model card\n\n"
+    atomic_write_text(args.out / "MODEL_CARD.md", intro + "\n".join(sections))
+    print(f"wrote {args.out / 'MODEL_CARD.md'} and {len(sections)} model(s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

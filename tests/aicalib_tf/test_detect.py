@@ -1,0 +1,86 @@
+"""Detection with the shipped default model, on data_gen renders and on real photos."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("keras")
+
+from aicalib_tf.detect import detect_corners, find_chessboard_corners  # noqa: E402
+from aicalib_tf.io import ImageError  # noqa: E402
+from aicalib_tf.model import MODELS_DIR, load_model  # noqa: E402
+from data_gen import make_sample  # noqa: E402
+
+DATA = Path(__file__).resolve().parents[1] / "data"
+pytestmark = pytest.mark.skipif(not (MODELS_DIR / "default.keras").is_file(), reason="no shipped default model")
+
+
+@pytest.fixture(scope="module")
+def model():
+    return load_model("default")
+
+
+@pytest.mark.parametrize("preset", ["clean", "distorted", "noisy"])
+def test_full_boards_in_opencv_order_with_subpixel_accuracy(model, preset):
+    errs = []
+    for i in range(4):
+        s = make_sample(preset, 21, i, pattern=(9, 6))
+        det = detect_corners(s.image, (9, 6), model=model)
+        assert det.complete and det.pattern_size == (9, 6), (preset, i)
+        # 9x6 boards: the colour rule fixes the order, which is data_gen's labelled order
+        e = np.linalg.norm(det.corners - s.corners, axis=1)
+        assert e.max() < 1.0, (preset, i)
+        errs.append(e)
+        assert det.ids.shape == (54, 2) and det.ids[10].tolist() == [1, 1]
+    assert np.median(np.concatenate(errs)) < (0.02 if preset != "noisy" else 0.2)
+
+
+def test_even_pattern_puts_the_first_row_above_the_last(model):
+    for i in range(3):
+        s = make_sample("clean", 8, i, pattern=(8, 6))
+        det = detect_corners(s.image, (8, 6), model=model)
+        assert det.complete
+        assert det.corners[5 * 8, 1] > det.corners[0, 1]
+
+
+def test_wrong_pattern_size_finds_no_board(model):
+    s = make_sample("clean", 21, 0, pattern=(9, 6))
+    assert not detect_corners(s.image, (7, 5), model=model).found
+    found, corners = find_chessboard_corners(s.image, (9, 6), model=model)
+    assert found and corners.shape == (54, 1, 2) and corners.dtype == np.float32
+
+
+def test_board_free_images_give_no_board(model):
+    for i in range(4):
+        s = make_sample("clutter", 3, i)
+        assert not detect_corners(s.image, (9, 6), model=model).found
+
+
+@pytest.mark.parametrize("shape, dtype", [((1, 1), np.uint8), ((5, 7), np.uint8), ((40, 40), np.uint16), ((64, 48, 3), np.uint8)])
+def test_tiny_and_flat_images_are_not_found_not_crashes(model, shape, dtype):
+    assert not detect_corners(np.full(shape, 7, dtype), (9, 6), model=model).found
+
+
+def test_bad_input_is_a_clear_error(model, tmp_path):
+    bad = tmp_path / "broken.jpg"
+    bad.write_bytes(b"\xff\xd8 not really a jpeg")
+    with pytest.raises(ImageError, match="broken.jpg"):
+        detect_corners(bad, (9, 6), model=model)
+    with pytest.raises(ValueError, match="pattern"):
+        detect_corners(np.zeros((48, 64), np.uint8), (1, 6), model=model)
+
+
+def test_all_real_opencv_left_photos_are_detected(model):
+    from aicalib_tf.baselines import opencv_classic
+    from aicalib_tf.io import load_image
+
+    files = sorted((DATA / "opencv_left").glob("left*.jpg"))
+    assert len(files) == 13
+    for f in files:
+        det = detect_corners(f, (9, 6), model=model)
+        assert det.complete, f.name
+        ok, ref = opencv_classic((load_image(f) * 255).round().astype(np.uint8), (9, 6))
+        assert ok
+        # same order as OpenCV, and the same corners to within a fraction of a pixel
+        assert np.abs(det.corners - ref).max() < 0.8, f.name
