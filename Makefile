@@ -18,6 +18,7 @@ demo: $(STAMP)
 	$(PY) -m data_gen --out reports/demo-dataset-$$(date +%Y%m%d-%H%M%S) --count 20 --preset hard --seed 0 --workers 2
 	$(PY) benchmarks/datagen_accuracy.py
 	$(PY) benchmarks/datagen_speed.py --quick
+	$(PY) benchmarks/model_compare.py --images 10
 
 test: $(STAMP)
 	$(PY) -m pytest -q; rc=$$?; if [ $$rc -eq 5 ]; then echo "pytest: no tests collected"; exit 0; fi; exit $$rc
@@ -25,6 +26,8 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(PY) benchmarks/datagen_accuracy.py
 	$(PY) benchmarks/datagen_speed.py
+	$(PY) benchmarks/refine_accuracy.py
+	$(PY) benchmarks/model_compare.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache reports

@@ -281,3 +281,100 @@ def find_chessboard_corners(image, pattern_size: tuple[int, int], *, model=None)
     if not det.complete:
         return False, None
     return True, det.corners.reshape(-1, 1, 2).copy()
+
+
+def draw_detection(gray: np.ndarray, det: Detection) -> np.ndarray:
+    """An overlay: (H, W, 3) uint8 BGR with the corners, row lines and corner 0 marked."""
+    img = cv2.cvtColor(np.clip(gray * 255.0 + 0.5, 0, 255).astype(np.uint8), cv2.COLOR_GRAY2BGR)
+    if not det.found:
+        cv2.putText(img, "no board", (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (0, 0, 255), 2)
+        return img
+    if det.complete:
+        cols = det.pattern_size[0]
+        for r in range(len(det.corners) // cols):
+            row = det.corners[r * cols : (r + 1) * cols]
+            colour = tuple(int(c) for c in cv2.applyColorMap(np.uint8([[40 * r % 255]]), cv2.COLORMAP_JET)[0, 0])
+            cv2.polylines(img, [np.round(row * 16).astype(np.int32)], False, colour, 1, cv2.LINE_AA, shift=4)
+    for k, (x, y) in enumerate(det.corners):
+        cv2.circle(img, (int(round(x * 16)), int(round(y * 16))), 4 * 16, (0, 255, 0) if k else (0, 0, 255), 1,
+                   cv2.LINE_AA, shift=4)
+    return img
+
+
+def _parse_args(argv):
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m aicalib_tf.detect", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("images", nargs="+", help="image files or glob patterns")
+    ap.add_argument("--pattern", required=True, help="inner corners, COLSxROWS, e.g. 9x6")
+    ap.add_argument("--out", required=True, help="folder for <image>.png overlays and <image>.json corners")
+    ap.add_argument("--model", default="default", help="default, report, or a path to a .keras model (default: %(default)s)")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    return ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Detect boards in images and write overlays and corner files; exit 2 on bad arguments."""
+    import os
+
+    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+    import glob
+    import json
+    import sys
+    from pathlib import Path
+
+    from tqdm import tqdm
+
+    from data_gen.board import parse_pattern
+
+    from .io import ImageError, atomic_write_bytes, atomic_write_text
+    from .model import file_sha256, load_model
+
+    args = _parse_args(argv)
+    try:
+        pattern = parse_pattern(args.pattern)
+        files = []
+        for item in args.images:
+            matches = sorted(glob.glob(item)) if any(ch in item for ch in "*?[") else [item]
+            files += matches
+        if not files:
+            raise ValueError(f"no images match {' '.join(args.images)}")
+        model = load_model(args.model)
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    sha = file_sha256(model.aicalib_path) if hasattr(model, "aicalib_path") else None
+    counts = {"complete": 0, "partial": 0, "none": 0, "failed": 0}
+    failures = []
+    for f in tqdm(files, desc="detect", unit="img", disable=args.quiet):
+        try:
+            gray = load_image(f)
+            det = detect_corners(gray, pattern, model=model)
+        except ImageError as exc:
+            counts["failed"] += 1
+            failures.append(str(exc))
+            continue
+        counts["complete" if det.complete else "partial" if det.found else "none"] += 1
+        stem = Path(f).stem
+        ok, png = cv2.imencode(".png", draw_detection(gray, det))
+        atomic_write_bytes(out / f"{stem}.png", png.tobytes())
+        record = {
+            "file": str(f), "image_size": list(det.image_size), "pattern_size": list(pattern),
+            "found": det.found, "complete": det.complete, "corners": det.corners.tolist(),
+            "ids": det.ids.tolist(), "scores": det.scores.tolist(), "model": str(args.model), "model_sha256": sha,
+        }
+        atomic_write_text(out / f"{stem}.json", json.dumps(record, indent=1) + "\n")
+    print(f"{len(files)} images: {counts['complete']} full boards, {counts['partial']} partial, "
+          f"{counts['none']} without a board, {counts['failed']} unreadable")
+    for msg in failures:
+        print(f"  skipped: {msg}")
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main())

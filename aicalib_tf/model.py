@@ -33,6 +33,7 @@ __all__ = [
     "build_model",
     "compile_model",
     "corner_map_loss",
+    "CornerMapLoss",
     "load_model",
     "save_model",
     "model_kind",
@@ -95,24 +96,48 @@ def build_model(name: str = "default") -> keras.Sequential:
 
 
 @keras.saving.register_keras_serializable(package="aicalib_tf")
-def corner_map_loss(y_true, y_pred):
-    """Loss for the corner map: weighted cross-entropy on the weight + L1 on the in-cell position.
+class CornerMapLoss(keras.losses.Loss):
+    """Loss for the corner map: a loss on the corner weight + L1 on the in-cell position.
 
     y_true, y_pred : (B, h, w, 3). The position term counts only cells that hold a corner.
+    gamma > 0 : focal loss on the weight (easy cells count little), summed and divided by the
+        number of corners. gamma = 0 : cross-entropy with positives weighted ``positive_weight``,
+        averaged over cells.
     """
-    eps = 1e-6
-    t, p = y_true[..., 0], ops.clip(y_pred[..., 0], eps, 1.0 - eps)
-    bce = -(POSITIVE_WEIGHT * t * ops.log(p) + (1.0 - t) * ops.log(1.0 - p))
-    l1 = ops.sum(ops.abs(y_true[..., 1:] - y_pred[..., 1:]), axis=-1)
-    pos = ops.sum(t)
-    return ops.mean(bce) + OFFSET_WEIGHT * ops.sum(t * l1) / ops.maximum(pos, 1.0)
+
+    def __init__(self, gamma: float = 2.0, positive_weight: float = POSITIVE_WEIGHT,
+                 offset_weight: float = OFFSET_WEIGHT, name: str = "corner_map_loss", **kwargs):
+        super().__init__(name=name, **kwargs)
+        self.gamma, self.positive_weight, self.offset_weight = float(gamma), float(positive_weight), float(offset_weight)
+
+    def call(self, y_true, y_pred):
+        eps = 1e-6
+        t, p = y_true[..., 0], ops.clip(y_pred[..., 0], eps, 1.0 - eps)
+        l1 = ops.sum(ops.abs(y_true[..., 1:] - y_pred[..., 1:]), axis=-1)
+        pos = ops.maximum(ops.sum(t), 1.0)
+        offset = self.offset_weight * ops.sum(t * l1) / pos
+        if self.gamma > 0:
+            g = self.gamma
+            focal = -(t * (1.0 - p) ** g * ops.log(p) + (1.0 - t) * p**g * ops.log(1.0 - p))
+            return ops.sum(focal) / pos + offset
+        bce = -(self.positive_weight * t * ops.log(p) + (1.0 - t) * ops.log(1.0 - p))
+        return ops.mean(bce) + offset
+
+    def get_config(self) -> dict:
+        return {"name": self.name, "gamma": self.gamma, "positive_weight": self.positive_weight,
+                "offset_weight": self.offset_weight}
 
 
-def compile_model(model: keras.Model, learning_rate: float = 2e-3) -> keras.Model:
-    """Attach the optimiser and the loss that suit the model's kind."""
+def corner_map_loss(y_true, y_pred, gamma: float = 2.0):
+    """Functional form of :class:`CornerMapLoss` (one scalar for the batch)."""
+    return CornerMapLoss(gamma=gamma).call(y_true, y_pred)
+
+
+def compile_model(model: keras.Model, learning_rate: float = 2e-3, *, focal_gamma: float = 2.0) -> keras.Model:
+    """Attach the optimiser and the loss that suit the model's kind (see :class:`CornerMapLoss`)."""
     opt = keras.optimizers.Adam(learning_rate)
     if model_kind(model) == "map":
-        model.compile(optimizer=opt, loss=corner_map_loss)
+        model.compile(optimizer=opt, loss=CornerMapLoss(gamma=focal_gamma))
     else:
         model.compile(optimizer=opt, loss="binary_crossentropy", metrics=["accuracy"])
     return model
@@ -165,6 +190,7 @@ def load_model(weights: str | os.PathLike = "default", *, compile: bool = False)
         model_kind(model)
     except ValueError as exc:
         raise ValueError(f"incompatible model {path}: {exc}") from None
+    model.aicalib_path = str(path)  # where it came from, for reports and hashes
     return model
 
 

@@ -54,6 +54,7 @@ class TrainConfig:
     learning_rate: float = 2e-3
     workers: int = 2
     threshold: float = 0.5
+    focal_gamma: float = 2.0
     determinism: bool = True
 
     def check(self) -> None:
@@ -73,6 +74,8 @@ class TrainConfig:
             raise ValueError(f"--seed must be >= 0, got {self.seed}")
         if not 0.0 < self.learning_rate < 1.0:
             raise ValueError(f"--learning-rate must be in (0, 1), got {self.learning_rate}")
+        if self.focal_gamma < 0:
+            raise ValueError(f"--focal-gamma must be >= 0, got {self.focal_gamma}")
         if not 0.0 < self.threshold < 1.0:
             raise ValueError(f"--threshold must be in (0, 1), got {self.threshold}")
 
@@ -170,7 +173,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True) -> d
     if resume:
         model = load_model(run / "checkpoint.keras", compile=True)
     else:
-        model = compile_model(build_model(cfg.arch), cfg.learning_rate)
+        model = compile_model(build_model(cfg.arch), cfg.learning_rate, focal_gamma=cfg.focal_gamma)
     prep_s = time.perf_counter() - t0
     if initial_epoch < cfg.epochs:
         schedule = keras.callbacks.LearningRateScheduler(
@@ -215,6 +218,8 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--learning-rate", type=float, default=d.learning_rate, help="peak Adam rate, cosine decay (default: %(default)s)")
     ap.add_argument("--workers", type=int, default=d.workers, help="rendering processes (default: %(default)s)")
     ap.add_argument("--threshold", type=float, default=d.threshold, help="corner weight for validation (default: %(default)s)")
+    ap.add_argument("--focal-gamma", type=float, default=d.focal_gamma,
+                    help="default model: focal-loss γ; 0 for weighted cross-entropy (default: %(default)s)")
     ap.add_argument("--no-determinism", action="store_true", help="allow non-deterministic TensorFlow ops")
     ap.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     ap.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -227,7 +232,7 @@ def main(argv: list[str] | None = None) -> int:
     cfg = TrainConfig(
         out=args.out, arch=args.arch, epochs=args.epochs, steps=args.steps, batch_size=args.batch_size,
         seed=args.seed, preset=args.preset, pool_images=args.pool_images, val_images=args.val_images,
-        learning_rate=args.learning_rate, workers=args.workers, threshold=args.threshold,
+        learning_rate=args.learning_rate, workers=args.workers, threshold=args.threshold, focal_gamma=args.focal_gamma,
         determinism=not args.no_determinism,
     )
     try:

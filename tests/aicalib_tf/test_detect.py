@@ -84,3 +84,21 @@ def test_all_real_opencv_left_photos_are_detected(model):
         assert ok
         # same order as OpenCV, and the same corners to within a fraction of a pixel
         assert np.abs(det.corners - ref).max() < 0.8, f.name
+
+
+def test_cli_writes_overlays_and_corner_files_and_skips_bad_files(tmp_path, capsys):
+    import json
+
+    from aicalib_tf.detect import main
+
+    bad = tmp_path / "corrupt.jpg"
+    bad.write_bytes(b"\xff\xd8 truncated")
+    out = tmp_path / "out"
+    assert main([str(DATA / "opencv_left" / "left0[12].jpg"), str(bad), "--pattern", "9x6", "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "3 images: 2 full boards" in printed and "1 unreadable" in printed and "corrupt.jpg" in printed
+    assert sorted(p.name for p in out.iterdir()) == ["left01.json", "left01.png", "left02.json", "left02.png"]
+    record = json.loads((out / "left01.json").read_text())
+    assert record["complete"] and len(record["corners"]) == 54 and len(record["model_sha256"]) == 64
+    assert main(["x.jpg", "--pattern", "9x", "--out", str(out)]) == 2
+    assert main([str(tmp_path / "none*.jpg"), "--pattern", "9x6", "--out", str(out)]) == 2

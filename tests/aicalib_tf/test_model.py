@@ -78,6 +78,28 @@ def test_loss_is_zero_only_for_the_exact_map():
     assert float(corner_map_loss(y, off)) > 1.0
 
 
+@pytest.mark.parametrize("gamma", [0.0, 2.0])
+def test_both_losses_are_small_for_the_exact_map_and_large_for_a_miss(gamma):
+    from aicalib_tf.model import CornerMapLoss
+
+    y = np.zeros((1, 4, 4, 3), np.float32)
+    y[0, 1, 2] = [1.0, 0.5, 0.5]
+    good = y.copy()
+    good[..., 0] = np.where(y[..., 0] > 0, 0.999, 0.001)
+    missed = good.copy()
+    missed[0, 1, 2, 0] = 0.01
+    loss = CornerMapLoss(gamma=gamma)
+    assert float(loss(y, good)) < 0.05
+    assert float(loss(y, missed)) > 10 * float(loss(y, good))
+
+
+def test_compiled_model_round_trips_with_its_loss(tmp_path):
+    m = compile_model(build_model("default"), focal_gamma=1.5)
+    path = save_model(m, tmp_path / "compiled.keras")
+    loaded = load_model(path, compile=True)
+    assert loaded.loss.gamma == 1.5
+
+
 @pytest.mark.parametrize("arch, shape", [("default", (1, 40, 48, 1)), ("report", (3, 32, 32, 1))])
 def test_save_load_round_trip_gives_identical_predictions(tmp_path, arch, shape):
     m = build_model(arch)
