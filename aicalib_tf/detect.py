@@ -10,8 +10,11 @@ pattern. They are resolved like ``cv2.findChessboardCorners`` (measured on data_
 
 * cols + rows odd (e.g. 9x6): the board's colours tell 180° apart. Corner 0 is the one whose
   outer diagonal square is black (the square beyond it, away from corners 1 and ``cols``).
-* otherwise (both even, both odd, or square): the first row is above the last row in the
-  image, and for a square pattern the first row also runs left to right.
+* otherwise (both even or both odd): the reading whose last row starts lowest in the image
+  relative to corner 0 (largest y[(rows−1)·cols] − y[0]). OpenCV reverses its order when that
+  difference is negative; the two agree whenever one reading has it positive and the other negative.
+* square patterns: of the four rotations, the one with the largest (x[cols−1] − x[0]) +
+  (y[(rows−1)·cols] − y[0]): rows run most nearly left to right and top to bottom.
 """
 
 from __future__ import annotations
@@ -184,8 +187,10 @@ def order_full_board(corners: np.ndarray, pattern_size: tuple[int, int], gray: n
             outer = c[0] - 0.5 * (c[1] - c[0]) - 0.5 * (c[cols] - c[0])
             inner = c[0] + 0.5 * (c[1] - c[0]) - 0.5 * (c[cols] - c[0])
             key = (_square_colour(gray, inner) - _square_colour(gray, outer), 0.0)
+        elif cols == rows:
+            key = (float(dx + dy), 0.0)
         else:
-            key = (float(dy > 0), float(dx > 0) + 1e-6 * (dx + dy))
+            key = (float(dy), float(dx))
         if best_key is None or key > best_key:
             best, best_key = c, key
     return best

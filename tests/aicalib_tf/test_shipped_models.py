@@ -15,7 +15,7 @@ from aicalib_tf.train import VALIDATION_SEED  # noqa: E402
 
 # Floors well below the card's figures and far above an untrained or broken model (which finds
 # no corners: recall 0), on a fixed slice of the validation images.
-FLOORS = {"default": {"precision": 0.6, "recall": 0.6}, "report": {"precision": 0.2, "recall": 0.2}}
+FLOORS = {"default": {"precision": 0.6, "recall": 0.45}, "report": {"precision": 0.3, "recall": 0.3}}
 
 
 @pytest.fixture(scope="module")
@@ -43,5 +43,5 @@ def test_untrained_model_fails_the_floor(images):
     from aicalib_tf.model import build_model
 
     stats = point_detection_stats([(corner_points(build_model("default"), img)[0], gt) for img, gt in zip(*images)])
-    assert not (stats["precision"] >= 0.6 and stats["recall"] >= 0.6)
+    assert not (stats["precision"] >= 0.6 and stats["recall"] >= 0.45)
     assert np.isfinite(stats["recall"])
