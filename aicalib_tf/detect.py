@@ -9,7 +9,8 @@ keeps its handedness, so only its rotations are ambiguous: 180°, and 90° too f
 pattern. They are resolved like ``cv2.findChessboardCorners`` (measured on data_gen boards):
 
 * cols + rows odd (e.g. 9x6): the board's colours tell 180° apart. Corner 0 is the one whose
-  outer diagonal square is black (the square beyond it, away from corners 1 and ``cols``).
+  outer diagonal square is black (the square beyond it, away from corners 1 and ``cols``). It is
+  decided by a vote of all inner squares, so it never samples outside the board.
 * otherwise (both even or both odd): the reading whose last row starts lowest in the image
   relative to corner 0 (largest y[(rows−1)·cols] − y[0]). OpenCV reverses its order when that
   difference is negative; the two agree whenever one reading has it positive and the other negative.
@@ -58,6 +59,7 @@ class Detection:
 
 
 _DEFAULT_MODEL = None
+MAX_CANDIDATES = 3000  # a 20x15 board has 300 corners; more candidates are clutter
 
 
 def _default_model():
@@ -164,9 +166,22 @@ def _proposer(smoothed: _Smoothed, ring_image: np.ndarray, ref_amp: float):
     return propose
 
 
-def _square_colour(gray: np.ndarray, p: np.ndarray) -> float:
-    x, y = float(p[0]), float(p[1])
-    return float(cv2.getRectSubPix(gray, (3, 3), (x, y)).mean())
+def _parity_contrast(corners: np.ndarray, pattern_size: tuple[int, int], gray: np.ndarray) -> float:
+    """Mean grey of the inner squares of odd parity minus that of even parity.
+
+    corners : (cols·rows, 2) in a row-major reading. Inner square (c, r), between corners (c−1, r−1)
+    and (c, r), has the colour of board square (c, r): black when c + r is even (the square
+    outside corner 0 is black). So the reading that puts corner 0 at the black outer square gives
+    a positive value. Every sampled square lies inside the board, hence inside the image.
+    """
+    cols, rows = pattern_size
+    g = corners.reshape(rows, cols, 2)
+    centres = 0.25 * (g[:-1, :-1] + g[1:, :-1] + g[:-1, 1:] + g[1:, 1:])  # (rows-1, cols-1, 2)
+    rr, cc = np.meshgrid(np.arange(1, rows), np.arange(1, cols), indexing="ij")
+    grey = cv2.remap(gray, centres[..., 0].astype(np.float32), centres[..., 1].astype(np.float32), cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REPLICATE)
+    even = (rr + cc) % 2 == 0
+    return float(grey[~even].mean() - grey[even].mean())
 
 
 def order_full_board(corners: np.ndarray, pattern_size: tuple[int, int], gray: np.ndarray) -> np.ndarray:
@@ -184,9 +199,7 @@ def order_full_board(corners: np.ndarray, pattern_size: tuple[int, int], gray: n
         dy = c[(rows - 1) * cols, 1] - c[0, 1]
         dx = c[cols - 1, 0] - c[0, 0]
         if (cols + rows) % 2 == 1 and cols != rows:
-            outer = c[0] - 0.5 * (c[1] - c[0]) - 0.5 * (c[cols] - c[0])
-            inner = c[0] + 0.5 * (c[1] - c[0]) - 0.5 * (c[cols] - c[0])
-            key = (_square_colour(gray, inner) - _square_colour(gray, outer), 0.0)
+            key = (_parity_contrast(c, pattern_size, gray), 0.0)
         elif cols == rows:
             key = (float(dx + dy), 0.0)
         else:
@@ -221,7 +234,7 @@ def _board_from_grid(grid: Grid, scores, pattern_size, gray, size) -> Detection 
             ij = np.stack([ij[:, 0], ij[:, 1].max() - ij[:, 1]], 1)
             a, b = b, a
         if (a, b) != (cols, rows):
-            return None
+            return None  # a different (e.g. bigger) board, or a partial one: never cut to size
     full = len(grid) == cols * rows
     if not full:
         return None
@@ -259,6 +272,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
         return empty
     model = model if model is not None else _default_model()
     pts, scores = corner_points(model, gray, threshold)
+    pts, scores = pts[:MAX_CANDIDATES], scores[:MAX_CANDIDATES]  # strongest first; bounds the N² steps
     if len(pts) < 9:
         return empty
     smoothed = _Smoothed(gray)
@@ -272,7 +286,8 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
         spacing = _nearest_spacing(refined)
         amp, _ = ring_symmetry(smooth, refined.astype(np.float64), 0.3 * spacing)
         propose = _proposer(smoothed, smooth, float(np.median(amp[: max(9, len(amp) // 2)])))
-    limit = max(pattern_size) if pattern_size is not None else None
+    # grow one step past the pattern so that a bigger board shows itself and is rejected
+    limit = max(pattern_size) + 1 if pattern_size is not None else None
     for grid in assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit):
         det = _board_from_grid(grid, scores, pattern_size, smooth, (w, h))
         if det is not None:
@@ -354,6 +369,7 @@ def main(argv: list[str] | None = None) -> int:
     sha = file_sha256(model.aicalib_path) if hasattr(model, "aicalib_path") else None
     counts = {"complete": 0, "partial": 0, "none": 0, "failed": 0}
     failures = []
+    used: set[str] = set()
     for f in tqdm(files, desc="detect", unit="img", disable=args.quiet):
         try:
             gray = load_image(f)
@@ -364,6 +380,9 @@ def main(argv: list[str] | None = None) -> int:
             continue
         counts["complete" if det.complete else "partial" if det.found else "none"] += 1
         stem = Path(f).stem
+        if stem in used:  # a/x.jpg and b/x.png must not overwrite each other
+            stem = f"{stem}-{len(used)}"
+        used.add(stem)
         ok, png = cv2.imencode(".png", draw_detection(gray, det))
         atomic_write_bytes(out / f"{stem}.png", png.tobytes())
         record = {

@@ -278,7 +278,8 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
         _fill_holes(lat)
         if len(lat.cells) < min_size:
             for kk in lat.cells.values():  # give the points back for other seeds
-                free[kk] = True
+                if kk < n:
+                    free[kk] = True
             continue
         ij = np.array(list(lat.cells.keys()))
         ks = list(lat.cells.values())

@@ -41,6 +41,9 @@ def to_gray_float(image: np.ndarray, name: str = "array") -> np.ndarray:
     elif a.dtype in (np.float32, np.float64):
         if not np.all(np.isfinite(a)):
             raise ImageError(f"{name}: float image contains NaN or inf")
+        lo, hi = float(a.min()), float(a.max())
+        if lo < -1e-3 or hi > 1.0 + 1e-3:  # e.g. 0–255 values in a float array
+            raise ImageError(f"{name}: float image must be in [0, 1], got values from {lo:g} to {hi:g}")
         scale = 1.0
     else:
         raise ImageError(f"{name}: unsupported dtype {a.dtype}; use uint8, uint16 or float in [0, 1]")

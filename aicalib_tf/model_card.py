@@ -88,18 +88,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=Path("models"))
     ap.add_argument("--intro", type=Path, help="Markdown put before the per-model sections")
     args = ap.parse_args(argv)
-    sections = []
-    for run in args.runs:
+    runs = []
+    for run in args.runs:  # check every run before writing anything
         try:
             config = json.loads((run / "config.json").read_text())
             metrics = json.loads((run / "metrics.json").read_text())
             data = (run / "model.keras").read_bytes()
+            log = (run / "log.csv").read_bytes()
         except (OSError, ValueError) as exc:
             print(f"error: {run}: not a finished training run ({exc})", file=sys.stderr)
             return 2
-        args.out.mkdir(parents=True, exist_ok=True)
+        runs.append((config, metrics, data, log))
+    args.out.mkdir(parents=True, exist_ok=True)
+    sections = []
+    for config, metrics, data, log in runs:
         atomic_write_bytes(args.out / f"{config['arch']}.keras", data)
-        atomic_write_bytes(args.out / f"{config['arch']}_log.csv", (run / "log.csv").read_bytes())
+        atomic_write_bytes(args.out / f"{config['arch']}_log.csv", log)
         sections.append(card_section(config, metrics))
     intro = args.intro.read_text() if args.intro else INTRO
     atomic_write_text(args.out / "MODEL_CARD.md", intro + "\n".join(sections))

@@ -12,8 +12,8 @@ within 1 px) and localisation error on a fixed validation set (preset ``--preset
 never trained on) and saves a checkpoint. RUN_DIR receives:
 
     config.json        the effective configuration (written first, atomically)
-    checkpoint.keras   the model after the last finished epoch, with its optimiser state
-    state.json         how many epochs are finished
+    checkpoint-NNNN.keras  the model after the last finished epoch, with its optimiser state
+    state.json         how many epochs are finished, and which checkpoint holds them
     log.csv            one row per epoch: loss and the validation metrics
     tensorboard/       TensorBoard logs
     model.keras        the final model (atomically, at the end)
@@ -103,7 +103,7 @@ def evaluate_points(model, images, corners, threshold: float = 0.5) -> dict:
     return point_detection_stats(pairs, max_distance=1.0)
 
 
-def _callbacks(cfg: TrainConfig, run: Path, val, initial_epoch: int):
+def _callbacks(cfg: TrainConfig, run: Path, val, initial_epoch: int, wall_before: float, t_start: float):
     import keras
 
     from .model import save_model
@@ -120,11 +120,18 @@ def _callbacks(cfg: TrainConfig, run: Path, val, initial_epoch: int):
                   f"loc median {stats['loc_median_px']:.3f} px  ({stats['true']} corners)", flush=True)
 
     class Checkpoint(keras.callbacks.Callback):
-        """Saves the model with its optimiser state, then the finished-epoch count (both atomically)."""
+        """Saves checkpoint-<epochs done>.keras (model and optimiser state), then state.json naming it,
+        then removes older checkpoints. A kill at any moment leaves a state.json whose checkpoint exists
+        and matches its epoch count."""
 
         def on_epoch_end(self, epoch, logs=None):
-            save_model(self.model, run / "checkpoint.keras")
-            _write_json(run / "state.json", {"epochs_done": epoch + 1})
+            name = f"checkpoint-{epoch + 1:04d}.keras"
+            save_model(self.model, run / name)
+            _write_json(run / "state.json", {"epochs_done": epoch + 1, "checkpoint": name,
+                                             "wall_s": round(wall_before + time.perf_counter() - t_start, 1)})
+            for old in run.glob("checkpoint-*.keras"):
+                if old.name != name:
+                    old.unlink(missing_ok=True)
 
     return [
         Validation(),  # first: it adds to the logs that the CSV logger writes
@@ -134,26 +141,30 @@ def _callbacks(cfg: TrainConfig, run: Path, val, initial_epoch: int):
     ]
 
 
-def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True) -> dict:
+def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epochs_given: int | None = None) -> dict:
     """Train as ``cfg`` says and write RUN_DIR; returns the final metrics dict.
 
-    resume : continue the run in ``cfg.out`` from its last checkpoint (its config.json wins
-        over ``cfg`` except for ``epochs``).
+    resume : continue the run in ``cfg.out`` from its last checkpoint; its config.json wins over
+        ``cfg``, except that ``epochs_given`` (when not None) sets a new epoch count.
     """
     cfg.check()
     run = Path(cfg.out)
     if resume:
-        if not (run / "state.json").is_file() or not (run / "checkpoint.keras").is_file():
+        state = json.loads((run / "state.json").read_text()) if (run / "state.json").is_file() else {}
+        if not state.get("checkpoint") or not (run / state["checkpoint"]).is_file():
             raise ValueError(f"--resume: {run} holds no checkpoint to resume from")
         saved = json.loads((run / "config.json").read_text())
         known = {f.name for f in fields(TrainConfig)}
-        cfg = TrainConfig(**{**{k: v for k, v in saved.items() if k in known}, "epochs": cfg.epochs, "out": str(run)})
-        initial_epoch = int(json.loads((run / "state.json").read_text())["epochs_done"])
+        epochs = saved["epochs"] if epochs_given is None else epochs_given
+        cfg = TrainConfig(**{**{k: v for k, v in saved.items() if k in known}, "epochs": epochs, "out": str(run)})
+        initial_epoch = int(state["epochs_done"])
+        wall_before = float(state.get("wall_s", 0.0))
     else:
-        if (run / "checkpoint.keras").exists() or (run / "model.keras").exists():
+        if (run / "state.json").exists() or (run / "model.keras").exists():
             raise ValueError(f"--out {run}: already holds a run; use --resume or a new folder")
         run.mkdir(parents=True, exist_ok=True)
         initial_epoch = 0
+        wall_before = 0.0
     _write_json(run / "config.json", asdict(cfg))
 
     import keras
@@ -171,7 +182,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True) -> d
     batches_cls = CornerMapBatches if cfg.arch == "default" else PatchBatches
     batches = batches_cls(pool, batch_size=cfg.batch_size, steps=cfg.steps, seed=cfg.seed, epoch=initial_epoch)
     if resume:
-        model = load_model(run / "checkpoint.keras", compile=True)
+        model = load_model(run / state["checkpoint"], compile=True)
     else:
         model = compile_model(build_model(cfg.arch), cfg.learning_rate, focal_gamma=cfg.focal_gamma)
     prep_s = time.perf_counter() - t0
@@ -179,8 +190,10 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True) -> d
         schedule = keras.callbacks.LearningRateScheduler(
             lambda e, lr: cfg.learning_rate * (0.5 * (1 + __import__("math").cos(__import__("math").pi * e / cfg.epochs)))
         )
-        model.fit(batches, epochs=cfg.epochs, initial_epoch=initial_epoch, verbose=1 if progress else 2,
-                  callbacks=[schedule, *_callbacks(cfg, run, val, initial_epoch)])
+        # shuffle=False: batches are already random per (seed, epoch, index); Keras's own shuffle
+        # draws from Python's global random, which a resumed process cannot replay
+        model.fit(batches, epochs=cfg.epochs, initial_epoch=initial_epoch, verbose=1 if progress else 2, shuffle=False,
+                  callbacks=[schedule, *_callbacks(cfg, run, val, initial_epoch, wall_before, t0)])
     final = run / "model.keras"
     save_model(model, final)
     stats = evaluate_points(model, *val, cfg.threshold)
@@ -193,6 +206,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True) -> d
         "resumed_at_epoch": initial_epoch if resume else None,
         "data_prep_s": round(prep_s, 1),
         "wall_s_this_process": round(time.perf_counter() - t0, 1),
+        "wall_s_total": round(wall_before + time.perf_counter() - t0, 1),
         "validation": {"preset": cfg.preset, "seed": VALIDATION_SEED, "images": cfg.val_images, "match_px": 1.0},
         "sha256": file_sha256(final),
         "size_bytes": final.stat().st_size,
@@ -208,7 +222,7 @@ def _parser() -> argparse.ArgumentParser:
     d = TrainConfig(out="")
     ap.add_argument("--out", required=True, metavar="RUN_DIR", help="run folder (created)")
     ap.add_argument("--arch", default=d.arch, help="default | report (default: %(default)s)")
-    ap.add_argument("--epochs", type=int, default=d.epochs, help="epochs (default: %(default)s)")
+    ap.add_argument("--epochs", type=int, default=None, help=f"epochs (default: {d.epochs}; with --resume: the run's own)")
     ap.add_argument("--steps", type=int, default=d.steps, help="batches per epoch (default: %(default)s)")
     ap.add_argument("--batch-size", type=int, default=d.batch_size, help="(default: %(default)s)")
     ap.add_argument("--seed", type=int, default=d.seed, help="data and initialisation seed (default: %(default)s)")
@@ -229,14 +243,15 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
     args = _parser().parse_args(argv)
+    d = TrainConfig(out="")
     cfg = TrainConfig(
-        out=args.out, arch=args.arch, epochs=args.epochs, steps=args.steps, batch_size=args.batch_size,
+        out=args.out, arch=args.arch, epochs=args.epochs if args.epochs is not None else d.epochs, steps=args.steps, batch_size=args.batch_size,
         seed=args.seed, preset=args.preset, pool_images=args.pool_images, val_images=args.val_images,
         learning_rate=args.learning_rate, workers=args.workers, threshold=args.threshold, focal_gamma=args.focal_gamma,
         determinism=not args.no_determinism,
     )
     try:
-        metrics = train(cfg, resume=args.resume, progress=not args.quiet)
+        metrics = train(cfg, resume=args.resume, progress=not args.quiet, epochs_given=args.epochs)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

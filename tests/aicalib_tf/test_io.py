@@ -38,3 +38,8 @@ def test_atomic_write_leaves_no_temporary_files(tmp_path):
     p = atomic_write_text(tmp_path / "a" / "x.txt", "hello")
     assert p.read_text() == "hello"
     assert [f.name for f in p.parent.iterdir()] == ["x.txt"]
+
+
+def test_float_images_outside_0_1_are_an_error():
+    with pytest.raises(ImageError, match=r"\[0, 1\].*255"):
+        load_image(np.full((4, 4), 255.0, np.float32))
