@@ -159,7 +159,7 @@ def _proposer(smoothed: _Smoothed, ring_image: np.ndarray, ref_amp: float):
             return out
         q, ok = _refine(smoothed, pred[k], step[k], max_shift=0.3 * step[k])
         amp, asym = ring_symmetry(ring_image, q.astype(np.float64), 0.3 * step[k])
-        ok &= (amp >= 0.5 * ref_amp) & (asym <= 0.35 * amp)
+        ok &= (amp >= 0.3 * ref_amp) & (asym <= 0.5 * amp)  # a T-junction at a board edge has asym ≈ 1.3·amp
         out[k[ok]] = q[ok]
         return out
 
