@@ -19,14 +19,16 @@ __all__ = ["STRIDE", "standardize", "padded_shape", "encode_corners", "decode_ma
 STRIDE = 4
 
 
-def standardize(gray: np.ndarray) -> np.ndarray:
+def standardize(gray: np.ndarray, mean: float | None = None, std: float | None = None) -> np.ndarray:
     """Zero-mean, unit-variance copy of a grey image: the network's input.
 
-    gray : (H, W) float or uint8. Returns (H, W) float32. A constant image becomes all zeros.
+    gray : (H, W) float or uint8. mean, std : the statistics to use (default: ``gray``'s own; a
+    crop passes its whole image's). Returns (H, W) float32. A constant image becomes all zeros.
     """
     g = np.asarray(gray, dtype=np.float32)
-    std = float(g.std())
-    return (g - float(g.mean())) / max(std, 1e-3)
+    mean = float(g.mean()) if mean is None else float(mean)
+    std = float(g.std()) if std is None else float(std)
+    return (g - mean) / max(std, 1e-3)
 
 
 def padded_shape(height: int, width: int) -> tuple[int, int]:

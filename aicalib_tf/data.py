@@ -28,7 +28,7 @@ from data_gen.dataset import iter_samples
 from data_gen.presets import get_preset
 
 from .candidates import saddle_points
-from .corner_map import STRIDE, encode_corners
+from .corner_map import STRIDE, encode_corners, standardize
 from .inference import extract_patches
 from .model import PATCH_SIZE
 
@@ -57,7 +57,7 @@ class Pool:
 
     def standardized(self, i: int, img: np.ndarray) -> np.ndarray:
         """A crop of image ``i`` standardised with the whole image's statistics."""
-        return (img.astype(np.float32) - self.mean[i]) / max(float(self.std[i]), 1e-3)
+        return standardize(img, self.mean[i], self.std[i])
 
 
 def render_pool(count: int, seed: int, *, preset: str = "train", workers: int = 1, progress: bool = True,
@@ -102,20 +102,26 @@ def _dihedral(img: np.ndarray, pts: np.ndarray, k: int) -> tuple[np.ndarray, np.
     return np.ascontiguousarray(img), np.stack([x, y], axis=1)
 
 
-class CornerMapBatches(keras.utils.PyDataset):
-    """Batches (B, 128, 128, 1) float32 -> corner-map targets (B, 32, 32, 3) for the default model."""
+class _PoolBatches(keras.utils.PyDataset):
+    """``steps`` batches a epoch cut from a pool; batch ``idx`` of epoch ``epoch`` is seeded by both."""
 
-    def __init__(self, pool: Pool, *, batch_size: int, steps: int, seed: int, epoch: int = 0,
-                 corner_bias: float = 0.6, **kwargs):
+    def __init__(self, pool: Pool, *, batch_size: int, steps: int, seed: int, epoch: int = 0, **kwargs):
         super().__init__(**kwargs)
-        self.pool, self.batch_size, self.steps, self.seed = pool, batch_size, steps, seed
-        self.epoch, self.corner_bias = epoch, corner_bias
+        self.pool, self.batch_size, self.steps, self.seed, self.epoch = pool, batch_size, steps, seed, epoch
 
     def __len__(self) -> int:
         return self.steps
 
     def on_epoch_end(self) -> None:
         self.epoch += 1
+
+
+class CornerMapBatches(_PoolBatches):
+    """Batches (B, 128, 128, 1) float32 -> corner-map targets (B, 32, 32, 3) for the default model."""
+
+    def __init__(self, pool: Pool, *, corner_bias: float = 0.6, **kwargs):
+        super().__init__(pool, **kwargs)
+        self.corner_bias = corner_bias
 
     def __getitem__(self, idx: int):
         rng = np.random.default_rng([self.seed, self.epoch, idx, 7])
@@ -142,13 +148,13 @@ class CornerMapBatches(keras.utils.PyDataset):
         return x, y
 
 
-class PatchBatches(keras.utils.PyDataset):
+class PatchBatches(_PoolBatches):
     """Balanced batches (B, 32, 32, 1) float32 -> (B, 1) labels for the report's patch classifier."""
 
-    def __init__(self, pool: Pool, *, batch_size: int, steps: int, seed: int, epoch: int = 0, **kwargs):
-        super().__init__(**kwargs)
-        self.pool, self.batch_size, self.steps, self.seed, self.epoch = pool, batch_size, steps, seed, epoch
+    def __init__(self, pool: Pool, **kwargs):
+        super().__init__(pool, **kwargs)
         self.hard = [self._hard_negatives(i) for i in range(len(pool))]
+        self.with_corners = [i for i in range(len(pool)) if len(pool.corners[i])] or [0]
 
     def _hard_negatives(self, i: int) -> np.ndarray:
         cand = saddle_points(self.pool.images[i], max_points=300)
@@ -158,21 +164,14 @@ class PatchBatches(keras.utils.PyDataset):
         d2 = ((cand[:, None, :] - pts[None, :, :]) ** 2).sum(-1).min(axis=1)
         return cand[d2 > 3.0**2]
 
-    def __len__(self) -> int:
-        return self.steps
-
-    def on_epoch_end(self) -> None:
-        self.epoch += 1
-
     def __getitem__(self, idx: int):
         rng = np.random.default_rng([self.seed, self.epoch, idx, 11])
         n = self.batch_size
         x = np.empty((n, PATCH_SIZE, PATCH_SIZE, 1), np.float32)
         y = (np.arange(n) < n // 2).astype(np.float32)[:, None]
-        with_corners = [i for i in range(len(self.pool)) if len(self.pool.corners[i])] or [0]
         for b in range(n):
             if y[b, 0] == 1.0:
-                i = with_corners[int(rng.integers(len(with_corners)))]
+                i = self.with_corners[int(rng.integers(len(self.with_corners)))]
                 pts = self.pool.corners[i]
                 p = np.rint(pts[int(rng.integers(len(pts)))]).astype(np.int64)
             else:

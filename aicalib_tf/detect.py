@@ -20,7 +20,7 @@ pattern. They are resolved like ``cv2.findChessboardCorners`` (measured on data_
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -51,7 +51,6 @@ class Detection:
     pattern_size: tuple[int, int] | None
     complete: bool
     image_size: tuple[int, int]
-    candidates: int = field(default=0, compare=False)
 
     @property
     def found(self) -> bool:
@@ -190,6 +189,11 @@ def order_full_board(corners: np.ndarray, pattern_size: tuple[int, int], gray: n
     corners : (cols·rows, 2) in some row-major reading of the board with the right handedness.
     Returns the (cols·rows, 2) corners in the rule's order.
     """
+    return corners[_reading(corners, pattern_size, gray)]
+
+
+def _reading(corners: np.ndarray, pattern_size: tuple[int, int], gray: np.ndarray) -> np.ndarray:
+    """The board symmetry (a (cols·rows,) index permutation) that puts ``corners`` in the rule's order."""
     from .metrics import board_symmetries
 
     cols, rows = pattern_size
@@ -205,7 +209,7 @@ def order_full_board(corners: np.ndarray, pattern_size: tuple[int, int], gray: n
         else:
             key = (float(dy), float(dx))
         if best_key is None or key > best_key:
-            best, best_key = c, key
+            best, best_key = perm, key
     return best
 
 
@@ -243,10 +247,9 @@ def _board_from_grid(grid: Grid, scores, pattern_size, gray, size) -> Detection 
     idx = ij[:, 1] * cols + ij[:, 0]
     corners[idx] = grid.points
     sc[idx] = np.where(grid.index >= 0, scores[grid.index], 0.0)
-    ordered = order_full_board(corners, (cols, rows), gray)
-    perm = np.array([int(np.argmin(((corners - p) ** 2).sum(1))) for p in ordered])
+    perm = _reading(corners, (cols, rows), gray)
     ids = np.stack(np.meshgrid(np.arange(cols), np.arange(rows)), -1).reshape(-1, 2).astype(np.int32)
-    return Detection(ordered.astype(np.float32), ids, sc[perm], (cols, rows), True, size)
+    return Detection(corners[perm], ids, sc[perm], (cols, rows), True, size)
 
 
 def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=None,

@@ -15,7 +15,7 @@ import numpy as np
 import tensorflow as tf
 
 from .candidates import saddle_points
-from .corner_map import STRIDE, decode_map, padded_shape, standardize
+from .corner_map import decode_map, padded_shape, standardize
 from .model import PATCH_SIZE, model_kind
 
 __all__ = ["corner_map", "corner_points", "patch_weights", "extract_patches"]

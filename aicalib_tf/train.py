@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -188,7 +189,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
     prep_s = time.perf_counter() - t0
     if initial_epoch < cfg.epochs:
         schedule = keras.callbacks.LearningRateScheduler(
-            lambda e, lr: cfg.learning_rate * (0.5 * (1 + __import__("math").cos(__import__("math").pi * e / cfg.epochs)))
+            lambda e, lr: cfg.learning_rate * 0.5 * (1 + math.cos(math.pi * e / cfg.epochs))
         )
         # shuffle=False: batches are already random per (seed, epoch, index); Keras's own shuffle
         # draws from Python's global random, which a resumed process cannot replay

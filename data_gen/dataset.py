@@ -82,8 +82,8 @@ def _json_bytes(obj) -> bytes:
 
 def _render_one(job: tuple) -> list:
     """Worker: render image ``index`` and write its PNG and JSON into the staging folder."""
-    stage, preset, seed, index, size, pattern = job
-    sample = make_sample(preset, seed, index, size=size, pattern=pattern)
+    stage, _, seed, index, _, _ = job
+    sample = _make_one(job[1:])
     name = f"{index:06d}"
     ok, png = cv2.imencode(".png", sample.image, [cv2.IMWRITE_PNG_COMPRESSION, 3])
     if not ok:
