@@ -5,9 +5,13 @@ Corner arrays are (N, 2) float (x, y) px in OpenCV order (index = r·cols + c).
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
-__all__ = ["board_symmetries", "align_to_truth", "corner_error_stats", "match_points", "point_detection_stats"]
+__all__ = [
+    "board_symmetries", "align_to_truth", "corner_error_stats", "match_points", "point_detection_stats",
+    "distortion_field", "calibration_errors",
+]
 
 
 def board_symmetries(pattern_size: tuple[int, int]) -> list[np.ndarray]:
@@ -106,4 +110,56 @@ def point_detection_stats(pairs: list[tuple[np.ndarray, np.ndarray]], max_distan
         "matched": int(tp),
         "predicted": int(n_pred),
         "true": int(n_true),
+    }
+
+
+_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
+
+
+def distortion_field(points: np.ndarray, K: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The displacement a lens model's undistortion applies to image points.
+
+    points : (N, 2) float (x, y) px in the distorted image. K : (3, 3). dist : OpenCV coefficients.
+    Returns (field (N, 2) px, ok (N,) bool): ``field = undistorted - points``, both in the model's
+    own pixel frame (``P = K``). ``ok`` is False where the iterative inverse did not converge
+    (re-distorting misses the point by more than 1e-3 px), e.g. beyond a strong lens' fold.
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 1, 2)
+    K = np.asarray(K, dtype=np.float64)
+    dist = np.asarray(dist, dtype=np.float64).ravel()
+    norm = cv2.undistortPoints(pts, K, dist, R=None, P=None, criteria=_UNDISTORT_CRITERIA)
+    obj = np.concatenate([norm.reshape(-1, 2), np.ones((len(pts), 1))], axis=1)
+    back, _ = cv2.projectPoints(obj, np.zeros(3), np.zeros(3), K, dist)
+    ok = np.linalg.norm(back.reshape(-1, 2) - pts.reshape(-1, 2), axis=1) < 1e-3
+    ideal = norm.reshape(-1, 2) * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
+    return ideal - pts.reshape(-1, 2), ok
+
+
+def calibration_errors(K: np.ndarray, dist: np.ndarray, K_true: np.ndarray, dist_true: np.ndarray,
+                       image_size: tuple[int, int], *, grid: tuple[int, int] = (32, 24)) -> dict:
+    """An estimated camera against the true one (DESIGN.md's calibration metrics).
+
+    K, K_true : (3, 3). dist, dist_true : OpenCV coefficients (5 or more).
+    image_size : (width, height) px. grid : (nx, ny) sample points spread over the whole image.
+    Returns fx_pct, fy_pct (signed relative focal errors, %), pp_px (principal-point distance, px),
+    and dist_field_mean_px / dist_field_max_px: how far apart the two models' undistortion fields
+    are over the image (points where either inverse fails are left out; ``dist_field_points``
+    counts the rest).
+    """
+    K = np.asarray(K, dtype=np.float64)
+    Kt = np.asarray(K_true, dtype=np.float64)
+    w, h = image_size
+    gx, gy = np.meshgrid(np.linspace(0, w - 1, grid[0]), np.linspace(0, h - 1, grid[1]))
+    pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    f_est, ok_est = distortion_field(pts, K, dist)
+    f_true, ok_true = distortion_field(pts, Kt, dist_true)
+    ok = ok_est & ok_true
+    d = np.linalg.norm(f_est[ok] - f_true[ok], axis=1)
+    return {
+        "fx_pct": float(100.0 * (K[0, 0] - Kt[0, 0]) / Kt[0, 0]),
+        "fy_pct": float(100.0 * (K[1, 1] - Kt[1, 1]) / Kt[1, 1]),
+        "pp_px": float(np.hypot(K[0, 2] - Kt[0, 2], K[1, 2] - Kt[1, 2])),
+        "dist_field_mean_px": float(d.mean()) if d.size else float("nan"),
+        "dist_field_max_px": float(d.max()) if d.size else float("nan"),
+        "dist_field_points": int(d.size),
     }
