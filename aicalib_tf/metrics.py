@@ -11,6 +11,7 @@ import numpy as np
 __all__ = [
     "board_symmetries", "align_to_truth", "corner_error_stats", "match_points", "point_detection_stats",
     "distortion_field", "calibration_errors",
+    "board_detection_outcome", "partial_board_stats", "detection_agreement", "OUTCOMES",
 ]
 
 
@@ -163,3 +164,104 @@ def calibration_errors(K: np.ndarray, dist: np.ndarray, K_true: np.ndarray, dist
         "dist_field_max_px": float(d.max()) if d.size else float("nan"),
         "dist_field_points": int(d.size),
     }
+
+
+# --- detection outcomes (issue 6) -------------------------------------------------------------
+
+OUTCOMES = ("hit", "wrong", "miss")
+
+
+def board_detection_outcome(detected, truth: np.ndarray, pattern_size: tuple[int, int],
+                            wrong_px: float = 2.0) -> tuple[str, np.ndarray]:
+    """Classify one full-board detection against the truth (DESIGN.md's detection rate).
+
+    detected : (cols·rows, 2) px in any admissible board order, or None when no full board was
+        returned. truth : (cols·rows, 2) px, OpenCV order.
+    Returns (outcome, errors): ``"miss"`` (nothing returned; errors empty), ``"hit"`` (every
+    corner within ``wrong_px`` px after the best board symmetry) or ``"wrong"`` (a full board
+    with any corner further off — including corners that are not on the board at all);
+    errors is the (cols·rows,) px distance of each aligned corner to its true position.
+    """
+    if wrong_px <= 0:
+        raise ValueError(f"wrong_px must be > 0, got {wrong_px}")
+    gt = np.asarray(truth, dtype=np.float64).reshape(-1, 2)
+    if detected is None:
+        n = int(pattern_size[0]) * int(pattern_size[1])
+        if gt.shape[0] != n:
+            raise ValueError(f"need {n} true corners for pattern {tuple(pattern_size)}, got {gt.shape[0]}")
+        return "miss", np.zeros(0)
+    errors = np.linalg.norm(align_to_truth(detected, gt, pattern_size) - gt, axis=1)
+    return ("hit" if float(errors.max()) <= wrong_px else "wrong"), errors
+
+
+def _inverse_symmetries(pattern_size: tuple[int, int]) -> list[np.ndarray]:
+    """For each board symmetry, the map detected index -> true index (inverse permutation)."""
+    return [np.argsort(p) for p in board_symmetries(pattern_size)]
+
+
+def partial_board_stats(corners: np.ndarray, ids: np.ndarray, truth: np.ndarray, visible: np.ndarray,
+                        pattern_size: tuple[int, int], max_px: float = 2.0) -> dict:
+    """Score a (possibly partial) board: how many visible corners it recovered with the right id.
+
+    corners : (N, 2) px. ids : (N, 2) int (col, row) of each detected corner.
+    truth : (cols·rows, 2) px, OpenCV order. visible : (cols·rows,) bool, the corners a detector
+    could see. A detected corner is *correct* when its id, read under the single board symmetry
+    (identity, 180°, and 90° turns for square patterns) that gives the most correct corners,
+    names a visible true corner within ``max_px`` px (each true corner counted once, the closest
+    detection winning). A full detection is the case N = cols·rows.
+    Returns visible (count), detected (N), correct, wrong_ids (= N − correct), recall
+    (= correct / visible; NaN when nothing is visible), symmetry (index into
+    :func:`board_symmetries`) and errors ((correct,) px of the correct corners).
+    """
+    cols, rows = (int(v) for v in pattern_size)
+    n = cols * rows
+    pts = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
+    ij = np.asarray(ids).reshape(-1, 2)
+    gt = np.asarray(truth, dtype=np.float64).reshape(-1, 2)
+    vis = np.asarray(visible, dtype=bool).ravel()
+    if gt.shape[0] != n or vis.shape[0] != n:
+        raise ValueError(f"need {n} true corners and visibility flags for pattern {(cols, rows)}, "
+                         f"got {gt.shape[0]} and {vis.shape[0]}")
+    if ij.shape[0] != pts.shape[0]:
+        raise ValueError(f"corners and ids disagree: {pts.shape[0]} corners, {ij.shape[0]} ids")
+    if max_px <= 0:
+        raise ValueError(f"max_px must be > 0, got {max_px}")
+    ij = ij.astype(np.int64)
+    inside = (ij[:, 0] >= 0) & (ij[:, 0] < cols) & (ij[:, 1] >= 0) & (ij[:, 1] < rows)
+    index = np.where(inside, ij[:, 1] * cols + ij[:, 0], 0)
+    best = (-1, 0, np.zeros(0))
+    for s, inv in enumerate(_inverse_symmetries((cols, rows))):
+        t = inv[index]
+        d = np.linalg.norm(pts - gt[t], axis=1)
+        ok = inside & vis[t] & (d <= max_px)
+        # one detection per true corner: the closest one keeps it
+        keep = {}
+        for k in np.flatnonzero(ok):
+            if t[k] not in keep or d[k] < d[keep[t[k]]]:
+                keep[int(t[k])] = int(k)
+        chosen = np.array(sorted(keep.values()), dtype=np.int64)
+        if len(chosen) > best[0]:
+            best = (len(chosen), s, d[chosen])
+    correct, sym, errs = best
+    n_vis = int(vis.sum())
+    return {
+        "visible": n_vis,
+        "detected": int(len(pts)),
+        "correct": int(correct),
+        "wrong_ids": int(len(pts) - correct),
+        "recall": float(correct / n_vis) if n_vis else float("nan"),
+        "symmetry": int(sym),
+        "errors": errs,
+    }
+
+
+def detection_agreement(a: np.ndarray, b: np.ndarray, pattern_size: tuple[int, int]) -> dict:
+    """How closely two full-board detections of the same image agree (no ground truth needed).
+
+    a, b : (cols·rows, 2) px, each in any admissible board order. ``b`` is read under the board
+    symmetry that best matches ``a``. Returns median_px, max_px and rms_px of the per-corner
+    distances.
+    """
+    pa = np.asarray(a, dtype=np.float64).reshape(-1, 2)
+    d = np.linalg.norm(align_to_truth(b, pa, pattern_size) - pa, axis=1)
+    return {"median_px": float(np.median(d)), "max_px": float(d.max()), "rms_px": float(np.sqrt(np.mean(d * d)))}
