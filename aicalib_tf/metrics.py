@@ -209,7 +209,9 @@ def partial_board_stats(corners: np.ndarray, ids: np.ndarray, truth: np.ndarray,
     (identity, 180°, and 90° turns for square patterns) that gives the most correct corners,
     names a visible true corner within ``max_px`` px (each true corner counted once, the closest
     detection winning). A full detection is the case N = cols·rows.
-    Returns visible (count), detected (N), correct, wrong_ids (= N − correct), recall
+    Returns visible (count), detected (N), correct, hidden_found (detections with the right id
+    within ``max_px`` of a true corner flagged invisible, e.g. a full board drawn through an
+    occluder: neither correct nor wrong), wrong_ids (= N − correct − hidden_found), recall
     (= correct / visible; NaN when nothing is visible), symmetry (index into
     :func:`board_symmetries`) and errors ((correct,) px of the correct corners).
     """
@@ -229,26 +231,27 @@ def partial_board_stats(corners: np.ndarray, ids: np.ndarray, truth: np.ndarray,
     ij = ij.astype(np.int64)
     inside = (ij[:, 0] >= 0) & (ij[:, 0] < cols) & (ij[:, 1] >= 0) & (ij[:, 1] < rows)
     index = np.where(inside, ij[:, 1] * cols + ij[:, 0], 0)
-    best = (-1, 0, np.zeros(0))
+    best = (-1, 0, np.zeros(0), 0)
     for s, inv in enumerate(_inverse_symmetries((cols, rows))):
         t = inv[index]
         d = np.linalg.norm(pts - gt[t], axis=1)
-        ok = inside & vis[t] & (d <= max_px)
+        ok = inside & (d <= max_px)
         # one detection per true corner: the closest one keeps it
-        keep = {}
+        keep: dict[int, int] = {}
         for k in np.flatnonzero(ok):
-            if t[k] not in keep or d[k] < d[keep[t[k]]]:
+            if int(t[k]) not in keep or d[k] < d[keep[int(t[k])]]:
                 keep[int(t[k])] = int(k)
-        chosen = np.array(sorted(keep.values()), dtype=np.int64)
+        chosen = np.array(sorted(k for ti, k in keep.items() if vis[ti]), dtype=np.int64)
         if len(chosen) > best[0]:
-            best = (len(chosen), s, d[chosen])
-    correct, sym, errs = best
+            best = (len(chosen), s, d[chosen], len(keep) - len(chosen))
+    correct, sym, errs, hidden = best
     n_vis = int(vis.sum())
     return {
         "visible": n_vis,
         "detected": int(len(pts)),
         "correct": int(correct),
-        "wrong_ids": int(len(pts) - correct),
+        "hidden_found": int(hidden),
+        "wrong_ids": int(len(pts) - correct - hidden),
         "recall": float(correct / n_vis) if n_vis else float("nan"),
         "symmetry": int(sym),
         "errors": errs,

@@ -175,9 +175,13 @@ def test_partial_full_detection_duplicates_and_out_of_range_ids():
 
     gt, ids = _grid(4, 3), _ids(4, 3)
     visible = np.ones(12, bool)
-    visible[0] = False  # an occluded corner found anyway is not a correct recovery
+    visible[0] = False  # an occluded corner found in place: neither a recovery nor a wrong id
     st = partial_board_stats(gt, ids, gt, visible, (4, 3))
-    assert st["correct"] == 11 and st["wrong_ids"] == 1 and st["recall"] == 1.0
+    assert st["correct"] == 11 and st["hidden_found"] == 1 and st["wrong_ids"] == 0 and st["recall"] == 1.0
+    far = gt.copy()
+    far[0] += 5.0
+    st = partial_board_stats(far, ids, gt, visible, (4, 3))
+    assert st["correct"] == 11 and st["hidden_found"] == 0 and st["wrong_ids"] == 1
     corners = np.vstack([gt[5], gt[5] + 0.5, gt[6]])
     st = partial_board_stats(corners, np.array([[1, 1], [1, 1], [9, 9]]), gt, visible, (4, 3))
     assert st["correct"] == 1 and st["wrong_ids"] == 2 and st["errors"].tolist() == [0.0]
