@@ -137,7 +137,8 @@ def distortion_field(points: np.ndarray, K: np.ndarray, dist: np.ndarray) -> tup
 
 
 def calibration_errors(K: np.ndarray, dist: np.ndarray, K_true: np.ndarray, dist_true: np.ndarray,
-                       image_size: tuple[int, int], *, grid: tuple[int, int] = (32, 24)) -> dict:
+                       image_size: tuple[int, int], *, grid: tuple[int, int] = (32, 24),
+                       seen: np.ndarray | None = None) -> dict:
     """An estimated camera against the true one (DESIGN.md's calibration metrics).
 
     K, K_true : (3, 3). dist, dist_true : OpenCV coefficients (5 or more).
@@ -146,6 +147,9 @@ def calibration_errors(K: np.ndarray, dist: np.ndarray, K_true: np.ndarray, dist
     and dist_field_mean_px / dist_field_max_px: how far apart the two models' undistortion fields
     are over the image (points where either inverse fails are left out; ``dist_field_points``
     counts the rest).
+    seen : optional (M, 2) px, e.g. every true corner of every view. Adds dist_field_seen_mean_px
+    and dist_field_seen_max_px over the grid points inside their convex hull: the area the
+    calibration saw, without the extrapolation to image corners the board never reached.
     """
     K = np.asarray(K, dtype=np.float64)
     Kt = np.asarray(K_true, dtype=np.float64)
@@ -155,7 +159,15 @@ def calibration_errors(K: np.ndarray, dist: np.ndarray, K_true: np.ndarray, dist
     f_est, ok_est = distortion_field(pts, K, dist)
     f_true, ok_true = distortion_field(pts, Kt, dist_true)
     ok = ok_est & ok_true
-    d = np.linalg.norm(f_est[ok] - f_true[ok], axis=1)
+    d_all = np.linalg.norm(f_est - f_true, axis=1)
+    d = d_all[ok]
+    extra = {}
+    if seen is not None:
+        hull = cv2.convexHull(np.asarray(seen, np.float32).reshape(-1, 1, 2))
+        inside = np.array([cv2.pointPolygonTest(hull, (float(x), float(y)), False) >= 0 for x, y in pts])
+        ds = d_all[ok & inside]
+        extra = {"dist_field_seen_mean_px": float(ds.mean()) if ds.size else float("nan"),
+                 "dist_field_seen_max_px": float(ds.max()) if ds.size else float("nan")}
     return {
         "fx_pct": float(100.0 * (K[0, 0] - Kt[0, 0]) / Kt[0, 0]),
         "fy_pct": float(100.0 * (K[1, 1] - Kt[1, 1]) / Kt[1, 1]),
@@ -163,6 +175,7 @@ def calibration_errors(K: np.ndarray, dist: np.ndarray, K_true: np.ndarray, dist
         "dist_field_mean_px": float(d.mean()) if d.size else float("nan"),
         "dist_field_max_px": float(d.max()) if d.size else float("nan"),
         "dist_field_points": int(d.size),
+        **extra,
     }
 
 

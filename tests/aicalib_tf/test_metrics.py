@@ -208,3 +208,14 @@ def test_agreement_of_two_detectors_after_symmetry():
     b[0] += [0.0, 0.5]
     ag = detection_agreement(gt, b, (9, 6))
     assert ag["median_px"] == 0.0 and ag["max_px"] == pytest.approx(0.5)
+
+
+def test_calibration_errors_seen_region_leaves_out_the_unseen_image_corners():
+    from aicalib_tf.metrics import calibration_errors
+
+    K = np.array([[400.0, 0, 320], [0, 400.0, 240], [0, 0, 1]])
+    true, est = np.array([-0.3, 0.1, 0, 0, 0]), np.array([-0.3, 0.1, 0, 0, -0.05])  # differ mostly far out
+    seen = np.array([[220.0, 160], [420, 160], [420, 320], [220, 320]])
+    e = calibration_errors(K, est, K, true, (640, 480), seen=seen)
+    assert e["dist_field_seen_max_px"] < 0.05 < e["dist_field_max_px"]
+    assert e["dist_field_seen_mean_px"] < e["dist_field_mean_px"]
