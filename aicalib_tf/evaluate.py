@@ -1,0 +1,434 @@
+"""The benchmark report: the CNN against OpenCV's chessboard detectors, on the same images.
+
+    python -m aicalib_tf.evaluate [--out reports/DATE] [--quick] [--model PATH]
+        [--detectors cnn,report,opencv,opencv-sb] [--conditions LIST] [--limit N] [--quiet]
+    python -m aicalib_tf.evaluate --images DIR --pattern 9x6 [--degrade] [--out ...]
+
+Default suite (no download, fixed seeds): data_gen renders of 9×6 boards at 640×480 under the
+named conditions (clean, noise20/40, blur2/3, contrast, shading, jpeg15, saltpepper5, barrel,
+tilt60, small, occluded, partial, board-free clutter) plus clean 1920×1080 images; severity
+sweeps (noise σ 0–60, blur σ 0.5–4 px, contrast, JPEG quality, lens distortion, tilt), each
+level on the same scenes; and 4 calibration sequences (data_gen ``calib``, seed 11: two mild
+lenses, two strong barrel lenses) with known K and distortion. ``--conditions`` takes condition
+names, sweep names (noise, blur, contrast, jpeg, distortion, tilt), ``named``, ``sweeps`` or
+``all`` (default); ``calib`` adds the calibration sequences (always run with ``all``).
+
+Detectors, all in this one process and timed per call (time.perf_counter, after a warm-up):
+cnn (the CNN pipeline with --model, default models/default.keras), report (the same pipeline
+with the report's patch classifier), opencv (cv2.findChessboardCorners + cornerSubPix), and
+opencv-sb (cv2.findChessboardCornersSB).
+
+Metrics (aicalib_tf.metrics, DESIGN.md): a *hit* is a full board whose corners all lie within
+2 px of the truth under the board's symmetries; a full board with any corner further off is a
+*wrong* detection; an incomplete board is *partial* (its recall over the visible corners and its
+wrong ids are counted); nothing is a *miss*. Corner errors (median, RMSE, p95) are over the
+corners of hits. On board-free images any full board is a false board. Calibration: each
+detector's boards of a sequence (partial ones too) -> aicalib_tf.calibrate.calibrate_camera ->
+focal error %, principal point px, distortion-field px against the true camera, and RMS.
+
+Sizes: the full suite renders 40 images per named condition, 15 per sweep level, 12 at
+1920×1080 and 20 views per calibration sequence; --quick renders 6, 3, 2 and 6; --limit N caps
+every count at N (calibration views at max(3, N)).
+
+--images DIR --pattern CxR: the user's photos, no ground truth: per image each detector's
+result and time, pairwise agreement of full boards, and the calibration each detector gives.
+--degrade adds seeded degradations of every photo (noise σ 20 and 40, blur σ 2.5, JPEG quality
+8, low light, gradient with shadow, 3 % salt-and-pepper) scored against the clean photo's
+consensus board (see aicalib_tf.photos).
+
+Writes into --out (default reports/<YYYYmmdd-HHMMSS>), atomically: results.csv (one row per
+image × detector), summary.csv, calibration.csv, report.md, figures/*.png and config.json.
+Exit codes: 0 done; 2 bad arguments.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, NamedTuple
+
+import numpy as np
+
+from .conditions import PATTERN, Condition, board_tilt_deg, calibration_sequences, condition_samples, select_conditions, square_px
+from .metrics import board_detection_outcome, calibration_errors, partial_board_stats
+
+__all__ = ["DETECTORS", "EvalConfig", "Found", "make_detectors", "time_detector", "score_detection",
+           "run_synthetic", "calibrate_sequences", "run", "main"]
+
+DETECTORS = ("cnn", "report", "opencv", "opencv-sb")
+WRONG_PX = 2.0
+FULL_COUNTS = {"named": 40, "sweep": 15, "hd": 12, "calib_views": 20}
+QUICK_COUNTS = {"named": 6, "sweep": 3, "hd": 2, "calib_views": 6}
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """One evaluation run (the CLI's options)."""
+
+    out: str
+    quick: bool = False
+    model: str = "default"
+    detectors: tuple[str, ...] = DETECTORS
+    conditions: str | None = None
+    limit: int | None = None
+    images: str | None = None
+    pattern: tuple[int, int] | None = None
+    degrade: bool = False
+    seed: int = 0
+    quiet: bool = False
+    command: str = ""
+    extra: dict = field(default_factory=dict)
+
+    def counts(self) -> dict:
+        """Images per named condition, per sweep level, at 1920×1080, and views per calibration sequence."""
+        c = dict(QUICK_COUNTS if self.quick else FULL_COUNTS)
+        if self.limit is not None:
+            c = {k: (max(3, min(v, self.limit)) if k == "calib_views" else min(v, self.limit)) for k, v in c.items()}
+        return c
+
+
+class Found(NamedTuple):
+    """One detector's answer on one image.
+
+    corners : (N, 2) float64 (x, y) px (N = 0 when nothing was found).
+    ids : (N, 2) int (col, row). complete : a full board (N = cols·rows).
+    """
+
+    corners: np.ndarray
+    ids: np.ndarray
+    complete: bool
+
+
+def _grid_ids(pattern: tuple[int, int]) -> np.ndarray:
+    cols, rows = pattern
+    c, r = np.meshgrid(np.arange(cols), np.arange(rows))
+    return np.stack([c.ravel(), r.ravel()], axis=1)
+
+
+_NOTHING = Found(np.zeros((0, 2)), np.zeros((0, 2), np.int64), False)
+
+
+def make_detectors(names, pattern: tuple[int, int], model: str = "default") -> tuple[dict[str, Callable], dict]:
+    """Build the detectors: ``{name: f(uint8 (H, W) image) -> Found}`` and their provenance.
+
+    names : subset of :data:`DETECTORS`. model : the cnn detector's weights (name or .keras path).
+    Returns (detectors, info) where info maps a CNN detector to its model path and sha256.
+    Raises ValueError for an unknown name, FileNotFoundError/ValueError for a bad model.
+    """
+    from .baselines import opencv_classic, opencv_sb
+
+    unknown = [n for n in names if n not in DETECTORS]
+    if unknown or not names:
+        raise ValueError(f"unknown detector(s) {', '.join(unknown) or '(none given)'}; choose from {', '.join(DETECTORS)}")
+    ids_full = _grid_ids(pattern)
+    dets, info = {}, {}
+
+    def cnn(m):
+        from .detect import detect_corners
+
+        def f(img):
+            d = detect_corners(img, pattern, model=m)
+            return Found(d.corners.astype(np.float64), d.ids.astype(np.int64), bool(d.complete)) if d.found else _NOTHING
+        return f
+
+    def cv(fn):
+        def f(img):
+            ok, c = fn(img, pattern)
+            return Found(np.asarray(c, np.float64).reshape(-1, 2), ids_full, True) if ok else _NOTHING
+        return f
+
+    for n in names:
+        if n in ("cnn", "report"):
+            from .model import file_sha256, load_model
+
+            m = load_model(model if n == "cnn" else "report")
+            info[n] = {"model": str(m.aicalib_path), "sha256": file_sha256(m.aicalib_path)}
+            dets[n] = cnn(m)
+        elif n == "opencv":
+            dets[n] = cv(opencv_classic)
+        else:
+            dets[n] = cv(opencv_sb)
+    return dets, info
+
+
+def time_detector(fn: Callable, image: np.ndarray) -> tuple[Found, float]:
+    """Run one detector on one image; returns (Found, wall time in ms)."""
+    t = time.perf_counter()
+    found = fn(image)
+    return found, 1000.0 * (time.perf_counter() - t)
+
+
+def score_detection(found: Found, truth: np.ndarray, visible: np.ndarray, has_board: bool,
+                    pattern: tuple[int, int] = PATTERN) -> tuple[dict, np.ndarray]:
+    """Score one detection against the truth (metrics module); returns (row fields, hit errors).
+
+    truth : (cols·rows, 2) px; visible : (cols·rows,) bool (both ignored without a board).
+    outcome: hit / wrong / partial / miss on board images, false_board / false_partial / none
+    on board-free ones. The returned errors (px) are those counted in the error statistics:
+    all corners of a hit, the correct corners of a partial board, none otherwise.
+    """
+    n = len(found.corners)
+    row = {"found": n > 0, "complete": bool(found.complete), "n_corners": n, "outcome": "none",
+           "err_median": np.nan, "err_max": np.nan, "visible": 0, "correct": 0, "wrong_ids": 0,
+           "hidden_found": 0, "recall": np.nan}
+    if not has_board:
+        row["outcome"] = "false_board" if found.complete else "false_partial" if n else "none"
+        row["wrong_ids"] = n
+        return row, np.zeros(0)
+    st = partial_board_stats(found.corners, found.ids, truth, visible, pattern, WRONG_PX)
+    row.update(visible=st["visible"], correct=st["correct"], wrong_ids=st["wrong_ids"],
+               hidden_found=st["hidden_found"], recall=st["recall"])
+    errors = np.zeros(0)
+    if found.complete:
+        outcome, e = board_detection_outcome(found.corners, truth, pattern, WRONG_PX)
+        row.update(outcome=outcome, err_median=float(np.median(e)), err_max=float(e.max()))
+        if outcome == "hit":
+            errors = e
+    elif n:
+        row["outcome"] = "partial"
+        errors = st["errors"]
+        if errors.size:
+            row.update(err_median=float(np.median(errors)), err_max=float(errors.max()))
+    else:
+        row["outcome"] = "miss"
+    return row, errors
+
+
+def _difficulty(rows: list[dict]) -> float:
+    """How hard an image was: detectors that failed (wrong counts double), then the worst error."""
+    bad = sum(2 if r["outcome"] in ("wrong", "false_board") else 1 for r in rows
+              if r["outcome"] not in ("hit", "none"))
+    return bad + 0.01 * min(99.0, max([r["err_max"] for r in rows if np.isfinite(r["err_max"])] or [0.0]))
+
+
+def _warm_up(detectors: dict) -> None:
+    from data_gen import make_sample
+
+    img = make_sample("clean", 0, 0, size=(640, 480), pattern=PATTERN).image
+    for fn in detectors.values():
+        fn(img)
+
+
+def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *, with_calibration: bool = True,
+                  progress: bool = True) -> dict:
+    """Run every detector on every image of ``conditions`` (and the calibration sequences).
+
+    counts : see :meth:`EvalConfig.counts`. Returns {"rows": [dict per image × detector],
+    "errors": {(condition, detector): [(K,) px arrays]}, "examples": [hardest images],
+    "calibration": [dict per sequence × detector], "render_s": seconds spent rendering}.
+    """
+    from tqdm import tqdm
+
+    def n_for(c: Condition) -> int:
+        return counts["sweep"] if c.sweep else counts["hd"] if c.size[0] > 1000 else counts["named"]
+
+    total = sum(n_for(c) for c in conditions) + (4 * counts["calib_views"] if with_calibration else 0)
+    bar = tqdm(total=total, desc="evaluate", unit="img", disable=not progress)
+    rows, errors, hardest = [], {}, {}
+    render_s = 0.0
+    for cond in conditions:
+        gen = condition_samples(cond, n_for(cond))
+        while True:
+            t0 = time.perf_counter()
+            item = next(gen, None)
+            render_s += time.perf_counter() - t0
+            if item is None:
+                break
+            index, s = item
+            img_rows, found_by = _detect_sample(cond.name, cond, index, s, detectors, rows, errors)
+            score = _difficulty(img_rows)
+            group = cond.sweep or cond.name  # one example per named condition or sweep
+            if score > 0 and score > hardest.get(group, (0,))[0]:
+                hardest[group] = (score, cond.name, index, s.image, s.corners if cond.has_board else None, found_by)
+            bar.update(1)
+    calib = []
+    if with_calibration:
+        t0 = time.perf_counter()
+        seqs = calibration_sequences(counts["calib_views"])
+        render_s += time.perf_counter() - t0
+        calib = calibrate_sequences(seqs, detectors, rows, errors, bar)
+    bar.close()
+    examples = sorted(hardest.values(), key=lambda h: -h[0])[:6]
+    return {"rows": rows, "errors": errors, "examples": examples, "calibration": calib, "render_s": render_s}
+
+
+def _detect_sample(name: str, cond: Condition | None, index: int, s, detectors: dict, rows: list, errors: dict):
+    lab = s.label
+    has_board = bool(lab.get("has_board", True)) and bool(lab["corners"])
+    truth = s.corners if has_board else None
+    visible = s.visible if has_board else None
+    h, w = s.image.shape
+    base = {"condition": name, "sweep": cond.sweep if cond else None, "level": cond.level if cond else np.nan,
+            "index": index, "seed": lab["seed"], "camera_id": lab["camera_id"], "width": w, "height": h,
+            "has_board": has_board, "tilt_deg": board_tilt_deg(lab), "square_px": square_px(lab),
+            "k1": float(lab["dist"][0])}
+    img_rows, found_by = [], {}
+    for det, fn in detectors.items():
+        found, ms = time_detector(fn, s.image)
+        row, e = score_detection(found, truth, visible, has_board)
+        row = {**base, "detector": det, **row, "time_ms": ms}
+        rows.append(row)
+        img_rows.append(row)
+        errors.setdefault((name, det), []).append(e)
+        found_by[det] = (found, row["outcome"])
+    return img_rows, found_by
+
+
+def calibrate_sequences(seqs, detectors: dict, rows: list, errors: dict, bar=None) -> list[dict]:
+    """Detect every view of each calibration sequence, calibrate per detector, compare with the truth.
+
+    seqs : [(camera_id, [Sample])] (see :func:`aicalib_tf.conditions.calibration_sequences`).
+    Detection rows go into ``rows``/``errors`` under condition ``calib``. Returns one dict per
+    sequence × detector: views, views_found (full boards), views_partial, views_used, rejected,
+    rms_px, fx_pct, fy_pct, pp_px, dist_field_mean_px, dist_field_max_px, status.
+    """
+    from .calibrate import CalibrationError, View, calibrate_camera
+
+    out = []
+    for cam, samples in seqs:
+        views = {d: [] for d in detectors}
+        for s in samples:
+            _, found_by = _detect_sample("calib", None, s.label["index"], s, detectors, rows, errors)
+            for d, (found, _) in found_by.items():
+                if len(found.corners):
+                    views[d].append(View(f"view{s.label['index']:03d}", found.corners, found.ids))
+            if bar is not None:
+                bar.update(1)
+        lab = samples[0].label
+        K_true, dist_true = np.asarray(lab["K"]), np.asarray(lab["dist"])
+        for d, vs in views.items():
+            rec = {"camera_id": cam, "lens": "strong barrel" if dist_true[0] < -0.2 else "mild",
+                   "k1_true": float(dist_true[0]), "fx_true": float(K_true[0, 0]), "detector": d,
+                   "views": len(samples), "views_found": sum(len(v.ids) == PATTERN[0] * PATTERN[1] for v in vs),
+                   "views_partial": sum(len(v.ids) < PATTERN[0] * PATTERN[1] for v in vs)}
+            try:
+                cal = calibrate_camera(vs, PATTERN, float(lab["square_size"]), tuple(lab["image_size"]))
+            except CalibrationError as exc:
+                rec.update(views_used=0, rejected=len(vs), status=f"failed: {exc}")
+                out.append(rec)
+                continue
+            err = calibration_errors(cal.K, cal.dist, K_true, dist_true, tuple(lab["image_size"]))
+            rec.update(views_used=len(cal.views), rejected=len(cal.rejected), rms_px=float(cal.rms),
+                       fx_pct=err["fx_pct"], fy_pct=err["fy_pct"], pp_px=err["pp_px"],
+                       dist_field_mean_px=err["dist_field_mean_px"], dist_field_max_px=err["dist_field_max_px"],
+                       status="ok")
+            out.append(rec)
+    return out
+
+
+def _versions() -> dict:
+    import platform
+
+    import cv2
+
+    v = {"python": platform.python_version(), "numpy": np.__version__, "opencv": cv2.__version__,
+         "platform": platform.platform(), "cpus": os.cpu_count()}
+    for mod in ("tensorflow", "keras", "pandas", "matplotlib"):
+        try:
+            v[mod] = __import__(mod).__version__
+        except ImportError:
+            v[mod] = None
+    return v
+
+
+def _split_calib(spec: str | None) -> tuple[str | None, bool]:
+    """(condition spec without ``calib``, whether to run the calibration sequences)."""
+    if spec is None or spec.strip() in ("", "all"):
+        return None, True
+    items = [s.strip() for s in spec.split(",") if s.strip()]
+    rest = [s for s in items if s != "calib"]
+    return (",".join(rest) if rest else ""), len(rest) < len(items)
+
+
+def run(cfg: EvalConfig, detectors: dict | None = None, info: dict | None = None) -> Path:
+    """Run the evaluation described by ``cfg``; returns the output folder.
+
+    detectors, info : from :func:`make_detectors` (built from ``cfg`` when None).
+    """
+    from . import report
+
+    out = Path(cfg.out)
+    t0 = time.perf_counter()
+    if detectors is None:
+        detectors, info = make_detectors(cfg.detectors, cfg.pattern or PATTERN, cfg.model)
+    if cfg.images is not None:
+        from .photos import run_photos
+
+        result = run_photos(Path(cfg.images), cfg.pattern, detectors, degrade=cfg.degrade, seed=cfg.seed,
+                            progress=not cfg.quiet)
+        result["wall_s"] = time.perf_counter() - t0
+        report.write_photo_report(out, cfg, result, info, _versions())
+        return out
+    spec, with_calib = _split_calib(cfg.conditions)
+    conds = select_conditions(spec) if spec != "" else []
+    _warm_up(detectors)
+    result = run_synthetic(conds, detectors, cfg.counts(), with_calibration=with_calib, progress=not cfg.quiet)
+    result["wall_s"] = time.perf_counter() - t0
+    report.write_report(out, cfg, conds, result, info, _versions())
+    return out
+
+
+def _parse_args(argv):
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m aicalib_tf.evaluate", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", default=None, help="output folder (default: reports/<YYYYmmdd-HHMMSS>)")
+    ap.add_argument("--quick", action="store_true", help="a small suite (about 2 minutes)")
+    ap.add_argument("--model", default="default", help="the cnn detector's model: default, report or a .keras path")
+    ap.add_argument("--detectors", default=",".join(DETECTORS), help="comma list from %(default)s")
+    ap.add_argument("--conditions", default=None, help="comma list of conditions / sweeps / named / sweeps / calib / all")
+    ap.add_argument("--limit", type=int, default=None, help="at most N images per condition (tiny runs)")
+    ap.add_argument("--images", default=None, help="a folder of the user's photos (no ground truth)")
+    ap.add_argument("--pattern", default=None, help="inner corners COLSxROWS for --images, e.g. 9x6")
+    ap.add_argument("--degrade", action="store_true", help="with --images: also score seeded degradations of each photo")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the --degrade noise (default: %(default)s)")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    return ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Parse arguments, run, print where the report is; exit 2 on bad arguments."""
+    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+    args = _parse_args(argv)
+    try:
+        dets = tuple(d.strip() for d in args.detectors.split(",") if d.strip())
+        bad = [d for d in dets if d not in DETECTORS]
+        if bad or not dets:
+            raise ValueError(f"unknown detector(s) {', '.join(bad) or '(none)'}; choose from {', '.join(DETECTORS)}")
+        if args.limit is not None and args.limit < 1:
+            raise ValueError(f"--limit must be >= 1, got {args.limit}")
+        pattern = None
+        if args.images is not None:
+            from data_gen.board import parse_pattern
+
+            if args.pattern is None:
+                raise ValueError("--images needs --pattern COLSxROWS")
+            pattern = parse_pattern(args.pattern)
+            if not Path(args.images).is_dir():
+                raise ValueError(f"--images {args.images}: not a folder")
+        elif args.pattern is not None or args.degrade:
+            raise ValueError("--pattern and --degrade go with --images")
+        else:
+            spec, _ = _split_calib(args.conditions)
+            if spec != "":
+                select_conditions(spec)  # unknown names fail here, before any work
+        out = args.out or str(Path("reports") / time.strftime("%Y%m%d-%H%M%S"))
+        cfg = EvalConfig(out=out, quick=args.quick, model=args.model, detectors=dets, conditions=args.conditions,
+                         limit=args.limit, images=args.images, pattern=pattern, degrade=args.degrade, seed=args.seed,
+                         quiet=args.quiet, command="python -m aicalib_tf.evaluate " + " ".join(
+                             sys.argv[1:] if argv is None else argv))
+        detectors, info = make_detectors(dets, pattern or PATTERN, args.model)  # a bad model is a bad argument
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    folder = run(cfg, detectors, info)
+    print(f"report: {folder / 'report.md'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
