@@ -15,7 +15,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-__all__ = ["ImageError", "load_image", "to_gray_float", "atomic_write_bytes", "atomic_write_text"]
+__all__ = ["ImageError", "load_image", "to_gray_float", "expand_images", "atomic_write_bytes", "atomic_write_text"]
 
 
 class ImageError(ValueError):
@@ -66,11 +66,46 @@ def load_image(src) -> np.ndarray:
         data = np.fromfile(path, dtype=np.uint8)
         if data.size == 0:
             raise ImageError(f"{path}: empty file")
+        if _truncated_jpeg(data.tobytes()):
+            raise ImageError(f"{path}: truncated JPEG (the image data ends without an end-of-image marker)")
         img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
         if img is None:
             raise ImageError(f"{path}: not a readable image (corrupt or unsupported format)")
         return to_gray_float(img, str(path))
     return to_gray_float(src)
+
+
+def _truncated_jpeg(data: bytes) -> bool:
+    """A JPEG whose last scan (after the last SOS marker, FF DA) has no end-of-image marker (FF D9).
+
+    OpenCV decodes such files with a warning and grey fill; we refuse them. Markers cannot occur
+    inside entropy-coded data (0xFF is stuffed there), and an EXIF thumbnail's EOI comes before
+    the main image's scans, so it cannot mask a truncated main image.
+    """
+    if not data.startswith(b"\xff\xd8"):
+        return False
+    sos = data.rfind(b"\xff\xda")
+    return sos < 0 or data.find(b"\xff\xd9", sos) < 0
+
+
+def expand_images(patterns) -> list[str]:
+    """Paths and glob patterns -> a sorted, de-duplicated list of paths (order of the patterns kept).
+
+    A pattern with ``*``, ``?`` or ``[`` is globbed (``**`` recurses); anything else is taken as a
+    path, whether or not it exists (the loader reports missing files by name).
+    """
+    import glob
+
+    out: list[str] = []
+    seen: set[str] = set()
+    for item in [patterns] if isinstance(patterns, (str, os.PathLike)) else patterns:
+        item = str(item)
+        matches = sorted(glob.glob(item, recursive=True)) if any(ch in item for ch in "*?[") else [item]
+        for m in matches:
+            if m not in seen:
+                seen.add(m)
+                out.append(m)
+    return out
 
 
 def atomic_write_bytes(path, data: bytes) -> Path:

@@ -1,3 +1,5 @@
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -43,3 +45,21 @@ def test_atomic_write_leaves_no_temporary_files(tmp_path):
 def test_float_images_outside_0_1_are_an_error():
     with pytest.raises(ImageError, match=r"\[0, 1\].*255"):
         load_image(np.full((4, 4), 255.0, np.float32))
+
+
+def test_truncated_jpeg_is_refused_by_name(tmp_path):
+    from aicalib_tf.io import ImageError, load_image
+
+    data = (Path(__file__).resolve().parents[1] / "data" / "opencv_left" / "left01.jpg").read_bytes()
+    (tmp_path / "cut.jpg").write_bytes(data[: len(data) * 3 // 4])
+    with pytest.raises(ImageError, match="cut.jpg: truncated JPEG"):
+        load_image(tmp_path / "cut.jpg")
+
+
+def test_expand_images_globs_sorts_and_dedupes(tmp_path):
+    from aicalib_tf.io import expand_images
+
+    for n in ("b.jpg", "a.jpg", "c.png"):
+        (tmp_path / n).write_bytes(b"x")
+    got = expand_images([str(tmp_path / "*.jpg"), str(tmp_path / "a.jpg"), str(tmp_path / "missing.png")])
+    assert [Path(p).name for p in got] == ["a.jpg", "b.jpg", "missing.png"]

@@ -1,0 +1,311 @@
+"""Calibrate a camera from a folder of chessboard photos.
+
+    python -m aicalib_tf.calibrate "photos/*.jpg" --pattern 9x6 --square 25mm [--out calib/]
+        [--detector cnn|opencv|opencv-sb] [--model PATH] [--fix-k3] [--rational]
+        [--resize-policy error|skip|crop|scale]
+
+Every image goes through the detector (default: the CNN, which also returns partial boards;
+each counts as a view with its own pose). Zhang's calibration (``cv2.calibrateCameraExtended``)
+follows, with outlier views rejected one at a time (see :mod:`aicalib_tf.calibration`).
+
+It prints a compact report (images used, skipped and rejected with reasons; RMS and worst view;
+K and distortion with ±1σ; field of view; warnings) and writes into --out, atomically:
+camera.yaml (OpenCV FileStorage), camera.json (the same plus board, detector, model sha256 and
+per-view poses), camera_info.yaml (ROS), report.png, and an undistorted preview of one image.
+
+Images of different sizes are an error naming the odd files unless --resize-policy says what to
+do: skip them, crop them to the common size (top-left kept; exact when an image only has extra
+rows or columns at the right or bottom, like 1281x721 among 1280x720), or scale their corners.
+
+Exit codes: 0 success; 2 bad input (no images, bad --pattern or --square, a bad model, no board
+found, fewer than 3 usable views, mixed sizes); nothing is written on failure.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .calibration import Calibration, CalibrationError, View, calibrate_camera
+
+__all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "CalibrateConfig", "parse_square",
+           "make_detector", "run", "main", "undistort"]
+
+DETECTORS = ("cnn", "opencv", "opencv-sb")
+RESIZE_POLICIES = ("error", "skip", "crop", "scale")
+_UNITS = {"mm": "mm", "cm": "cm", "m": "m", "in": "in", "inch": "in", "": ""}
+
+
+def undistort(image, calibration: Calibration, *, alpha: float = 0.0):
+    """Remove lens distortion (see :func:`aicalib_tf.calib_io.undistort`)."""
+    from .calib_io import undistort as _undistort
+
+    return _undistort(image, calibration, alpha=alpha)
+
+
+def parse_square(text: str) -> tuple[float, str]:
+    """``"25mm"`` -> (25.0, "mm"). Units: mm, cm, m, in; a bare number is unitless."""
+    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*([a-zA-Z]*)\s*", str(text))
+    if not m:
+        raise ValueError(f"--square must be a positive size such as 25mm, 2.5cm or 0.025m, got {text!r}")
+    value, unit = float(m.group(1)), m.group(2).lower()
+    if unit not in _UNITS:
+        raise ValueError(f"--square unit {m.group(2)!r} is not one of mm, cm, m, in (got {text!r})")
+    if not value > 0:
+        raise ValueError(f"--square must be positive, got {text!r}")
+    return value, _UNITS[unit]
+
+
+def make_detector(name: str, pattern_size: tuple[int, int], model=None):
+    """A function (H, W) float32 grey in [0, 1] -> (corners (N, 2), ids (N, 2)) or None.
+
+    name : "cnn" (full or partial boards; ``model`` is a loaded corner model or None for the
+    shipped default), "opencv" (classic + cornerSubPix) or "opencv-sb" (full boards only).
+    """
+    cols, rows = pattern_size
+    full_ids = np.stack(np.meshgrid(np.arange(cols), np.arange(rows)), -1).reshape(-1, 2)
+    if name == "cnn":
+        from .detect import detect_corners
+
+        def cnn(gray):
+            det = detect_corners(gray, pattern_size, model=model)
+            return (det.corners, det.ids) if det.found else None
+
+        return cnn
+    if name in ("opencv", "opencv-sb"):
+        from .baselines import opencv_classic, opencv_sb
+
+        fn = opencv_classic if name == "opencv" else opencv_sb
+
+        def classic(gray):
+            ok, corners = fn(np.clip(gray * 255.0 + 0.5, 0, 255).astype(np.uint8), pattern_size)
+            return (corners, full_ids) if ok else None
+
+        return classic
+    raise ValueError(f"unknown detector {name!r}; choose from {', '.join(DETECTORS)}")
+
+
+@dataclass(frozen=True)
+class CalibrateConfig:
+    """Everything one calibration run needs (the CLI's options)."""
+
+    images: tuple[str, ...]
+    pattern: tuple[int, int]
+    square: float = 1.0
+    square_unit: str = ""
+    out: str = "calib"
+    detector: str = "cnn"
+    model: str = "default"
+    fix_k3: bool = False
+    rational: bool = False
+    resize_policy: str = "error"
+    quiet: bool = False
+
+
+@dataclass
+class _Found:
+    label: str
+    file: str
+    size: tuple[int, int]
+    view: View | None
+
+
+def _labels(files: list[str]) -> dict[str, str]:
+    """Short names for reports: the file name, or the path where two files share a name."""
+    counts = Counter(Path(f).name for f in files)
+    return {f: Path(f).name if counts[Path(f).name] == 1 else f for f in files}
+
+
+def _detect_all(files: list[str], labels: dict[str, str], detect, quiet: bool) -> tuple[list[_Found], dict[str, str]]:
+    from tqdm import tqdm
+
+    from .io import ImageError, load_image
+
+    found, skipped = [], {}
+    for f in tqdm(files, desc="detect", unit="img", disable=quiet):
+        try:
+            gray = load_image(f)
+        except ImageError as exc:
+            skipped[labels[f]] = str(exc).removeprefix(f"{f}: ")
+            continue
+        h, w = gray.shape
+        hit = detect(gray)
+        found.append(_Found(labels[f], f, (w, h), View(labels[f], *hit) if hit is not None else None))
+    return found, skipped
+
+
+def _apply_size_policy(found: list[_Found], policy: str, skipped: dict) -> tuple[list[_Found], tuple[int, int]]:
+    """Bring every image to the most common size, as the policy says; returns (found, size)."""
+    sizes = Counter(f.size for f in found)
+    size = sizes.most_common(1)[0][0]
+    odd = [f for f in found if f.size != size]
+    if not odd:
+        return found, size
+    if policy == "error":
+        names = ", ".join(f"{f.label} ({f.size[0]}x{f.size[1]})" for f in odd)
+        raise CalibrationError(f"images of different sizes: most are {size[0]}x{size[1]} but {names}; "
+                               "choose --resize-policy skip, crop or scale")
+    out = []
+    for f in found:
+        if f.size == size:
+            out.append(f)
+            continue
+        tag = f"{f.size[0]}x{f.size[1]}"
+        if policy == "skip":
+            skipped[f.label] = f"image is {tag}, not {size[0]}x{size[1]} (--resize-policy skip)"
+            continue
+        if policy == "crop" and (f.size[0] < size[0] or f.size[1] < size[1]):
+            skipped[f.label] = f"image is {tag}, smaller than {size[0]}x{size[1]}: cannot crop"
+            continue
+        view = f.view
+        if view is not None and policy == "crop":
+            inside = (view.corners[:, 0] <= size[0] - 0.5) & (view.corners[:, 1] <= size[1] - 0.5)
+            view = View(view.name, view.corners[inside], view.ids[inside])
+        elif view is not None:  # scale
+            s = np.array([size[0] / f.size[0], size[1] / f.size[1]])
+            view = View(view.name, (view.corners + 0.5) * s - 0.5, view.ids)
+        print(f"note: {f.label} is {tag}; {'cropped' if policy == 'crop' else 'scaled'} to {size[0]}x{size[1]}",
+              file=sys.stderr)
+        out.append(_Found(f.label, f.file, size, view))
+    return out, size
+
+
+def _preview(cal: Calibration, files: dict[str, str]) -> tuple[str, bytes] | None:
+    """(file name, PNG bytes) of the first used view's image, undistorted."""
+    import cv2
+
+    from .calib_io import undistort as _undistort
+
+    for name in cal.views:
+        img = cv2.imread(files[name], cv2.IMREAD_COLOR)
+        if img is None:
+            continue
+        w, h = cal.image_size
+        img = img[:h, :w] if img.shape[1] >= w and img.shape[0] >= h else cv2.resize(img, (w, h))
+        if img.shape[:2] != (h, w):
+            img = cv2.resize(img, (w, h))
+        ok, png = cv2.imencode(".png", _undistort(img, cal))
+        if ok:
+            return f"undistorted_{Path(name).stem}.png", png.tobytes()
+    return None
+
+
+def _suggest_pattern(files: list[str], model) -> str:
+    """A hint naming the grid sizes the CNN sees in the first images, for a wrong --pattern."""
+    from .detect import detect_corners
+    from .io import ImageError
+
+    seen = Counter()
+    for f in files[:3]:
+        try:
+            det = detect_corners(f, None, model=model)
+        except ImageError:
+            continue
+        if det.found and det.pattern_size:
+            c, r = det.pattern_size
+            seen[f"{max(c, r)}x{min(c, r)}"] += 1
+    if not seen:
+        return ""
+    return f" (the CNN sees {', '.join(f'{k} grids in {v} image(s)' for k, v in seen.items())}; is --pattern right?)"
+
+
+def run(cfg: CalibrateConfig) -> tuple[Calibration, str]:
+    """Detect, calibrate, write every output file; returns (calibration, printed report).
+
+    Raises ValueError / CalibrationError / FileNotFoundError for bad input, before writing anything.
+    """
+    from .calib_io import save_calibration
+    from .calib_report import format_report, report_figure
+    from .io import atomic_write_bytes, atomic_write_text, expand_images
+
+    files = expand_images(cfg.images)
+    if not files:
+        raise ValueError(f"no images match {' '.join(cfg.images)}")
+    if cfg.resize_policy not in RESIZE_POLICIES:
+        raise ValueError(f"--resize-policy must be one of {', '.join(RESIZE_POLICIES)}, got {cfg.resize_policy!r}")
+    model, sha = None, None
+    if cfg.detector == "cnn":
+        from .model import file_sha256, load_model
+
+        model = load_model(cfg.model)
+        sha = file_sha256(model.aicalib_path) if hasattr(model, "aicalib_path") else None
+    detect = make_detector(cfg.detector, cfg.pattern, model)
+    labels = _labels(files)
+    found, skipped = _detect_all(files, labels, detect, cfg.quiet)
+    if not found:
+        raise CalibrationError(f"none of the {len(files)} images could be read")
+    found, size = _apply_size_policy(found, cfg.resize_policy, skipped)
+    for f in found:
+        if f.view is None:
+            skipped[f.label] = f"no {cfg.pattern[0]}x{cfg.pattern[1]} board found"
+    views = [f.view for f in found if f.view is not None]
+    if not views:
+        hint = _suggest_pattern(files, model) if cfg.detector == "cnn" else ""
+        raise CalibrationError(f"no {cfg.pattern[0]}x{cfg.pattern[1]} board found in any of the {len(files)} images{hint}")
+    meta = {"detector": cfg.detector, "model": cfg.model if cfg.detector == "cnn" else None, "model_sha256": sha,
+            "rational": cfg.rational, "fix_k3": cfg.fix_k3, "resize_policy": cfg.resize_policy,
+            "images": len(files)}
+    cal = calibrate_camera(views, cfg.pattern, cfg.square, size, rational=cfg.rational, fix_k3=cfg.fix_k3,
+                           square_unit=cfg.square_unit, meta=meta)
+    by_name = {v.name: v for v in views}
+    used = [by_name[n] for n in cal.views]
+    report = format_report(cal, used, skipped=skipped, total=len(files))
+    figure = report_figure(cal, used)
+    preview = _preview(cal, {labels[f]: f for f in files})
+    out = Path(cfg.out)
+    save_calibration(cal, out)
+    atomic_write_bytes(out / "report.png", figure)
+    atomic_write_text(out / "report.txt", report + "\n")
+    if preview is not None:
+        atomic_write_bytes(out / preview[0], preview[1])
+    return cal, report
+
+
+def _parse_args(argv):
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m aicalib_tf.calibrate", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("images", nargs="+", help="image files or glob patterns (quote globs)")
+    ap.add_argument("--pattern", required=True, help="inner corners, COLSxROWS, e.g. 9x6")
+    ap.add_argument("--square", default="1", help="square size with unit, e.g. 25mm (default: 1, unitless)")
+    ap.add_argument("--out", default="calib", help="output folder (default: %(default)s)")
+    ap.add_argument("--detector", default="cnn", choices=DETECTORS, help="corner detector (default: %(default)s)")
+    ap.add_argument("--model", default="default", help="CNN: default, report, or a .keras path (default: %(default)s)")
+    ap.add_argument("--fix-k3", action="store_true", help="hold k3 at 0 (narrow lenses, few views)")
+    ap.add_argument("--rational", action="store_true", help="8-coefficient rational distortion model (fisheye-like lenses)")
+    ap.add_argument("--resize-policy", default="error", choices=RESIZE_POLICIES,
+                    help="images whose size differs from the most common one (default: %(default)s)")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    return ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """CLI entry: returns 0 on success, 2 on bad input (message on stderr, no files written)."""
+    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+    from data_gen.board import check_pattern, parse_pattern
+
+    args = _parse_args(argv)
+    try:
+        pattern = check_pattern(parse_pattern(args.pattern))
+        square, unit = parse_square(args.square)
+        cfg = CalibrateConfig(images=tuple(args.images), pattern=pattern, square=square, square_unit=unit,
+                              out=args.out, detector=args.detector, model=args.model, fix_k3=args.fix_k3,
+                              rational=args.rational, resize_policy=args.resize_policy, quiet=args.quiet)
+        cal, report = run(cfg)
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(report)
+    print(f"wrote {Path(cfg.out) / 'camera.yaml'}, camera.json, camera_info.yaml, report.png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
