@@ -283,7 +283,9 @@ def calibrate_sequences(seqs, detectors: dict, rows: list, errors: dict, bar=Non
     seqs : [(camera_id, [Sample])] (see :func:`aicalib_tf.conditions.calibration_sequences`).
     Detection rows go into ``rows``/``errors`` under condition ``calib``. Returns one dict per
     sequence × detector: views, views_found (full boards), views_partial, views_used, rejected,
-    rms_px, fx_pct, fy_pct, pp_px, dist_field_mean_px, dist_field_max_px, status.
+    rms_px, fx_pct, fy_pct, pp_px, dist_field_mean_px, dist_field_max_px (over the whole image),
+    dist_field_seen_mean_px, dist_field_seen_max_px (inside the hull of all the sequence's visible
+    true corners: the area the boards covered), status.
     """
     from .calibrate import CalibrationError, View, calibrate_camera
 
@@ -310,11 +312,13 @@ def calibrate_sequences(seqs, detectors: dict, rows: list, errors: dict, bar=Non
                 rec.update(views_used=0, rejected=len(vs), status=f"failed: {exc}")
                 out.append(rec)
                 continue
-            err = calibration_errors(cal.K, cal.dist, K_true, dist_true, tuple(lab["image_size"]))
+            seen = np.concatenate([s.corners[s.visible] for s in samples])
+            err = calibration_errors(cal.K, cal.dist, K_true, dist_true, tuple(lab["image_size"]), seen=seen)
             rec.update(views_used=len(cal.views), rejected=len(cal.rejected), rms_px=float(cal.rms),
                        fx_pct=err["fx_pct"], fy_pct=err["fy_pct"], pp_px=err["pp_px"],
                        dist_field_mean_px=err["dist_field_mean_px"], dist_field_max_px=err["dist_field_max_px"],
-                       status="ok")
+                       dist_field_seen_mean_px=err["dist_field_seen_mean_px"],
+                       dist_field_seen_max_px=err["dist_field_seen_max_px"], status="ok")
             out.append(rec)
     return out
 
