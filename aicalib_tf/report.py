@@ -90,9 +90,10 @@ def _sweep_figure(summary: pd.DataFrame, sweep: str, path: Path) -> None:
     s = summary[summary["sweep"] == sweep].sort_values("severity")
     label, invert = SWEEP_AXES.get(sweep, (sweep, False))
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6))
-    for det, g in s.groupby("detector", sort=False):
-        a1.plot(g["severity"], 100 * g["detection_rate"], "o-", label=det)
-        a2.plot(g["severity"], g["err_median"], "o-", label=det)
+    for k, (det, g) in enumerate(s.groupby("detector", sort=False)):
+        style = dict(marker="os^vD"[k % 5], ls=("-", "--", "-.", ":")[k % 4], ms=6 - k, label=det)
+        a1.plot(g["severity"], 100 * g["detection_rate"], **style)
+        a2.plot(g["severity"], g["err_median"], **style)
     a1.set(xlabel=label, ylabel="full boards found correctly (%)", ylim=(-3, 103), title=f"{sweep}: detection rate")
     a2.set(xlabel=label, ylabel="median corner error of hits (px)", yscale="log", title=f"{sweep}: corner error")
     for a in (a1, a2):
@@ -114,7 +115,7 @@ def _error_hist(errors: dict, named: set, path: Path) -> None:
         if e.size:
             ax.hist(np.clip(e, 1e-4, None), bins=bins, histtype="step", lw=1.5, label=f"{det} ({e.size} corners)")
     ax.set(xscale="log", xlabel="corner error (px)", ylabel="corners",
-           title="Corner errors of hits and correct partial corners, named conditions")
+           title="Corner errors: hits and correct partial corners (named conditions, calibration views)")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     _save_fig(fig, path)
@@ -202,6 +203,18 @@ def _headline(summary: pd.DataFrame, conds) -> str:
     return "\n".join(lines)
 
 
+def _headline_times(results: pd.DataFrame) -> str:
+    """Two extra headline rows: median / max ms per image at each image size."""
+    dets = list(dict.fromkeys(results["detector"]))
+    lines = []
+    for (w, h), g in results.groupby(["width", "height"]):
+        t = g.groupby("detector")["time_ms"]
+        med, mx = t.median(), t.max()
+        lines.append(f"| time {w}×{h}, median / max ms | "
+                     + " | ".join(f"{med[d]:.1f} / {mx[d]:.0f}" if d in med else "–" for d in dets) + " |")
+    return "\n".join(lines)
+
+
 def _timing_table(results: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for (w, h, det), g in results.groupby(["width", "height", "detector"], sort=False):
@@ -261,7 +274,7 @@ def write_report(out: Path, cfg, conds, result: dict, info: dict, versions: dict
           "\n## Headline\n",
           "Hits / images (wrong detections), median corner error of hits; occluded and partial: corner recall and wrong ids; "
           "clutter: full boards reported on board-free images.\n",
-          _headline(summary, conds),
+          _headline(summary, conds) + ("\n" + _headline_times(results) if len(results) else ""),
           "\n## Detection by condition\n",
           "A hit: a full board with every corner within 2 px of the truth (board symmetries allowed); wrong: a full board "
           "with any corner further off; partial: an incomplete board. Errors in px over hit corners; recall over visible "
