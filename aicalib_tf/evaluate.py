@@ -335,7 +335,23 @@ def _versions() -> dict:
             v[mod] = __import__(mod).__version__
         except ImportError:
             v[mod] = None
+    v.update(_git_state())
     return v
+
+
+def _git_state() -> dict:
+    """The code's commit and its uncommitted source files (empty when not in a git checkout)."""
+    import subprocess
+
+    root = Path(__file__).resolve().parents[1]
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
+                              timeout=10).stdout.strip()
+        status = subprocess.run(["git", "status", "--porcelain", "--", "aicalib_tf", "data_gen", "models"], cwd=root,
+                                capture_output=True, text=True, timeout=10).stdout.splitlines()
+    except (OSError, subprocess.SubprocessError):
+        return {}
+    return {"git_commit": head or None, "git_uncommitted": [ln[3:] for ln in status]} if head else {}
 
 
 def _split_calib(spec: str | None) -> tuple[str | None, bool]:
@@ -347,15 +363,17 @@ def _split_calib(spec: str | None) -> tuple[str | None, bool]:
     return (",".join(rest) if rest else ""), len(rest) < len(items)
 
 
-def run(cfg: EvalConfig, detectors: dict | None = None, info: dict | None = None) -> Path:
+def run(cfg: EvalConfig, detectors: dict | None = None, info: dict | None = None, *,
+        started: float | None = None) -> Path:
     """Run the evaluation described by ``cfg``; returns the output folder.
 
     detectors, info : from :func:`make_detectors` (built from ``cfg`` when None).
+    started : time.perf_counter() at the start of the command, for the reported wall time.
     """
     from . import report
 
     out = Path(cfg.out)
-    t0 = time.perf_counter()
+    t0 = time.perf_counter() if started is None else started
     if detectors is None:
         detectors, info = make_detectors(cfg.detectors, cfg.pattern or PATTERN, cfg.model)
     if cfg.images is not None:
@@ -396,6 +414,7 @@ def _parse_args(argv):
 
 def main(argv: list[str] | None = None) -> int:
     """Parse arguments, run, print where the report is; exit 2 on bad arguments."""
+    started = time.perf_counter()
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
     args = _parse_args(argv)
     try:
@@ -429,7 +448,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, FileNotFoundError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    folder = run(cfg, detectors, info)
+    folder = run(cfg, detectors, info, started=started)
     print(f"report: {folder / 'report.md'}")
     return 0
 

@@ -224,6 +224,11 @@ def _timing_table(results: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows).sort_values(["size", "detector"], key=lambda s: s.map(str))
 
 
+def _uncommitted(versions: dict) -> str:
+    files = versions.get("git_uncommitted")
+    return f"  \nUncommitted source files at run time: {', '.join(files)}." if files else ""
+
+
 def _config(cfg, versions: dict, info: dict, extra: dict) -> dict:
     return {"command": cfg.command, "out": str(cfg.out), "quick": cfg.quick, "limit": cfg.limit,
             "detectors": list(cfg.detectors), "models": info, "versions": versions, **extra}
@@ -268,9 +273,9 @@ def write_report(out: Path, cfg, conds, result: dict, info: dict, versions: dict
           f"Command: `{cfg.command}`  \nWall time: {result['wall_s']:.0f} s (rendering {result['render_s']:.0f} s); "
           f"{len(results)} detections on {len(results) // max(1, len(cfg.detectors))} images. "
           f"Machine: {versions.get('platform')}, {versions.get('cpus')} CPUs.  ",
-          "Versions: " + ", ".join(f"{k} {v}" for k, v in versions.items() if k not in ("platform", "cpus")) + ".  ",
+          "Versions: " + ", ".join(f"{k} {v}" for k, v in versions.items() if k not in ("platform", "cpus", "git_uncommitted")) + ".  ",
           "Models: " + "; ".join(f"{d}: `{Path(m['model']).name}` sha256 `{m['sha256'][:16]}…`" for d, m in info.items())
-          + ("." if info else "none."),
+          + ("." if info else "none.") + _uncommitted(versions),
           "\n## Headline\n",
           "Hits / images (wrong detections), median corner error of hits; occluded and partial: corner recall and wrong ids; "
           "clutter: full boards reported on board-free images.\n",
@@ -348,8 +353,9 @@ def write_photo_report(out: Path, cfg, result: dict, info: dict, versions: dict)
     md = [f"# Chessboard detection on real photos: CNN against OpenCV\n",
           f"Command: `{cfg.command}`  \nPhotos: {result['files']} in `{cfg.images}`, pattern {cfg.pattern[0]}×{cfg.pattern[1]}; "
           f"{len(result['skipped'])} unreadable. Wall time {result['wall_s']:.0f} s.  ",
-          "Versions: " + ", ".join(f"{k} {v}" for k, v in versions.items() if k not in ("platform", "cpus")) + ".  ",
-          "Models: " + "; ".join(f"{d}: `{Path(m['model']).name}` sha256 `{m['sha256'][:16]}…`" for d, m in info.items()) + "."]
+          "Versions: " + ", ".join(f"{k} {v}" for k, v in versions.items() if k not in ("platform", "cpus", "git_uncommitted")) + ".  ",
+          "Models: " + "; ".join(f"{d}: `{Path(m['model']).name}` sha256 `{m['sha256'][:16]}…`" for d, m in info.items()) + "."
+          + _uncommitted(versions)]
     for name, why in result["skipped"].items():
         md.append(f"- skipped {name}: {why}")
     figures = []
