@@ -162,6 +162,12 @@ def _proposer(smoothed: _Smoothed, ring_image: np.ndarray, ref_amp: float):
         out[k[ok]] = q[ok]
         return out
 
+    def verify(pts: np.ndarray, step: np.ndarray) -> np.ndarray:
+        """(M,) bool: the ring test of ``propose`` at points (M, 2) with local steps (M,) px."""
+        amp, asym = ring_symmetry(ring_image, np.asarray(pts, np.float64), 0.3 * np.asarray(step, np.float64))
+        return (amp >= 0.3 * ref_amp) & (asym <= 0.5 * amp)
+
+    propose.verify = verify
     return propose
 
 
@@ -252,6 +258,482 @@ def _board_from_grid(grid: Grid, scores, pattern_size, gray, size) -> Detection 
     return Detection(corners[perm], ids, sc[perm], (cols, rows), True, size)
 
 
+# ---- partial boards ---------------------------------------------------------------------------
+
+# handedness-preserving maps of grid (i, j) onto board (col, row): 0°, 90°, 180°, 270°
+_ROTATIONS = tuple(np.array(m) for m in ([[1, 0], [0, 1]], [[0, -1], [1, 0]], [[-1, 0], [0, -1]], [[0, 1], [-1, 0]]))
+MIN_PARTIAL = 9  # fewest corners of a partial board (a grid's seed is 3x3)
+BORDER_BEYOND = 0.12  # where the margin is looked for: this fraction of a step beyond the last line
+BORDER_T = 0.7  # white-normalised grey the margin must reach there (0 black square, 1 white square)
+MAX_RESIDUAL = 0.08  # of a step: how far a corner of a partial board may be from its neighbours' lattice
+
+
+def _sample(gray: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Bilinear grey values (M,) at points xy (M, 2) px."""
+    xy = np.asarray(xy, np.float32).reshape(-1, 1, 2)
+    return cv2.remap(gray, xy[..., 0], xy[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()
+
+
+def _square_colours(cells: dict, gray: np.ndarray):
+    """Which grid squares are black, from the grey at their centres.
+
+    cells : {(i, j): (2,) px}. Grid square (i, j) lies between corners (i, j) and (i+1, j+1).
+    Returns (black, contrast): black is the parity of i + j of the black squares (0 or 1), or None
+    when the squares do not split into two clearly different colours; contrast is white − black grey.
+    """
+    keys, centres = [], []
+    for (i, j), p in cells.items():
+        q = [cells.get(c) for c in ((i + 1, j), (i, j + 1), (i + 1, j + 1))]
+        if all(v is not None for v in q):
+            keys.append(i + j)
+            centres.append(0.25 * (p + q[0] + q[1] + q[2]))
+    if len(keys) < 2:
+        return None, 0.0
+    par = np.array(keys) % 2
+    vals = _sample(gray, np.array(centres))
+    if par.min() == par.max():
+        return None, 0.0
+    m0, m1 = vals[par == 0].mean(), vals[par == 1].mean()
+    black = 0 if m0 < m1 else 1
+    agree = np.mean((vals < 0.5 * (m0 + m1)) == (par == black))
+    contrast = abs(m1 - m0)
+    if agree < 0.9 or contrast < 0.08:
+        return None, contrast
+    return black, contrast
+
+
+def _border_sides(cells: dict, ext: tuple[int, int], gray: np.ndarray, black: int, contrast: float) -> dict:
+    """Which sides of a grid are the board's outermost corner lines.
+
+    cells : {(i, j): (2,) px} with i in [0, ext[0]), j in [0, ext[1]). black, contrast : from
+    :func:`_square_colours`. Beyond the outermost line of inner corners a board has one more row of
+    squares, then plain white paper. For each side, the line one step further out (L1) is
+    extrapolated from the last grid lines, and each square between the last line and L1 is tested:
+    the squares alternate black and white as the grid's colours predict, a black square stays black
+    up to 0.2 step before L1, and ``BORDER_BEYOND`` of a step beyond L1 the paper is white
+    (normalised grey > ``BORDER_T``). Were the board to go on, a black square would lie beyond each
+    white one; an object in front would have to line up with L1 along the whole side to pass.
+    A side is a border when at least two of its squares are tested, all pass, and at most a third
+    of the squares that lie in the image could not be tested because a corner of the last line is
+    missing there (hidden, say). Squares outside the image are not counted.
+    Returns {(axis, sign): bool} for axis 0 (i) / 1 (j) and sign −1 (min side) / +1 (max side).
+    """
+    h, w = gray.shape
+    lo_xy, hi_xy = np.array([2.0, 2.0]), np.array([w - 3.0, h - 3.0])
+    ij = np.array(list(cells.keys()), np.float64)
+    xy = np.array(list(cells.values()), np.float64)
+    hom, _ = cv2.findHomography(ij, xy, 0) if len(ij) >= 4 else (None, None)
+    out = {}
+    for axis in (0, 1):
+        for sign in (-1, 1):
+            e = 0 if sign < 0 else ext[axis] - 1
+
+            def at(a, o):
+                return cells.get((a, o) if axis == 0 else (o, a))
+
+            ends, missing_in_view = {}, set()
+            for o in range(ext[1 - axis]):
+                p0, p1, p2 = at(e, o), at(e - sign, o), at(e - 2 * sign, o)
+                if p0 is not None and p1 is not None:
+                    ends[o] = (p0, 2 * p0 - p1 if p2 is None else 3 * p0 - 3 * p1 + p2)
+                elif p0 is None and hom is not None:
+                    cell = np.array([[e, o] if axis == 0 else [o, e]], np.float64).reshape(-1, 1, 2)
+                    q = cv2.perspectiveTransform(cell, hom).reshape(2)
+                    if np.all((q >= lo_xy) & (q <= hi_xy)):
+                        missing_in_view.add(o)
+            rows, failed = [], 0
+            lo = min(e, e + sign)
+            for o in range(ext[1 - axis] - 1):
+                if o in ends and o + 1 in ends:
+                    a = 0.5 * (ends[o][0] + ends[o + 1][0])
+                    b = 0.5 * (ends[o][1] + ends[o + 1][1])
+                    pts = np.stack([a + 0.5 * (b - a), a + 0.8 * (b - a), b + BORDER_BEYOND * (b - a)])
+                    if np.all((pts >= lo_xy) & (pts <= hi_xy)):
+                        rows.append((pts, (lo + o) % 2 == black))
+                elif o in missing_in_view or o + 1 in missing_in_view:
+                    failed += 1
+            out[(axis, sign)] = False
+            if len(rows) < 2 or 2 * failed > len(rows):
+                continue
+            vals = _sample(gray, np.concatenate([r[0] for r in rows])).reshape(-1, 3)
+            is_black = np.array([r[1] for r in rows])
+            if is_black.all() or not is_black.any():
+                continue
+            blk, wht = np.median(vals[is_black, 0]), np.median(vals[~is_black, 0])
+            if wht - blk < 0.5 * contrast:
+                continue
+            t = (vals - blk) / (wht - blk)
+            alternate = np.all(np.where(is_black, t[:, 0] < 0.5, t[:, 0] > 0.5))
+            black_to_edge = np.all(t[is_black, 1] < 0.5)
+            margin = np.all(t[:, 2] > BORDER_T)
+            out[(axis, sign)] = bool(alternate and black_to_edge and margin)
+    return out
+
+
+def _board_keys(ids: np.ndarray, pattern_size) -> bytes:
+    """One key per class of id sets that the board's symmetries map onto each other."""
+    cols, rows = pattern_size
+    c, r = ids[:, 0], ids[:, 1]
+    forms = [np.stack([c, r], 1), np.stack([cols - 1 - c, rows - 1 - r], 1)]
+    if cols == rows:
+        forms += [np.stack([rows - 1 - r, c], 1), np.stack([r, cols - 1 - c], 1)]
+    return min(f.astype(np.int32).tobytes() for f in forms)
+
+
+def _placements(ij: np.ndarray, pattern_size, borders: dict, black: int | None) -> list[np.ndarray]:
+    """Every (col, row) id assignment of a grid that fits the pattern and the evidence.
+
+    ij : (K, 2) handed grid positions. An assignment rotates the grid by a multiple of 90° (keeping
+    handedness) and shifts it inside the pattern; a side in ``borders`` marked True must land on
+    the pattern's outermost line, and with ``black`` the grid's black squares must be the board's
+    black squares (board square (c, r) is black when c + r is even, squares indexed from the
+    corner-0 outer square). Returns a list of (K, 2) int id arrays.
+    """
+    cols, rows = pattern_size
+    unit = np.array([[0, 0], [1, 0], [0, 1], [1, 1]])
+    out = []
+    for m in _ROTATIONS:
+        cr = ij @ m.T
+        base = cr.min(0)
+        cr = cr - base
+        a, b = cr.max(0) + 1
+        if a > cols or b > rows:
+            continue
+        c0, r0 = (unit @ m.T - base).min(0)
+        sides = []
+        for (axis, sign), border in borders.items():
+            if border:
+                d = m @ (sign * np.eye(2, dtype=int)[axis])
+                sides.append((0 if d[0] else 1, int(d[0] + d[1])))
+        for oc in range(cols - a + 1):
+            for orow in range(rows - b + 1):
+                ok = all((oc == 0 if s < 0 else oc + a == cols) if ax == 0 else (orow == 0 if s < 0 else orow + b == rows)
+                         for ax, s in sides)
+                if ok and black is not None and (c0 + oc + r0 + orow) % 2 != black:
+                    ok = False
+                if ok:
+                    out.append(cr + np.array([oc, orow]))
+    return out
+
+
+def _steps(ids: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean image displacement (px) per +1 column and per +1 row, by an affine fit."""
+    a = np.concatenate([ids.astype(np.float64), np.ones((len(ids), 1))], axis=1)
+    (u, v, _), *_ = np.linalg.lstsq(a, pts.astype(np.float64), rcond=None)
+    return u, v
+
+
+def _choose_reading(ids: np.ndarray, pts: np.ndarray, pattern_size) -> np.ndarray:
+    """Of the symmetric readings of a placement, the one the full-board geometric rule prefers.
+
+    Only used when colours cannot tell them apart (cols + rows even): the reading whose rows run
+    most nearly downwards (largest y step per row; then x step per column); for square patterns,
+    the largest x step per column + y step per row.
+    """
+    cols, rows = pattern_size
+    c, r = ids[:, 0], ids[:, 1]
+    forms = [np.stack([c, r], 1), np.stack([cols - 1 - c, rows - 1 - r], 1)]
+    if cols == rows:
+        forms += [np.stack([rows - 1 - r, c], 1), np.stack([r, cols - 1 - c], 1)]
+
+    def key(f):
+        u, v = _steps(f, pts)
+        return (float(u[0] + v[1]), 0.0) if cols == rows else (float(v[1]), float(u[0]))
+
+    return max(forms, key=key)
+
+
+def _in_view(pts: np.ndarray, size) -> np.ndarray:
+    w, h = size
+    return np.all(np.isfinite(pts), axis=1) & (pts[:, 0] >= 1) & (pts[:, 0] <= w - 2) & (pts[:, 1] >= 1) & (pts[:, 1] <= h - 2)
+
+
+def _take(cells: dict, new: dict, pred: np.ndarray, step: np.ndarray, got: np.ndarray) -> int:
+    """Add proposals ``got`` (M, 2, NaN where none) for cells ``new`` (M keys) unless they repeat a point."""
+    pts = np.array([v[0] for v in cells.values()])
+    added = 0
+    for key, p, s, q in zip(new, pred, step, got):
+        if not np.all(np.isfinite(q)) or np.linalg.norm(q - p) > 0.3 * s:
+            continue
+        if np.min(np.linalg.norm(pts - q, axis=1)) < 0.5 * s:
+            continue
+        cells[key] = (q.astype(np.float64), 0.0)
+        pts = np.vstack([pts, q])
+        added += 1
+    return added
+
+
+def _grow_cut_lines(cells: dict, propose, limit: int, size) -> None:
+    """Grow a grid by lines that are partly out of the image or hidden.
+
+    Grid assembly adds a line when half of its predicted corners are found; at the image frame or
+    beside an object most of them may not be visible. Here a line one step beyond each side is
+    added when at least two of its predicted corners are found (saddle fit and ring test, see
+    :func:`_proposer`), or one where at most two lie in the image. The grid never grows past
+    ``limit`` positions on an axis. cells : {(i, j): (point (2,), score)}, changed in place.
+    """
+    for _ in range(2 * limit):
+        grown = False
+        for axis in (0, 1):
+            for sign in (-1, 1):
+                keys = np.array(list(cells.keys()))
+                if keys[:, axis].max() - keys[:, axis].min() + 1 >= limit:
+                    continue
+                e = keys[:, axis].max() if sign > 0 else keys[:, axis].min()
+                new, pred, step = [], [], []
+                for o in np.unique(keys[:, 1 - axis]):
+                    def at(a, o=int(o)):
+                        v = cells.get((int(a), o) if axis == 0 else (o, int(a)))
+                        return None if v is None else v[0]
+                    p0, p1, p2 = at(e), at(e - sign), at(e - 2 * sign)
+                    if p0 is None or p1 is None:
+                        continue
+                    new.append((int(e + sign), int(o)) if axis == 0 else (int(o), int(e + sign)))
+                    pred.append(2 * p0 - p1 if p2 is None else 3 * p0 - 3 * p1 + p2)
+                    step.append(np.linalg.norm(p0 - p1))
+                if not new:
+                    continue
+                pred, step = np.array(pred), np.array(step)
+                view = _in_view(pred, size)
+                got = propose(pred, step)
+                ok = np.all(np.isfinite(got), axis=1) & (np.linalg.norm(got - pred, axis=1) <= 0.3 * step)
+                need = 1 if view.sum() <= 2 else 2
+                if ok.sum() >= need:
+                    trial = dict(cells)
+                    if _take(trial, new, pred, step, np.where(ok[:, None], got, np.nan)) >= need:
+                        cells.clear()
+                        cells.update(trial)
+                        grown = True
+        _fill_cells(cells, propose)
+        if not grown:
+            return
+
+
+def _fill_cells(cells: dict, propose, passes: int = 3) -> None:
+    """Look for the corners of missing cells inside a grid's extent, predicted by parallelograms."""
+    for _ in range(passes):
+        keys = np.array(list(cells.keys()))
+        (i0, j0), (i1, j1) = keys.min(0), keys.max(0)
+        new, pred, step = [], [], []
+        for i in range(i0, i1 + 1):
+            for j in range(j0, j1 + 1):
+                if (i, j) in cells:
+                    continue
+                preds = []
+                for di in (-1, 1):
+                    for dj in (-1, 1):
+                        a, b, c = cells.get((i + di, j)), cells.get((i, j + dj)), cells.get((i + di, j + dj))
+                        if a is not None and b is not None and c is not None:
+                            preds.append((a[0] + b[0] - c[0], min(np.linalg.norm(a[0] - c[0]), np.linalg.norm(b[0] - c[0]))))
+                if preds:
+                    new.append((i, j))
+                    pred.append(np.mean([p for p, _ in preds], axis=0))
+                    step.append(min(s for _, s in preds))
+        if not new:
+            return
+        pred, step = np.array(pred), np.array(step)
+        if _take(cells, new, pred, step, propose(pred, step)) == 0:
+            return
+
+
+def _reach(cells: dict, propose, limit: int, size, passes: int = 3, radius: int = 3) -> None:
+    """Look for corners of the lattice across gaps (an object in front, a missed line).
+
+    Every missing cell within ``radius`` steps of the grid, inside a ``limit`` × ``limit`` window
+    around it, is predicted by a homography of its 12 nearest known cells and looked for there.
+    cells : {(i, j): (point (2,), score)}, changed in place.
+    """
+    for _ in range(passes):
+        ij = np.array(list(cells.keys()))
+        pts = np.array([v[0] for v in cells.values()])
+        lo, hi = ij.min(0), ij.max(0)
+        span = limit - (hi - lo + 1)  # room left on each axis
+        a0, a1 = lo - np.minimum(span, radius), hi + np.minimum(span, radius)
+        ii, jj = np.meshgrid(np.arange(a0[0], a1[0] + 1), np.arange(a0[1], a1[1] + 1), indexing="ij")
+        cand = np.stack([ii.ravel(), jj.ravel()], 1)
+        have = set(map(tuple, ij.tolist()))
+        cand = np.array([c for c in cand.tolist() if tuple(c) not in have])
+        if len(cand) == 0:
+            return
+        dist = np.abs(cand[:, None, :] - ij[None, :, :]).max(-1).min(1)
+        cand = cand[dist <= radius]
+        if len(cand) == 0:
+            return
+        pred = _predict_ids(ij, pts, cand)
+        view = _in_view(pred, size)
+        cand, pred = cand[view], pred[view]
+        if len(cand) == 0:
+            return
+        step = _local_step(ij, pts, pred)
+        got = propose(pred, step)
+        added = 0
+        for c, p, s, q in zip(cand, pred, step, got):
+            ij_now = np.array(list(cells.keys()))
+            lo_n, hi_n = np.minimum(ij_now.min(0), c), np.maximum(ij_now.max(0), c)
+            if np.any(hi_n - lo_n + 1 > limit):
+                continue
+            added += _take(cells, [(int(c[0]), int(c[1]))], p[None], np.array([s]), q[None])
+        if not added:
+            return
+
+
+def _place_cells(cells: dict, pattern_size, gray: np.ndarray) -> np.ndarray | None:
+    """(K, 2) int board ids of the cells (in ``cells`` order), or None when the evidence leaves them open."""
+    cols, rows = pattern_size
+    ij = np.array(list(cells.keys()))
+    ij = ij - ij.min(0)
+    pts = np.array([v[0] for v in cells.values()])
+    cells_xy = {(int(i), int(j)): p for (i, j), p in zip(ij, pts)}
+    ext = (int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1)
+    black, contrast = _square_colours(cells_xy, gray)
+    if black is None and (cols + rows) % 2 == 1:
+        return None  # the colours must tell 180° apart, as for a full board
+    borders = _border_sides(cells_xy, ext, gray, black, contrast) if black is not None else {}
+    found = _placements(ij, pattern_size, borders, black)
+    if not found or len({_board_keys(f, pattern_size) for f in found}) != 1:
+        return None
+    ids = found[0]
+    if black is None or (cols + rows) % 2 == 0:
+        ids = _choose_reading(ids, pts, pattern_size)
+    return ids
+
+
+def _predict_ids(ids: np.ndarray, pts: np.ndarray, want: np.ndarray, k: int = 12) -> np.ndarray:
+    """Image positions (M, 2) of board ids ``want`` (M, 2), each from a homography of its k nearest known ids."""
+    out = np.full((len(want), 2), np.nan)
+    if len(ids) < 4:
+        return out
+    d2 = ((want[:, None, :] - ids[None, :, :]) ** 2).sum(-1)
+    near = np.argsort(d2, axis=1)[:, : min(k, len(ids))]
+    cache = {}
+    for m, nb in enumerate(near):
+        key = tuple(sorted(nb.tolist()))
+        if key not in cache:
+            cache[key], _ = cv2.findHomography(ids[nb].astype(np.float64), pts[nb].astype(np.float64), 0)
+        hom = cache[key]
+        if hom is not None:
+            out[m] = cv2.perspectiveTransform(want[m].astype(np.float64).reshape(1, 1, 2), hom).reshape(2)
+    return out
+
+
+def _local_step(ids: np.ndarray, pts: np.ndarray, want_xy: np.ndarray) -> np.ndarray:
+    """(M,) px corner spacing near each position: the nearest known corner's distance to its nearest one."""
+    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
+    np.fill_diagonal(d2, np.inf)
+    spacing = np.sqrt(d2.min(axis=1))
+    near = np.argmin(((want_xy[:, None, :] - pts[None, :, :]) ** 2).sum(-1), axis=1)
+    return spacing[near]
+
+
+def _complete(ids: np.ndarray, pts: np.ndarray, sc: np.ndarray, pattern_size, propose, size, passes: int = 3):
+    """Look for the pattern's missing corners where the placed ones predict them (around objects in front)."""
+    cols, rows = pattern_size
+    for _ in range(passes):
+        have = set(map(tuple, ids.tolist()))
+        want = np.array([(c, r) for r in range(rows) for c in range(cols) if (c, r) not in have])
+        if len(want) == 0:
+            break
+        pred = _predict_ids(ids, pts, want)
+        view = _in_view(pred, size)
+        if not view.any():
+            break
+        want, pred = want[view], pred[view]
+        step = _local_step(ids, pts, pred)
+        got = propose(pred, step)
+        ok = np.all(np.isfinite(got), axis=1) & (np.linalg.norm(got - pred, axis=1) <= 0.3 * step)
+        d_old = np.sqrt(((got[:, None, :] - pts[None, :, :]) ** 2).sum(-1)).min(axis=1) if ok.any() else None
+        if ok.any():
+            ok &= d_old >= 0.5 * step
+        if not ok.any():
+            break
+        ids = np.concatenate([ids, want[ok]])
+        pts = np.concatenate([pts, got[ok]])
+        sc = np.concatenate([sc, np.zeros(int(ok.sum()), np.float32)])
+    return ids, pts, sc
+
+
+def _lattice_residuals(ids: np.ndarray, pts: np.ndarray, k: int = 8) -> np.ndarray:
+    """(N,) distance of each corner from where its k nearest other corners predict it, in local steps."""
+    n = len(ids)
+    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
+    np.fill_diagonal(d2, np.inf)
+    step = np.sqrt(d2.min(axis=1))
+    res = np.zeros(n)
+    for q in range(n):
+        others = np.delete(np.arange(n), q)
+        pred = _predict_ids(ids[others], pts[others], ids[q : q + 1], k=k)[0]
+        res[q] = np.linalg.norm(pred - pts[q]) / step[q] if np.all(np.isfinite(pred)) else 0.0
+    return res
+
+
+def _drop_outliers(ids, pts, sc, max_residual: float = MAX_RESIDUAL):
+    """Drop corners off the lattice of their neighbours (e.g. pulled by the edge of an object in front).
+
+    The worst corner goes first, until every residual (:func:`_lattice_residuals`) is at most
+    ``max_residual`` local steps. Returns the kept (ids, pts, sc).
+    """
+    while len(ids) > MIN_PARTIAL:
+        res = _lattice_residuals(ids, pts)
+        worst = int(np.argmax(res))
+        if res[worst] <= max_residual:
+            break
+        keep = np.arange(len(ids)) != worst
+        ids, pts, sc = ids[keep], pts[keep], sc[keep]
+    return ids, pts, sc
+
+
+def _corners_beyond(ids: np.ndarray, pts: np.ndarray, pattern_size, propose, size) -> int:
+    """How many X-junctions lie one step outside the pattern, where a placed board has none."""
+    cols, rows = pattern_size
+    ring = [(c, -1) for c in range(-1, cols + 1)] + [(c, rows) for c in range(-1, cols + 1)]
+    ring += [(-1, r) for r in range(rows)] + [(cols, r) for r in range(rows)]
+    want = np.array(ring)
+    pred = _predict_ids(ids, pts, want)
+    view = _in_view(pred, size)
+    if not view.any():
+        return 0
+    pred = pred[view]
+    step = _local_step(ids, pts, pred)
+    got = propose(pred, step)
+    return int((np.all(np.isfinite(got), axis=1) & (np.linalg.norm(got - pred, axis=1) <= 0.3 * step)).sum())
+
+
+def _partial_board(grids: list[Grid], scores, pattern_size, gray, size, propose) -> Detection | None:
+    """The largest grid whose place on the board the image decides, as an incomplete board.
+
+    Each grid (largest first) is grown by partly visible lines, placed on the pattern
+    (:func:`_place_cells`); the pattern's missing corners are then looked for where the placed ones
+    predict them, and the board is dropped if X-junctions show up one step outside the pattern.
+    """
+    if propose is None:
+        return None
+    cols, rows = pattern_size
+    for grid in grids:
+        if len(grid) < MIN_PARTIAL:
+            continue
+        ij = _handed(grid.ij, grid.points)
+        sc = np.where(grid.index >= 0, scores[np.maximum(grid.index, 0)], 0.0)
+        cells = {(int(i), int(j)): (np.asarray(p, np.float64), float(s)) for (i, j), p, s in zip(ij, grid.points, sc)}
+        _grow_cut_lines(cells, propose, max(pattern_size) + 1, size)
+        _reach(cells, propose, max(pattern_size) + 1, size)
+        ids = _place_cells(cells, pattern_size, gray)
+        if ids is None:
+            continue
+        pts = np.array([v[0] for v in cells.values()])
+        sc = np.array([v[1] for v in cells.values()], np.float32)
+        ids, pts, sc = _complete(ids, pts, sc, pattern_size, propose, size)
+        ids, pts, sc = _drop_outliers(ids, pts, sc)
+        if _corners_beyond(ids, pts, pattern_size, propose, size) >= 2:
+            continue
+        order = np.argsort(ids[:, 1] * cols + ids[:, 0], kind="stable")
+        ids, pts, sc = ids[order].astype(np.int32), pts[order].astype(np.float32), sc[order].astype(np.float32)
+        if len(ids) == cols * rows:  # completed: read it like any full board
+            perm = _reading(pts, pattern_size, gray)
+            return Detection(pts[perm], ids, sc[perm], (cols, rows), True, size)
+        return Detection(pts, ids, sc, (cols, rows), False, size)
+    return None
+
+
 def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=None,
                    threshold: float = 0.5) -> Detection:
     """Find a chessboard's inner corners.
@@ -291,8 +773,13 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
         propose = _proposer(smoothed, smooth, float(np.median(amp[: max(9, len(amp) // 2)])))
     # grow one step past the pattern so that a bigger board shows itself and is rejected
     limit = max(pattern_size) + 1 if pattern_size is not None else None
-    for grid in assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit):
+    grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit)
+    for grid in grids:
         det = _board_from_grid(grid, scores, pattern_size, smooth, (w, h))
+        if det is not None:
+            return det
+    if pattern_size is not None:
+        det = _partial_board(grids, scores, pattern_size, smooth, (w, h), propose)
         if det is not None:
             return det
     return empty

@@ -16,6 +16,19 @@ DATA = Path(__file__).resolve().parents[1] / "data"
 pytestmark = pytest.mark.skipif(not (MODELS_DIR / "default.keras").is_file(), reason="no shipped default model")
 
 
+def _partial_stats(det, s, pattern=(9, 6)):
+    """Correct and wrong ids of a detection against a data_gen sample (up to the board's 180° turn)."""
+    cols, rows = pattern
+    best = None
+    for flip in (False, True):
+        cr = det.ids if not flip else np.stack([cols - 1 - det.ids[:, 0], rows - 1 - det.ids[:, 1]], 1)
+        d = np.linalg.norm(det.corners - s.corners[cr[:, 1] * cols + cr[:, 0]], axis=1)
+        correct = int((d <= 2.0).sum())
+        if best is None or correct > best["correct"]:
+            best = {"correct": correct, "wrong_ids": len(d) - correct, "visible": int(s.visible.sum())}
+    return best
+
+
 @pytest.fixture(scope="module")
 def model():
     return load_model("default")
@@ -28,7 +41,8 @@ def test_full_boards_in_opencv_order_with_subpixel_accuracy(model, preset, need)
         s = make_sample(preset, 21, i, pattern=(9, 6))
         det = detect_corners(s.image, (9, 6), model=model)
         if not det.complete:  # e.g. distorted #1: a far, steep board with 5 px squares
-            assert not det.found  # never a partial or wrong board instead
+            if det.found:  # a partial board instead: every id right
+                assert _partial_stats(det, s)["wrong_ids"] == 0, (preset, i)
             continue
         found += 1
         assert det.pattern_size == (9, 6)
