@@ -566,6 +566,13 @@ def _reach(cells: dict, propose, limit: int, size, passes: int = 3, radius: int 
             return
         step = _local_step(ij, pts, pred)
         got = propose(pred, step)
+        hit = np.all(np.isfinite(got), axis=1) & (np.linalg.norm(got - pred, axis=1) <= 0.3 * step)
+        # a corner outside the grid's extent needs a found neighbour that is outside too: one lone
+        # junction (an object's corner against a square, say) must not stretch the grid
+        outside = hit & np.any((cand < lo) | (cand > hi), axis=1)
+        pair = np.abs(cand[:, None, :] - cand[None, outside, :]).max(-1) == 1  # (M, #outside)
+        hit &= ~outside | pair.any(axis=1)
+        cand, pred, step, got = cand[hit], pred[hit], step[hit], got[hit]
         added = 0
         for c, p, s, q in zip(cand, pred, step, got):
             ij_now = np.array(list(cells.keys()))

@@ -5,9 +5,10 @@
     python benchmarks/partial_boards.py --hash-check FILE    # compare with a fingerprint made before
 
 Accuracy: for each preset, --images 640×480 renders of 9×6 inner corners (seed --seed) go through
-``detect_corners(image, (9, 6))``. Each returned corner is matched to the true corner its id names,
-after the one board symmetry (180°; 90° too for square patterns) that gives the most matches; a
-corner within 2 px of it is correct, any other is a wrong id. Recall = correct / visible corners.
+``detect_corners(image, (9, 6))`` and ``metrics.partial_board_stats``: each returned corner is
+matched to the true corner its id names, after the one board symmetry (180°; 90° too for square
+patterns) that gives the most matches; a corner within 2 px of a visible true corner is correct,
+of a hidden one neither, any other is a wrong id. Recall = correct / visible corners.
 A clutter image (no board) that gives any board is a false positive.
 
 Fingerprint: 30 mixed images (clean, distorted, noisy, blur, hard, occluded; seed 7); for each,
@@ -30,6 +31,7 @@ os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
 import numpy as np  # noqa: E402
 
 from aicalib_tf.detect import detect_corners  # noqa: E402
+from aicalib_tf.metrics import partial_board_stats  # noqa: E402
 from aicalib_tf.model import load_model  # noqa: E402
 from data_gen import make_sample  # noqa: E402
 
@@ -38,29 +40,9 @@ MAX_PX = 2.0
 MIXED = ["clean", "distorted", "noisy", "blur", "hard", "occluded"]
 
 
-def _symmetries(pattern):
-    """Maps (N, 2) (col, row) ids -> ids under each board symmetry (identity, 180°, and 90°s if square)."""
-    cols, rows = pattern
-    maps = [lambda cr: cr, lambda cr: np.stack([cols - 1 - cr[:, 0], rows - 1 - cr[:, 1]], 1)]
-    if cols == rows:
-        maps += [lambda cr: np.stack([cr[:, 1], cols - 1 - cr[:, 0]], 1),
-                 lambda cr: np.stack([rows - 1 - cr[:, 1], cr[:, 0]], 1)]
-    return maps
-
-
 def partial_stats(corners, ids, truth, visible, pattern, max_px=MAX_PX) -> dict:
-    """Local equivalent of ``metrics.partial_board_stats``: visible, correct, wrong_ids, recall."""
-    cols, _ = pattern
-    n_vis = int(np.sum(visible))
-    best = (0, len(corners))
-    for sym in _symmetries(pattern):
-        cr = sym(np.asarray(ids).reshape(-1, 2))
-        k = cr[:, 1] * cols + cr[:, 0]
-        d = np.linalg.norm(np.asarray(corners, np.float64) - truth[k], axis=1) if len(k) else np.zeros(0)
-        correct = int(np.sum(d <= max_px))
-        if correct > best[0]:
-            best = (correct, len(corners) - correct)
-    return {"visible": n_vis, "correct": best[0], "wrong_ids": best[1], "recall": best[0] / max(n_vis, 1)}
+    """``metrics.partial_board_stats``; hidden corners found with the right id count as neither."""
+    return partial_board_stats(corners, ids, truth, visible, pattern, max_px)
 
 
 def accuracy(model, presets, n, seed):
