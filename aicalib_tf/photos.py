@@ -7,9 +7,11 @@ symmetries). Per detector: the calibration its boards give (aicalib_tf.calibrate
 ``--degrade`` applies seeded degradations to every photo (:data:`PHOTO_DEGRADATIONS`) and
 scores each detector against a reference board found on the clean photo. The reference rule
 (:func:`consensus_reference`): the largest group of detectors whose full boards agree pairwise
-within 1 px (max over corners) gives the mean of their boards; when only one detector finds a
-full board, that board is the reference ("single"); of two equally large groups the tighter one
-(smaller worst pairwise distance) wins; when several find boards but no two agree, the photo has
+within 1 px (max over corners) gives the mean of their boards. Detectors sharing one corner
+localiser (cnn and report: the same saddle refinement) count as one vote, in the group size and
+in the mean, so the reference does not lean towards the CNN. When only one detector (family)
+finds a full board, its board is the reference ("single"); of two equally large groups the
+tighter one (smaller worst pairwise distance) wins; when several find boards but no two agree, the photo has
 no reference and is left out of the degradation scores (counted). A degraded photo's full board is a hit when every corner is within 2 px of
 the reference; its deviation is the per-corner distance to it.
 """
@@ -75,36 +77,47 @@ def degrade_photo(gray: np.ndarray, name: str, rng: np.random.Generator) -> np.n
     return PHOTO_DEGRADATIONS[name][1](np.asarray(gray, np.float32), rng)
 
 
-def consensus_reference(boards: dict, pattern: tuple[int, int], agree_px: float = AGREE_PX):
+FAMILIES = {"report": "cnn"}  # the report model feeds the same saddle refinement: one localiser, one vote
+
+
+def consensus_reference(boards: dict, pattern: tuple[int, int], agree_px: float = AGREE_PX,
+                        families: dict | None = None):
     """The reference board of a clean photo from the detectors' full boards (module docstring rule).
 
     boards : {detector: (cols·rows, 2) px} full boards only.
+    families : {detector: family}; detectors of one family (default: cnn and report, which share
+        the CNN pipeline's corner refinement) count as one vote in the group size and the mean.
     Returns (reference (cols·rows, 2) px or None, rule: "consensus" | "single" | "disagree" | "none",
     members: the detectors it came from).
     """
+    fam = {d: (FAMILIES if families is None else families).get(d, d) for d in boards}
     names = list(boards)
     if not names:
         return None, "none", []
-    if len(names) == 1:
-        return np.asarray(boards[names[0]], np.float64), "single", names
+    if len(set(fam.values())) == 1:  # one localiser: its boards must agree among themselves
+        ref = np.asarray(boards[names[0]], np.float64)
+        if any(detection_agreement(ref, boards[m], pattern)["max_px"] > agree_px for m in names[1:]):
+            return None, "disagree", []
+        return np.mean([align_to_truth(boards[m], ref, pattern) for m in names], axis=0), "single", names
     dist = {}
     for a, b in combinations(names, 2):
         dist[a, b] = dist[b, a] = detection_agreement(boards[a], boards[b], pattern)["max_px"]
-    # the largest group agreeing pairwise; among equal groups the tightest (smallest worst pair)
+    # the group agreeing pairwise with the most families; among equal ones the tightest (smallest worst pair)
     best = None
     for k in range(len(names), 1, -1):
         for group in combinations(names, k):
+            n_fam = len({fam[g] for g in group})
             spread = max(dist[a, b] for a, b in combinations(group, 2))
-            if spread <= agree_px and (best is None or spread < best[0]):
-                best = (spread, group)
-        if best is not None:
-            break
+            if n_fam >= 2 and spread <= agree_px and (best is None or (n_fam, -spread) > (best[0], -best[1])):
+                best = (n_fam, spread, group)
     if best is None:
         return None, "disagree", []
-    top = [set(best[1])]
-    members = [n for n in names if n in top[0]]
+    members = list(best[2])
     ref = np.asarray(boards[members[0]], np.float64)
-    ref = np.mean([align_to_truth(boards[m], ref, pattern) for m in members], axis=0)
+    per_family: dict[str, list] = {}
+    for m in members:
+        per_family.setdefault(fam[m], []).append(align_to_truth(boards[m], ref, pattern))
+    ref = np.mean([np.mean(v, axis=0) for v in per_family.values()], axis=0)
     return ref, "consensus", members
 
 

@@ -151,6 +151,15 @@ def test_consensus_reference_rule():
     assert consensus_reference({"cnn": truth, "opencv": truth + 3.0}, (9, 6))[1] == "disagree"
     ref, rule, _ = consensus_reference({"opencv-sb": truth}, (9, 6))
     assert rule == "single" and np.array_equal(ref, truth)
+    # cnn and report share the CNN pipeline's refinement: one vote between them
+    ref, rule, members = consensus_reference({"cnn": truth, "report": truth, "opencv": truth + 0.3}, (9, 6))
+    assert rule == "consensus" and members == ["cnn", "report", "opencv"]
+    np.testing.assert_allclose(ref, truth + 0.15)
+    ref, rule, members = consensus_reference({"cnn": truth, "report": truth, "opencv": truth + 0.3,
+                                              "opencv-sb": truth + 3.0}, (9, 6))
+    assert members == ["cnn", "report", "opencv"]
+    assert consensus_reference({"cnn": truth, "report": truth + 0.2}, (9, 6))[1] == "single"
+    assert consensus_reference({"cnn": truth, "report": truth + 5.0}, (9, 6))[1] == "disagree"
     assert consensus_reference({}, (9, 6))[:2] == (None, "none")
 
 
