@@ -137,7 +137,7 @@ def run_photos(folder: Path, pattern: tuple[int, int], detectors: dict, *, degra
     from tqdm import tqdm
 
     from .calibrate import CalibrationError, View, calibrate_camera
-    from .evaluate import time_detector
+    from .detectors import time_detector
 
     files = list_images(folder)
     variants = list(PHOTO_DEGRADATIONS) if degrade else ["clean"]

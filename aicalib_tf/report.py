@@ -269,7 +269,7 @@ def write_report(out: Path, cfg, conds, result: dict, info: dict, versions: dict
     named_sum = summary[summary["sweep"].isna() | (summary["sweep"] == "")]
     cols = ["condition", "detector", "images", "hits", "wrong", "partial", "misses", "detection_rate", "err_median",
             "err_rmse", "err_p95", "recall", "wrong_ids", "false_boards", "false_partial", "time_median_ms", "time_max_ms"]
-    md = [f"# Chessboard detection benchmark: CNN against OpenCV\n",
+    md = ["# Chessboard detection benchmark: CNN against OpenCV\n",
           f"Command: `{cfg.command}`  \nWall time: {result['wall_s']:.0f} s (rendering {result['render_s']:.0f} s); "
           f"{len(results)} detections on {len(results) // max(1, len(cfg.detectors))} images. "
           f"Machine: {versions.get('platform')}, {versions.get('cpus')} CPUs.  ",
@@ -350,7 +350,7 @@ def write_photo_report(out: Path, cfg, result: dict, info: dict, versions: dict)
     _csv(calib, out / "calibration.csv")
     _csv(refs, out / "references.csv")
     clean = rows[rows["degradation"] == "clean"] if len(rows) else rows
-    md = [f"# Chessboard detection on real photos: CNN against OpenCV\n",
+    md = ["# Chessboard detection on real photos: CNN against OpenCV\n",
           f"Command: `{cfg.command}`  \nPhotos: {result['files']} in `{cfg.images}`, pattern {cfg.pattern[0]}×{cfg.pattern[1]}; "
           f"{len(result['skipped'])} unreadable. Wall time {result['wall_s']:.0f} s.  ",
           "Versions: " + ", ".join(f"{k} {v}" for k, v in versions.items() if k not in ("platform", "cpus", "git_uncommitted")) + ".  ",
@@ -379,7 +379,7 @@ def write_photo_report(out: Path, cfg, result: dict, info: dict, versions: dict)
                _md_table(calib, {"rms_px": ".3f", "fx": ".1f", "fy": ".1f", "cx": ".1f", "cy": ".1f", "k1": ".4f",
                                  "k2": ".4f", "p1": ".5f", "p2": ".5f", "k3": ".4f"})]
     if len(refs):
-        md += [f"\n## Reference boards\n", f"Rule (aicalib_tf.photos): the largest group of detectors agreeing within "
+        md += ["\n## Reference boards\n", f"Rule (aicalib_tf.photos): the largest group of detectors agreeing within "
                f"{AGREE_PX:g} px on the clean photo (their mean board), or the one detector that finds a full board. "
                + ", ".join(f"{k}: {v}" for k, v in refs["rule"].value_counts().items()) + "."]
     if cfg.degrade and len(rows):

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from aicalib_tf.conditions import all_conditions, named_conditions, select_conditions
-from aicalib_tf.evaluate import Found, main, score_detection
+from aicalib_tf.detectors import Found, score_detection
+from aicalib_tf.evaluate import main
 from aicalib_tf.photos import consensus_reference, degrade_photo, PHOTO_DEGRADATIONS
 from aicalib_tf.report import RESULT_COLUMNS, SUMMARY_COLUMNS
 
@@ -125,19 +126,19 @@ def test_bad_arguments_exit_2(argv, message, capsys, tmp_path):
 def test_score_detection_outcomes():
     truth, ids = _grid()
     vis = np.ones(54, bool)
-    row, e = score_detection(Found(truth[::-1] + 0.1, ids, True), truth, vis, True)
+    row, e = score_detection(Found(truth[::-1] + 0.1, ids, True), truth, vis, True, (9, 6))
     assert row["outcome"] == "hit" and row["recall"] == 1.0 and e.shape == (54,) and row["wrong_ids"] == 0
     bad = truth.copy()
     bad[3] += 5.0
-    row, e = score_detection(Found(bad, ids, True), truth, vis, True)
+    row, e = score_detection(Found(bad, ids, True), truth, vis, True, (9, 6))
     assert row["outcome"] == "wrong" and e.size == 0 and row["err_max"] == pytest.approx(5 * np.sqrt(2))
-    row, e = score_detection(Found(truth[:20], ids[:20], False), truth, vis, True)
+    row, e = score_detection(Found(truth[:20], ids[:20], False), truth, vis, True, (9, 6))
     assert row["outcome"] == "partial" and row["correct"] == 20 and row["recall"] == pytest.approx(20 / 54)
-    row, _ = score_detection(Found(np.zeros((0, 2)), np.zeros((0, 2), int), False), truth, vis, True)
+    row, _ = score_detection(Found(np.zeros((0, 2)), np.zeros((0, 2), int), False), truth, vis, True, (9, 6))
     assert row["outcome"] == "miss"
-    row, _ = score_detection(Found(truth, ids, True), None, None, False)
+    row, _ = score_detection(Found(truth, ids, True), None, None, False, (9, 6))
     assert row["outcome"] == "false_board"
-    row, _ = score_detection(Found(np.zeros((0, 2)), np.zeros((0, 2), int), False), None, None, False)
+    row, _ = score_detection(Found(np.zeros((0, 2)), np.zeros((0, 2), int), False), None, None, False, (9, 6))
     assert row["outcome"] == "none"
 
 
