@@ -26,7 +26,7 @@ corners of hits. On board-free images any full board is a false board. Calibrati
 detector's boards of a sequence (partial ones too) -> aicalib_tf.calibrate.calibrate_camera ->
 focal error %, principal point px, distortion-field px against the true camera, and RMS.
 
-Sizes: the full suite renders 60 images per named condition, 24 per sweep level, 20 at
+Sizes: the full suite renders 100 images per named condition, 32 per sweep level, 30 at
 1920×1080 and 20 views per calibration sequence; --quick renders 6, 3, 2 and 6; --limit N caps
 every count at N (calibration views at max(3, N)).
 
@@ -57,7 +57,7 @@ from .metrics import calibration_errors
 __all__ = ["DETECTORS", "EvalConfig", "Found", "make_detectors", "time_detector", "score_detection",
            "run_synthetic", "calibrate_sequences", "run", "main"]
 
-FULL_COUNTS = {"named": 60, "sweep": 24, "hd": 20, "calib_views": 20}
+FULL_COUNTS = {"named": 100, "sweep": 32, "hd": 30, "calib_views": 20}
 QUICK_COUNTS = {"named": 6, "sweep": 3, "hd": 2, "calib_views": 6}
 
 

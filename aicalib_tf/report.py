@@ -217,11 +217,13 @@ def _headline_times(results: pd.DataFrame) -> str:
 
 def _timing_table(results: pd.DataFrame) -> pd.DataFrame:
     rows = []
-    for (w, h, det), g in results.groupby(["width", "height", "detector"], sort=False):
+    dets = list(dict.fromkeys(results["detector"]))
+    for (w, h, det), g in sorted(results.groupby(["width", "height", "detector"]),
+                                 key=lambda kv: (kv[0][0] * kv[0][1], dets.index(kv[0][2]))):
         t = g["time_ms"]
         rows.append({"size": f"{w}×{h}", "detector": det, "images": len(g), "median ms": t.median(),
                      "p95 ms": t.quantile(0.95), "max ms": t.max(), "max / median": t.max() / t.median()})
-    return pd.DataFrame(rows).sort_values(["size", "detector"], key=lambda s: s.map(str))
+    return pd.DataFrame(rows)
 
 
 def _uncommitted(versions: dict) -> str:
