@@ -16,6 +16,39 @@ pattern. They are resolved like ``cv2.findChessboardCorners`` (measured on data_
   difference is negative; the two agree whenever one reading has it positive and the other negative.
 * square patterns: of the four rotations, the one with the largest (x[cols−1] − x[0]) +
   (y[(rows−1)·cols] − y[0]): rows run most nearly left to right and top to bottom.
+
+Partial boards (``pattern_size`` given, no full board found; ``complete=False``). A board cut by
+the frame or hidden in part by an object in front comes back with the corners that are seen, in
+row-major order of their ids, each id the corner's (col, row) on the full board, correct up to
+the board's symmetry as above. Ids are only returned when the image decides them; otherwise no
+board (a miss rather than a wrong id). The grid is first grown by partly visible lines and across
+gaps (corners found where the lattice predicts them, by saddle fit and ring test), then every
+placement of it on the pattern (a 90° turn keeping handedness, and a shift) is checked against
+three kinds of evidence:
+
+* extent: the grid fits inside the pattern; spanning all ``cols`` (or ``rows``) corners of an axis
+  fixes that axis;
+* borders: beyond the board's outermost corner line lies one more row of squares, then white
+  paper. A grid side whose next line, extrapolated, has alternating squares before it and white
+  paper just beyond it all along (and is not mostly hidden) is the pattern's outermost line on
+  that side;
+* colours: the grid's black squares must be the board's black squares (board square (c, r), the
+  one between corners (c−1, r−1) and (c, r), is black when c + r is even, as on a full board).
+  This settles 180° when cols + rows is odd, as for full boards; the colours must be readable then.
+
+The ids are returned when the placements left agree up to the board's symmetry; where that
+leaves a choice (cols + rows even), the reading whose rows run most nearly downwards (square
+patterns: rows right and columns down) is taken, the full-board geometric rule applied to the
+mean steps. The pattern's missing corners are then looked for where the placed ones predict them,
+corners off their neighbours' lattice by more than ``MAX_RESIDUAL`` of a step are dropped (at most
+a tenth of them, else no board), and a board with X-junctions one step outside the pattern is
+dropped. If every corner is found, the board is complete and ordered by the full-board rules.
+A view of one corner of a non-square board alone (two sides cut by the frame) cannot be placed:
+the visible sides could be the long or the short ones.
+
+Without ``pattern_size``, the largest grid with every corner found is returned, complete, its
+size taken as the pattern; ids are relative to that grid, in the full-board order.
+:func:`find_chessboard_corners` reports full boards only, like OpenCV.
 """
 
 from __future__ import annotations
@@ -36,8 +69,10 @@ __all__ = ["Detection", "detect_corners", "find_chessboard_corners", "order_full
 class Detection:
     """A detected chessboard.
 
-    corners : (N, 2) float32 (x, y) px, in OpenCV order when ``complete``.
-    ids : (N, 2) int32, (col, row) of each corner on the board.
+    corners : (N, 2) float32 (x, y) px, in OpenCV order when ``complete``; a partial board's are
+        ordered by id (row-major), with the unseen corners left out.
+    ids : (N, 2) int32, (col, row) of each corner on the board (see the module docstring for a
+        partial board's).
     scores : (N,) float32 CNN corner weights in [0, 1]; 0 for a corner the CNN missed that was
         recovered where the grid predicts one (saddle fit and ring test on the image).
     pattern_size : (cols, rows) inner corners (the found grid's size when none was given).
@@ -677,16 +712,19 @@ def _drop_outliers(ids, pts, sc, max_residual: float = MAX_RESIDUAL):
     """Drop corners off the lattice of their neighbours (e.g. pulled by the edge of an object in front).
 
     The worst corner goes first, until every residual (:func:`_lattice_residuals`) is at most
-    ``max_residual`` local steps. Returns the kept (ids, pts, sc).
+    ``max_residual`` local steps. A board that would lose more than a tenth of its corners (at
+    least 2) this way is not a clean lattice: None. Returns the kept (ids, pts, sc) or None.
     """
-    while len(ids) > MIN_PARTIAL:
+    for _ in range(max(2, len(ids) // 10) + 1):
+        if len(ids) < MIN_PARTIAL:
+            return None
         res = _lattice_residuals(ids, pts)
         worst = int(np.argmax(res))
         if res[worst] <= max_residual:
-            break
+            return ids, pts, sc
         keep = np.arange(len(ids)) != worst
         ids, pts, sc = ids[keep], pts[keep], sc[keep]
-    return ids, pts, sc
+    return None
 
 
 def _corners_beyond(ids: np.ndarray, pts: np.ndarray, pattern_size, propose, size) -> int:
@@ -729,7 +767,10 @@ def _partial_board(grids: list[Grid], scores, pattern_size, gray, size, propose)
         pts = np.array([v[0] for v in cells.values()])
         sc = np.array([v[1] for v in cells.values()], np.float32)
         ids, pts, sc = _complete(ids, pts, sc, pattern_size, propose, size)
-        ids, pts, sc = _drop_outliers(ids, pts, sc)
+        kept = _drop_outliers(ids, pts, sc)
+        if kept is None:
+            continue
+        ids, pts, sc = kept
         if _corners_beyond(ids, pts, pattern_size, propose, size) >= 2:
             continue
         order = np.argsort(ids[:, 1] * cols + ids[:, 0], kind="stable")
@@ -746,9 +787,13 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     """Find a chessboard's inner corners.
 
     image : path or array (see :func:`aicalib_tf.io.load_image`).
-    pattern_size : (cols, rows) inner corners; None returns the largest grid found.
+    pattern_size : (cols, rows) inner corners; None returns the largest complete grid found, with
+        ids relative to it.
     model : a loaded corner model (default: the shipped ``models/default.keras``).
-    Returns a :class:`Detection`; ``found`` is False when no board is there.
+    threshold : CNN corner weight above which a peak is a candidate.
+    Returns a :class:`Detection`; ``found`` is False when no board is there. With ``pattern_size``,
+    a board partly out of frame or hidden is returned with ``complete=False`` when the image
+    decides its ids (module docstring), and not at all otherwise.
     """
     from .inference import corner_points
 
@@ -801,20 +846,21 @@ def find_chessboard_corners(image, pattern_size: tuple[int, int], *, model=None)
 
 
 def draw_detection(gray: np.ndarray, det: Detection) -> np.ndarray:
-    """An overlay: (H, W, 3) uint8 BGR with the corners, row lines and corner 0 marked."""
+    """An overlay: (H, W, 3) uint8 BGR with the corners, row lines and corner (0, 0) marked (red)."""
     img = cv2.cvtColor(np.clip(gray * 255.0 + 0.5, 0, 255).astype(np.uint8), cv2.COLOR_GRAY2BGR)
     if not det.found:
         cv2.putText(img, "no board", (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (0, 0, 255), 2)
         return img
-    if det.complete:
-        cols = det.pattern_size[0]
-        for r in range(len(det.corners) // cols):
-            row = det.corners[r * cols : (r + 1) * cols]
-            colour = tuple(int(c) for c in cv2.applyColorMap(np.uint8([[40 * r % 255]]), cv2.COLORMAP_JET)[0, 0])
-            cv2.polylines(img, [np.round(row * 16).astype(np.int32)], False, colour, 1, cv2.LINE_AA, shift=4)
-    for k, (x, y) in enumerate(det.corners):
-        cv2.circle(img, (int(round(x * 16)), int(round(y * 16))), 4 * 16, (0, 255, 0) if k else (0, 0, 255), 1,
+    for r in np.unique(det.ids[:, 1]):  # a partial board's rows too: its corners are ordered by id
+        row = det.corners[det.ids[:, 1] == r]
+        colour = tuple(int(c) for c in cv2.applyColorMap(np.uint8([[40 * int(r) % 255]]), cv2.COLORMAP_JET)[0, 0])
+        cv2.polylines(img, [np.round(row * 16).astype(np.int32)], False, colour, 1, cv2.LINE_AA, shift=4)
+    first = (det.ids == 0).all(axis=1)
+    for (x, y), is_first in zip(det.corners, first):
+        cv2.circle(img, (int(round(x * 16)), int(round(y * 16))), 4 * 16, (0, 0, 255) if is_first else (0, 255, 0), 1,
                    cv2.LINE_AA, shift=4)
+    if not det.complete:
+        cv2.putText(img, f"partial: {len(det.corners)} corners", (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (0, 200, 255), 2)
     return img
 
 
@@ -888,7 +934,7 @@ def main(argv: list[str] | None = None) -> int:
             "ids": det.ids.tolist(), "scores": det.scores.tolist(), "model": str(args.model), "model_sha256": sha,
         }
         atomic_write_text(out / f"{stem}.json", json.dumps(record, indent=1) + "\n")
-    print(f"{len(files)} images: {counts['complete']} full boards, {counts['partial']} partial, "
+    print(f"{len(files)} images: {counts['complete']} full boards, {counts['partial']} partial (seen corners, ids fixed by the image), "
           f"{counts['none']} without a board, {counts['failed']} unreadable")
     for msg in failures:
         print(f"  skipped: {msg}")

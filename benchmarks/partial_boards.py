@@ -35,7 +35,7 @@ from aicalib_tf.metrics import partial_board_stats  # noqa: E402
 from aicalib_tf.model import load_model  # noqa: E402
 from data_gen import make_sample  # noqa: E402
 
-PATTERN = (9, 6)
+PATTERN = (9, 6)  # --pattern changes it
 MAX_PX = 2.0
 MIXED = ["clean", "distorted", "noisy", "blur", "hard", "occluded"]
 
@@ -45,19 +45,40 @@ def partial_stats(corners, ids, truth, visible, pattern, max_px=MAX_PX) -> dict:
     return partial_board_stats(corners, ids, truth, visible, pattern, max_px)
 
 
+def _count_placements():
+    """Wrap detect._place_cells to count grids whose ids the image left open (for the report only)."""
+    from aicalib_tf import detect
+
+    tally = {"tried": 0, "open": 0}
+    place = detect._place_cells
+
+    def counted(*args, **kwargs):
+        ids = place(*args, **kwargs)
+        tally["tried"] += 1
+        tally["open"] += ids is None
+        return ids
+
+    detect._place_cells = counted
+    return tally
+
+
 def accuracy(model, presets, n, seed):
-    print("| preset | boards returned | complete | visible-corner recall | wrong ids | images with a wrong id | ms median |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
+    tally = _count_placements()
+    print("| preset | boards returned | complete | visible-corner recall | wrong ids | images with a wrong id | "
+          "no board: ids left open / no grid | ms median |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for preset in presets:
-        found = complete = vis = correct = wrong = bad_imgs = 0
+        found = complete = vis = correct = wrong = bad_imgs = undecided = 0
         times, misses = [], []
         for i in range(n):
             s = make_sample(preset, seed, i, pattern=PATTERN, size=(640, 480))
+            tally["open"] = 0
             t = time.perf_counter()
             det = detect_corners(s.image, PATTERN, model=model)
             times.append(1000 * (time.perf_counter() - t))
             found += det.found
             complete += det.complete
+            undecided += (not det.found) and tally["open"] > 0
             if preset == "clutter":
                 continue
             st = partial_stats(det.corners, det.ids, s.corners, s.visible, PATTERN)
@@ -68,10 +89,11 @@ def accuracy(model, presets, n, seed):
             if st["recall"] < 0.9:
                 misses.append((i, st["correct"], st["visible"], st["wrong_ids"]))
         if preset == "clutter":
-            print(f"| {preset} | {found}/{n} (false positives) | {complete} | - | - | - | {np.median(times):.1f} |")
+            print(f"| {preset} | {found}/{n} (false positives) | {complete} | - | - | - | {undecided} / "
+                  f"{n - found - undecided} | {np.median(times):.1f} |")
         else:
             print(f"| {preset} | {found}/{n} | {complete} | {correct}/{vis} = {correct / max(vis, 1):.3f} | {wrong} | "
-                  f"{bad_imgs} | {np.median(times):.1f} |", flush=True)
+                  f"{bad_imgs} | {undecided} / {n - found - undecided} | {np.median(times):.1f} |", flush=True)
             if misses:
                 print("    recall < 0.9 (index, correct, visible, wrong):", misses, flush=True)
 
@@ -98,9 +120,12 @@ def main(argv=None) -> int:
     ap.add_argument("--presets", default="occluded,partial,clutter")
     ap.add_argument("--seed", type=int, default=21)
     ap.add_argument("--model", default="default")
+    ap.add_argument("--pattern", default="9x6", help="inner corners COLSxROWS (default: %(default)s)")
     ap.add_argument("--hash-out")
     ap.add_argument("--hash-check")
     args = ap.parse_args(argv)
+    global PATTERN
+    PATTERN = tuple(int(v) for v in args.pattern.lower().split("x"))
     model = load_model(args.model)
     if args.hash_out or args.hash_check:
         fp, times = fingerprint(model)
