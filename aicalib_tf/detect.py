@@ -640,22 +640,53 @@ def _place_cells(cells: dict, pattern_size, gray: np.ndarray) -> np.ndarray | No
     return ids
 
 
+def _homographies(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """Least-squares homographies, many at once: src, dst (M, K, 2) with K >= 4 -> (M, 3, 3).
+
+    The linear (DLT, h33 = 1) fit on coordinates centred and scaled per set; a degenerate set
+    gives NaNs.
+    """
+    def norm(p):
+        mean = p.mean(axis=1, keepdims=True)
+        scale = np.sqrt(2.0) / np.maximum(np.sqrt(((p - mean) ** 2).sum(-1)).mean(axis=1), 1e-12)[:, None, None]
+        t = np.zeros((len(p), 3, 3))
+        t[:, 0, 0] = t[:, 1, 1] = scale[:, 0, 0]
+        t[:, :2, 2] = -mean[:, 0, :] * scale[:, 0, :]
+        t[:, 2, 2] = 1.0
+        return (p - mean) * scale, t
+
+    (s, ts), (d, td) = norm(np.asarray(src, np.float64)), norm(np.asarray(dst, np.float64))
+    m, k = s.shape[:2]
+    x, y, u, v = s[..., 0], s[..., 1], d[..., 0], d[..., 1]
+    one, zero = np.ones_like(x), np.zeros_like(x)
+    rows_u = np.stack([x, y, one, zero, zero, zero, -u * x, -u * y], -1)
+    rows_v = np.stack([zero, zero, zero, x, y, one, -v * x, -v * y], -1)
+    a = np.concatenate([rows_u, rows_v], axis=1)  # (M, 2K, 8)
+    rhs = np.concatenate([u, v], axis=1)  # (M, 2K)
+    ata = a.transpose(0, 2, 1) @ a
+    atb = (a.transpose(0, 2, 1) @ rhs[..., None])[..., 0]
+    h = np.full((m, 9), np.nan)
+    ok = np.abs(np.linalg.det(ata)) > 1e-12
+    if ok.any():
+        h[ok, :8] = np.linalg.solve(ata[ok], atb[ok][..., None])[..., 0]
+        h[ok, 8] = 1.0
+    hn = h.reshape(m, 3, 3)
+    return np.linalg.inv(td) @ hn @ ts
+
+
 def _predict_ids(ids: np.ndarray, pts: np.ndarray, want: np.ndarray, k: int = 12) -> np.ndarray:
-    """Image positions (M, 2) of board ids ``want`` (M, 2), each from a homography of its k nearest known ids."""
-    out = np.full((len(want), 2), np.nan)
-    if len(ids) < 4:
-        return out
+    """Image positions (M, 2) of board ids ``want`` (M, 2), each from a homography of its k nearest known ids.
+
+    NaN rows where fewer than 4 ids are known or the fit is degenerate.
+    """
+    want = np.asarray(want, np.float64).reshape(-1, 2)
+    if len(ids) < 4 or len(want) == 0:
+        return np.full((len(want), 2), np.nan)
     d2 = ((want[:, None, :] - ids[None, :, :]) ** 2).sum(-1)
-    near = np.argsort(d2, axis=1)[:, : min(k, len(ids))]
-    cache = {}
-    for m, nb in enumerate(near):
-        key = tuple(sorted(nb.tolist()))
-        if key not in cache:
-            cache[key], _ = cv2.findHomography(ids[nb].astype(np.float64), pts[nb].astype(np.float64), 0)
-        hom = cache[key]
-        if hom is not None:
-            out[m] = cv2.perspectiveTransform(want[m].astype(np.float64).reshape(1, 1, 2), hom).reshape(2)
-    return out
+    near = np.argsort(d2, axis=1, kind="stable")[:, : min(k, len(ids))]
+    hom = _homographies(ids[near].astype(np.float64), pts[near].astype(np.float64))
+    q = hom @ np.concatenate([want, np.ones((len(want), 1))], axis=1)[..., None]
+    return q[:, :2, 0] / q[:, 2:, 0]
 
 
 def _local_step(ids: np.ndarray, pts: np.ndarray, want_xy: np.ndarray) -> np.ndarray:
@@ -700,12 +731,16 @@ def _lattice_residuals(ids: np.ndarray, pts: np.ndarray, k: int = 8) -> np.ndarr
     d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
     np.fill_diagonal(d2, np.inf)
     step = np.sqrt(d2.min(axis=1))
-    res = np.zeros(n)
-    for q in range(n):
-        others = np.delete(np.arange(n), q)
-        pred = _predict_ids(ids[others], pts[others], ids[q : q + 1], k=k)[0]
-        res[q] = np.linalg.norm(pred - pts[q]) / step[q] if np.all(np.isfinite(pred)) else 0.0
-    return res
+    if n < 5:
+        return np.zeros(n)
+    di = ((ids[:, None, :] - ids[None, :, :]) ** 2).sum(-1).astype(np.float64)
+    np.fill_diagonal(di, np.inf)  # leave each corner out of its own fit
+    near = np.argsort(di, axis=1, kind="stable")[:, : min(k, n - 1)]
+    hom = _homographies(ids[near].astype(np.float64), pts[near].astype(np.float64))
+    q = hom @ np.concatenate([ids.astype(np.float64), np.ones((n, 1))], axis=1)[..., None]
+    pred = q[:, :2, 0] / q[:, 2:, 0]
+    res = np.linalg.norm(pred - pts, axis=1) / step
+    return np.where(np.isfinite(res), res, 0.0)
 
 
 def _drop_outliers(ids, pts, sc, max_residual: float = MAX_RESIDUAL):
