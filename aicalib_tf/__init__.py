@@ -11,10 +11,15 @@ Public API (this package imports without TensorFlow; Keras loads only where a mo
 * :func:`load_model` — the shipped CNNs ("default", "report") or a ``.keras`` path, safe mode.
 """
 
-from .calibrate import undistort
-from .calibration import Calibration, CalibrationError, View, calibrate_camera
-from .detect import Detection, detect_corners, find_chessboard_corners
 from .io import ImageError, load_image
+
+# Loaded on first use, so that ``python -m aicalib_tf.detect`` (or .calibrate) does not find its
+# own module already imported by the package, and ``import aicalib_tf`` stays light.
+_LAZY = {
+    "Calibration": "calibration", "CalibrationError": "calibration", "View": "calibration",
+    "calibrate_camera": "calibration", "undistort": "calib_io",
+    "Detection": "detect", "detect_corners": "detect", "find_chessboard_corners": "detect",
+}
 
 __all__ = [
     "Calibration", "CalibrationError", "Detection", "ImageError", "View", "calibrate_camera", "detect_corners",
@@ -28,3 +33,11 @@ def load_model(weights="default", *, compile: bool = False):
     from .model import load_model as _load
 
     return _load(weights, compile=compile)
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module 'aicalib_tf' has no attribute {name!r}")
