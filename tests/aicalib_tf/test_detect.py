@@ -227,3 +227,18 @@ def test_cli_writes_overlays_and_corner_files_and_skips_bad_files(tmp_path, caps
     assert record["complete"] and len(record["corners"]) == 54 and len(record["model_sha256"]) == 64
     assert main(["x.jpg", "--pattern", "9x", "--out", str(out)]) == 2
     assert main([str(tmp_path / "none*.jpg"), "--pattern", "9x6", "--out", str(out)]) == 2
+
+
+def test_without_a_pattern_the_largest_complete_grid_comes_back_with_its_own_ids(model):
+    # partial #5 (seed 21) shows 7 of the 9 columns: with no pattern, that 7x6 grid is "the board"
+    s = make_sample("partial", 21, 5, pattern=(9, 6), size=(640, 480))
+    det = detect_corners(s.image, None, model=model)
+    cols, rows = det.pattern_size
+    assert det.complete and cols * rows == len(det.corners) == 42 and sorted((cols, rows)) == [6, 7]
+    assert det.ids[:, 0].max() == cols - 1 and det.ids[:, 1].max() == rows - 1
+    # every corner is a true one; the ids are the grid's, not the board's
+    d = np.linalg.norm(det.corners[:, None, :] - s.corners[None, :, :], axis=2).min(axis=1)
+    assert d.max() < 1.0
+    # the same image with the pattern: a partial board with the board's ids
+    det96 = detect_corners(s.image, (9, 6), model=model)
+    assert det96.found and not det96.complete and _partial_stats(det96, s)["wrong_ids"] == 0
