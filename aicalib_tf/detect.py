@@ -197,12 +197,22 @@ def _proposer(smoothed: _Smoothed, ring_image: np.ndarray, ref_amp: float):
         out[k[ok]] = q[ok]
         return out
 
-    def verify(pts: np.ndarray, step: np.ndarray) -> np.ndarray:
-        """(M,) bool: the ring test of ``propose`` at points (M, 2) with local steps (M,) px."""
-        amp, asym = ring_symmetry(ring_image, np.asarray(pts, np.float64), 0.3 * np.asarray(step, np.float64))
-        return (amp >= 0.3 * ref_amp) & (asym <= 0.5 * amp)
+    def tight(pred: np.ndarray, step: np.ndarray) -> np.ndarray:
+        """``propose`` for a corner beside an object in front: the smallest fit window (2 px) and a
+        ring of 0.15 step (at least 2 px), and the corner within 0.1 step of the prediction."""
+        out = np.full(pred.shape, np.nan)
+        h, w = ring_image.shape
+        inside = (pred[:, 0] >= 3) & (pred[:, 0] <= w - 4) & (pred[:, 1] >= 3) & (pred[:, 1] <= h - 4)
+        k = np.flatnonzero(inside)
+        if len(k) == 0:
+            return out
+        q, ok = _refine(smoothed, pred[k], np.full(len(k), 4.0), max_shift=0.1 * step[k])
+        amp, asym = ring_symmetry(ring_image, q.astype(np.float64), np.maximum(2.0, 0.15 * step[k]))
+        ok &= (amp >= 0.3 * ref_amp) & (asym <= 0.5 * amp)
+        out[k[ok]] = q[ok]
+        return out
 
-    propose.verify = verify
+    propose.tight = tight
     return propose
 
 
@@ -699,8 +709,12 @@ def _local_step(ids: np.ndarray, pts: np.ndarray, want_xy: np.ndarray) -> np.nda
 
 
 def _complete(ids: np.ndarray, pts: np.ndarray, sc: np.ndarray, pattern_size, propose, size, passes: int = 3):
-    """Look for the pattern's missing corners where the placed ones predict them (around objects in front)."""
+    """Look for the pattern's missing corners where the placed ones predict them (around objects in front).
+
+    Returns (ids, pts, sc, tight): tight (N,) bool marks corners found by ``propose.tight`` only.
+    """
     cols, rows = pattern_size
+    tight = np.zeros(len(ids), bool)
     for _ in range(passes):
         have = set(map(tuple, ids.tolist()))
         want = np.array([(c, r) for r in range(rows) for c in range(cols) if (c, r) not in have])
@@ -714,6 +728,11 @@ def _complete(ids: np.ndarray, pts: np.ndarray, sc: np.ndarray, pattern_size, pr
         step = _local_step(ids, pts, pred)
         got = propose(pred, step)
         ok = np.all(np.isfinite(got), axis=1) & (np.linalg.norm(got - pred, axis=1) <= 0.3 * step)
+        by_tight = np.zeros(len(ok), bool)
+        if (~ok).any() and hasattr(propose, "tight"):  # beside an object in front
+            miss = np.flatnonzero(~ok)
+            got[miss] = propose.tight(pred[miss], step[miss])
+            ok[miss] = by_tight[miss] = np.all(np.isfinite(got[miss]), axis=1)
         d_old = np.sqrt(((got[:, None, :] - pts[None, :, :]) ** 2).sum(-1)).min(axis=1) if ok.any() else None
         if ok.any():
             ok &= d_old >= 0.5 * step
@@ -722,7 +741,8 @@ def _complete(ids: np.ndarray, pts: np.ndarray, sc: np.ndarray, pattern_size, pr
         ids = np.concatenate([ids, want[ok]])
         pts = np.concatenate([pts, got[ok]])
         sc = np.concatenate([sc, np.zeros(int(ok.sum()), np.float32)])
-    return ids, pts, sc
+        tight = np.concatenate([tight, by_tight[ok]])
+    return ids, pts, sc, tight
 
 
 def _lattice_residuals(ids: np.ndarray, pts: np.ndarray, k: int = 8) -> np.ndarray:
@@ -743,22 +763,27 @@ def _lattice_residuals(ids: np.ndarray, pts: np.ndarray, k: int = 8) -> np.ndarr
     return np.where(np.isfinite(res), res, 0.0)
 
 
-def _drop_outliers(ids, pts, sc, max_residual: float = MAX_RESIDUAL):
+def _drop_outliers(ids, pts, sc, free=None, max_residual: float = MAX_RESIDUAL):
     """Drop corners off the lattice of their neighbours (e.g. pulled by the edge of an object in front).
 
     The worst corner goes first, until every residual (:func:`_lattice_residuals`) is at most
-    ``max_residual`` local steps. A board that would lose more than a tenth of its corners (at
-    least 2) this way is not a clean lattice: None. Returns the kept (ids, pts, sc) or None.
+    ``max_residual`` local steps. A board that would lose more than a tenth of its other corners
+    (at least 2) this way is not a clean lattice: None. free : (N,) bool, corners whose loss does
+    not count (found by the tight test beside an object). Returns the kept (ids, pts, sc) or None.
     """
-    for _ in range(max(2, len(ids) // 10) + 1):
-        if len(ids) < MIN_PARTIAL:
-            return None
+    free = np.zeros(len(ids), bool) if free is None else np.asarray(free, bool)
+    budget = max(2, int((~free).sum()) // 10)
+    while len(ids) >= MIN_PARTIAL:
         res = _lattice_residuals(ids, pts)
         worst = int(np.argmax(res))
         if res[worst] <= max_residual:
             return ids, pts, sc
+        if not free[worst]:
+            budget -= 1
+            if budget < 0:
+                return None
         keep = np.arange(len(ids)) != worst
-        ids, pts, sc = ids[keep], pts[keep], sc[keep]
+        ids, pts, sc, free = ids[keep], pts[keep], sc[keep], free[keep]
     return None
 
 
@@ -801,8 +826,10 @@ def _partial_board(grids: list[Grid], scores, pattern_size, gray, size, propose)
             continue
         pts = np.array([v[0] for v in cells.values()])
         sc = np.array([v[1] for v in cells.values()], np.float32)
-        ids, pts, sc = _complete(ids, pts, sc, pattern_size, propose, size)
-        kept = _drop_outliers(ids, pts, sc)
+        ids, pts, sc, tight = _complete(ids, pts, sc, pattern_size, propose, size)
+        kept = _drop_outliers(ids, pts, sc, tight)
+        if kept is None and tight.any():  # the tight corners may have upset their neighbours' fits
+            kept = _drop_outliers(ids[~tight], pts[~tight], sc[~tight])
         if kept is None:
             continue
         ids, pts, sc = kept
