@@ -46,11 +46,12 @@ from __future__ import annotations
 import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 import numpy as np
 
-from .conditions import PATTERN, Condition, board_tilt_deg, calibration_sequences, condition_samples, select_conditions, square_px
+from .conditions import (CALIB_CAMERAS, PATTERN, Condition, board_tilt_deg, calibration_sequences, condition_samples,
+                         select_conditions, square_px)
 from .detectors import DETECTORS, Found, make_detectors, score_detection, time_detector
 from .metrics import calibration_errors
 
@@ -77,7 +78,6 @@ class EvalConfig:
     seed: int = 0
     quiet: bool = False
     command: str = ""
-    extra: dict = field(default_factory=dict)
 
     def counts(self) -> dict:
         """Images per named condition, per sweep level, at 1920×1080, and views per calibration sequence."""
@@ -115,7 +115,7 @@ def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *,
     def n_for(c: Condition) -> int:
         return counts["sweep"] if c.sweep else counts["hd"] if c.size[0] > 1000 else counts["named"]
 
-    total = sum(n_for(c) for c in conditions) + (4 * counts["calib_views"] if with_calibration else 0)
+    total = sum(n_for(c) for c in conditions) + (len(CALIB_CAMERAS) * counts["calib_views"] if with_calibration else 0)
     bar = tqdm(total=total, desc="evaluate", unit="img", disable=not progress)
     rows, errors, hardest = [], {}, {}
     render_s = 0.0

@@ -177,7 +177,8 @@ def run_photos(folder: Path, pattern: tuple[int, int], detectors: dict, *, degra
                         views[d].append(View(f.name, fo.corners, fo.ids))
             outcomes = {}
             for d, (fo, ms) in found_by.items():
-                row = {"file": f.name, "degradation": var, "detector": d, "found": len(fo.corners) > 0,
+                row = {"file": f.name, "width": gray.shape[1], "height": gray.shape[0], "degradation": var,
+                       "detector": d, "found": len(fo.corners) > 0,
                        "complete": bool(fo.complete), "n_corners": len(fo.corners), "time_ms": ms,
                        "reference": ref is not None, "outcome": "", "dev_median_px": np.nan, "dev_max_px": np.nan,
                        "recall": np.nan}

@@ -367,7 +367,7 @@ def write_photo_report(out: Path, cfg, result: dict, info: dict, versions: dict)
                                                         time_max_ms=("time_ms", "max")).reset_index()
         per["partial"] = per["partial"] - per["full_boards"]
         md += ["\n## Detections on the photos\n", _md_table(per, {"time_median_ms": ".1f", "time_max_ms": ".0f"})]
-        _time_figure(clean.assign(width=0, height=0), fig_dir / "time.png")
+        _time_figure(clean, fig_dir / "time.png")
         figures.append(("Time per photo", fig_dir / "time.png"))
     if len(agree):
         both = agree[agree["both_found"]]
