@@ -310,6 +310,7 @@ _ROTATIONS = tuple(np.array(m) for m in ([[1, 0], [0, 1]], [[0, -1], [1, 0]], [[
 MIN_PARTIAL = 9  # fewest corners of a partial board (a grid's seed is 3x3)
 BORDER_BEYOND = 0.12  # where the margin is looked for: this fraction of a step beyond the last line
 BORDER_T = 0.7  # white-normalised grey the margin must reach there (0 black square, 1 white square)
+FAILED_RATIO = 2  # a border side: untested (corner missing in view) squares at most 1/FAILED_RATIO of the tested
 MAX_RESIDUAL = 0.08  # of a step: how far a corner of a partial board may be from its neighbours' lattice
 
 
@@ -398,7 +399,7 @@ def _border_sides(cells: dict, ext: tuple[int, int], gray: np.ndarray, black: in
                 elif o in missing_in_view or o + 1 in missing_in_view:
                     failed += 1
             out[(axis, sign)] = False
-            if len(rows) < 2 or 2 * failed > len(rows):
+            if len(rows) < 2 or FAILED_RATIO * failed > len(rows):
                 continue
             vals = _sample(gray, np.concatenate([r[0] for r in rows])).reshape(-1, 3)
             is_black = np.array([r[1] for r in rows])
