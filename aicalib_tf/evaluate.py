@@ -323,6 +323,9 @@ def main(argv: list[str] | None = None) -> int:
             pattern = parse_pattern(args.pattern)
             if not Path(args.images).is_dir():
                 raise ValueError(f"--images {args.images}: not a folder")
+            from .photos import list_images
+
+            list_images(Path(args.images))  # a folder without images is a bad argument
         elif args.pattern is not None or args.degrade:
             raise ValueError("--pattern and --degrade go with --images")
         else:

@@ -382,7 +382,8 @@ def write_photo_report(out: Path, cfg, result: dict, info: dict, versions: dict)
                                  "k2": ".4f", "p1": ".5f", "p2": ".5f", "k3": ".4f"})]
     if len(refs):
         md += ["\n## Reference boards\n", f"Rule (aicalib_tf.photos): the largest group of detectors agreeing within "
-               f"{AGREE_PX:g} px on the clean photo (their mean board), or the one detector that finds a full board. "
+               f"{AGREE_PX:g} px on the clean photo (their mean board; cnn and report share one corner refinement and count as "
+               "one vote), or the one detector that finds a full board. "
                + ", ".join(f"{k}: {v}" for k, v in refs["rule"].value_counts().items()) + "."]
     if cfg.degrade and len(rows):
         scored = rows[rows["reference"]]

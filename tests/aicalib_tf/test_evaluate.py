@@ -115,6 +115,7 @@ def test_photos_with_degradations(tmp_path):
     (["--pattern", "9x6"], "go with --images"),
     (["--images", "/no/such/folder", "--pattern", "9x6"], "not a folder"),
     (["--images", ".", "--pattern", "9"], "pattern"),
+    (["--images", str(Path(__file__).parent), "--pattern", "9x6"], "no images"),
     (["--model", "/no/such.keras", "--detectors", "cnn"], "not found"),
 ])
 def test_bad_arguments_exit_2(argv, message, capsys, tmp_path):
