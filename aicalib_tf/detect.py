@@ -39,7 +39,8 @@ three kinds of evidence:
 The ids are returned when the placements left agree up to the board's symmetry; where that
 leaves a choice (cols + rows even), the reading whose rows run most nearly downwards (square
 patterns: rows right and columns down) is taken, the full-board geometric rule applied to the
-mean steps. The pattern's missing corners are then looked for where the placed ones predict them,
+mean steps. The pattern's missing corners are then looked for where the placed ones predict them
+(a second time with a 2 px window and a small ring, for corners beside an object in front),
 corners off their neighbours' lattice by more than ``MAX_RESIDUAL`` of a step are dropped (at most
 a tenth of them, else no board), and a board with X-junctions one step outside the pattern is
 dropped. If every corner is found, the board is complete and ordered by the full-board rules.
