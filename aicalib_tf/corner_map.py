@@ -58,14 +58,21 @@ def encode_corners(corners: np.ndarray, image_size: tuple[int, int]) -> np.ndarr
     return target
 
 
+POOL_DISTANCE = 1.0  # px: cells whose points agree this closely share one corner's weight
+POOL_FLOOR = 0.2  # a neighbour below this weight adds nothing
+
+
 def decode_map(cmap: np.ndarray, threshold: float = 0.5, min_distance: float = 2.5) -> tuple[np.ndarray, np.ndarray]:
     """Corner points from a corner map.
 
     cmap : (h, w, 3) float, as the network outputs it.
-    threshold : minimum corner weight.
-    min_distance : px; of two points closer than this in neighbouring cells, only the stronger stays
-        (a corner on a cell border can light up both cells).
-    Returns points (N, 2) float32 (x, y) px and scores (N,) float32, strongest first.
+    threshold : minimum corner weight. A corner near a cell border splits its weight between
+        the cells that touch it (at a cell's corner, four cells of about 0.25–0.5 each), so a
+        cell's weight is pooled with the neighbouring cells whose points lie within
+        ``min_distance`` px of its own before the threshold applies (capped at 1).
+    min_distance : px; of two points closer than this in neighbouring cells, only the stronger
+        stays, placed at the weight-weighted mean of the close points.
+    Returns points (N, 2) float32 (x, y) px and scores (N,) float32 (pooled weights), strongest first.
     """
     m = np.asarray(cmap, dtype=np.float32)
     if m.ndim != 3 or m.shape[2] != 3:
@@ -75,8 +82,8 @@ def decode_map(cmap: np.ndarray, threshold: float = 0.5, min_distance: float = 2
     x = STRIDE * (jj + m[..., 1]) - 0.5
     y = STRIDE * (ii + m[..., 2]) - 0.5
     p = m[..., 0]
-    keep = p >= threshold
-    # Suppress a cell when a neighbouring cell is stronger and its point is close.
+    pooled, sx, sy = p.copy(), p * x, p * y
+    keep = np.ones_like(p, dtype=bool)
     pad_p = np.pad(p, 1, constant_values=-1.0)
     pad_x = np.pad(x, 1)
     pad_y = np.pad(y, 1)
@@ -87,10 +94,19 @@ def decode_map(cmap: np.ndarray, threshold: float = 0.5, min_distance: float = 2
             q = pad_p[1 + di : 1 + di + h, 1 + dj : 1 + dj + w]
             qx = pad_x[1 + di : 1 + di + h, 1 + dj : 1 + dj + w]
             qy = pad_y[1 + di : 1 + di + h, 1 + dj : 1 + dj + w]
-            # ties are broken by position so exactly one of two equal cells survives
+            d2 = (qx - x) ** 2 + (qy - y) ** 2
+            close = d2 < min_distance**2
+            qc = np.where((d2 < POOL_DISTANCE**2) & (q >= POOL_FLOOR), q, 0.0)
+            pooled += qc
+            sx += qc * qx
+            sy += qc * qy
+            # suppress a cell when a close neighbour is stronger; ties broken by position
             stronger = (q > p) | ((q == p) & ((di, dj) < (0, 0)))
-            close = (qx - x) ** 2 + (qy - y) ** 2 < min_distance**2
             keep &= ~(stronger & close)
-    order = np.argsort(-p[keep], kind="stable")
-    pts = np.stack([x[keep], y[keep]], axis=1)[order]
-    return pts.astype(np.float32), p[keep][order].astype(np.float32)
+    keep &= pooled >= threshold
+    score = np.minimum(pooled, 1.0)
+    order = np.lexsort((-p[keep], -score[keep]))  # strongest pooled weight first, then own weight
+    px = sx[keep] / np.maximum(pooled[keep], 1e-12)
+    py = sy[keep] / np.maximum(pooled[keep], 1e-12)
+    pts = np.stack([px, py], axis=1)[order]
+    return pts.astype(np.float32), score[keep][order].astype(np.float32)

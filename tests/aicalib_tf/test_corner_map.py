@@ -38,8 +38,21 @@ def test_decode_keeps_one_of_two_cells_lit_by_one_corner():
     m[3, 3] = [0.6, 0.5, 0.5]  # a separate corner
     pts, scores = decode_map(m, 0.5)
     assert len(pts) == 2
-    np.testing.assert_allclose(scores, [0.9, 0.6])
-    np.testing.assert_allclose(pts[0], [7.46, 5.5], atol=1e-5)
+    np.testing.assert_allclose(scores, [1.0, 0.6])  # 0.9 + 0.7 pooled, capped at 1
+    np.testing.assert_allclose(pts[0], [(0.9 * 7.46 + 0.7 * 7.5) / 1.6, 5.5], atol=1e-5)
+
+
+def test_decode_pools_a_corner_split_between_four_cells():
+    """A corner exactly on a cell corner lights four cells below the threshold; it is still found."""
+    m = np.zeros((4, 4, 3), np.float32)
+    m[1, 1] = [0.45, 1.0, 1.0]
+    m[1, 2] = [0.4, 0.0, 1.0]
+    m[2, 1] = [0.45, 1.0, 0.0]
+    m[2, 2] = [0.4, 0.0, 0.0]  # all four point at (7.5, 7.5)
+    m[0, 3] = [0.45, 0.5, 0.5]  # alone and weak: stays out
+    pts, scores = decode_map(m, 0.5)
+    assert len(pts) == 1 and scores[0] == 1.0
+    np.testing.assert_allclose(pts[0], [7.5, 7.5], atol=1e-5)
 
 
 def test_decode_threshold_and_shape_check():
