@@ -15,15 +15,13 @@ $(STAMP): pyproject.toml
 setup: $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m data_gen --out reports/demo-dataset-$$(date +%Y%m%d-%H%M%S) --count 20 --preset hard --seed 0 --workers 2
-	$(PY) benchmarks/datagen_accuracy.py
-	$(PY) benchmarks/datagen_speed.py --quick
-	$(PY) benchmarks/model_compare.py --images 10
+	$(PY) -m aicalib_tf.evaluate
 
 test: $(STAMP)
 	$(PY) -m pytest -q; rc=$$?; if [ $$rc -eq 5 ]; then echo "pytest: no tests collected"; exit 0; fi; exit $$rc
 
 bench: $(STAMP)
+	$(PY) -m aicalib_tf.evaluate --images tests/data/opencv_left --pattern 9x6 --degrade
 	$(PY) benchmarks/datagen_accuracy.py
 	$(PY) benchmarks/datagen_speed.py
 	$(PY) benchmarks/refine_accuracy.py
