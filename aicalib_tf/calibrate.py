@@ -1,7 +1,7 @@
 """Calibrate a camera from a folder of chessboard photos.
 
     python -m aicalib_tf.calibrate "photos/*.jpg" --pattern 9x6 --square 25mm [--out calib/]
-        [--detector cnn|opencv|opencv-sb] [--model PATH] [--fix-k3] [--rational]
+        [--detector cnn|report|opencv|opencv-sb] [--model PATH] [--fix-k3] [--rational]
         [--resize-policy error|skip|crop|scale]
 
 Every image goes through the detector (default: the CNN, which also returns partial boards;
@@ -37,7 +37,7 @@ from .calibration import Calibration, CalibrationError, View, calibrate_camera
 __all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "CalibrateConfig", "parse_square",
            "make_detector", "run", "main", "undistort"]
 
-DETECTORS = ("cnn", "opencv", "opencv-sb")
+DETECTORS = ("cnn", "report", "opencv", "opencv-sb")
 RESIZE_POLICIES = ("error", "skip", "crop", "scale")
 _UNITS = {"mm": "mm", "cm": "cm", "m": "m", "in": "in", "inch": "in", "": ""}
 
@@ -62,33 +62,29 @@ def parse_square(text: str) -> tuple[float, str]:
     return value, _UNITS[unit]
 
 
-def make_detector(name: str, pattern_size: tuple[int, int], model=None):
-    """A function (H, W) float32 grey in [0, 1] -> (corners (N, 2), ids (N, 2)) or None.
+def make_detector(name: str, pattern_size: tuple[int, int], model: str = "default"):
+    """A function (H, W) grey image (float in [0, 1] or uint8) -> (corners (N, 2), ids (N, 2)) or None.
 
-    name : "cnn" (full or partial boards; ``model`` is a loaded corner model or None for the
-    shipped default), "opencv" (classic + cornerSubPix) or "opencv-sb" (full boards only).
+    name : "cnn" (full or partial boards, with ``model``: default, report or a .keras path),
+    "report" (the same pipeline with the report's network), "opencv" (classic + cornerSubPix) or
+    "opencv-sb" (full boards only). The function's ``info`` attribute holds the model path and
+    sha256 for the CNN detectors. The detectors are those of :mod:`aicalib_tf.detectors`.
     """
-    cols, rows = pattern_size
-    full_ids = np.stack(np.meshgrid(np.arange(cols), np.arange(rows)), -1).reshape(-1, 2)
-    if name == "cnn":
-        from .detect import detect_corners
+    from .detectors import make_detectors
 
-        def cnn(gray):
-            det = detect_corners(gray, pattern_size, model=model)
-            return (det.corners, det.ids) if det.found else None
+    if name not in DETECTORS:
+        raise ValueError(f"unknown detector {name!r}; choose from {', '.join(DETECTORS)}")
+    detectors, info = make_detectors([name], tuple(pattern_size), model)
+    found_by = detectors[name]
 
-        return cnn
-    if name in ("opencv", "opencv-sb"):
-        from .baselines import opencv_classic, opencv_sb
+    def detect(gray):
+        g = np.asarray(gray)
+        u8 = g if g.dtype == np.uint8 else np.clip(g * 255.0 + 0.5, 0, 255).astype(np.uint8)
+        found = found_by(u8)
+        return (found.corners, found.ids) if len(found.corners) else None
 
-        fn = opencv_classic if name == "opencv" else opencv_sb
-
-        def classic(gray):
-            ok, corners = fn(np.clip(gray * 255.0 + 0.5, 0, 255).astype(np.uint8), pattern_size)
-            return (corners, full_ids) if ok else None
-
-        return classic
-    raise ValueError(f"unknown detector {name!r}; choose from {', '.join(DETECTORS)}")
+    detect.info = info.get(name, {})
+    return detect
 
 
 @dataclass(frozen=True)
@@ -196,11 +192,13 @@ def _preview(cal: Calibration, files: dict[str, str]) -> tuple[str, bytes] | Non
     return None
 
 
-def _suggest_pattern(files: list[str], model) -> str:
+def _suggest_pattern(files: list[str], model_path: str) -> str:
     """A hint naming the grid sizes the CNN sees in the first images, for a wrong --pattern."""
     from .detect import detect_corners
     from .io import ImageError
+    from .model import load_model
 
+    model = load_model(model_path)
     seen = Counter()
     for f in files[:3]:
         try:
@@ -229,13 +227,7 @@ def run(cfg: CalibrateConfig) -> tuple[Calibration, str]:
         raise ValueError(f"no images match {' '.join(cfg.images)}")
     if cfg.resize_policy not in RESIZE_POLICIES:
         raise ValueError(f"--resize-policy must be one of {', '.join(RESIZE_POLICIES)}, got {cfg.resize_policy!r}")
-    model, sha = None, None
-    if cfg.detector == "cnn":
-        from .model import file_sha256, load_model
-
-        model = load_model(cfg.model)
-        sha = file_sha256(model.aicalib_path) if hasattr(model, "aicalib_path") else None
-    detect = make_detector(cfg.detector, cfg.pattern, model)
+    detect = make_detector(cfg.detector, cfg.pattern, cfg.model)
     labels = _labels(files)
     found, skipped = _detect_all(files, labels, detect, cfg.quiet)
     if not found:
@@ -246,9 +238,9 @@ def run(cfg: CalibrateConfig) -> tuple[Calibration, str]:
             skipped[f.label] = f"no {cfg.pattern[0]}x{cfg.pattern[1]} board found"
     views = [f.view for f in found if f.view is not None]
     if not views:
-        hint = _suggest_pattern(files, model) if cfg.detector == "cnn" else ""
+        hint = _suggest_pattern(files, detect.info["model"]) if "model" in detect.info else ""
         raise CalibrationError(f"no {cfg.pattern[0]}x{cfg.pattern[1]} board found in any of the {len(files)} images{hint}")
-    meta = {"detector": cfg.detector, "model": cfg.model if cfg.detector == "cnn" else None, "model_sha256": sha,
+    meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
             "rational": cfg.rational, "fix_k3": cfg.fix_k3, "resize_policy": cfg.resize_policy,
             "images": len(files)}
     cal = calibrate_camera(views, cfg.pattern, cfg.square, size, rational=cfg.rational, fix_k3=cfg.fix_k3,
@@ -277,7 +269,7 @@ def _parse_args(argv):
     ap.add_argument("--square", default="1", help="square size with unit, e.g. 25mm (default: 1, unitless)")
     ap.add_argument("--out", default="calib", help="output folder (default: %(default)s)")
     ap.add_argument("--detector", default="cnn", choices=DETECTORS, help="corner detector (default: %(default)s)")
-    ap.add_argument("--model", default="default", help="CNN: default, report, or a .keras path (default: %(default)s)")
+    ap.add_argument("--model", default="default", help="the cnn detector's network: default, report, or a .keras path (default: %(default)s)")
     ap.add_argument("--fix-k3", action="store_true", help="hold k3 at 0 (narrow lenses, few views)")
     ap.add_argument("--rational", action="store_true", help="8-coefficient rational distortion model (fisheye-like lenses)")
     ap.add_argument("--resize-policy", default="error", choices=RESIZE_POLICIES,

@@ -21,15 +21,8 @@ UDACITY = DATA / "udacity_lane_cal"
 
 
 @pytest.fixture(scope="module")
-def model():
-    from aicalib_tf.model import load_model
-
-    return load_model("default")
-
-
-@pytest.fixture(scope="module")
-def left_views(model):
-    detect = make_detector("cnn", (9, 6), model)
+def left_views():
+    detect = make_detector("cnn", (9, 6))
     views = []
     for f in sorted(LEFT.glob("*.jpg")):
         hit = detect(load_image(f))
@@ -43,12 +36,12 @@ def left_views(model):
 @pytest.mark.slow
 @pytest.mark.parametrize("camera_id", [1, 2])  # seed 0: camera 1 strong barrel (k1 −0.29), camera 2 mild
 @pytest.mark.parametrize("detector", ["cnn", "opencv"])
-def test_calibration_recovers_the_true_camera(model, camera_id, detector):
+def test_calibration_recovers_the_true_camera(camera_id, detector):
     from data_gen.sample import make_sequence
 
     seq = make_sequence("calib", 0, camera_id)
     label = seq[0].label
-    detect = make_detector(detector, (9, 6), model)
+    detect = make_detector(detector, (9, 6))
     views = [View(f"v{i}", *hit) for i, s in enumerate(seq) if (hit := detect(load_image(s.image))) is not None]
     size = tuple(label["image_size"])
     cal = calibrate_camera(views, (9, 6), label["square_size"], size)
@@ -242,10 +235,12 @@ def test_cli_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, args, messag
     assert not (tmp_path / "c").exists()
 
 
-def test_detector_choices(model):
+def test_detector_choices():
     gray = load_image(LEFT / "left01.jpg")
-    for name in ("cnn", "opencv", "opencv-sb"):
-        corners, ids = make_detector(name, (9, 6), model)(gray)
+    for name in ("cnn", "report", "opencv", "opencv-sb"):
+        detect = make_detector(name, (9, 6))
+        corners, ids = detect(gray)
         assert corners.shape == (54, 2) and ids.shape == (54, 2)
+        assert (len(detect.info.get("sha256", "")) == 64) == (name in ("cnn", "report"))
     with pytest.raises(ValueError, match="unknown detector"):
         make_detector("magic", (9, 6))
