@@ -1,6 +1,6 @@
 """Corner-point precision and recall of the shipped CNNs, per data_gen condition.
 
-    python benchmarks/model_compare.py [--images 30] [--models default,report]
+    python benchmarks/model_compare.py [--images 30] [--models default,report] [--thresholds 0.5,0.4] [--conditions noisy,blur]
 
 Each model scores whole 640×480 images (the default model decodes its corner map; the report's
 patch classifier scores saddle-point candidates). A detection matches a visible true corner
@@ -32,23 +32,27 @@ def main(argv=None) -> int:
     ap.add_argument("--images", type=int, default=30)
     ap.add_argument("--models", default="default,report")
     ap.add_argument("--seed", type=int, default=77)
+    ap.add_argument("--thresholds", default="0.5", help="comma list of corner-weight thresholds (default: %(default)s)")
+    ap.add_argument("--conditions", default=",".join(CONDITIONS))
     args = ap.parse_args(argv)
+    thresholds = [float(t) for t in args.thresholds.split(",")]
     models = {name: load_model(name) for name in args.models.split(",")}
-    print("| condition | model | precision | recall | F1 | loc median px | network ms/image |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
-    for cond in CONDITIONS:
+    print("| condition | model | threshold | precision | recall | F1 | loc median px | network ms/image |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    for cond in args.conditions.split(","):
         samples = [make_sample(cond, args.seed, i, size=(640, 480)) for i in range(args.images)]
         for name, model in models.items():
             corner_points(model, samples[0].image)  # warm up the traced function
-            pairs, times = [], []
-            for s in samples:
-                t = time.perf_counter()
-                pts, _ = corner_points(model, s.image)
-                times.append(time.perf_counter() - t)
-                pairs.append((pts, s.corners[s.visible] if s.label["has_board"] else np.zeros((0, 2))))
-            st = point_detection_stats(pairs, 1.0)
-            print(f"| {cond} | {name} | {st['precision']:.3f} | {st['recall']:.3f} | {st['f1']:.3f} | "
-                  f"{st['loc_median_px']:.3f} | {1000 * np.median(times):.1f} |", flush=True)
+            for thr in thresholds:
+                pairs, times = [], []
+                for s in samples:
+                    t = time.perf_counter()
+                    pts, _ = corner_points(model, s.image, thr)
+                    times.append(time.perf_counter() - t)
+                    pairs.append((pts, s.corners[s.visible] if s.label["has_board"] else np.zeros((0, 2))))
+                st = point_detection_stats(pairs, 1.0)
+                print(f"| {cond} | {name} | {thr:g} | {st['precision']:.3f} | {st['recall']:.3f} | {st['f1']:.3f} | "
+                      f"{st['loc_median_px']:.3f} | {1000 * np.median(times):.1f} |", flush=True)
     return 0
 
 
