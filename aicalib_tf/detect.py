@@ -48,7 +48,10 @@ A view of one corner of a non-square board alone (two sides cut by the frame) ca
 the visible sides could be the long or the short ones.
 
 Without ``pattern_size``, the largest grid with every corner found is returned, complete, its
-size taken as the pattern; ids are relative to that grid, in the full-board order.
+size taken as the pattern; ids are relative to that grid, in the full-board order. A grid with
+positions missing (a line cut by the frame that kept a few corners, say) counts by its largest
+filled rectangle (:func:`aicalib_tf.grid.full_subgrid`), so a few extra corners never hide it,
+after corners off their neighbours' lattice are dropped as for partial boards.
 :func:`find_chessboard_corners` reports full boards only, like OpenCV.
 """
 
@@ -59,7 +62,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .grid import Grid, assemble_grids
+from .grid import Grid, assemble_grids, full_subgrid
 from .io import load_image
 from .refine import refine_saddle
 
@@ -846,6 +849,29 @@ def _partial_board(grids: list[Grid], scores, pattern_size, gray, size, propose)
     return None
 
 
+def _own_grids(grids: list[Grid]) -> list[Grid]:
+    """Without a pattern: each grid's filled part, largest first.
+
+    A grid with every position filled is kept as it is. In any other grid, corners off their
+    neighbours' lattice (:func:`_drop_outliers`, as for partial boards; a grid that would lose more
+    than a tenth of them is dropped) leave holes, then the largest filled rectangle is kept
+    (:func:`aicalib_tf.grid.full_subgrid`): a line cut by the frame that kept a few corners never
+    hides the rest of the grid, and a corner pulled by an object in front does not come back with it.
+    """
+    out = []
+    for grid in grids:
+        a, b = grid.shape
+        if len(grid) == a * b:  # filled already
+            out.append(grid)
+            continue
+        kept = _drop_outliers(grid.ij, grid.points, grid.index)
+        if kept is not None:
+            sub = full_subgrid(Grid(index=kept[2], ij=kept[0], points=kept[1]))
+            if sub is not None:
+                out.append(sub)
+    return sorted(out, key=len, reverse=True)
+
+
 def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=None,
                    threshold: float = 0.5) -> Detection:
     """Find a chessboard's inner corners.
@@ -890,6 +916,8 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     # grow one step past the pattern so that a bigger board shows itself and is rejected
     limit = max(pattern_size) + 1 if pattern_size is not None else None
     grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit)
+    if pattern_size is None:
+        grids = _own_grids(grids)
     for grid in grids:
         det = _board_from_grid(grid, scores, pattern_size, smooth, (w, h))
         if det is not None:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Grid", "assemble_grids", "edge_contrast"]
+__all__ = ["Grid", "assemble_grids", "edge_contrast", "full_subgrid"]
 
 TOLERANCE = 0.3  # of the local step: how far a predicted corner may be from the point it takes
 
@@ -46,6 +46,38 @@ class Grid:
 
     def __len__(self) -> int:
         return len(self.index)
+
+
+def full_subgrid(grid: Grid, min_side: int = 3) -> Grid | None:
+    """The largest sub-rectangle of a grid with a point at every (i, j), as a grid of its own.
+
+    A grid with every position of its extent filled is returned as it is. Otherwise, e.g. when a
+    line cut by the image frame kept only a few of its corners, the filled rectangle with the most
+    points (ties: the first with the smallest i, then j) is cut out and its ij shifted to start at
+    0. None when no filled rectangle has ``min_side`` positions along both axes.
+    """
+    a, b = grid.shape
+    if len(grid) == a * b:
+        return grid if min(a, b) >= min_side else None
+    filled = np.zeros((a, b), bool)
+    filled[grid.ij[:, 0], grid.ij[:, 1]] = True
+    best, best_n = None, 0
+    for i0 in range(a):
+        along = np.ones(b, bool)
+        for i1 in range(i0, a):
+            along &= filled[i1]
+            if i1 - i0 + 1 < min_side:
+                continue
+            run = 0
+            for j in range(b):  # the longest run of j filled for every i in [i0, i1]
+                run = run + 1 if along[j] else 0
+                if run >= min_side and run * (i1 - i0 + 1) > best_n:
+                    best, best_n = (i0, i1, j - run + 1, j), run * (i1 - i0 + 1)
+    if best is None:
+        return None
+    i0, i1, j0, j1 = best
+    sel = (grid.ij[:, 0] >= i0) & (grid.ij[:, 0] <= i1) & (grid.ij[:, 1] >= j0) & (grid.ij[:, 1] <= j1)
+    return Grid(index=grid.index[sel], ij=grid.ij[sel] - np.array([i0, j0]), points=grid.points[sel])
 
 
 class _Lattice:

@@ -3,6 +3,7 @@
     python benchmarks/partial_boards.py [--images 30] [--presets occluded,partial,clutter] [--seed 21]
     python benchmarks/partial_boards.py --hash-out FILE      # full-board fingerprint of mixed images
     python benchmarks/partial_boards.py --hash-check FILE    # compare with a fingerprint made before
+    python benchmarks/partial_boards.py --no-pattern [--presets ...]   # pattern_size=None: own-grid boards
 
 Accuracy: for each preset, --images 640×480 renders of 9×6 inner corners (seed --seed) go through
 ``detect_corners(image, (9, 6))`` and ``metrics.partial_board_stats``: each returned corner is
@@ -11,10 +12,16 @@ patterns) that gives the most matches; a corner within 2 px of a visible true co
 of a hidden one neither, any other is a wrong id. Recall = correct / visible corners.
 A clutter image (no board) that gives any board is a false positive.
 
-Fingerprint: 30 mixed images (clean, distorted, noisy, blur, hard, occluded; seed 7); for each,
-the sha256 of the full-board detection (corners, ids, scores) or "none". The check passes when
-every full board is byte-identical and no image that had none now has a full board. It also
-prints the median time per image (the same images, after a warm-up).
+Without a pattern (--no-pattern), ``detect_corners(image, None)`` returns the largest complete grid
+with its own ids. A returned grid is *right* when every corner lies within 2 px of a true corner
+and its ids map onto those corners' true (col, row) by one rotation/reflection and shift; any
+other grid is a wrong grid (on clutter: a false board).
+
+Fingerprint: 40 mixed images (clean, distorted, noisy, blur, hard, occluded, partial, clutter;
+seed 7), each detected with the pattern and without one; for each, the sha256 of the detection
+(corners, ids, scores, complete) or "none". The check passes when every detection is
+byte-identical. It also prints the median and max time per image with the pattern (the same
+images, after a warm-up).
 """
 
 from __future__ import annotations
@@ -37,7 +44,7 @@ from data_gen import make_sample  # noqa: E402
 
 PATTERN = (9, 6)  # --pattern changes it
 MAX_PX = 2.0
-MIXED = ["clean", "distorted", "noisy", "blur", "hard", "occluded"]
+MIXED = ["clean", "distorted", "noisy", "blur", "hard", "occluded", "partial", "clutter"]
 
 
 def partial_stats(corners, ids, truth, visible, pattern, max_px=MAX_PX) -> dict:
@@ -98,6 +105,13 @@ def accuracy(model, presets, n, seed):
                 print("    recall < 0.9 (index, correct, visible, wrong):", misses, flush=True)
 
 
+def _digest(det) -> str:
+    if not det.found:
+        return "none"
+    raw = det.corners.tobytes() + det.ids.tobytes() + det.scores.tobytes() + bytes([det.complete])
+    return hashlib.sha256(raw).hexdigest()
+
+
 def fingerprint(model, n_per=5, seed=7) -> tuple[dict, list[float]]:
     out, times = {}, []
     samples = [(p, i, make_sample(p, seed, i, pattern=PATTERN, size=(640, 480))) for p in MIXED for i in range(n_per)]
@@ -106,12 +120,48 @@ def fingerprint(model, n_per=5, seed=7) -> tuple[dict, list[float]]:
         t = time.perf_counter()
         det = detect_corners(s.image, PATTERN, model=model)
         times.append(1000 * (time.perf_counter() - t))
-        if det.complete:
-            h = hashlib.sha256(det.corners.tobytes() + det.ids.tobytes() + det.scores.tobytes()).hexdigest()
-        else:
-            h = "partial" if det.found else "none"
-        out[f"{p}/{i}"] = h
+        out[f"{p}/{i}"] = _digest(det)
+        out[f"{p}/{i}/no-pattern"] = _digest(detect_corners(s.image, None, model=model))
     return out, times
+
+
+def _own_grid_right(det, truth, max_px=MAX_PX) -> bool:
+    """Whether a pattern-free detection is true corners whose ids are a rotation/reflection + shift of the true ids."""
+    cols = PATTERN[0]
+    d = np.linalg.norm(det.corners[:, None, :].astype(np.float64) - truth[None, :, :], axis=2)
+    k = d.argmin(axis=1)
+    if d[np.arange(len(k)), k].max() > max_px or len(set(k.tolist())) < len(k):
+        return False
+    cr = np.stack([k % cols, k // cols], 1)
+    for m in ([[1, 0], [0, 1]], [[0, 1], [1, 0]]):
+        for s in ([1, 1], [1, -1], [-1, 1], [-1, -1]):
+            t = (cr @ np.array(m)) * np.array(s)
+            if np.array_equal(t - t.min(0), det.ids - det.ids.min(0)):
+                return True
+    return False
+
+
+def no_pattern(model, presets, n, seed):
+    print("| preset | grids returned | corners returned / visible | mean grid size | wrong grids | ms median |")
+    print("| --- | --- | --- | --- | --- | --- |")
+    for preset in presets:
+        found = corners = vis = wrong = 0
+        times, sizes = [], []
+        for i in range(n):
+            s = make_sample(preset, seed, i, pattern=PATTERN, size=(640, 480))
+            t = time.perf_counter()
+            det = detect_corners(s.image, None, model=model)
+            times.append(1000 * (time.perf_counter() - t))
+            vis += int(np.sum(s.visible)) if preset != "clutter" else 0
+            if not det.found:
+                continue
+            found += 1
+            corners += len(det.corners)
+            sizes.append(len(det.corners))
+            wrong += preset == "clutter" or not _own_grid_right(det, np.asarray(s.corners, np.float64))
+        label = "false boards" if preset == "clutter" else "wrong grids"
+        print(f"| {preset} | {found}/{n} | {corners}/{vis} | {np.mean(sizes) if sizes else 0:.1f} | {wrong} {label} | "
+              f"{np.median(times):.1f} |", flush=True)
 
 
 def main(argv=None) -> int:
@@ -123,27 +173,29 @@ def main(argv=None) -> int:
     ap.add_argument("--pattern", default="9x6", help="inner corners COLSxROWS (default: %(default)s)")
     ap.add_argument("--hash-out")
     ap.add_argument("--hash-check")
+    ap.add_argument("--no-pattern", action="store_true", help="detect with pattern_size=None (own-grid ids)")
     args = ap.parse_args(argv)
     global PATTERN
     PATTERN = tuple(int(v) for v in args.pattern.lower().split("x"))
     model = load_model(args.model)
     if args.hash_out or args.hash_check:
         fp, times = fingerprint(model)
-        full = [t for v, t in zip(fp.values(), times) if v not in ("none", "partial")]
-        print(f"{len(fp)} images, {len(full)} full boards, {sum(v == 'partial' for v in fp.values())} partial; "
-              f"ms median {np.median(times):.1f}, mean {np.mean(times):.1f}, max {max(times):.1f}; "
-              f"full-board images: ms median {np.median(full):.1f}, max {max(full):.1f}")
+        found = sum(v != "none" for k, v in fp.items() if not k.endswith("/no-pattern"))
+        print(f"{len(times)} images, {found} with a board (pattern {PATTERN}); "
+              f"ms median {np.median(times):.1f}, mean {np.mean(times):.1f}, max {max(times):.1f}")
         if args.hash_out:
             with open(args.hash_out, "w") as f:
                 json.dump(fp, f, indent=1)
             return 0
         with open(args.hash_check) as f:
             ref = json.load(f)
-        bad = [k for k, v in ref.items() if (v not in ("none", "partial") and fp[k] != v)
-               or (v in ("none", "partial") and fp[k] not in ("none", "partial"))]
-        print("full boards identical" if not bad else f"DIFFERENT: {bad}")
+        bad = [k for k, v in ref.items() if fp.get(k) != v]
+        print(f"all {len(ref)} detections identical" if not bad else f"DIFFERENT: {bad}")
         return 1 if bad else 0
-    accuracy(model, args.presets.split(","), args.images, args.seed)
+    if args.no_pattern:
+        no_pattern(model, args.presets.split(","), args.images, args.seed)
+    else:
+        accuracy(model, args.presets.split(","), args.images, args.seed)
     return 0
 
 

@@ -51,3 +51,22 @@ def test_too_few_or_scattered_points_give_no_grid():
     assert assemble_grids(np.zeros((5, 2))) == []
     rng = np.random.default_rng(0)
     assert all(len(g) < 20 for g in assemble_grids(rng.uniform(0, 640, (300, 2))))
+
+
+def test_full_subgrid_cuts_the_largest_filled_rectangle():
+    from aicalib_tf.grid import Grid, full_subgrid
+
+    ii, jj = np.meshgrid(np.arange(8), np.arange(6), indexing="ij")
+    ij = np.stack([ii.ravel(), jj.ravel()], 1)
+    keep = ~((ij[:, 0] == 7) & (ij[:, 1] < 4))  # a last column cut by the frame: 2 of its 6 corners
+    g = Grid(index=np.flatnonzero(keep), ij=ij[keep], points=ij[keep] * 30.0 + 5.0)
+    sub = full_subgrid(g)
+    assert sub.shape == (7, 6) and len(sub) == 42 and np.array_equal(sub.ij.min(0), [0, 0])
+    assert np.array_equal(sub.points, sub.ij * 30.0 + 5.0)  # points stay with their positions
+    full = Grid(index=np.arange(48), ij=ij, points=ij * 1.0)
+    assert full_subgrid(full) is full
+    hole = ~((ij[:, 0] == 3) & (ij[:, 1] == 2))  # a hole inside: the 8x3 below it (24) beats 4x6 (24, found later)
+    sub = full_subgrid(Grid(index=np.flatnonzero(hole), ij=ij[hole], points=ij[hole] * 1.0))
+    assert len(sub) == 24 and sub.shape == (8, 3) and np.array_equal(sub.points.min(0), [0, 3])
+    thin = ij[:, 1] < 2  # 8x2: no 3x3 inside
+    assert full_subgrid(Grid(index=np.flatnonzero(thin), ij=ij[thin], points=ij[thin] * 1.0)) is None
