@@ -4,8 +4,10 @@ An ideal X-junction is point-symmetric: the intensity at c + d equals the intens
 whatever the angles of its two lines. Any symmetric blur keeps that, so the centre is a
 stationary point (a saddle) of the smoothed image. :func:`refine_saddle` finds it: it fits a
 quadratic surface to a Gaussian-weighted window of the smoothed image around each estimate, moves
-to the quadratic's saddle point and repeats, all points at once. :func:`refine_subpix` wraps
-OpenCV's ``cornerSubPix`` behind the same signature, for comparison.
+to the quadratic's saddle point and repeats, all points at once. :func:`refine_windowed` picks
+each point's window to fit inside its squares, on an image smoothed once per window size
+(:class:`Smoothed`). :func:`refine_subpix` wraps OpenCV's ``cornerSubPix`` behind the same
+signature, for comparison.
 
 Coordinates are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0).
 """
@@ -15,7 +17,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-__all__ = ["refine_saddle", "refine_subpix", "saddle_fit_matrix"]
+__all__ = ["Smoothed", "refine_saddle", "refine_subpix", "refine_windowed", "saddle_fit_matrix"]
 
 
 def saddle_fit_matrix(radius: int) -> tuple[np.ndarray, np.ndarray]:
@@ -91,6 +93,40 @@ def refine_saddle(
     )
     out = np.where(ok[:, None], pts, pts0)
     return out.astype(np.float32), ok
+
+
+class Smoothed:
+    """The image smoothed for each refinement radius r (σ = 0.4·r), made once per image on demand."""
+
+    def __init__(self, gray: np.ndarray):
+        self.gray, self.cache = gray, {}
+
+    def __getitem__(self, r: int) -> np.ndarray:
+        if r not in self.cache:
+            self.cache[r] = cv2.GaussianBlur(self.gray, (0, 0), 0.4 * r)
+        return self.cache[r]
+
+
+def _window_radius(spacing: np.ndarray) -> np.ndarray:
+    """Refinement window half-size (px) that fits inside squares of ``spacing`` px: 2..5."""
+    return np.clip(np.round(0.45 * np.asarray(spacing, np.float64)), 2, 5).astype(int)
+
+
+def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, max_shift: np.ndarray | None = None):
+    """Saddle refinement with a window that fits inside the local squares.
+
+    pts : (N, 2). spacing : (N,) px, the local corner spacing. max_shift : (N,) px or None.
+    Returns refined (N, 2) float32 and ok (N,) bool.
+    """
+    radius = _window_radius(spacing)
+    out = np.asarray(pts, np.float32).copy()
+    ok = np.zeros(len(pts), bool)
+    for r in np.unique(radius):
+        sel = radius == r
+        out[sel], ok[sel] = refine_saddle(smoothed[int(r)], pts[sel], sigma=0.0, radius=int(r))
+    if max_shift is not None:
+        ok &= np.linalg.norm(out - pts, axis=1) <= max_shift
+    return out, ok
 
 
 def refine_subpix(gray: np.ndarray, points: np.ndarray, *, half_window: int = 5) -> tuple[np.ndarray, np.ndarray]:

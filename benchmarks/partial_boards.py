@@ -53,11 +53,11 @@ def partial_stats(corners, ids, truth, visible, pattern, max_px=MAX_PX) -> dict:
 
 
 def _count_placements():
-    """Wrap detect._place_cells to count grids whose ids the image left open (for the report only)."""
-    from aicalib_tf import detect
+    """Wrap placement.place_cells to count grids whose ids the image left open (for the report only)."""
+    from aicalib_tf import placement
 
     tally = {"tried": 0, "open": 0}
-    place = detect._place_cells
+    place = placement.place_cells
 
     def counted(*args, **kwargs):
         ids = place(*args, **kwargs)
@@ -65,7 +65,7 @@ def _count_placements():
         tally["open"] += ids is None
         return ids
 
-    detect._place_cells = counted
+    placement.place_cells = counted
     return tally
 
 

@@ -1,0 +1,199 @@
+"""Where a partial grid lies on the pattern: the ids its image evidence leaves (:func:`place_cells`).
+
+A grid is placed on the pattern by a 90° turn that keeps handedness and a shift; the image must
+decide which. Three kinds of evidence rule placements out (see :mod:`aicalib_tf.detect` for the
+contract):
+
+* extent: the grid fits inside the pattern;
+* borders (:func:`_border_sides`): a grid side whose next line has alternating squares before it
+  and white paper just beyond it is the pattern's outermost line;
+* colours (:func:`_square_colours`): the grid's black squares must be the board's black squares.
+
+Ids come back only when the placements left agree up to the board's symmetry.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from .board_order import choose_reading, symmetric_ids
+
+__all__ = ["place_cells"]
+
+
+# handedness-preserving maps of grid (i, j) onto board (col, row): 0°, 90°, 180°, 270°
+_ROTATIONS = tuple(np.array(m) for m in ([[1, 0], [0, 1]], [[0, -1], [1, 0]], [[-1, 0], [0, -1]], [[0, 1], [-1, 0]]))
+
+
+BORDER_BEYOND = 0.12  # where the margin is looked for: this fraction of a step beyond the last line
+
+
+BORDER_T = 0.7  # white-normalised grey the margin must reach there (0 black square, 1 white square)
+
+
+FAILED_RATIO = 2  # a border side: untested (corner missing in view) squares at most 1/FAILED_RATIO of the tested
+
+
+def _sample(gray: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Bilinear grey values (M,) at points xy (M, 2) px."""
+    xy = np.asarray(xy, np.float32).reshape(-1, 1, 2)
+    return cv2.remap(gray, xy[..., 0], xy[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()
+
+
+def _square_colours(cells: dict, gray: np.ndarray):
+    """Which grid squares are black, from the grey at their centres.
+
+    cells : {(i, j): (2,) px}. Grid square (i, j) lies between corners (i, j) and (i+1, j+1).
+    Returns (black, contrast): black is the parity of i + j of the black squares (0 or 1), or None
+    when the squares do not split into two clearly different colours; contrast is white − black grey.
+    """
+    keys, centres = [], []
+    for (i, j), p in cells.items():
+        q = [cells.get(c) for c in ((i + 1, j), (i, j + 1), (i + 1, j + 1))]
+        if all(v is not None for v in q):
+            keys.append(i + j)
+            centres.append(0.25 * (p + q[0] + q[1] + q[2]))
+    if len(keys) < 2:
+        return None, 0.0
+    par = np.array(keys) % 2
+    vals = _sample(gray, np.array(centres))
+    if par.min() == par.max():
+        return None, 0.0
+    m0, m1 = vals[par == 0].mean(), vals[par == 1].mean()
+    black = 0 if m0 < m1 else 1
+    agree = np.mean((vals < 0.5 * (m0 + m1)) == (par == black))
+    contrast = abs(m1 - m0)
+    if agree < 0.9 or contrast < 0.08:
+        return None, contrast
+    return black, contrast
+
+
+def _border_sides(cells: dict, ext: tuple[int, int], gray: np.ndarray, black: int, contrast: float) -> dict:
+    """Which sides of a grid are the board's outermost corner lines.
+
+    cells : {(i, j): (2,) px} with i in [0, ext[0]), j in [0, ext[1]). black, contrast : from
+    :func:`_square_colours`. Beyond the outermost line of inner corners a board has one more row of
+    squares, then plain white paper. For each side, the line one step further out (L1) is
+    extrapolated from the last grid lines, and each square between the last line and L1 is tested:
+    the squares alternate black and white as the grid's colours predict, a black square stays black
+    up to 0.2 step before L1, and ``BORDER_BEYOND`` of a step beyond L1 the paper is white
+    (normalised grey > ``BORDER_T``). Were the board to go on, a black square would lie beyond each
+    white one; an object in front would have to line up with L1 along the whole side to pass.
+    A side is a border when at least two of its squares are tested, all pass, and at most a third
+    of the squares that lie in the image could not be tested because a corner of the last line is
+    missing there (hidden, say). Squares outside the image are not counted.
+    Returns {(axis, sign): bool} for axis 0 (i) / 1 (j) and sign −1 (min side) / +1 (max side).
+    """
+    h, w = gray.shape
+    lo_xy, hi_xy = np.array([2.0, 2.0]), np.array([w - 3.0, h - 3.0])
+    ij = np.array(list(cells.keys()), np.float64)
+    xy = np.array(list(cells.values()), np.float64)
+    hom, _ = cv2.findHomography(ij, xy, 0) if len(ij) >= 4 else (None, None)
+    out = {}
+    for axis in (0, 1):
+        for sign in (-1, 1):
+            e = 0 if sign < 0 else ext[axis] - 1
+
+            def at(a, o):
+                return cells.get((a, o) if axis == 0 else (o, a))
+
+            ends, missing_in_view = {}, set()
+            for o in range(ext[1 - axis]):
+                p0, p1, p2 = at(e, o), at(e - sign, o), at(e - 2 * sign, o)
+                if p0 is not None and p1 is not None:
+                    ends[o] = (p0, 2 * p0 - p1 if p2 is None else 3 * p0 - 3 * p1 + p2)
+                elif p0 is None and hom is not None:
+                    cell = np.array([[e, o] if axis == 0 else [o, e]], np.float64).reshape(-1, 1, 2)
+                    q = cv2.perspectiveTransform(cell, hom).reshape(2)
+                    if np.all((q >= lo_xy) & (q <= hi_xy)):
+                        missing_in_view.add(o)
+            rows, failed = [], 0
+            lo = min(e, e + sign)
+            for o in range(ext[1 - axis] - 1):
+                if o in ends and o + 1 in ends:
+                    a = 0.5 * (ends[o][0] + ends[o + 1][0])
+                    b = 0.5 * (ends[o][1] + ends[o + 1][1])
+                    pts = np.stack([a + 0.5 * (b - a), a + 0.8 * (b - a), b + BORDER_BEYOND * (b - a)])
+                    if np.all((pts >= lo_xy) & (pts <= hi_xy)):
+                        rows.append((pts, (lo + o) % 2 == black))
+                elif o in missing_in_view or o + 1 in missing_in_view:
+                    failed += 1
+            out[(axis, sign)] = False
+            if len(rows) < 2 or FAILED_RATIO * failed > len(rows):
+                continue
+            vals = _sample(gray, np.concatenate([r[0] for r in rows])).reshape(-1, 3)
+            is_black = np.array([r[1] for r in rows])
+            if is_black.all() or not is_black.any():
+                continue
+            blk, wht = np.median(vals[is_black, 0]), np.median(vals[~is_black, 0])
+            if wht - blk < 0.5 * contrast:
+                continue
+            t = (vals - blk) / (wht - blk)
+            alternate = np.all(np.where(is_black, t[:, 0] < 0.5, t[:, 0] > 0.5))
+            black_to_edge = np.all(t[is_black, 1] < 0.5)
+            margin = np.all(t[:, 2] > BORDER_T)
+            out[(axis, sign)] = bool(alternate and black_to_edge and margin)
+    return out
+
+
+def _board_keys(ids: np.ndarray, pattern_size) -> bytes:
+    """One key per class of id sets that the board's symmetries map onto each other."""
+    return min(f.astype(np.int32).tobytes() for f in symmetric_ids(ids, pattern_size))
+
+
+def _placements(ij: np.ndarray, pattern_size, borders: dict, black: int | None) -> list[np.ndarray]:
+    """Every (col, row) id assignment of a grid that fits the pattern and the evidence.
+
+    ij : (K, 2) handed grid positions. An assignment rotates the grid by a multiple of 90° (keeping
+    handedness) and shifts it inside the pattern; a side in ``borders`` marked True must land on
+    the pattern's outermost line, and with ``black`` the grid's black squares must be the board's
+    black squares (board square (c, r) is black when c + r is even, squares indexed from the
+    corner-0 outer square). Returns a list of (K, 2) int id arrays.
+    """
+    cols, rows = pattern_size
+    unit = np.array([[0, 0], [1, 0], [0, 1], [1, 1]])
+    out = []
+    for m in _ROTATIONS:
+        cr = ij @ m.T
+        base = cr.min(0)
+        cr = cr - base
+        a, b = cr.max(0) + 1
+        if a > cols or b > rows:
+            continue
+        c0, r0 = (unit @ m.T - base).min(0)
+        sides = []
+        for (axis, sign), border in borders.items():
+            if border:
+                d = m @ (sign * np.eye(2, dtype=int)[axis])
+                sides.append((0 if d[0] else 1, int(d[0] + d[1])))
+        for oc in range(cols - a + 1):
+            for orow in range(rows - b + 1):
+                ok = all((oc == 0 if s < 0 else oc + a == cols) if ax == 0 else (orow == 0 if s < 0 else orow + b == rows)
+                         for ax, s in sides)
+                if ok and black is not None and (c0 + oc + r0 + orow) % 2 != black:
+                    ok = False
+                if ok:
+                    out.append(cr + np.array([oc, orow]))
+    return out
+
+
+def place_cells(cells: dict, pattern_size, gray: np.ndarray) -> np.ndarray | None:
+    """(K, 2) int board ids of the cells (in ``cells`` order), or None when the evidence leaves them open."""
+    cols, rows = pattern_size
+    ij = np.array(list(cells.keys()))
+    ij = ij - ij.min(0)
+    pts = np.array([v[0] for v in cells.values()])
+    cells_xy = {(int(i), int(j)): p for (i, j), p in zip(ij, pts)}
+    ext = (int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1)
+    black, contrast = _square_colours(cells_xy, gray)
+    if black is None and (cols + rows) % 2 == 1:
+        return None  # the colours must tell 180° apart, as for a full board
+    borders = _border_sides(cells_xy, ext, gray, black, contrast) if black is not None else {}
+    found = _placements(ij, pattern_size, borders, black)
+    if not found or len({_board_keys(f, pattern_size) for f in found}) != 1:
+        return None
+    ids = found[0]
+    if black is None or (cols + rows) % 2 == 0:
+        ids = choose_reading(ids, pts, pattern_size)
+    return ids
