@@ -93,18 +93,22 @@ class Calibration:
 
     @property
     def fx(self) -> float:
+        """K[0, 0], px."""
         return float(self.K[0, 0])
 
     @property
     def fy(self) -> float:
+        """K[1, 1], px."""
         return float(self.K[1, 1])
 
     @property
     def cx(self) -> float:
+        """K[0, 2], px."""
         return float(self.K[0, 2])
 
     @property
     def cy(self) -> float:
+        """K[1, 2], px."""
         return float(self.K[1, 2])
 
     def worst_view(self) -> tuple[str, float]:

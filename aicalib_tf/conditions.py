@@ -142,6 +142,7 @@ def sweep_conditions() -> list[Condition]:
 
 
 def all_conditions() -> list[Condition]:
+    """The named conditions followed by every sweep level."""
     return named_conditions() + sweep_conditions()
 
 

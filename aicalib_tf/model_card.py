@@ -82,6 +82,7 @@ def card_section(config: dict, metrics: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """CLI entry (see the module docstring); returns the process exit code (2 on bad arguments)."""
     ap = argparse.ArgumentParser(prog="python -m aicalib_tf.model_card", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("runs", nargs="+", type=Path, help="run folders of python -m aicalib_tf.train")

@@ -58,6 +58,7 @@ def parse_args(argv=None) -> tuple[DatasetConfig, bool]:
 
 
 def main(argv=None) -> int:
+    """CLI entry (see the module docstring); returns the process exit code (2 on bad arguments)."""
     try:
         cfg, progress = parse_args(argv)
     except ValueError as exc:

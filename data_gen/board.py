@@ -27,6 +27,7 @@ def parse_pattern(text: str) -> tuple[int, int]:
 
 
 def check_pattern(pattern_size) -> tuple[int, int]:
+    """Validate ``(cols, rows)`` inner corners against the supported range; returns it as ints."""
     try:
         cols, rows = (int(v) for v in pattern_size)
     except (TypeError, ValueError):
