@@ -127,6 +127,11 @@ class _Lattice:
         return int(keys[:, axis].max() - keys[:, axis].min() + 1)
 
 
+def _norm(d: np.ndarray) -> float:
+    """Length of one (2,) vector, as ``np.linalg.norm`` computes it, without its overhead."""
+    return float(np.sqrt(d.dot(d)))
+
+
 def _predict(lat: _Lattice, cell: tuple[int, int], back: tuple[int, int]) -> tuple[np.ndarray, float] | None:
     """Predict the point at ``cell`` from the line of known points behind it (direction ``back``)."""
     i, j = cell
@@ -136,7 +141,7 @@ def _predict(lat: _Lattice, cell: tuple[int, int], back: tuple[int, int]) -> tup
     if p1 is None or p2 is None:
         return None
     p3 = lat.p((i + 3 * di, j + 3 * dj))
-    step = float(np.linalg.norm(p1 - p2))
+    step = _norm(p1 - p2)
     if p3 is None:
         return 2 * p1 - p2, step
     # quadratic extrapolation follows the curvature of distorted lines
@@ -144,25 +149,28 @@ def _predict(lat: _Lattice, cell: tuple[int, int], back: tuple[int, int]) -> tup
 
 
 def _grow_side(lat: _Lattice, axis: int, sign: int) -> bool:
-    """Try to add one row/column beyond the current extent on one side. True if added."""
-    keys = np.array(list(lat.cells.keys()))
-    edge = keys[:, axis].max() if sign > 0 else keys[:, axis].min()
-    new = edge + sign
-    back = (-sign, 0) if axis == 0 else (0, -sign)
-    others = np.unique(keys[:, 1 - axis])
-    cells, preds, tols = [], [], []
-    for o in others:
-        cell = (new, int(o)) if axis == 0 else (int(o), new)
-        got = _predict(lat, cell, back)
-        if got is not None:
-            cells.append(cell)
-            preds.append(got[0])
-            tols.append(TOLERANCE * got[1])
-    if not cells:
-        return False
+    """Try to add one row/column beyond the current extent on one side. True if added.
+
+    Each line ending on that side predicts its next point as :func:`_predict` does (all lines at once).
+    """
     if lat.limit is not None and lat.extent(axis) >= lat.limit:
         return False
-    found = lat.find(np.array(preds), np.array(tols), allow_propose=lat.limit is not None)
+    keys = np.array(list(lat.cells.keys()))
+    new = int(keys[:, axis].max() + 1 if sign > 0 else keys[:, axis].min() - 1)
+    cells, line = [], []
+    for o in np.unique(keys[:, 1 - axis]).tolist():
+        at = [lat.p((new - t * sign, o) if axis == 0 else (o, new - t * sign)) for t in (1, 2, 3)]
+        if at[0] is not None and at[1] is not None:
+            cells.append((new, o) if axis == 0 else (o, new))
+            line.append((at[0], at[1], at[0] if at[2] is None else at[2], at[2] is not None))
+    if not cells:
+        return False
+    p1, p2, p3 = (np.array([ln[t] for ln in line]) for t in range(3))
+    quad = np.array([ln[3] for ln in line])[:, None]
+    preds = np.where(quad, 3 * p1 - 3 * p2 + p3, 2 * p1 - p2)  # quadratic where three points are known
+    d = p1 - p2
+    tols = TOLERANCE * np.sqrt((d * d).sum(axis=1))
+    found = lat.find(preds, tols, allow_propose=lat.limit is not None)
     hits = [(c, k) for c, k in zip(cells, found) if k >= 0]
     if len(hits) < max(2, 0.5 * len(cells)) or len({k for _, k in hits}) < len(hits):
         return False
@@ -179,7 +187,7 @@ def _parallelogram(lat: _Lattice, cell: tuple[int, int]) -> list[tuple[np.ndarra
         for dj in (-1, 1):
             a, b, c = lat.p((i + di, j)), lat.p((i, j + dj)), lat.p((i + di, j + dj))
             if a is not None and b is not None and c is not None:
-                out.append((a + b - c, float(min(np.linalg.norm(a - c), np.linalg.norm(b - c)))))
+                out.append((a + b - c, min(_norm(a - c), _norm(b - c))))
     return out
 
 
@@ -247,20 +255,20 @@ def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, gray: np.ndarray | None
         contrast = edge_contrast(gray, np.repeat(p[None], len(neighbours), 0), lat.pts[neighbours])
         along = contrast >= 0.5 * contrast.max()
         neighbours, steps = neighbours[along], steps[along]
+    length = np.sqrt((steps * steps).sum(axis=1)).tolist()
     pairs = []
     for a in range(len(neighbours)):
         for b in range(a + 1, len(neighbours)):
-            u, v = steps[a], steps[b]
-            nu, nv = np.linalg.norm(u), np.linalg.norm(v)
+            nu, nv = length[a], length[b]
             if nu < 1.0 or nv < 1.0 or not 0.5 <= nu / nv <= 2.0:
                 continue
-            cos = abs(float(u @ v)) / (nu * nv)
+            cos = abs(float(steps[a] @ steps[b])) / (nu * nv)
             if cos < 0.95:  # otherwise nearly collinear: not two grid directions
                 pairs.append((cos, a, b))
     offs = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)]
     for _, a, b in sorted(pairs):
         u, v = steps[a], steps[b]
-        tol = TOLERANCE * min(np.linalg.norm(u), np.linalg.norm(v))
+        tol = TOLERANCE * min(length[a], length[b])
         preds = np.array([p + di * u + dj * v for di, dj in offs])
         found = lat.find(preds, np.full(len(offs), tol), allow_propose=False)
         if np.all(found >= 0) and len(set(found.tolist())) == 8 and k not in found:

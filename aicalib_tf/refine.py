@@ -14,18 +14,21 @@ Coordinates are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0).
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 
 __all__ = ["Smoothed", "refine_saddle", "refine_subpix", "refine_windowed", "saddle_fit_matrix"]
 
 
+@functools.lru_cache(maxsize=16)
 def saddle_fit_matrix(radius: int) -> tuple[np.ndarray, np.ndarray]:
     """Offsets and the weighted least-squares operator of the quadratic fit.
 
     Returns offsets (M, 2) float32 (dx, dy) px on the (2r+1)² grid and P (6, M) float64 with
     coefficients (a, b, c, d, e, f) = P @ values for f(x, y) = a x² + b xy + c y² + d x + e y + f.
-    The weights are Gaussian with σ = radius / 2 + 0.5.
+    The weights are Gaussian with σ = radius / 2 + 0.5. Cached per radius: read-only arrays.
     """
     r = int(radius)
     d = np.arange(-r, r + 1, dtype=np.float64)
@@ -36,7 +39,9 @@ def saddle_fit_matrix(radius: int) -> tuple[np.ndarray, np.ndarray]:
     a = np.stack([dx * dx, dx * dy, dy * dy, dx, dy, np.ones_like(dx)], axis=1)
     aw = a * w[:, None]
     p = np.linalg.solve(a.T @ aw, aw.T)
-    return np.stack([dx, dy], axis=1).astype(np.float32), p
+    offsets = np.stack([dx, dy], axis=1).astype(np.float32)
+    offsets.flags.writeable = p.flags.writeable = False
+    return offsets, p
 
 
 def refine_saddle(
@@ -63,34 +68,35 @@ def refine_saddle(
     if sigma > 0:
         g = cv2.GaussianBlur(g, (0, 0), sigma)
     offsets, fit = saddle_fit_matrix(radius)
+    ox, oy = offsets[None, :, 0].astype(np.float64), offsets[None, :, 1].astype(np.float64)
     max_shift = float(radius if max_shift is None else max_shift)
-    pts = pts0.copy()
-    step = np.zeros_like(pts)
-    saddle = np.zeros(len(pts), bool)
-    for _ in range(iterations):
-        mx = (pts[:, None, 0] + offsets[None, :, 0]).astype(np.float32)
-        my = (pts[:, None, 1] + offsets[None, :, 1]).astype(np.float32)
-        vals = cv2.remap(g, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float64)
+    x0, y0 = pts0[:, 0].copy(), pts0[:, 1].copy()
+    x, y = x0, y0
+    sx = sy = np.zeros(len(pts0))
+    saddle = np.zeros(len(pts0), bool)
+    for _ in range(iterations):  # all points at once, a handful of array operations per step
+        vals = cv2.remap(g, (x[:, None] + ox).astype(np.float32), (y[:, None] + oy).astype(np.float32),
+                         cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float64)
         a, b, c, d, e, _ = fit @ vals.T  # each (N,)
         det = 4 * a * c - b * b
         saddle = det < 0
         safe = np.where(saddle, det, -1.0)
-        sx = (-2 * c * d + b * e) / safe
-        sy = (b * d - 2 * a * e) / safe
-        step = np.stack([sx, sy], axis=1)
-        step = np.where(saddle[:, None], step, 0.0)
-        norm = np.linalg.norm(step, axis=1, keepdims=True)
-        step = step * np.minimum(1.0, 1.0 / np.maximum(norm, 1e-12))  # at most 1 px per iteration
-        pts = pts + step
-        if np.all(np.abs(step) < 1e-3):
+        sx = np.where(saddle, (-2 * c * d + b * e) / safe, 0.0)
+        sy = np.where(saddle, (b * d - 2 * a * e) / safe, 0.0)
+        scale = np.minimum(1.0, 1.0 / np.maximum(np.sqrt(sx * sx + sy * sy), 1e-12))  # at most 1 px per iteration
+        sx, sy = sx * scale, sy * scale
+        x, y = x + sx, y + sy
+        if np.all((np.abs(sx) < 1e-3) & (np.abs(sy) < 1e-3)):
             break
     h, w = g.shape
+    dx, dy = x - x0, y - y0
     ok = (
         saddle
-        & (np.linalg.norm(step, axis=1) < 0.05)
-        & (np.linalg.norm(pts - pts0, axis=1) <= max_shift)
-        & (pts[:, 0] >= -0.5) & (pts[:, 0] <= w - 0.5) & (pts[:, 1] >= -0.5) & (pts[:, 1] <= h - 0.5)
+        & (np.sqrt(sx * sx + sy * sy) < 0.05)
+        & (np.sqrt(dx * dx + dy * dy) <= max_shift)
+        & (x >= -0.5) & (x <= w - 0.5) & (y >= -0.5) & (y <= h - 0.5)
     )
+    pts = np.stack([x, y], axis=1)
     out = np.where(ok[:, None], pts, pts0)
     return out.astype(np.float32), ok
 
