@@ -13,7 +13,6 @@ that fits its own images but is wrong elsewhere):
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 import cv2
@@ -121,13 +120,11 @@ def report_figure(cal: Calibration, views: list[View]) -> bytes:
 
     views : the used views, in ``cal.views`` order.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from .plotting import new_figure, png_bytes
 
     w, h = cal.image_size
-    fig, axes = plt.subplots(1, 3, figsize=(17, 4.8), gridspec_kw={"width_ratios": [1.1, 1, 1]})
+    fig = new_figure((17, 4.8))
+    axes = fig.subplots(1, 3, gridspec_kw={"width_ratios": [1.1, 1, 1]})
     ax = axes[0]
     order = np.arange(len(cal.views))
     ax.bar(order, cal.per_view_rms, color="tab:blue")
@@ -159,7 +156,4 @@ def report_figure(cal: Calibration, views: list[View]) -> bytes:
     fig.colorbar(im, ax=ax, fraction=0.04, label="corners per cell")
     ax.set_title(f"corner coverage ({100 * np.mean(cov > 0):.0f}% of cells)")
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90)
-    plt.close(fig)
-    return buf.getvalue()
+    return png_bytes(fig, tight=False)

@@ -6,7 +6,6 @@ to PNG bytes in memory.
 
 from __future__ import annotations
 
-import io
 import json
 import math
 from pathlib import Path
@@ -15,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from .io import atomic_write_bytes, atomic_write_text
+from .plotting import new_figure, png_bytes
 from .metrics import corner_error_stats
 
 __all__ = ["summarize", "write_report", "write_photo_report", "SUMMARY_COLUMNS", "RESULT_COLUMNS"]
@@ -31,20 +31,8 @@ SWEEP_AXES = {"noise": ("Gaussian noise σ (grey levels)", False), "blur": ("Gau
               "tilt": ("board tilt (median, degrees)", False)}
 
 
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def _save_fig(fig, path: Path) -> None:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
-    _plt().close(fig)
-    atomic_write_bytes(path, buf.getvalue())
+    atomic_write_bytes(path, png_bytes(fig))
 
 
 def _csv(df: pd.DataFrame, path: Path) -> None:
@@ -90,10 +78,10 @@ def summarize(results: pd.DataFrame, errors: dict) -> pd.DataFrame:
 # --- figures --------------------------------------------------------------------------------
 
 def _sweep_figure(summary: pd.DataFrame, sweep: str, path: Path) -> None:
-    plt = _plt()
     s = summary[summary["sweep"] == sweep].sort_values("severity")
     label, invert = SWEEP_AXES.get(sweep, (sweep, False))
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6))
+    fig = new_figure((10, 3.6))
+    a1, a2 = fig.subplots(1, 2)
     for k, (det, g) in enumerate(s.groupby("detector", sort=False)):
         style = dict(marker="os^vD"[k % 5], ls=("-", "--", "-.", ":")[k % 4], ms=6 - k, label=det)
         a1.plot(g["severity"], 100 * g["detection_rate"], **style)
@@ -109,8 +97,8 @@ def _sweep_figure(summary: pd.DataFrame, sweep: str, path: Path) -> None:
 
 
 def _error_hist(errors: dict, named: set, path: Path) -> None:
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(7, 3.6))
+    fig = new_figure((7, 3.6))
+    ax = fig.subplots()
     bins = np.logspace(-4, math.log10(WRONG_LIMIT), 50)
     dets = sorted({d for _, d in errors}, key=list({d: 0 for _, d in errors}).index)
     for det in dets:
@@ -129,10 +117,10 @@ WRONG_LIMIT = 2.0
 
 
 def _time_figure(results: pd.DataFrame, path: Path) -> None:
-    plt = _plt()
     sizes = sorted({(int(w), int(h)) for w, h in zip(results["width"], results["height"])})
     dets = list(dict.fromkeys(results["detector"]))
-    fig, axes = plt.subplots(1, len(sizes), figsize=(4.5 * len(sizes), 3.6), squeeze=False)
+    fig = new_figure((4.5 * len(sizes), 3.6))
+    axes = fig.subplots(1, len(sizes), squeeze=False)
     for ax, (w, h) in zip(axes[0], sizes):
         g = results[(results["width"] == w) & (results["height"] == h)]
         data = [g.loc[g["detector"] == d, "time_ms"].to_numpy() for d in dets]
@@ -144,9 +132,9 @@ def _time_figure(results: pd.DataFrame, path: Path) -> None:
 
 
 def _example_figure(title: str, image: np.ndarray, truth, found_by: dict, path: Path) -> None:
-    plt = _plt()
     n = len(found_by)
-    fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.6), squeeze=False)
+    fig = new_figure((4.2 * n, 3.6))
+    axes = fig.subplots(1, n, squeeze=False)
     for ax, (det, (found, outcome)) in zip(axes[0], found_by.items()):
         ax.imshow(image, cmap="gray", vmin=0, vmax=255)
         if truth is not None and len(truth):
