@@ -71,27 +71,35 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float):
     ``tight`` looks for a corner beside an object in front: the smallest fit window (2 px), the
     corner within 0.1 step, a ring of 0.15 step (at least 2 px). Either needs a ring amplitude of
     0.3·``ref_amp`` and asymmetry at most half the amplitude (a T-junction at a board edge has
-    asymmetry ≈ 1.3·amplitude).
+    asymmetry ≈ 1.3·amplitude). A point asked again (same prediction and step) is answered from
+    memory: each point's answer depends on that point alone (:func:`aicalib_tf.refine.refine_saddle`).
     """
     h, w = ring_image.shape
 
-    def look(pred, step, margin, window, shift, ring):
-        out = np.full(pred.shape, np.nan)
-        k = np.flatnonzero(np.all((pred >= margin) & (pred <= np.array([w - 1 - margin, h - 1 - margin])), axis=1))
-        if len(k) == 0:
-            return out
-        s = step[k]
-        q, ok = refine_windowed(smoothed, pred[k], window(s), max_shift=shift * s)
-        amp, asym = ring_symmetry(ring_image, q.astype(np.float64), ring(s))
-        ok &= (amp >= 0.3 * ref_amp) & (asym <= 0.5 * amp)
-        out[k[ok]] = q[ok]
-        return out
+    def look(pred, step, margin, window, shift, ring, memo):
+        pred, step = np.asarray(pred, np.float64), np.asarray(step, np.float64)
+        keys = [p.tobytes() + s.tobytes() for p, s in zip(pred, step)]
+        todo = np.array([m for m, key in enumerate(keys) if key not in memo], int)
+        if len(todo):  # each point's answer depends on it alone: asked again, it is remembered
+            got = np.full((len(todo), 2), np.nan)
+            p, s = pred[todo], step[todo]
+            k = np.flatnonzero(np.all((p >= margin) & (p <= np.array([w - 1 - margin, h - 1 - margin])), axis=1))
+            if len(k):
+                q, ok = refine_windowed(smoothed, p[k], window(s[k]), max_shift=shift * s[k])
+                amp, asym = ring_symmetry(ring_image, q.astype(np.float64), ring(s[k]))
+                ok &= (amp >= 0.3 * ref_amp) & (asym <= 0.5 * amp)
+                got[k[ok]] = q[ok]
+            for m, g in zip(todo.tolist(), got):
+                memo[keys[m]] = g
+        return np.array([memo[key] for key in keys]).reshape(-1, 2)
+
+    memo_wide, memo_tight = {}, {}
 
     def propose(pred: np.ndarray, step: np.ndarray) -> np.ndarray:
-        return look(pred, step, 1, lambda s: s, 0.3, lambda s: 0.3 * s)
+        return look(pred, step, 1, lambda s: s, 0.3, lambda s: 0.3 * s, memo_wide)
 
     def tight(pred: np.ndarray, step: np.ndarray) -> np.ndarray:
-        return look(pred, step, 3, lambda s: np.full(len(s), 4.0), 0.1, lambda s: np.maximum(2.0, 0.15 * s))
+        return look(pred, step, 3, lambda s: np.full(len(s), 4.0), 0.1, lambda s: np.maximum(2.0, 0.15 * s), memo_tight)
 
     propose.tight = tight
     return propose

@@ -4,7 +4,8 @@ An ideal X-junction is point-symmetric: the intensity at c + d equals the intens
 whatever the angles of its two lines. Any symmetric blur keeps that, so the centre is a
 stationary point (a saddle) of the smoothed image. :func:`refine_saddle` finds it: it fits a
 quadratic surface to a Gaussian-weighted window of the smoothed image around each estimate, moves
-to the quadratic's saddle point and repeats, all points at once. :func:`refine_windowed` picks
+to the quadratic's saddle point and repeats until the step is below 1e-3 px, all points at once
+(each point stops on its own, so its result never depends on the others). :func:`refine_windowed` picks
 each point's window to fit inside its squares, on an image smoothed once per window size
 (:class:`Smoothed`). :func:`refine_subpix` wraps OpenCV's ``cornerSubPix`` behind the same
 signature, for comparison.
@@ -71,22 +72,26 @@ def refine_saddle(
     ox, oy = offsets[None, :, 0].astype(np.float64), offsets[None, :, 1].astype(np.float64)
     max_shift = float(radius if max_shift is None else max_shift)
     x0, y0 = pts0[:, 0].copy(), pts0[:, 1].copy()
-    x, y = x0, y0
-    sx = sy = np.zeros(len(pts0))
-    saddle = np.zeros(len(pts0), bool)
-    for _ in range(iterations):  # all points at once, a handful of array operations per step
-        vals = cv2.remap(g, (x[:, None] + ox).astype(np.float32), (y[:, None] + oy).astype(np.float32),
+    x, y = x0.copy(), y0.copy()
+    n = len(pts0)
+    sx, sy, saddle = np.zeros(n), np.zeros(n), np.zeros(n, bool)
+    act = np.arange(n)  # points still moving: each stops on its own, so none depends on the others
+    for _ in range(iterations):
+        xa, ya = x[act], y[act]
+        vals = cv2.remap(g, (xa[:, None] + ox).astype(np.float32), (ya[:, None] + oy).astype(np.float32),
                          cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float64)
-        a, b, c, d, e, _ = fit @ vals.T  # each (N,)
+        a, b, c, d, e, _ = fit @ vals.T  # each (len(act),)
         det = 4 * a * c - b * b
-        saddle = det < 0
-        safe = np.where(saddle, det, -1.0)
-        sx = np.where(saddle, (-2 * c * d + b * e) / safe, 0.0)
-        sy = np.where(saddle, (b * d - 2 * a * e) / safe, 0.0)
-        scale = np.minimum(1.0, 1.0 / np.maximum(np.sqrt(sx * sx + sy * sy), 1e-12))  # at most 1 px per iteration
-        sx, sy = sx * scale, sy * scale
-        x, y = x + sx, y + sy
-        if np.all((np.abs(sx) < 1e-3) & (np.abs(sy) < 1e-3)):
+        sad = det < 0
+        safe = np.where(sad, det, -1.0)
+        ux = np.where(sad, (-2 * c * d + b * e) / safe, 0.0)
+        uy = np.where(sad, (b * d - 2 * a * e) / safe, 0.0)
+        scale = np.minimum(1.0, 1.0 / np.maximum(np.sqrt(ux * ux + uy * uy), 1e-12))  # at most 1 px per iteration
+        ux, uy = ux * scale, uy * scale
+        sx[act], sy[act], saddle[act] = ux, uy, sad
+        x[act], y[act] = xa + ux, ya + uy
+        act = act[(np.abs(ux) >= 1e-3) | (np.abs(uy) >= 1e-3)]
+        if len(act) == 0:
             break
     h, w = g.shape
     dx, dy = x - x0, y - y0
