@@ -91,6 +91,7 @@ class _Lattice:
     def __init__(self, pts: np.ndarray, free: np.ndarray, propose=None, limit: int | None = None):
         self.pts, self.free, self.n0 = pts, free, len(pts)
         self.cells: dict[tuple[int, int], int] = {}
+        self.coords: tuple[set, set] = (set(), set())  # the i and the j positions taken
         self.propose, self.limit = propose, limit
         self.extra: list[np.ndarray] = []
 
@@ -115,6 +116,8 @@ class _Lattice:
 
     def take(self, cell: tuple[int, int], k: int) -> None:
         self.cells[cell] = int(k)
+        self.coords[0].add(int(cell[0]))
+        self.coords[1].add(int(cell[1]))
         if k < self.n0:
             self.free[k] = False
 
@@ -123,8 +126,7 @@ class _Lattice:
         return None if k is None else self.point(k)
 
     def extent(self, axis: int) -> int:
-        keys = np.array(list(self.cells.keys()))
-        return int(keys[:, axis].max() - keys[:, axis].min() + 1)
+        return max(self.coords[axis]) - min(self.coords[axis]) + 1
 
 
 def _norm(d: np.ndarray) -> float:
@@ -155,10 +157,9 @@ def _grow_side(lat: _Lattice, axis: int, sign: int) -> bool:
     """
     if lat.limit is not None and lat.extent(axis) >= lat.limit:
         return False
-    keys = np.array(list(lat.cells.keys()))
-    new = int(keys[:, axis].max() + 1 if sign > 0 else keys[:, axis].min() - 1)
+    new = max(lat.coords[axis]) + 1 if sign > 0 else min(lat.coords[axis]) - 1
     cells, line = [], []
-    for o in np.unique(keys[:, 1 - axis]).tolist():
+    for o in sorted(lat.coords[1 - axis]):
         at = [lat.p((new - t * sign, o) if axis == 0 else (o, new - t * sign)) for t in (1, 2, 3)]
         if at[0] is not None and at[1] is not None:
             cells.append((new, o) if axis == 0 else (o, new))
