@@ -98,14 +98,27 @@ class _Lattice:
     def point(self, k: int) -> np.ndarray:
         return self.pts[k] if k < self.n0 else self.extra[k - self.n0]
 
-    def find(self, pred: np.ndarray, tol: np.ndarray, allow_propose: bool = True) -> np.ndarray:
-        """For predictions (M, 2) and tolerances (M,), a point index within tol, or -1."""
+    def _nearest_free(self, pred: np.ndarray, tol: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(M,) index of the nearest free candidate within tol of each prediction, or -1; and the misses."""
         d2 = ((pred[:, None, :] - self.pts[None, :, :]) ** 2).sum(-1)
         d2[:, ~self.free] = np.inf
         best = np.argmin(d2, axis=1)
         ok = d2[np.arange(len(pred)), best] <= tol**2
-        found = np.where(ok, best, -1)
-        miss = np.flatnonzero(~ok)
+        return np.where(ok, best, -1), np.flatnonzero(~ok)
+
+    def ask_ahead(self, pred: np.ndarray, tol: np.ndarray) -> None:
+        """Ask ``propose`` in one batch about predictions that no free candidate matches.
+
+        Nothing is taken: a ``propose`` that remembers its answers then answers :meth:`find`'s
+        later asks for the same predictions at no cost.
+        """
+        _, miss = self._nearest_free(pred, tol)
+        if self.propose is not None and len(miss):
+            self.propose(pred[miss], tol[miss] / TOLERANCE)
+
+    def find(self, pred: np.ndarray, tol: np.ndarray, allow_propose: bool = True) -> np.ndarray:
+        """For predictions (M, 2) and tolerances (M,), a point index within tol, or -1."""
+        found, miss = self._nearest_free(pred, tol)
         if self.propose is not None and allow_propose and len(miss):
             got = self.propose(pred[miss], tol[miss] / TOLERANCE)
             for m, q in zip(miss, got):
@@ -150,13 +163,14 @@ def _predict(lat: _Lattice, cell: tuple[int, int], back: tuple[int, int]) -> tup
     return 3 * p1 - 3 * p2 + p3, step
 
 
-def _grow_side(lat: _Lattice, axis: int, sign: int) -> bool:
-    """Try to add one row/column beyond the current extent on one side. True if added.
+def _side(lat: _Lattice, axis: int, sign: int):
+    """The next line beyond one side: (cells, predictions (M, 2), tolerances (M,)), or None.
 
-    Each line ending on that side predicts its next point as :func:`_predict` does (all lines at once).
+    Each line ending on that side predicts its next point as :func:`_predict` does (all lines at
+    once). None when the grid has reached ``limit`` along ``axis`` or no line predicts a point.
     """
     if lat.limit is not None and lat.extent(axis) >= lat.limit:
-        return False
+        return None
     new = max(lat.coords[axis]) + 1 if sign > 0 else min(lat.coords[axis]) - 1
     cells, line = [], []
     for o in sorted(lat.coords[1 - axis]):
@@ -165,19 +179,58 @@ def _grow_side(lat: _Lattice, axis: int, sign: int) -> bool:
             cells.append((new, o) if axis == 0 else (o, new))
             line.append((at[0], at[1], at[0] if at[2] is None else at[2], at[2] is not None))
     if not cells:
-        return False
+        return None
     p1, p2, p3 = (np.array([ln[t] for ln in line]) for t in range(3))
     quad = np.array([ln[3] for ln in line])[:, None]
     preds = np.where(quad, 3 * p1 - 3 * p2 + p3, 2 * p1 - p2)  # quadratic where three points are known
     d = p1 - p2
-    tols = TOLERANCE * np.sqrt((d * d).sum(axis=1))
-    found = lat.find(preds, tols, allow_propose=lat.limit is not None)
+    return cells, preds, TOLERANCE * np.sqrt((d * d).sum(axis=1))
+
+
+def _grow_side(lat: _Lattice, axis: int, sign: int, whole: bool = False) -> bool:
+    """Try to add one row/column beyond the current extent on one side (:func:`_side`). True if added.
+
+    The line is added when at least half its predictions (and 2) find a point; with ``whole``, only
+    when all of them find a candidate point (``propose`` is not asked).
+    """
+    side = _side(lat, axis, sign)
+    if side is None:
+        return False
+    cells, preds, tols = side
+    found = lat.find(preds, tols, allow_propose=lat.limit is not None and not whole)
     hits = [(c, k) for c, k in zip(cells, found) if k >= 0]
+    if whole and len(hits) < len(cells):
+        return False
     if len(hits) < max(2, 0.5 * len(cells)) or len({k for _, k in hits}) < len(hits):
         return False
     for c, k in hits:
         lat.take(c, k)
     return True
+
+
+def _grow(lat: _Lattice) -> None:
+    """Grow all four sides in turn until none grows. Where ``propose`` is asked (with ``limit``),
+    first by lines whose every point is a candidate, then by any line (``propose`` asked about the
+    points no candidate gives): a board's lines come from candidates, ``propose`` only looks where
+    they end or have gaps.
+
+    Each round of the second kind first asks ``propose`` about all four sides' next lines in one
+    batch (:meth:`_Lattice.ask_ahead`): a side that does not change before its turn is then answered
+    from ``propose``'s memory (:func:`aicalib_tf.junctions.proposer`), one call instead of four.
+    """
+    asks = lat.propose is not None and lat.limit is not None
+    for whole in ((True, False) if asks else (False,)):
+        grown = True
+        while grown:
+            grown = False
+            if asks and not whole:
+                sides = [side for axis in (0, 1) for sign in (1, -1) if (side := _side(lat, axis, sign)) is not None]
+                if len(sides) > 1:
+                    lat.ask_ahead(np.concatenate([p for _, p, _ in sides]), np.concatenate([t for _, _, t in sides]))
+            for axis in (0, 1):
+                for sign in (1, -1):
+                    while _grow_side(lat, axis, sign, whole):
+                        grown = True
 
 
 def _parallelogram(lat: _Lattice, cell: tuple[int, int]) -> list[tuple[np.ndarray, float]]:
@@ -309,13 +362,7 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
         lat = _Lattice(pts, free, propose, limit)
         if not _seed(lat, int(k), near[k], gray):
             continue
-        grown = True
-        while grown:
-            grown = False
-            for axis in (0, 1):
-                for sign in (1, -1):
-                    while _grow_side(lat, axis, sign):
-                        grown = True
+        _grow(lat)
         _fill_holes(lat)
         if len(lat.cells) < min_size:
             for kk in lat.cells.values():  # give the points back for other seeds

@@ -4,6 +4,7 @@
     python benchmarks/partial_boards.py --hash-out FILE      # full-board fingerprint of mixed images
     python benchmarks/partial_boards.py --hash-check FILE    # compare with a fingerprint made before
     python benchmarks/partial_boards.py --no-pattern [--presets ...]   # pattern_size=None: own-grid boards
+    python benchmarks/partial_boards.py --speed [--repeats 3]           # ms per image, with and without the CNN
 
 Accuracy: for each preset, --images 640×480 renders of 9×6 inner corners (seed --seed) go through
 ``detect_corners(image, (9, 6))`` and ``metrics.partial_board_stats``: each returned corner is
@@ -16,6 +17,10 @@ Without a pattern (--no-pattern), ``detect_corners(image, None)`` returns the la
 with its own ids. A returned grid is *right* when every corner lies within 2 px of a true corner
 and its ids map onto those corners' true (col, row) by one rotation/reflection and shift; any
 other grid is a wrong grid (on clutter: a false board).
+
+Speed: 35 images (clean, noisy, blur, distorted, occluded, partial, clutter; 5 each, seed 11),
+each timed --repeats times (the fastest counts, to see past other work on the machine), the whole
+detection and the CNN alone (``inference.corner_points``); median and max per preset and overall.
 
 Fingerprint: 40 mixed images (clean, distorted, noisy, blur, hard, occluded, partial, clutter;
 seed 7), each detected with the pattern and without one; for each, the sha256 of the detection
@@ -164,6 +169,36 @@ def no_pattern(model, presets, n, seed):
               f"{np.median(times):.1f} |", flush=True)
 
 
+SPEED = ["clean", "noisy", "blur", "distorted", "occluded", "partial", "clutter"]
+
+
+def speed(model, repeats=3, n_per=5, seed=11):
+    from aicalib_tf.inference import corner_points
+    from aicalib_tf.io import load_image
+
+    samples = [(p, make_sample(p, seed, i, pattern=PATTERN, size=(640, 480)).image) for p in SPEED for i in range(n_per)]
+    detect_corners(samples[0][1], PATTERN, model=model)  # warm up
+    total, cnn = [], []
+    for _, image in samples:
+        gray, t_all, t_cnn = load_image(image), [], []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            detect_corners(image, PATTERN, model=model)
+            t_all.append(1000 * (time.perf_counter() - t))
+            t = time.perf_counter()
+            corner_points(model, gray)
+            t_cnn.append(1000 * (time.perf_counter() - t))
+        total.append(min(t_all))
+        cnn.append(min(t_cnn))
+    total, cnn = np.array(total), np.array(cnn)
+    print("| images | ms median | ms max | max / median | CNN ms median | rest ms median | rest ms max |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for name, sel in [(p, slice(k * n_per, (k + 1) * n_per)) for k, p in enumerate(SPEED)] + [("all", slice(None))]:
+        t, c = total[sel], cnn[sel]
+        print(f"| {name} | {np.median(t):.1f} | {t.max():.1f} | {t.max() / np.median(t):.2f} | {np.median(c):.1f} | "
+              f"{np.median(t - c):.1f} | {(t - c).max():.1f} |")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--images", type=int, default=30)
@@ -174,6 +209,8 @@ def main(argv=None) -> int:
     ap.add_argument("--hash-out")
     ap.add_argument("--hash-check")
     ap.add_argument("--no-pattern", action="store_true", help="detect with pattern_size=None (own-grid ids)")
+    ap.add_argument("--speed", action="store_true", help="time 35 mixed images (whole detection and CNN alone)")
+    ap.add_argument("--repeats", type=int, default=3, help="--speed: runs per image, the fastest counts")
     args = ap.parse_args(argv)
     global PATTERN
     PATTERN = tuple(int(v) for v in args.pattern.lower().split("x"))
@@ -192,6 +229,9 @@ def main(argv=None) -> int:
         bad = [k for k, v in ref.items() if fp.get(k) != v]
         print(f"all {len(ref)} detections identical" if not bad else f"DIFFERENT: {bad}")
         return 1 if bad else 0
+    if args.speed:
+        speed(model, args.repeats)
+        return 0
     if args.no_pattern:
         no_pattern(model, args.presets.split(","), args.images, args.seed)
     else:
