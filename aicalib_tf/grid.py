@@ -245,27 +245,38 @@ def _parallelogram(lat: _Lattice, cell: tuple[int, int]) -> list[tuple[np.ndarra
     return out
 
 
+def _hole(lat: _Lattice, cell: tuple[int, int]) -> tuple[np.ndarray, float] | None:
+    """A missing cell's predicted point and tolerance: the mean of its neighbours' predictions."""
+    preds = [got for back in ((-1, 0), (1, 0), (0, -1), (0, 1)) if (got := _predict(lat, cell, back)) is not None]
+    preds += _parallelogram(lat, cell)
+    if not preds:
+        return None
+    return np.mean([p for p, _ in preds], axis=0), TOLERANCE * min(s for _, s in preds)
+
+
 def _fill_holes(lat: _Lattice, passes: int = 10) -> None:
-    """Take points for missing cells inside the grid's extent, predicted from known neighbours."""
+    """Take points for missing cells inside the grid's extent, predicted from known neighbours.
+
+    Cells are filled one by one, each prediction using the cells filled before it. Each pass first
+    asks ``propose`` about all its holes in one batch (:meth:`_Lattice.ask_ahead`), so a hole whose
+    prediction did not change before its turn is answered from ``propose``'s memory.
+    """
     keys = np.array(list(lat.cells.keys()))
     (i0, j0), (i1, j1) = keys.min(0), keys.max(0)
     for _ in range(passes):
+        holes = [(i, j) for i in range(i0, i1 + 1) for j in range(j0, j1 + 1) if (i, j) not in lat.cells]
+        ahead = [h for cell in holes if (h := _hole(lat, cell)) is not None] if lat.propose is not None else []
+        if len(ahead) > 1:
+            lat.ask_ahead(np.array([p for p, _ in ahead]), np.array([t for _, t in ahead]))
         added = False
-        for i in range(i0, i1 + 1):
-            for j in range(j0, j1 + 1):
-                if (i, j) in lat.cells:
-                    continue
-                preds = [got for back in ((-1, 0), (1, 0), (0, -1), (0, 1))
-                         if (got := _predict(lat, (i, j), back)) is not None]
-                preds += _parallelogram(lat, (i, j))
-                if not preds:
-                    continue
-                pred = np.mean([p for p, _ in preds], axis=0)
-                tol = TOLERANCE * min(s for _, s in preds)
-                k = lat.find(pred[None], np.array([tol]))[0]
-                if k >= 0:
-                    lat.take((i, j), k)
-                    added = True
+        for cell in holes:
+            got = _hole(lat, cell)
+            if got is None:
+                continue
+            k = lat.find(got[0][None], np.array([got[1]]))[0]
+            if k >= 0:
+                lat.take(cell, k)
+                added = True
         if not added:
             break
 
