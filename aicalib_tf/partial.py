@@ -48,26 +48,15 @@ def _grow_cut_lines(cells: dict, propose, limit: int, size) -> None:
     """
     for _ in range(2 * limit):
         grown = False
+        sides = [side for axis in (0, 1) for sign in (-1, 1) if (side := _cut_side(cells, axis, sign, limit))]
+        if len(sides) > 1:  # one batch; propose remembers, so the sides' own asks below cost nothing more
+            propose(np.concatenate([p for _, p, _ in sides]), np.concatenate([st for _, _, st in sides]))
         for axis in (0, 1):
             for sign in (-1, 1):
-                keys = np.array(list(cells.keys()))
-                if keys[:, axis].max() - keys[:, axis].min() + 1 >= limit:
+                side = _cut_side(cells, axis, sign, limit)
+                if side is None:
                     continue
-                e = keys[:, axis].max() if sign > 0 else keys[:, axis].min()
-                new, pred, step = [], [], []
-                for o in np.unique(keys[:, 1 - axis]):
-                    def at(a, o=int(o)):
-                        v = cells.get((int(a), o) if axis == 0 else (o, int(a)))
-                        return None if v is None else v[0]
-                    p0, p1, p2 = at(e), at(e - sign), at(e - 2 * sign)
-                    if p0 is None or p1 is None:
-                        continue
-                    new.append((int(e + sign), int(o)) if axis == 0 else (int(o), int(e + sign)))
-                    pred.append(2 * p0 - p1 if p2 is None else 3 * p0 - 3 * p1 + p2)
-                    step.append(np.linalg.norm(p0 - p1))
-                if not new:
-                    continue
-                pred, step = np.array(pred), np.array(step)
+                new, pred, step = side
                 view = in_view(pred, size)
                 got = propose(pred, step)
                 ok = np.all(np.isfinite(got), axis=1) & (np.linalg.norm(got - pred, axis=1) <= 0.3 * step)
@@ -81,6 +70,32 @@ def _grow_cut_lines(cells: dict, propose, limit: int, size) -> None:
         _fill_cells(cells, propose)
         if not grown:
             return
+
+
+def _cut_side(cells: dict, axis: int, sign: int, limit: int):
+    """The line one step beyond a side of the grid: (new cells, predictions (M, 2) px, steps (M,) px).
+
+    Each line ending there is extrapolated (quadratically where three points are known). None when
+    the grid spans ``limit`` positions along ``axis`` or no line ends there.
+    """
+    keys = np.array(list(cells.keys()))
+    if keys[:, axis].max() - keys[:, axis].min() + 1 >= limit:
+        return None
+    e = keys[:, axis].max() if sign > 0 else keys[:, axis].min()
+    new, pred, step = [], [], []
+    for o in np.unique(keys[:, 1 - axis]):
+        def at(a, o=int(o)):
+            v = cells.get((int(a), o) if axis == 0 else (o, int(a)))
+            return None if v is None else v[0]
+        p0, p1, p2 = at(e), at(e - sign), at(e - 2 * sign)
+        if p0 is None or p1 is None:
+            continue
+        new.append((int(e + sign), int(o)) if axis == 0 else (int(o), int(e + sign)))
+        pred.append(2 * p0 - p1 if p2 is None else 3 * p0 - 3 * p1 + p2)
+        step.append(np.linalg.norm(p0 - p1))
+    if not new:
+        return None
+    return new, np.array(pred), np.array(step)
 
 
 def _fill_cells(cells: dict, propose, passes: int = 3) -> None:
