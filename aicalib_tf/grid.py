@@ -98,13 +98,19 @@ class _Lattice:
     def point(self, k: int) -> np.ndarray:
         return self.pts[k] if k < self.n0 else self.extra[k - self.n0]
 
-    def _nearest_free(self, pred: np.ndarray, tol: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(M,) index of the nearest free candidate within tol of each prediction, or -1; and the misses."""
-        d2 = ((pred[:, None, :] - self.pts[None, :, :]) ** 2).sum(-1)
-        d2[:, ~self.free] = np.inf
+    def _nearest_free(self, pred: np.ndarray, tol: np.ndarray, among: np.ndarray | None = None):
+        """(M,) index of the nearest free candidate within tol of each prediction, or -1; and the misses.
+
+        among : sorted candidate indices that hold every candidate within tol of a prediction
+        (a cheaper search, same answer), or None for all.
+        """
+        idx = np.flatnonzero(self.free) if among is None else among[self.free[among]]
+        if len(idx) == 0:
+            return np.full(len(pred), -1), np.arange(len(pred))
+        d2 = ((pred[:, None, :] - self.pts[None, idx, :]) ** 2).sum(-1)
         best = np.argmin(d2, axis=1)
         ok = d2[np.arange(len(pred)), best] <= tol**2
-        return np.where(ok, best, -1), np.flatnonzero(~ok)
+        return np.where(ok, idx[best], -1), np.flatnonzero(~ok)
 
     def ask_ahead(self, pred: np.ndarray, tol: np.ndarray) -> None:
         """Ask ``propose`` in one batch about predictions that no free candidate matches.
@@ -307,17 +313,19 @@ def edge_contrast(gray: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
     return np.abs(sample(left).mean(axis=1) - sample(right).mean(axis=1)).astype(np.float32)
 
 
-def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, gray: np.ndarray | None = None) -> bool:
+_OFFS = np.array([(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)], np.float64)
+
+
+def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | None = None) -> bool:
     """Try to place a 3×3 lattice centred on point ``k``; True (and cells taken) on success.
 
     Any two independent lattice steps generate the same points, so a diagonal step would give a
-    sheared grid. With ``gray``, only steps along square edges are used (see :func:`edge_contrast`);
-    pairs of steps are tried most orthogonal first.
+    sheared grid. With ``contrast`` (:func:`edge_contrast` of each step to a neighbour), only steps
+    along square edges are used; pairs of steps are tried most orthogonal first.
     """
     p = lat.pts[k]
     steps = lat.pts[neighbours] - p
-    if gray is not None:  # keep the steps that run along edges between squares
-        contrast = edge_contrast(gray, np.repeat(p[None], len(neighbours), 0), lat.pts[neighbours])
+    if contrast is not None:  # keep the steps that run along edges between squares
         along = contrast >= 0.5 * contrast.max()
         neighbours, steps = neighbours[along], steps[along]
     length = np.sqrt((steps * steps).sum(axis=1)).tolist()
@@ -330,15 +338,16 @@ def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, gray: np.ndarray | None
             cos = abs(float(steps[a] @ steps[b])) / (nu * nv)
             if cos < 0.95:  # otherwise nearly collinear: not two grid directions
                 pairs.append((cos, a, b))
-    offs = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)]
+    dist2 = ((lat.pts - p) ** 2).sum(axis=1)
     for _, a, b in sorted(pairs):
         u, v = steps[a], steps[b]
         tol = TOLERANCE * min(length[a], length[b])
-        preds = np.array([p + di * u + dj * v for di, dj in offs])
-        found = lat.find(preds, np.full(len(offs), tol), allow_propose=False)
+        preds = p + _OFFS[:, :1] * u + _OFFS[:, 1:] * v
+        reach = length[a] + length[b] + tol + 1.0  # every prediction lies within |u| + |v| of p
+        found, _ = lat._nearest_free(preds, np.full(8, tol), np.flatnonzero(dist2 <= reach * reach))
         if np.all(found >= 0) and len(set(found.tolist())) == 8 and k not in found:
             lat.take((0, 0), k)
-            for (di, dj), f in zip(offs, found):
+            for (di, dj), f in zip(_OFFS.astype(int).tolist(), found):
                 lat.take((di, dj), f)
             return True
     return False
@@ -365,13 +374,16 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
     d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
     np.fill_diagonal(d2, np.inf)
     near = np.argsort(d2, axis=1)[:, : min(neighbours, n - 1)]
+    contrast = None  # of every point's steps to its near points, in one go (seeds use them)
+    if gray is not None:
+        contrast = edge_contrast(gray, np.repeat(pts, near.shape[1], axis=0), pts[near.ravel()]).reshape(near.shape)
     free = np.ones(n, bool)
     grids = []
     for k in order:
         if not free[k]:
             continue
         lat = _Lattice(pts, free, propose, limit)
-        if not _seed(lat, int(k), near[k], gray):
+        if not _seed(lat, int(k), near[k], None if contrast is None else contrast[k]):
             continue
         _grow(lat)
         _fill_holes(lat)
