@@ -231,7 +231,7 @@ def _parse_args(argv):
 
     ap = argparse.ArgumentParser(prog="python -m aicalib_tf.detect", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("images", nargs="+", help="image files or glob patterns")
+    ap.add_argument("images", nargs="+", help="image files or glob patterns (** recurses; each file once)")
     ap.add_argument("--pattern", required=True, help="inner corners, COLSxROWS, e.g. 9x6")
     ap.add_argument("--out", required=True, help="folder for <image>.png overlays and <image>.json corners")
     ap.add_argument("--model", default="default", help="default, report, or a path to a .keras model (default: %(default)s)")
@@ -244,7 +244,6 @@ def main(argv: list[str] | None = None) -> int:
     import os
 
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
-    import glob
     import json
     import sys
     from pathlib import Path
@@ -253,16 +252,13 @@ def main(argv: list[str] | None = None) -> int:
 
     from data_gen.board import parse_pattern
 
-    from .io import ImageError, atomic_write_bytes, atomic_write_text
+    from .io import ImageError, atomic_write_bytes, atomic_write_text, expand_images
     from .model import file_sha256, load_model
 
     args = _parse_args(argv)
     try:
         pattern = parse_pattern(args.pattern)
-        files = []
-        for item in args.images:
-            matches = sorted(glob.glob(item)) if any(ch in item for ch in "*?[") else [item]
-            files += matches
+        files = expand_images(args.images)
         if not files:
             raise ValueError(f"no images match {' '.join(args.images)}")
         model = load_model(args.model)
