@@ -1,0 +1,61 @@
+"""The detection pipeline's model-free parts: junction tests, the lattice model, reading rules."""
+
+import cv2
+import numpy as np
+
+from aicalib_tf.board_order import symmetric_ids
+from aicalib_tf.junctions import proposer, ring_symmetry
+from aicalib_tf.lattice import drop_outliers, predict_ids
+from aicalib_tf.refine import Smoothed, refine_saddle
+from data_gen import make_sample
+
+
+def _board():
+    s = make_sample("clean", 3, 0, pattern=(9, 6), size=(640, 480))
+    return s, s.image.astype(np.float32) / 255.0
+
+
+def test_a_point_refines_the_same_alone_or_with_others():
+    s, gray = _board()
+    g = cv2.GaussianBlur(gray, (0, 0), 1.0)
+    rng = np.random.default_rng(0)
+    pts = np.concatenate([s.corners[:20] + rng.uniform(-1, 1, (20, 2)), rng.uniform(20, 460, (20, 2))])
+    together, ok = refine_saddle(g, pts, sigma=0.0, radius=4)
+    for k in range(len(pts)):
+        alone, ok_k = refine_saddle(g, pts[k : k + 1], sigma=0.0, radius=4)
+        assert np.array_equal(alone[0], together[k]) and ok_k[0] == ok[k]
+    assert np.all(ok[:20]) and np.abs(together[:20] - s.corners[:20]).max() < 0.1
+
+
+def test_the_proposer_answers_batches_and_repeats_like_single_asks():
+    s, gray = _board()
+    smooth = cv2.GaussianBlur(gray, (0, 0), 1.0)
+    amp, _ = ring_symmetry(smooth, s.corners.astype(np.float64), np.full(54, 8.0))
+    pred = np.concatenate([s.corners[:10] + 0.8, s.corners[:5] + 15.0])  # near corners, then on squares
+    step = np.full(len(pred), 30.0)
+    batch = proposer(Smoothed(gray), smooth, float(np.median(amp)))(pred, step)
+    single = proposer(Smoothed(gray), smooth, float(np.median(amp)))
+    one_by_one = np.concatenate([single(pred[k : k + 1], step[k : k + 1]) for k in range(len(pred))])
+    again = single(pred[::-1], step[::-1])[::-1]  # remembered answers, in another order
+    assert np.array_equal(batch, one_by_one, equal_nan=True) and np.array_equal(batch, again, equal_nan=True)
+    assert np.all(np.isfinite(batch[:10])) and np.all(np.isnan(batch[10:]))
+    assert np.abs(batch[:10] - s.corners[:10]).max() < 0.1
+
+
+def test_lattice_predicts_ids_and_drops_a_pulled_corner():
+    s, _ = _board()
+    ids = np.stack(np.meshgrid(np.arange(9), np.arange(6)), -1).reshape(-1, 2)
+    keep = ~((ids[:, 0] == 4) & (ids[:, 1] == 3))
+    pred = predict_ids(ids[keep], s.corners[keep], np.array([[4, 3]]))
+    assert np.linalg.norm(pred[0] - s.corners[31]) < 0.05  # a clean perspective board: exact to rounding
+    pulled = s.corners.astype(np.float64).copy()
+    pulled[31] += 6.0
+    kept_ids, kept_pts, _ = drop_outliers(ids, pulled, np.zeros(54))
+    assert len(kept_ids) == 53 and not ((kept_ids[:, 0] == 4) & (kept_ids[:, 1] == 3)).any()
+
+
+def test_symmetric_ids_are_the_board_rotations():
+    ids = np.array([[0, 0], [8, 5], [3, 1]])
+    forms = symmetric_ids(ids, (9, 6))
+    assert len(forms) == 2 and np.array_equal(forms[1], [[8, 5], [0, 0], [5, 4]])
+    assert len(symmetric_ids(ids[:1], (7, 7))) == 4
