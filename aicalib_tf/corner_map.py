@@ -68,32 +68,39 @@ def decode_map(cmap: np.ndarray, threshold: float = 0.5, min_distance: float = 2
     cmap : (h, w, 3) float, as the network outputs it.
     threshold : minimum corner weight. A corner near a cell border splits its weight between
         the cells that touch it (at a cell's corner, four cells of about 0.25–0.5 each), so a
-        cell's weight is pooled with the neighbouring cells whose points lie within
-        ``min_distance`` px of its own before the threshold applies (capped at 1).
+        cell's weight is pooled with the neighbouring cells (weight ≥ ``POOL_FLOOR``) whose
+        points lie within ``POOL_DISTANCE`` px of its own before the threshold applies (capped at 1).
     min_distance : px; of two points closer than this in neighbouring cells, only the stronger
-        stays, placed at the weight-weighted mean of the close points.
+        stays, placed at the weight-weighted mean of the points pooled into it.
     Returns points (N, 2) float32 (x, y) px and scores (N,) float32 (pooled weights), strongest first.
+
+    Only cells of weight ≥ min(threshold, POOL_FLOOR) can survive (a weaker cell is either below
+    the threshold alone or pooled from a stronger, close neighbour that suppresses it), so the
+    work is done on those cells only.
     """
     m = np.asarray(cmap, dtype=np.float32)
     if m.ndim != 3 or m.shape[2] != 3:
         raise ValueError(f"corner map must be (h, w, 3), got shape {m.shape}")
     h, w = m.shape[:2]
-    jj, ii = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
-    x = STRIDE * (jj + m[..., 1]) - 0.5
-    y = STRIDE * (ii + m[..., 2]) - 0.5
-    p = m[..., 0]
+    p_all = m[..., 0]
+    ci, cj = np.nonzero(p_all >= min(threshold, POOL_FLOOR))
+    pad = np.pad(m, ((1, 1), (1, 1), (0, 0)))
+    pad[..., 0] = np.pad(p_all, 1, constant_values=-1.0)
+
+    def cell(di: int, dj: int):
+        """Weight and point (x, y) px of the cells at offset (di, dj) from the candidates."""
+        v = pad[ci + 1 + di, cj + 1 + dj]
+        col, row = (cj + dj).astype(np.float32), (ci + di).astype(np.float32)
+        return v[:, 0], STRIDE * (col + v[:, 1]) - 0.5, STRIDE * (row + v[:, 2]) - 0.5
+
+    p, x, y = cell(0, 0)
     pooled, sx, sy = p.copy(), p * x, p * y
-    keep = np.ones_like(p, dtype=bool)
-    pad_p = np.pad(p, 1, constant_values=-1.0)
-    pad_x = np.pad(x, 1)
-    pad_y = np.pad(y, 1)
+    keep = np.ones(len(p), dtype=bool)
     for di in (-1, 0, 1):
         for dj in (-1, 0, 1):
             if di == 0 and dj == 0:
                 continue
-            q = pad_p[1 + di : 1 + di + h, 1 + dj : 1 + dj + w]
-            qx = pad_x[1 + di : 1 + di + h, 1 + dj : 1 + dj + w]
-            qy = pad_y[1 + di : 1 + di + h, 1 + dj : 1 + dj + w]
+            q, qx, qy = cell(di, dj)
             d2 = (qx - x) ** 2 + (qy - y) ** 2
             close = d2 < min_distance**2
             qc = np.where((d2 < POOL_DISTANCE**2) & (q >= POOL_FLOOR), q, 0.0)
