@@ -44,8 +44,9 @@ patterns: rows right and columns down) is taken, the full-board geometric rule a
 mean steps. The pattern's missing corners are then looked for where the placed ones predict them
 (a second time with a 2 px window and a small ring, for corners beside an object in front),
 corners off their neighbours' lattice by more than ``MAX_RESIDUAL`` of a step are dropped (at most
-a tenth of them, else no board), and a board with X-junctions one step outside the pattern is
-dropped. If every corner is found, the board is complete and ordered by the full-board rules.
+a tenth of them, else no board), so are corners so near the frame that their refinement window
+leaves the image by more than 0.3 of its radius (pulled towards the frame), and a board with
+X-junctions one step outside the pattern is dropped. If every corner is found, the board is complete and ordered by the full-board rules.
 A view of one corner of a non-square board alone (two sides cut by the frame) cannot be placed:
 the visible sides could be the long or the short ones.
 

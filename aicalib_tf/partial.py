@@ -4,8 +4,10 @@
 the pattern the image decides: the grid is grown by partly visible lines (:func:`_grow_cut_lines`)
 and across gaps (:func:`_reach`), placed (:func:`aicalib_tf.placement.place_cells`), the
 pattern's missing corners are looked for where the placed ones predict them (:func:`_complete`),
-off-lattice corners are dropped (:func:`aicalib_tf.lattice.drop_outliers`) and a board with
-X-junctions one step outside the pattern is refused (:func:`_corners_beyond`).
+off-lattice corners are dropped (:func:`aicalib_tf.lattice.drop_outliers`), so are corners whose
+refinement window leaves the frame by more than 0.3 of its radius (``EDGE_WINDOW``: the saddle
+fit slides towards the frame there, up to 2.4 px), and a board with X-junctions one step outside
+the pattern is refused (:func:`_corners_beyond`).
 
 cells : {(i, j): (point (2,) px, score)} while a grid grows.
 """
@@ -17,9 +19,21 @@ import numpy as np
 from . import placement
 from .board_order import handed, reading
 from .grid import Grid
+from .junctions import nearest_spacing
 from .lattice import MIN_PARTIAL, drop_outliers, in_view, local_step, predict_ids
+from .refine import window_radius
 
 __all__ = ["partial_board"]
+
+
+EDGE_WINDOW = 0.7  # of its refinement window's radius: how far a partial board's corner must be from the frame
+LONE_SHIFT = 0.1  # of a step: how near its prediction a line's lone corner must be when its ring test leaves the frame
+
+
+def _room(pts: np.ndarray, size) -> np.ndarray:
+    """(N,) px from each point to the image frame (the outer pixel centres); NaN for a NaN point."""
+    w, h = size
+    return np.minimum(np.minimum(pts[:, 0], pts[:, 1]), np.minimum(w - 1 - pts[:, 0], h - 1 - pts[:, 1]))
 
 
 def _take(cells: dict, new: dict, pred: np.ndarray, step: np.ndarray, got: np.ndarray) -> int:
@@ -43,8 +57,13 @@ def _grow_cut_lines(cells: dict, propose, limit: int, size) -> None:
     Grid assembly adds a line when half of its predicted corners are found; at the image frame or
     beside an object most of them may not be visible. Here a line one step beyond each side is
     added when at least two of its predicted corners are found (saddle fit and ring test, see
-    :func:`aicalib_tf.junctions.proposer`), or one where at most two lie in the image. The grid
-    never grows past ``limit`` positions on an axis. cells : {(i, j): (point (2,), score)}, changed in place.
+    :func:`aicalib_tf.junctions.proposer`), or one where at most two lie in the image. Such a lone
+    corner whose ring reaches beyond the frame must lie within ``LONE_SHIFT`` of a step of its
+    prediction: the ring test reads samples beyond the frame as copies of the edge pixels, and
+    there the junction of two border squares and the background, cut by the frame, passes it
+    (the saddle sliding 0.18 step towards the frame; true corners there: at most 0.07 step on
+    data_gen renders). The grid never grows past ``limit`` positions on an axis.
+    cells : {(i, j): (point (2,), score)}, changed in place.
     """
     for _ in range(2 * limit):
         grown = False
@@ -61,6 +80,10 @@ def _grow_cut_lines(cells: dict, propose, limit: int, size) -> None:
                 got = propose(pred, step)
                 ok = np.all(np.isfinite(got), axis=1) & (np.linalg.norm(got - pred, axis=1) <= 0.3 * step)
                 need = 1 if view.sum() <= 2 else 2
+                if need == 1:  # a line on one corner's word, its ring cut by the frame: the lattice must vouch for it
+                    with np.errstate(invalid="ignore"):
+                        cut = _room(got, size) < 0.3 * step
+                    ok &= ~cut | (np.linalg.norm(got - pred, axis=1) <= LONE_SHIFT * step)
                 if ok.sum() >= need:
                     trial = dict(cells)
                     if _take(trial, new, pred, step, np.where(ok[:, None], got, np.nan)) >= need:
@@ -263,6 +286,13 @@ def partial_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int
         if kept is None:
             continue
         ids, pts, sc = kept
+        # a corner nearer the frame than EDGE_WINDOW of its refinement window's radius is pulled
+        # towards the frame (on data_gen renders: 0.5-2.4 px off below 0.7, at most 0.53 px above): left out
+        edge = _room(pts, size) < EDGE_WINDOW * window_radius(nearest_spacing(pts))
+        if edge.any():
+            ids, pts, sc = ids[~edge], pts[~edge], sc[~edge]
+            if len(ids) < MIN_PARTIAL:
+                continue
         if _corners_beyond(ids, pts, pattern_size, propose, size) >= 2:
             continue
         order = np.argsort(ids[:, 1] * cols + ids[:, 0], kind="stable")

@@ -20,7 +20,7 @@ import functools
 import cv2
 import numpy as np
 
-__all__ = ["Smoothed", "refine_saddle", "refine_subpix", "refine_windowed", "saddle_fit_matrix"]
+__all__ = ["Smoothed", "refine_saddle", "refine_subpix", "refine_windowed", "saddle_fit_matrix", "window_radius"]
 
 
 @functools.lru_cache(maxsize=16)
@@ -118,7 +118,7 @@ class Smoothed:
         return self.cache[r]
 
 
-def _window_radius(spacing: np.ndarray) -> np.ndarray:
+def window_radius(spacing: np.ndarray) -> np.ndarray:
     """Refinement window half-size (px) that fits inside squares of ``spacing`` px: 2..5."""
     return np.clip(np.round(0.45 * np.asarray(spacing, np.float64)), 2, 5).astype(int)
 
@@ -129,7 +129,7 @@ def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, ma
     pts : (N, 2). spacing : (N,) px, the local corner spacing. max_shift : (N,) px or None.
     Returns refined (N, 2) float32 and ok (N,) bool.
     """
-    radius = _window_radius(spacing)
+    radius = window_radius(spacing)
     out = np.asarray(pts, np.float32).copy()
     ok = np.zeros(len(pts), bool)
     for r in np.unique(radius):

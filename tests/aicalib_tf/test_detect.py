@@ -115,6 +115,30 @@ def test_partial_boards_have_the_true_ids(model, preset, boards, recall):
     assert correct / visible >= recall
 
 
+
+def test_a_line_on_one_corner_at_the_frame_does_not_shift_the_ids(model):
+    # evaluate's partial #74: a board in the top-left corner of the image, cut by two sides. A line
+    # grown on one corner's word took the junction of two border squares and the dark background
+    # 3 px below the frame (the ring test read the rows beyond the frame as copies of the edge):
+    # a seventh row, so the placement turned the grid by 90° and 28 of 29 ids were wrong
+    s = make_sample("partial", 21, 74, pattern=(9, 6), size=(640, 480))
+    det = detect_corners(s.image, (9, 6), model=model)
+    st = _partial_stats(det, s)
+    assert st["wrong_ids"] == 0
+    assert not det.found or st["correct"] == len(det.corners)
+
+
+@pytest.mark.parametrize("index", [52, 55])
+def test_a_corner_whose_window_leaves_the_frame_is_accurate_or_left_out(model, index):
+    # evaluate's partial #52 and #55: a corner 0.6 and 0.8 px from the frame, its refinement window
+    # mostly outside the image, was refined 2.2 and 2.4 px off (right id, wrong place)
+    s = make_sample("partial", 21, index, pattern=(9, 6), size=(640, 480))
+    det = detect_corners(s.image, (9, 6), model=model)
+    st = _partial_stats(det, s)
+    assert det.found and st["wrong_ids"] == 0
+    assert st["correct"] >= 0.9 * st["visible"]
+    assert np.max(st["errors"]) < 0.6
+
 def _tilted_board(sq=40, margin=20, angle=8.0, cols=9, rows=6):
     """A synthetic board turned by ``angle`` degrees: image (H, W) uint8 and true corners (cols·rows, 2).
 
