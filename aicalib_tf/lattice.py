@@ -87,7 +87,12 @@ def local_step(ids: np.ndarray, pts: np.ndarray, want_xy: np.ndarray) -> np.ndar
 
 
 def lattice_residuals(ids: np.ndarray, pts: np.ndarray, k: int = 8) -> np.ndarray:
-    """(N,) distance of each corner from where its k nearest other corners predict it, in local steps."""
+    """(N,) distance of each corner from where its k nearest other corners predict it, in local steps.
+
+    The local step is the distance to the nearest other corner; for a corner none of whose four
+    neighbours is found (hidden by an object in front), the shorter of that and the lattice's own
+    step there (the predicted neighbours' distance).
+    """
     n = len(ids)
     d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
     np.fill_diagonal(d2, np.inf)
@@ -100,6 +105,16 @@ def lattice_residuals(ids: np.ndarray, pts: np.ndarray, k: int = 8) -> np.ndarra
     hom = homographies(ids[near].astype(np.float64), pts[near].astype(np.float64))
     q = hom @ np.concatenate([ids.astype(np.float64), np.ones((n, 1))], axis=1)[..., None]
     pred = q[:, :2, 0] / q[:, 2:, 0]
+    # a corner whose four neighbours are all hidden (an object in front) is further from the nearest
+    # found one than a step: the step is then the lattice's own, the shortest of its four unit steps
+    unit = np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])
+    have = set(map(tuple, ids.tolist()))
+    alone = np.array([not any((int(i + a), int(j + b)) in have for a, b in unit) for i, j in ids])
+    if alone.any():
+        qs = hom[alone, None] @ np.concatenate([ids[alone, None, :] + unit[None], np.ones((int(alone.sum()), 4, 1))],
+                                               axis=2)[..., None]
+        lat = np.linalg.norm(qs[..., :2, 0] / qs[..., 2:, 0] - pred[alone, None, :], axis=2).min(axis=1)
+        step[alone] = np.where(np.isfinite(lat), np.minimum(step[alone], lat), step[alone])
     res = np.linalg.norm(pred - pts, axis=1) / step
     return np.where(np.isfinite(res), res, 0.0)
 

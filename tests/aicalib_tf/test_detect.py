@@ -139,6 +139,17 @@ def test_a_corner_whose_window_leaves_the_frame_is_accurate_or_left_out(model, i
     assert st["correct"] >= 0.9 * st["visible"]
     assert np.max(st["errors"]) < 0.6
 
+
+def test_a_corner_whose_neighbours_are_hidden_is_held_to_the_lattice_step(model):
+    # evaluate's occluded #52: corner (0, 0), its four neighbours behind an object in front, was
+    # found on the object's edge 3.1 px off; its lattice residual was measured in the distance to
+    # the nearest found corner (two steps), so it passed
+    s = make_sample("occluded", 21, 52, pattern=(9, 6), size=(640, 480))
+    det = detect_corners(s.image, (9, 6), model=model)
+    st = _partial_stats(det, s)
+    assert det.found and st["wrong_ids"] == 0
+    assert st["correct"] >= 0.9 * st["visible"]
+
 def _tilted_board(sq=40, margin=20, angle=8.0, cols=9, rows=6):
     """A synthetic board turned by ``angle`` degrees: image (H, W) uint8 and true corners (cols·rows, 2).
 

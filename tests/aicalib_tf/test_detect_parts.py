@@ -5,7 +5,7 @@ import numpy as np
 
 from aicalib_tf.board_order import symmetric_ids
 from aicalib_tf.junctions import proposer, ring_symmetry
-from aicalib_tf.lattice import drop_outliers, predict_ids
+from aicalib_tf.lattice import drop_outliers, lattice_residuals, predict_ids
 from aicalib_tf.refine import Smoothed, refine_saddle
 from data_gen import make_sample
 
@@ -59,3 +59,14 @@ def test_symmetric_ids_are_the_board_rotations():
     forms = symmetric_ids(ids, (9, 6))
     assert len(forms) == 2 and np.array_equal(forms[1], [[8, 5], [0, 0], [5, 4]])
     assert len(symmetric_ids(ids[:1], (7, 7))) == 4
+
+
+def test_a_corner_with_its_neighbours_hidden_is_measured_in_lattice_steps():
+    # corner (0, 0) 1 px off, (1, 0) and (0, 1) hidden: the nearest found corner is a diagonal away
+    # (14 px), but the residual is in the lattice's own step (10 px)
+    ids = np.array([(i, j) for j in range(5) for i in range(5) if (i, j) not in {(1, 0), (0, 1)}])
+    pts = ids * 10.0 + 50.0
+    pts[0] += (1.0, 0.0)
+    res = lattice_residuals(ids, pts)
+    assert abs(res[0] - 0.1) < 0.01
+    assert res[1:].max() < 0.05
