@@ -14,7 +14,7 @@ import numpy as np
 
 from .grid import Grid
 
-__all__ = ["choose_reading", "full_board", "handed", "order_full_board", "reading", "symmetric_ids"]
+__all__ = ["choose_reading", "full_board", "full_board_ids", "handed", "order_full_board", "reading", "symmetric_ids"]
 
 
 def _parity_contrast(corners: np.ndarray, pattern_size: tuple[int, int], gray: np.ndarray) -> float:
@@ -107,8 +107,13 @@ def full_board(grid: Grid, scores: np.ndarray, pattern_size: tuple[int, int] | N
     corners[idx] = grid.points
     sc[idx] = np.where(grid.index >= 0, scores[grid.index], 0.0)
     perm = reading(corners, (cols, rows), gray)
-    ids = np.stack(np.meshgrid(np.arange(cols), np.arange(rows)), -1).reshape(-1, 2).astype(np.int32)
-    return corners[perm], ids, sc[perm], (cols, rows)
+    return corners[perm], full_board_ids((cols, rows)), sc[perm], (cols, rows)
+
+
+def full_board_ids(pattern_size) -> np.ndarray:
+    """(cols·rows, 2) int32 (col, row) of every corner of a full board, in OpenCV order (r·cols + c)."""
+    cols, rows = (int(v) for v in pattern_size)
+    return np.stack(np.meshgrid(np.arange(cols), np.arange(rows)), -1).reshape(-1, 2).astype(np.int32)
 
 
 def _steps(ids: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

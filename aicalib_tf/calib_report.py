@@ -19,11 +19,9 @@ import cv2
 import numpy as np
 
 from .calibration import Calibration, View, view_rms
+from .metrics import normalized_rays
 
 __all__ = ["field_of_view", "view_tilts_deg", "coverage_counts", "calibration_warnings", "format_report", "report_figure"]
-
-_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
-
 
 def field_of_view(cal: Calibration) -> tuple[float, float]:
     """(horizontal, vertical) field of view in degrees, through the lens model.
@@ -32,11 +30,8 @@ def field_of_view(cal: Calibration) -> tuple[float, float]:
     pinhole value 2·atan(w / 2f) where the inverse distortion does not converge.
     """
     w, h = cal.image_size
-    pts = np.array([[0.0, cal.cy], [w - 1.0, cal.cy], [cal.cx, 0.0], [cal.cx, h - 1.0]]).reshape(-1, 1, 2)
-    norm = cv2.undistortPoints(pts, cal.K, cal.dist, R=None, P=None, criteria=_CRITERIA).reshape(-1, 2)
-    obj = np.concatenate([norm, np.ones((4, 1))], axis=1)
-    back, _ = cv2.projectPoints(obj, np.zeros(3), np.zeros(3), cal.K, cal.dist)
-    ok = np.linalg.norm(back.reshape(-1, 2) - pts.reshape(-1, 2), axis=1) < 1e-2
+    pts = np.array([[0.0, cal.cy], [w - 1.0, cal.cy], [cal.cx, 0.0], [cal.cx, h - 1.0]])
+    norm, ok = normalized_rays(pts, cal.K, cal.dist, tol_px=1e-2)
     if ok.all():
         hfov = np.degrees(np.arctan(norm[1, 0]) - np.arctan(norm[0, 0]))
         vfov = np.degrees(np.arctan(norm[3, 1]) - np.arctan(norm[2, 1]))

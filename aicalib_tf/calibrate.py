@@ -70,6 +70,8 @@ def make_detector(name: str, pattern_size: tuple[int, int], model: str = "defaul
     "opencv-sb" (full boards only). The function's ``info`` attribute holds the model path and
     sha256 for the CNN detectors. The detectors are those of :mod:`aicalib_tf.detectors`.
     """
+    from data_gen.degrade import quantize
+
     from .detectors import make_detectors
 
     if name not in DETECTORS:
@@ -79,8 +81,7 @@ def make_detector(name: str, pattern_size: tuple[int, int], model: str = "defaul
 
     def detect(gray):
         g = np.asarray(gray)
-        u8 = g if g.dtype == np.uint8 else np.clip(g * 255.0 + 0.5, 0, 255).astype(np.uint8)
-        found = found_by(u8)
+        found = found_by(g if g.dtype == np.uint8 else quantize(g))
         return (found.corners, found.ids) if len(found.corners) else None
 
     detect.info = info.get(name, {})
@@ -173,19 +174,20 @@ def _apply_size_policy(found: list[_Found], policy: str, skipped: dict) -> tuple
 
 
 def _preview(cal: Calibration, files: dict[str, str]) -> tuple[str, bytes] | None:
-    """(file name, PNG bytes) of the first used view's image, undistorted."""
+    """(file name, PNG bytes) of the first used view's image of the calibration's size, undistorted.
+
+    Images that --resize-policy brought to that size are passed over, so the preview never
+    repeats the crop or scale that their corners went through.
+    """
     import cv2
 
     from .calib_io import undistort as _undistort
 
+    w, h = cal.image_size
     for name in cal.views:
         img = cv2.imread(files[name], cv2.IMREAD_COLOR)
-        if img is None:
+        if img is None or img.shape[:2] != (h, w):
             continue
-        w, h = cal.image_size
-        img = img[:h, :w] if img.shape[1] >= w and img.shape[0] >= h else cv2.resize(img, (w, h))
-        if img.shape[:2] != (h, w):
-            img = cv2.resize(img, (w, h))
         ok, png = cv2.imencode(".png", _undistort(img, cal))
         if ok:
             return f"undistorted_{Path(name).stem}.png", png.tobytes()

@@ -160,6 +160,11 @@ def _usable(view: View, pattern_size: tuple[int, int]) -> str | None:
     return None
 
 
+def _n_dist(flags: int) -> int:
+    """How many distortion coefficients a fit with these OpenCV flags estimates."""
+    return 8 if flags & cv2.CALIB_RATIONAL_MODEL else 5
+
+
 def _flags(rational: bool, fix_k3: bool) -> int:
     flags = cv2.CALIB_RATIONAL_MODEL if rational else 0
     if fix_k3:
@@ -188,7 +193,7 @@ def _run(views: list[View], square_size: float, image_size, flags: int, warm=Non
     img = [v.corners.astype(np.float32).reshape(-1, 1, 2) for v in views]
     size = tuple(int(s) for s in image_size)
     best, last_error = None, None
-    n_dist = 8 if flags & cv2.CALIB_RATIONAL_MODEL else 5
+    n_dist = _n_dist(flags)
     for start in _starts(image_size, warm):
         try:
             if start is None:
@@ -267,7 +272,7 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
         rejected[usable[worst].name] = f"outlier: RMS {per_view[worst]:.2f} px > {thr:.2f} px"
         usable.pop(worst)
         max_drop -= 1
-    n_dist = 8 if rational else 5
+    n_dist = _n_dist(flags)
     names = INTRINSIC_NAMES[: 4 + n_dist]
     std = {n: float(s) for n, s in zip(names, std_in[: len(names)])}
     return Calibration(

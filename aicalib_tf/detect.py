@@ -210,7 +210,9 @@ def find_chessboard_corners(image, pattern_size: tuple[int, int], *, model=None)
 
 def draw_detection(gray: np.ndarray, det: Detection) -> np.ndarray:
     """An overlay: (H, W, 3) uint8 BGR with the corners, row lines and corner (0, 0) marked (red)."""
-    img = cv2.cvtColor(np.clip(gray * 255.0 + 0.5, 0, 255).astype(np.uint8), cv2.COLOR_GRAY2BGR)
+    from data_gen.degrade import quantize
+
+    img = cv2.cvtColor(quantize(gray), cv2.COLOR_GRAY2BGR)
     if not det.found:
         cv2.putText(img, "no board", (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (0, 0, 255), 2)
         return img

@@ -12,6 +12,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from .board_order import full_board_ids
 from .metrics import board_detection_outcome, partial_board_stats
 
 __all__ = ["DETECTORS", "WRONG_PX", "Found", "make_detectors", "time_detector", "score_detection"]
@@ -32,12 +33,6 @@ class Found(NamedTuple):
     complete: bool
 
 
-def _grid_ids(pattern: tuple[int, int]) -> np.ndarray:
-    cols, rows = pattern
-    c, r = np.meshgrid(np.arange(cols), np.arange(rows))
-    return np.stack([c.ravel(), r.ravel()], axis=1)
-
-
 _NOTHING = Found(np.zeros((0, 2)), np.zeros((0, 2), np.int64), False)
 
 
@@ -53,7 +48,7 @@ def make_detectors(names, pattern: tuple[int, int], model: str = "default") -> t
     unknown = [n for n in names if n not in DETECTORS]
     if unknown or not names:
         raise ValueError(f"unknown detector(s) {', '.join(unknown) or '(none given)'}; choose from {', '.join(DETECTORS)}")
-    ids_full = _grid_ids(pattern)
+    ids_full = full_board_ids(pattern).astype(np.int64)
     dets, info = {}, {}
 
     def cnn(m):

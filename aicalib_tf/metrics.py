@@ -10,7 +10,7 @@ import numpy as np
 
 __all__ = [
     "board_symmetries", "align_to_truth", "corner_error_stats", "match_points", "point_detection_stats",
-    "distortion_field", "calibration_errors",
+    "normalized_rays", "distortion_field", "calibration_errors",
     "board_detection_outcome", "partial_board_stats", "detection_agreement", "OUTCOMES",
 ]
 
@@ -117,23 +117,37 @@ def point_detection_stats(pairs: list[tuple[np.ndarray, np.ndarray]], max_distan
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
 
 
+def normalized_rays(points: np.ndarray, K: np.ndarray, dist: np.ndarray, *,
+                    tol_px: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
+    """Undistort image points to normalized camera coordinates, and say where that worked.
+
+    points : (N, 2) float (x, y) px in the distorted image. K : (3, 3). dist : OpenCV coefficients.
+    Returns (xy (N, 2) float64 normalized (x/z, y/z), ok (N,) bool). ``ok`` is False where the
+    iterative inverse did not converge: re-distorting misses the point by more than ``tol_px``
+    px (e.g. beyond a strong lens' fold).
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 1, 2)
+    K = np.asarray(K, dtype=np.float64)
+    dist = np.asarray(dist, dtype=np.float64).ravel()
+    xy = cv2.undistortPoints(pts, K, dist, R=None, P=None, criteria=_UNDISTORT_CRITERIA).reshape(-1, 2)
+    obj = np.concatenate([xy, np.ones((len(xy), 1))], axis=1)
+    back, _ = cv2.projectPoints(obj, np.zeros(3), np.zeros(3), K, dist)
+    ok = np.linalg.norm(back.reshape(-1, 2) - pts.reshape(-1, 2), axis=1) < tol_px
+    return xy, ok
+
+
 def distortion_field(points: np.ndarray, K: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The displacement a lens model's undistortion applies to image points.
 
     points : (N, 2) float (x, y) px in the distorted image. K : (3, 3). dist : OpenCV coefficients.
     Returns (field (N, 2) px, ok (N,) bool): ``field = undistorted - points``, both in the model's
-    own pixel frame (``P = K``). ``ok`` is False where the iterative inverse did not converge
-    (re-distorting misses the point by more than 1e-3 px), e.g. beyond a strong lens' fold.
+    own pixel frame (``P = K``); ``ok`` as in :func:`normalized_rays` (1e-3 px).
     """
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 1, 2)
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     K = np.asarray(K, dtype=np.float64)
-    dist = np.asarray(dist, dtype=np.float64).ravel()
-    norm = cv2.undistortPoints(pts, K, dist, R=None, P=None, criteria=_UNDISTORT_CRITERIA)
-    obj = np.concatenate([norm.reshape(-1, 2), np.ones((len(pts), 1))], axis=1)
-    back, _ = cv2.projectPoints(obj, np.zeros(3), np.zeros(3), K, dist)
-    ok = np.linalg.norm(back.reshape(-1, 2) - pts.reshape(-1, 2), axis=1) < 1e-3
-    ideal = norm.reshape(-1, 2) * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
-    return ideal - pts.reshape(-1, 2), ok
+    xy, ok = normalized_rays(pts, K, dist)
+    ideal = xy * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
+    return ideal - pts, ok
 
 
 def calibration_errors(K: np.ndarray, dist: np.ndarray, K_true: np.ndarray, dist_true: np.ndarray,

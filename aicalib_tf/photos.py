@@ -121,10 +121,6 @@ def consensus_reference(boards: dict, pattern: tuple[int, int], agree_px: float 
     return ref, "consensus", members
 
 
-def _to_uint8(gray: np.ndarray) -> np.ndarray:
-    return dg.quantize(gray)
-
-
 def run_photos(folder: Path, pattern: tuple[int, int], detectors: dict, *, degrade: bool = False, seed: int = 0,
                progress: bool = True) -> dict:
     """Run every detector on every photo (and, with ``degrade``, on its degraded copies).
@@ -156,7 +152,7 @@ def run_photos(folder: Path, pattern: tuple[int, int], detectors: dict, *, degra
         sizes[f.name] = (gray.shape[1], gray.shape[0])
         ref = None
         for vi, var in enumerate(variants):
-            img = _to_uint8(gray) if var == "clean" else degrade_photo(gray, var, np.random.default_rng([seed, fi, vi]))
+            img = dg.quantize(gray) if var == "clean" else degrade_photo(gray, var, np.random.default_rng([seed, fi, vi]))
             if first:  # warm up on the first photo, untimed
                 for fn in detectors.values():
                     fn(img)
