@@ -32,11 +32,47 @@ from .corner_map import STRIDE, encode_corners, standardize
 from .inference import extract_patches
 from .model import PATCH_SIZE
 
-__all__ = ["Pool", "render_pool", "CornerMapBatches", "PatchBatches", "CROP_SIZE"]
+__all__ = ["Pool", "parse_mix", "render_pool", "CornerMapBatches", "PatchBatches", "CROP_SIZE"]
 
 CROP_SIZE = 128
 IMAGE_SIZE = (640, 480)
 BOARD_FREE_FRACTION = 0.1
+MIX_INDEX_STRIDE = 1_000_000  # preset k of a mix renders indices k·stride + i: no scene repeats another's
+
+
+def parse_mix(spec: str) -> list[tuple[str, float]]:
+    """A pool's presets and their shares from ``"train"`` or ``"train:0.8,distorted:0.2"``.
+
+    A name without a share gets 1; shares are normalised to sum to 1. Raises ``ValueError`` naming
+    the bad part (unknown preset, share not a positive number, a preset twice).
+    """
+    from data_gen.presets import PRESETS
+
+    out: list[tuple[str, float]] = []
+    for part in str(spec).split(","):
+        name, _, share = part.strip().partition(":")
+        if name not in PRESETS:
+            raise ValueError(f"unknown preset {name!r} in {spec!r}; choose from: {', '.join(PRESETS)}")
+        if name in (n for n, _ in out):
+            raise ValueError(f"preset {name!r} appears twice in {spec!r}")
+        try:
+            w = float(share) if share else 1.0
+        except ValueError:
+            raise ValueError(f"share {share!r} of preset {name!r} is not a number") from None
+        if not (w > 0 and np.isfinite(w)):
+            raise ValueError(f"share of preset {name!r} must be > 0, got {share!r}")
+        out.append((name, w))
+    total = sum(w for _, w in out)
+    return [(n, w / total) for n, w in out]
+
+
+def _split(count: int, shares: list[float]) -> list[int]:
+    """``count`` items split by ``shares`` (largest remainders), summing to ``count``."""
+    raw = np.asarray(shares) * count
+    n = np.floor(raw).astype(int)
+    for k in np.argsort(-(raw - n), kind="stable")[: count - int(n.sum())]:
+        n[k] += 1
+    return [int(v) for v in n]
 
 
 @dataclass(frozen=True)
@@ -62,19 +98,24 @@ class Pool:
 
 def render_pool(count: int, seed: int, *, preset: str = "train", workers: int = 1, progress: bool = True,
                 size: tuple[int, int] = IMAGE_SIZE) -> Pool:
-    """Render ``count`` images: ~90% ``preset`` scenes and ~10% board-free clutter, all seeded.
+    """Render ``count`` images: ~90% board scenes of ``preset`` and ~10% board-free clutter, all seeded.
 
+    preset : one data_gen preset, or a mix ``"train:0.8,distorted:0.2"`` (:func:`parse_mix`): the
+        board scenes are split by the shares, preset k of the mix rendering indices from
+        ``k · MIX_INDEX_STRIDE`` (a single preset renders exactly what it did before mixes).
     Distractor checkers are switched off (see the module docstring).
     """
     if count < 1:
         raise ValueError(f"pool needs at least 1 image, got {count}")
-    boards = get_preset(preset, checker_distractors=(0.0, 0.0))
+    mix = parse_mix(preset)
     clutter = get_preset("clutter", checker_distractors=(0.0, 0.0))
     n_free = int(round(BOARD_FREE_FRACTION * count)) if count >= 10 else 0
     w, h = size
     images = np.empty((count, h, w), np.uint8)
     corners = []
-    jobs = [(boards, range(count - n_free)), (clutter, range(n_free))]
+    jobs = [(get_preset(name, checker_distractors=(0.0, 0.0)), range(k * MIX_INDEX_STRIDE, k * MIX_INDEX_STRIDE + n))
+            for k, ((name, _), n) in enumerate(zip(mix, _split(count - n_free, [s for _, s in mix])))]
+    jobs.append((clutter, range(n_free)))
     bar = tqdm(total=count, desc=f"rendering {preset} pool", unit="img", disable=not progress)
     k = 0
     for p, indices in jobs:

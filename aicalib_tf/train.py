@@ -7,9 +7,10 @@ Examples::
     python -m aicalib_tf.train --out runs/default --resume                  # continue a killed run
 
 A run renders a seeded pool of ``--preset`` images in memory, then trains on crops cut from it
-(see :mod:`aicalib_tf.data`). After each epoch it scores corner precision, recall (a match is
-within 1 px) and localisation error on a fixed validation set (preset ``--preset``, seed 900001,
-never trained on) and saves a checkpoint. RUN_DIR receives:
+(see :mod:`aicalib_tf.data`; ``--preset`` may mix presets, e.g. ``train:0.8,distorted:0.2``).
+After each epoch it scores corner precision, recall (a match is within 1 px) and localisation
+error on a fixed validation set (``--preset``, or a mix's first preset; seed 900001, never
+trained on) and saves a checkpoint. RUN_DIR receives:
 
     config.json        the effective configuration (written first, atomically)
     checkpoint-NNNN.keras  the model after the last finished epoch, with its optimiser state
@@ -60,14 +61,15 @@ class TrainConfig:
 
     def check(self) -> None:
         """Raise ``ValueError`` naming the first bad option."""
-        from data_gen.presets import PRESETS
-
+        from .data import parse_mix
         from .model import ARCHITECTURES
 
         if self.arch not in ARCHITECTURES:
             raise ValueError(f"--arch: unknown architecture {self.arch!r}; choose from: {', '.join(ARCHITECTURES)}")
-        if self.preset not in PRESETS:
-            raise ValueError(f"--preset: unknown preset {self.preset!r}; choose from: {', '.join(PRESETS)}")
+        try:
+            parse_mix(self.preset)
+        except ValueError as e:
+            raise ValueError(f"--preset: {e}") from None
         for name in ("epochs", "steps", "batch_size", "pool_images", "val_images", "workers"):
             if getattr(self, name) < 1:
                 raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
@@ -171,7 +173,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
     import keras
     import tensorflow as tf
 
-    from .data import CornerMapBatches, PatchBatches, render_pool
+    from .data import CornerMapBatches, PatchBatches, parse_mix, render_pool
     from .model import build_model, compile_model, file_sha256, load_model, save_model
 
     keras.utils.set_random_seed(cfg.seed)
@@ -179,7 +181,8 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
         tf.config.experimental.enable_op_determinism()
     t0 = time.perf_counter()
     pool = render_pool(cfg.pool_images, cfg.seed, preset=cfg.preset, workers=cfg.workers, progress=progress)
-    val = validation_set(cfg.preset, cfg.val_images, workers=cfg.workers, progress=progress)
+    val_preset = parse_mix(cfg.preset)[0][0]  # a mix validates on its first preset
+    val = validation_set(val_preset, cfg.val_images, workers=cfg.workers, progress=progress)
     batches_cls = CornerMapBatches if cfg.arch == "default" else PatchBatches
     batches = batches_cls(pool, batch_size=cfg.batch_size, steps=cfg.steps, seed=cfg.seed, epoch=initial_epoch)
     if resume:
@@ -208,7 +211,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
         "data_prep_s": round(prep_s, 1),
         "wall_s_this_process": round(time.perf_counter() - t0, 1),
         "wall_s_total": round(wall_before + time.perf_counter() - t0, 1),
-        "validation": {"preset": cfg.preset, "seed": VALIDATION_SEED, "images": cfg.val_images, "match_px": 1.0},
+        "validation": {"preset": val_preset, "seed": VALIDATION_SEED, "images": cfg.val_images, "match_px": 1.0},
         "sha256": file_sha256(final),
         "size_bytes": final.stat().st_size,
         **({"previous": previous} if previous else {}),
@@ -227,7 +230,7 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--steps", type=int, default=d.steps, help="batches per epoch (default: %(default)s)")
     ap.add_argument("--batch-size", type=int, default=d.batch_size, help="(default: %(default)s)")
     ap.add_argument("--seed", type=int, default=d.seed, help="data and initialisation seed (default: %(default)s)")
-    ap.add_argument("--preset", default=d.preset, help="data_gen preset to train on (default: %(default)s)")
+    ap.add_argument("--preset", default=d.preset, help="data_gen preset to train on, or a mix such as train:0.8,distorted:0.2 (default: %(default)s)")
     ap.add_argument("--pool-images", type=int, default=d.pool_images, help="images rendered for training (default: %(default)s)")
     ap.add_argument("--val-images", type=int, default=d.val_images, help="validation images (default: %(default)s)")
     ap.add_argument("--learning-rate", type=float, default=d.learning_rate, help="peak Adam rate, cosine decay (default: %(default)s)")

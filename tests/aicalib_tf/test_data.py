@@ -69,3 +69,25 @@ def test_patch_batches_are_balanced(pool):
     assert x.shape == (16, 32, 32, 1) and y.shape == (16, 1)
     assert y.sum() == 8
     np.testing.assert_array_equal(pb[0][0], x)
+
+
+def test_parse_mix_normalises_shares_and_names_bad_parts():
+    from aicalib_tf.data import parse_mix
+
+    assert parse_mix("train") == [("train", 1.0)]
+    assert parse_mix("train:3,distorted:1") == [("train", 0.75), ("distorted", 0.25)]
+    for spec, words in [("nope", "unknown preset 'nope'"), ("train:0", "must be > 0"), ("train:x", "'x'"),
+                        ("train,train", "twice")]:
+        with pytest.raises(ValueError, match=words):
+            parse_mix(spec)
+
+
+def test_a_mixed_pool_renders_each_preset_its_share(pool):
+    from data_gen import make_sample
+
+    mixed = render_pool(10, seed=3, preset="train:0.5,distorted:0.5", workers=1, progress=False)
+    # 9 board scenes split 5 / 4 (largest remainder first), then the clutter image
+    assert np.array_equal(mixed.images[:5], pool.images[:5])  # preset 0 renders what a single preset does
+    d0 = make_sample("distorted", 3, 1_000_000, size=(640, 480))
+    assert np.array_equal(mixed.images[5], d0.image)
+    assert np.array_equal(mixed.images[9], pool.images[9])
