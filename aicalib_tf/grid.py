@@ -91,9 +91,13 @@ class _Lattice:
     def __init__(self, pts: np.ndarray, free: np.ndarray, propose=None, limit: int | None = None):
         self.pts, self.free, self.n0 = pts, free, len(pts)
         self.cells: dict[tuple[int, int], int] = {}
+        self.at: dict[tuple[int, int], np.ndarray] = {}  # the cells' points: (2,) float64 px
         self.coords: tuple[set, set] = (set(), set())  # the i and the j positions taken
         self.propose, self.limit = propose, limit
         self.extra: list[np.ndarray] = []
+        self.version = 0  # counts cells taken: what was worked out at one version holds until the next
+        self.sides: dict = {}  # (axis, sign) -> (version, that side's next line), see _side
+        self.free_idx = (-1, None)  # (version, np.flatnonzero(free) at that version)
 
     def point(self, k: int) -> np.ndarray:
         return self.pts[k] if k < self.n0 else self.extra[k - self.n0]
@@ -104,7 +108,12 @@ class _Lattice:
         among : sorted candidate indices that hold every candidate within tol of a prediction
         (a cheaper search, same answer), or None for all.
         """
-        idx = np.flatnonzero(self.free) if among is None else among[self.free[among]]
+        if among is not None:
+            idx = among[self.free[among]]
+        else:  # while a lattice grows only its take() changes free: the list holds until the next version
+            if self.free_idx[0] != self.version:
+                self.free_idx = (self.version, np.flatnonzero(self.free))
+            idx = self.free_idx[1]
         if len(idx) == 0:
             return np.full(len(pred), -1), np.arange(len(pred))
         d2 = ((pred[:, None, :] - self.pts[None, idx, :]) ** 2).sum(-1)
@@ -135,14 +144,15 @@ class _Lattice:
 
     def take(self, cell: tuple[int, int], k: int) -> None:
         self.cells[cell] = int(k)
+        self.at[cell] = self.point(k)
         self.coords[0].add(int(cell[0]))
         self.coords[1].add(int(cell[1]))
+        self.version += 1
         if k < self.n0:
             self.free[k] = False
 
     def p(self, cell) -> np.ndarray | None:
-        k = self.cells.get(cell)
-        return None if k is None else self.point(k)
+        return self.at.get(cell)
 
     def extent(self, axis: int) -> int:
         return max(self.coords[axis]) - min(self.coords[axis]) + 1
@@ -174,20 +184,38 @@ def _side(lat: _Lattice, axis: int, sign: int):
 
     Each line ending on that side predicts its next point as :func:`_predict` does (all lines at
     once). None when the grid has reached ``limit`` along ``axis`` or no line predicts a point.
+    Worked out once per lattice version (``_Lattice.sides``), so callers must not change the arrays.
     """
+    cached = lat.sides.get((axis, sign))
+    if cached is None or cached[0] != lat.version:
+        cached = (lat.version, _work_out_side(lat, axis, sign))
+        lat.sides[(axis, sign)] = cached
+    return cached[1]
+
+
+def _work_out_side(lat: _Lattice, axis: int, sign: int):
+    """:func:`_side`, computed."""
     if lat.limit is not None and lat.extent(axis) >= lat.limit:
         return None
     new = max(lat.coords[axis]) + 1 if sign > 0 else min(lat.coords[axis]) - 1
-    cells, line = [], []
+    get = lat.at.get
+    b1, b2, b3 = new - sign, new - 2 * sign, new - 3 * sign
+    cells, l1, l2, l3, quad = [], [], [], [], []
     for o in sorted(lat.coords[1 - axis]):
-        at = [lat.p((new - t * sign, o) if axis == 0 else (o, new - t * sign)) for t in (1, 2, 3)]
-        if at[0] is not None and at[1] is not None:
+        if axis == 0:
+            q1, q2, q3 = get((b1, o)), get((b2, o)), get((b3, o))
+        else:
+            q1, q2, q3 = get((o, b1)), get((o, b2)), get((o, b3))
+        if q1 is not None and q2 is not None:
             cells.append((new, o) if axis == 0 else (o, new))
-            line.append((at[0], at[1], at[0] if at[2] is None else at[2], at[2] is not None))
+            l1.append(q1)
+            l2.append(q2)
+            l3.append(q1 if q3 is None else q3)
+            quad.append(q3 is not None)
     if not cells:
         return None
-    p1, p2, p3 = (np.array([ln[t] for ln in line]) for t in range(3))
-    quad = np.array([ln[3] for ln in line])[:, None]
+    p1, p2, p3 = np.array(l1), np.array(l2), np.array(l3)
+    quad = np.array(quad)[:, None]
     preds = np.where(quad, 3 * p1 - 3 * p2 + p3, 2 * p1 - p2)  # quadratic where three points are known
     d = p1 - p2
     return cells, preds, TOLERANCE * np.sqrt((d * d).sum(axis=1))

@@ -70,3 +70,25 @@ def test_full_subgrid_cuts_the_largest_filled_rectangle():
     assert len(sub) == 24 and sub.shape == (8, 3) and np.array_equal(sub.points.min(0), [0, 3])
     thin = ij[:, 1] < 2  # 8x2: no 3x3 inside
     assert full_subgrid(Grid(index=np.flatnonzero(thin), ij=ij[thin], points=ij[thin] * 1.0)) is None
+
+
+def test_a_side_is_worked_out_again_only_after_a_cell_is_taken():
+    from aicalib_tf.grid import _Lattice, _side, _work_out_side
+
+    ii, jj = np.meshgrid(np.arange(4), np.arange(3), indexing="ij")
+    pts = np.stack([10.0 + 8 * jj.ravel() + 0.1 * ii.ravel() ** 2, 20.0 + 8 * ii.ravel()], axis=1)
+    lat = _Lattice(pts, np.ones(len(pts), bool))
+    for k, (i, j) in enumerate(zip(ii.ravel(), jj.ravel())):
+        if (i, j) != (0, 2):
+            lat.take((int(i), int(j)), k)
+    first = _side(lat, 0, 1)
+    assert _side(lat, 0, 1) is first  # remembered while nothing changes
+    cells, preds, tols = first
+    assert cells == [(4, 0), (4, 1), (4, 2)]
+    np.testing.assert_array_equal(preds[0], 3 * pts[9] - 3 * pts[6] + pts[3])  # three known: quadratic
+    lat.take((0, 2), 2)
+    again = _side(lat, 0, -1)
+    fresh = _work_out_side(lat, 0, -1)
+    assert again[0] == fresh[0] == [(-1, 0), (-1, 1), (-1, 2)]
+    np.testing.assert_array_equal(again[1], fresh[1])
+    assert list(lat._nearest_free(preds, tols)[0]) == [-1, -1, -1]
