@@ -7,7 +7,10 @@ quadratic surface to a Gaussian-weighted window of the smoothed image around eac
 to the quadratic's saddle point and repeats until the step is below 1e-3 px, all points at once
 (each point stops on its own, so its result never depends on the others). :func:`refine_windowed` picks
 each point's window to fit inside its squares, on an image smoothed once per window size
-(:class:`Smoothed`). :func:`refine_subpix` wraps OpenCV's ``cornerSubPix`` behind the same
+(:class:`Smoothed`). A hard shadow edge across the window pulls the saddle up to ~3 px towards it
+(evaluate ``shading``: 15 wrong boards); where the window about the saddle is not point-symmetric
+(:func:`aicalib_tf.robust_refine.asymmetry` above ``MAX_ASYMMETRY``), the fit that models a
+shadow edge (:func:`aicalib_tf.robust_refine.refine_symmetric`) decides instead. :func:`refine_subpix` wraps OpenCV's ``cornerSubPix`` behind the same
 signature, for comparison.
 
 Coordinates are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0).
@@ -107,15 +110,25 @@ def refine_saddle(
 
 
 class Smoothed:
-    """The image smoothed for each refinement radius r (σ = 0.4·r), made once per image on demand."""
+    """The image smoothed for each refinement radius r (σ = 0.4·r) or σ, made once per image on demand."""
 
     def __init__(self, gray: np.ndarray):
         self.gray, self.cache = gray, {}
 
     def __getitem__(self, r: int) -> np.ndarray:
-        if r not in self.cache:
-            self.cache[r] = cv2.GaussianBlur(self.gray, (0, 0), 0.4 * r)
-        return self.cache[r]
+        return self.sigma(0.4 * r)
+
+    def sigma(self, sigma: float) -> np.ndarray:
+        """The image smoothed with a Gaussian of ``sigma`` px."""
+        key = round(float(sigma), 6)
+        if key not in self.cache:
+            self.cache[key] = cv2.GaussianBlur(self.gray, (0, 0), key)
+        return self.cache[key]
+
+
+MAX_ASYMMETRY = 0.004  # above it (robust_refine.asymmetry at the saddle) the shadow-robust fit decides
+SHADOWED = 0.02  # above it, and the shadow-robust fit failing, the point is not refined (ok False)
+SHADOW_SIGMA = 0.7  # px, the smoothing of the image for the shadow-robust fit
 
 
 def window_radius(spacing: np.ndarray) -> np.ndarray:
@@ -129,12 +142,24 @@ def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, ma
     pts : (N, 2). spacing : (N,) px, the local corner spacing. max_shift : (N,) px or None.
     Returns refined (N, 2) float32 and ok (N,) bool.
     """
+    from .robust_refine import asymmetry, refine_symmetric  # they use this module's saddle fit
+
     radius = window_radius(spacing)
     out = np.asarray(pts, np.float32).copy()
     ok = np.zeros(len(pts), bool)
     for r in np.unique(radius):
-        sel = radius == r
-        out[sel], ok[sel] = refine_saddle(smoothed[int(r)], pts[sel], sigma=0.0, radius=int(r))
+        sel = np.flatnonzero(radius == r)
+        img = smoothed[int(r)]
+        out[sel], ok[sel] = refine_saddle(img, pts[sel], sigma=0.0, radius=int(r))
+        # a shadow edge across the window pulls the saddle fit: where the window is not point-symmetric
+        # about it, the fit that allows a shadow edge decides
+        asym = asymmetry(img, out[sel], int(r))
+        odd = ok[sel] & (asym > MAX_ASYMMETRY)
+        if odd.any():  # on a lightly smoothed image: more smoothing mixes the shadow into the board
+            got, got_ok = refine_symmetric(smoothed.sigma(SHADOW_SIGMA), pts[sel[odd]], radius=int(r) + 1)
+            out[sel[odd][got_ok]] = got[got_ok]
+            # neither fit to be trusted where the window is far from symmetric and this fit failed
+            ok[sel[odd][~got_ok & (asym[odd] > SHADOWED)]] = False
     if max_shift is not None:
         ok &= np.linalg.norm(out - pts, axis=1) <= max_shift
     return out, ok
