@@ -24,6 +24,9 @@ import numpy as np
 __all__ = ["Grid", "assemble_grids", "edge_contrast", "full_subgrid"]
 
 TOLERANCE = 0.3  # of the local step: how far a predicted corner may be from the point it takes
+MAX_STEP_RATIO = 4.5  # a seed's two steps may differ in length this much (a board tilted 60°+ halves one)
+MAX_CELL_AREA = 1.5  # seed pairs spanning more than this of the smallest cell generate a sub-lattice
+MAX_SPAN_RATIO = 1.15  # seed pairs longer than this times the shortest (|u| + |v|) are not tried
 
 
 @dataclass(frozen=True)
@@ -344,30 +347,55 @@ def edge_contrast(gray: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
 _OFFS = np.array([(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)], np.float64)
 
 
-def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | None = None) -> bool:
+def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | None = None,
+          gray: np.ndarray | None = None) -> bool:
     """Try to place a 3×3 lattice centred on point ``k``; True (and cells taken) on success.
 
     Any two independent lattice steps generate the same points, so a diagonal step would give a
     sheared grid. With ``contrast`` (:func:`edge_contrast` of each step to a neighbour), only steps
-    along square edges are used; pairs of steps are tried most orthogonal first.
+    along square edges are used, and a step with a near point halfway along it (a double step) is
+    not. Of the pairs of steps that are not nearly collinear, only these are tried, shortest
+    (|u| + |v|) first:
+
+    * pairs spanning a cell of at most ``MAX_CELL_AREA`` times the smallest pair's: a pair such as
+      (row, row − 2·col) generates only every other point, its cell twice the board's;
+    * pairs at most ``MAX_SPAN_RATIO`` times as long as the shortest such pair: of the pairs that
+      generate the whole lattice, the board's own edges are the shortest once diagonals are out.
+      A longer one such as (col, 2·col − row) is more orthogonal on a board tilted 60°, and it
+      seeds where the board's own 3×3 is incomplete, as a sheared grid.
     """
     p = lat.pts[k]
     steps = lat.pts[neighbours] - p
+    length = np.sqrt((steps * steps).sum(axis=1))
+    # a multiple step (a near point part-way along it: 2·col, 3·col) generates every other line only
+    t = (steps @ steps.T) / np.maximum(length**2, 1e-12)[:, None]  # [a, b]: b's position along a
+    off = np.abs(steps[:, 0:1] * steps[None, :, 1] - steps[:, 1:2] * steps[None, :, 0]) / np.maximum(length, 1e-12)[:, None]
+    single = ~((t > 0.2) & (t < 0.8) & (off < TOLERANCE * length[None, :])).any(axis=1)
     if contrast is not None:  # keep the steps that run along edges between squares
-        along = contrast >= 0.5 * contrast.max()
-        neighbours, steps = neighbours[along], steps[along]
-    length = np.sqrt((steps * steps).sum(axis=1)).tolist()
+        single &= contrast >= 0.5 * contrast.max()
+        contrast = contrast[single]
+    neighbours, steps, length = neighbours[single], steps[single], length[single].tolist()
     pairs = []
     for a in range(len(neighbours)):
         for b in range(a + 1, len(neighbours)):
             nu, nv = length[a], length[b]
-            if nu < 1.0 or nv < 1.0 or not 0.5 <= nu / nv <= 2.0:
+            if nu < 1.0 or nv < 1.0 or not 1 / MAX_STEP_RATIO <= nu / nv <= MAX_STEP_RATIO:
                 continue
             cos = abs(float(steps[a] @ steps[b])) / (nu * nv)
             if cos < 0.95:  # otherwise nearly collinear: not two grid directions
                 pairs.append((cos, a, b))
+    if pairs:
+        ab = np.array([(a, b) for _, a, b in pairs])
+        u, v = steps[ab[:, 0]], steps[ab[:, 1]]
+        area = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+        large = area > MAX_CELL_AREA * area.min()
+        span = np.array([length[a] + length[b] for _, a, b in pairs])
+        # a longer pair that generates the whole lattice too (col, 2·col − row) only seeds where
+        # the board's own 3×3 is incomplete, and then as a sheared grid: leave that to other seeds
+        short = ~large & (span <= MAX_SPAN_RATIO * span[~large].min())
+        pairs = sorted((n, *pair) for n, pair, ok in zip(span.tolist(), pairs, short) if ok)
     dist2 = ((lat.pts - p) ** 2).sum(axis=1)
-    for _, a, b in sorted(pairs):
+    for _, _, a, b in pairs:
         u, v = steps[a], steps[b]
         tol = TOLERANCE * min(length[a], length[b])
         preds = p + _OFFS[:, :1] * u + _OFFS[:, 1:] * v
@@ -382,7 +410,7 @@ def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | 
 
 
 def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray: np.ndarray | None = None,
-                   min_size: int = 9, neighbours: int = 6, propose=None, limit: int | None = None) -> list[Grid]:
+                   min_size: int = 9, neighbours: int = 12, propose=None, limit: int | None = None) -> list[Grid]:
     """Find lattices among candidate corner points.
 
     points : (N, 2) float (x, y) px. scores : (N,) or None; seeds are tried strongest first.
@@ -411,7 +439,7 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
         if not free[k]:
             continue
         lat = _Lattice(pts, free, propose, limit)
-        if not _seed(lat, int(k), near[k], None if contrast is None else contrast[k]):
+        if not _seed(lat, int(k), near[k], None if contrast is None else contrast[k], gray):
             continue
         _grow(lat)
         _fill_holes(lat)

@@ -92,3 +92,20 @@ def test_a_side_is_worked_out_again_only_after_a_cell_is_taken():
     assert again[0] == fresh[0] == [(-1, 0), (-1, 1), (-1, 2)]
     np.testing.assert_array_equal(again[1], fresh[1])
     assert list(lat._nearest_free(preds, tols)[0]) == [-1, -1, -1]
+
+
+@pytest.mark.parametrize("index", [69, 91, 274])
+def test_a_board_tilted_60_degrees_assembles_unsheared(index):
+    # evaluate's tilt60 scenes: one step about 2-4x the other, and a knight's step (2·col − row)
+    # more orthogonal to col than row is; these were missed (no grid) before seeds took the
+    # shortest pairs of steps, up to 4.5x apart, and left out multiple steps
+    from aicalib_tf.conditions import select_conditions
+
+    cond = select_conditions("tilt60")[0]
+    s = make_sample(cond.preset, cond.seed, index, size=cond.size, pattern=(9, 6))
+    gray = cv2.GaussianBlur(s.image, (0, 0), 1.0)
+    grids = assemble_grids(s.corners, gray=gray)
+    assert len(grids) == 1 and len(grids[0]) == 54
+    cr = np.stack(np.meshgrid(np.arange(9), np.arange(6)), -1).reshape(-1, 2)
+    order = np.argmin(np.linalg.norm(grids[0].points[:, None] - s.corners[None], axis=2), axis=1)
+    assert _same_lattice(grids[0].ij, cr[order])
