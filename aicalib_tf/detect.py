@@ -50,6 +50,13 @@ X-junctions one step outside the pattern is dropped. If every corner is found, t
 A view of one corner of a non-square board alone (two sides cut by the frame) cannot be placed:
 the visible sides could be the long or the short ones.
 
+Large images (longer side ≥ 1600 px) are searched coarse to fine (:mod:`aicalib_tf.pyramid`):
+first at a reduced scale (block means, the longer side kept ≥ 800 px), the corners found there
+refined again on the full image; a finer scale is tried only when no complete board was found,
+and the partial board with the most corners over all scales is returned otherwise. A 1920×1080
+image costs about a quarter as much; a board whose squares are too small for the coarse scale is
+found at full size.
+
 Without ``pattern_size``, the largest grid with every corner found is returned, complete, its
 size taken as the pattern; ids are relative to that grid, in the full-board order. A grid with
 positions missing (a line cut by the frame that kept a few corners, say) counts by its largest
@@ -71,6 +78,7 @@ from .io import load_image
 from .junctions import dedupe, nearest_spacing, proposer, ring_symmetry
 from .lattice import drop_outliers
 from .partial import partial_board
+from .pyramid import downscale, refine_full, scales, to_full
 from .refine import Smoothed, refine_windowed
 
 __all__ = ["Detection", "detect_corners", "draw_detection", "find_chessboard_corners", "main", "order_full_board"]
@@ -154,19 +162,35 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     a board partly out of frame or hidden is returned with ``complete=False`` when the image
     decides its ids (module docstring), and not at all otherwise.
     """
-    from .inference import corner_points
-
     gray = load_image(image)
     h, w = gray.shape
     if pattern_size is not None:
         from data_gen.board import check_pattern
 
         check_pattern(pattern_size)
+    model = model if model is not None else _default_model()
+    best = None
+    for f in scales(w, h):
+        det = _detect_at(downscale(gray, f), pattern_size, model, threshold)
+        if det.found and f > 1:
+            corners = refine_full(gray, to_full(det.corners, f))
+            det = Detection(corners, det.ids, det.scores, det.pattern_size, det.complete, (w, h))
+        if det.complete:
+            return det
+        if best is None or len(det.corners) > len(best.corners):
+            best = det
+    return Detection(best.corners, best.ids, best.scores, best.pattern_size, best.complete, (w, h))
+
+
+def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, threshold: float) -> Detection:
+    """:func:`detect_corners` on one scale: gray (H, W) float32, pattern already checked."""
+    from .inference import corner_points
+
+    h, w = gray.shape
     empty = Detection(np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
                       pattern_size, False, (w, h))
     if h < 8 or w < 8:
         return empty
-    model = model if model is not None else _default_model()
     pts, scores = corner_points(model, gray, threshold)
     pts, scores = pts[:MAX_CANDIDATES], scores[:MAX_CANDIDATES]  # strongest first; bounds the N² steps
     if len(pts) < 9:
