@@ -233,7 +233,8 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
     image_size : (width, height) px; required.
     rational : fit OpenCV's 8-coefficient rational model. fix_k3 : hold k3 at 0.
     reject_outliers : drop views by the rule in the module docstring and recalibrate.
-    Raises :class:`CalibrationError` with fewer than ``min_views`` usable views.
+    Raises :class:`CalibrationError` with fewer than ``min_views`` usable views, and ``ValueError``
+    for bad arguments (two views of one name among them).
     """
     from data_gen.board import check_pattern
 
@@ -246,8 +247,12 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
         raise ValueError(f"min_views must be at least 3, got {min_views}")
     rejected: dict[str, str] = {}
     usable: list[View] = []
+    seen: set[str] = set()
     for k, v in enumerate(views):
         view = v if isinstance(v, View) else View(getattr(v, "name", f"view{k}"), v.corners, v.ids)
+        if view.name in seen:  # per-view results and rejections are keyed by name
+            raise ValueError(f"two views are named {view.name!r}; view names must be unique")
+        seen.add(view.name)
         why = _usable(view, pattern_size)
         if why is None:
             usable.append(view)

@@ -96,6 +96,9 @@ def test_too_few_views_and_bad_views_are_clear_errors(left_views):
         calibrate_camera(left_views, (9, 6), -1.0, (640, 480))
     with pytest.raises(ValueError, match="pattern_size"):
         calibrate_camera(left_views, (9,), 25.0, (640, 480))
+    twin = View(left_views[0].name, left_views[1].corners, left_views[1].ids)
+    with pytest.raises(ValueError, match=f"two views are named '{left_views[0].name}'"):
+        calibrate_camera(left_views + [twin], (9, 6), 25.0, (640, 480))
 
 
 def test_partial_views_count_with_their_own_pose(left_views):
