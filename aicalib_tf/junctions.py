@@ -14,7 +14,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .refine import Smoothed, refine_windowed
+from .refine import SHADOW_SIGMA, Smoothed, refine_windowed, window_radius
+from .robust_refine import shadow_asymmetry
 
 __all__ = ["dedupe", "nearest_spacing", "proposer", "ring_symmetry"]
 
@@ -61,6 +62,28 @@ def ring_symmetry(gray: np.ndarray, pts: np.ndarray, radius: np.ndarray) -> tupl
     return amp, asym
 
 
+SHADOWED_X = 0.01  # most robust_refine.shadow_asymmetry of an X-junction under a shadow edge
+
+
+def _shadowed_x(smoothed: Smoothed, pts: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """(M,) bool: an X-junction whose ring test a shadow edge broke.
+
+    A shadow multiplies the image, so a corner it crosses is no longer point-symmetric; but the
+    odd part left is its even part times a profile across the edge, which
+    :func:`aicalib_tf.robust_refine.shadow_asymmetry` allows for (on the image and window, one px
+    wider, of the shadow-robust refinement). True X-junctions that fail the ring test on evaluate
+    ``shading`` leave at most 0.0074 of it; T-junctions at board edges and corners by an object's
+    edge 0.01–0.3 (benchmarks of the proposer's asks on shading, occluded, partial and clutter).
+    pts : (M, 2) px. radius : (M,) int, the refinement window radius.
+    """
+    out = np.zeros(len(pts), bool)
+    img = smoothed.sigma(SHADOW_SIGMA)
+    for r in np.unique(radius):
+        sel = np.flatnonzero(radius == r)
+        out[sel] = shadow_asymmetry(img, pts[sel], int(r) + 1) <= SHADOWED_X
+    return out
+
+
 def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float):
     """Look for a corner at each grid prediction: saddle refinement plus the ring test.
 
@@ -71,7 +94,9 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float):
     ``tight`` looks for a corner beside an object in front: the smallest fit window (2 px), the
     corner within 0.1 step, a ring of 0.15 step (at least 2 px). Either needs a ring amplitude of
     0.3·``ref_amp`` and asymmetry at most half the amplitude (a T-junction at a board edge has
-    asymmetry ≈ 1.3·amplitude). A point asked again (same prediction and step) is answered from
+    asymmetry ≈ 1.3·amplitude), or, where a shadow edge crosses the ring (asymmetry up to ~1.5·amplitude
+    on evaluate ``shading``), the fit window point-symmetric once a straight shadow edge is allowed
+    for (:func:`_shadowed_x`). A point asked again (same prediction and step) is answered from
     memory: each point's answer depends on that point alone (:func:`aicalib_tf.refine.refine_saddle`).
     """
     h, w = ring_image.shape
@@ -87,7 +112,10 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float):
             if len(k):
                 q, ok = refine_windowed(smoothed, p[k], window(s[k]), max_shift=shift * s[k])
                 amp, asym = ring_symmetry(ring_image, q.astype(np.float64), ring(s[k]))
-                ok &= (amp >= 0.3 * ref_amp) & (asym <= 0.5 * amp)
+                ok &= amp >= 0.3 * ref_amp
+                odd = np.flatnonzero(ok & (asym > 0.5 * amp))  # a shadow edge across the ring, or no X-junction
+                if len(odd):
+                    ok[odd] = _shadowed_x(smoothed, q[odd], window_radius(window(s[k[odd]])))
                 got[k[ok]] = q[ok]
             for m, g in zip(todo.tolist(), got):
                 memo[keys[m]] = g

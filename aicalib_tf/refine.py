@@ -10,8 +10,9 @@ each point's window to fit inside its squares, on an image smoothed once per win
 (:class:`Smoothed`). A hard shadow edge across the window pulls the saddle up to ~3 px towards it
 (evaluate ``shading``: 15 wrong boards); where the window about the saddle is not point-symmetric
 (:func:`aicalib_tf.robust_refine.asymmetry` above ``MAX_ASYMMETRY``), the fit that models a
-shadow edge (:func:`aicalib_tf.robust_refine.refine_symmetric`) decides instead. :func:`refine_subpix` wraps OpenCV's ``cornerSubPix`` behind the same
-signature, for comparison.
+shadow edge (:func:`aicalib_tf.robust_refine.refine_symmetric`) decides instead, started again
+around the point where its result is not symmetric even with a shadow edge (``RESTART``).
+:func:`refine_subpix` wraps OpenCV's ``cornerSubPix`` behind the same signature, for comparison.
 
 Coordinates are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0).
 """
@@ -142,10 +143,11 @@ def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, ma
     pts : (N, 2). spacing : (N,) px, the local corner spacing. max_shift : (N,) px or None.
     Returns refined (N, 2) float32 and ok (N,) bool.
     """
-    from .robust_refine import asymmetry, refine_symmetric  # they use this module's saddle fit
+    from .robust_refine import asymmetry  # it uses this module's saddle fit
 
+    pts = np.asarray(pts, np.float64).reshape(-1, 2)
     radius = window_radius(spacing)
-    out = np.asarray(pts, np.float32).copy()
+    out = pts.astype(np.float32)
     ok = np.zeros(len(pts), bool)
     for r in np.unique(radius):
         sel = np.flatnonzero(radius == r)
@@ -155,14 +157,47 @@ def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, ma
         # about it, the fit that allows a shadow edge decides
         asym = asymmetry(img, out[sel], int(r))
         odd = ok[sel] & (asym > MAX_ASYMMETRY)
-        if odd.any():  # on a lightly smoothed image: more smoothing mixes the shadow into the board
-            got, got_ok = refine_symmetric(smoothed.sigma(SHADOW_SIGMA), pts[sel[odd]], radius=int(r) + 1)
+        if odd.any():
+            got, got_ok = _shadow_fit(smoothed, pts[sel[odd]], int(r))
             out[sel[odd][got_ok]] = got[got_ok]
             # neither fit to be trusted where the window is far from symmetric and this fit failed
             ok[sel[odd][~got_ok & (asym[odd] > SHADOWED)]] = False
     if max_shift is not None:
         ok &= np.linalg.norm(out - pts, axis=1) <= max_shift
     return out, ok
+
+
+RESTART = 0.012  # above it (robust_refine.shadow_asymmetry at its result) the shadow-robust fit starts again nearby
+RESTARTS = 8  # starts on a circle of 0.4 window radius around the point
+
+
+def _shadow_fit(smoothed: Smoothed, pts: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
+    """The shadow-robust fit (:func:`aicalib_tf.robust_refine.refine_symmetric`) of a radius-``r`` window's points.
+
+    On a lightly smoothed image (more smoothing mixes the shadow into the board), in a window one
+    px wider. The fit can settle on the wrong side of a shadow edge, up to ~2 px off (evaluate
+    ``shading`` #86): where the window about a result is not point-symmetric even allowing for a
+    shadow edge (``RESTART``), it starts again from ``RESTARTS`` points around the first start and
+    the result that leaves the least of it is kept, within r + 1 px of the start.
+    Returns (M, 2) float32 and ok (M,) bool.
+    """
+    from .robust_refine import refine_symmetric, shadow_asymmetry
+
+    img = smoothed.sigma(SHADOW_SIGMA)
+    got, ok = refine_symmetric(img, pts, radius=r + 1)
+    left = shadow_asymmetry(img, got, r + 1)
+    again = np.flatnonzero(ok & (left > RESTART))
+    if len(again):
+        ang = 2 * np.pi * np.arange(RESTARTS) / RESTARTS
+        ring = 0.4 * r * np.stack([np.cos(ang), np.sin(ang)], 1)
+        starts = (pts[again, None, :] + ring[None]).reshape(-1, 2)
+        more, more_ok = refine_symmetric(img, starts, radius=r + 1)
+        more_ok &= np.linalg.norm(more - np.repeat(pts[again], RESTARTS, axis=0), axis=1) <= r + 1
+        more_left = np.where(more_ok, shadow_asymmetry(img, more, r + 1), np.inf).reshape(-1, RESTARTS)
+        best = np.argmin(more_left, axis=1)
+        better = more_left[np.arange(len(again)), best] < left[again]
+        got[again[better]] = more.reshape(-1, RESTARTS, 2)[better, best[better]]
+    return got, ok
 
 
 def refine_subpix(gray: np.ndarray, points: np.ndarray, *, half_window: int = 5) -> tuple[np.ndarray, np.ndarray]:

@@ -70,3 +70,27 @@ def test_a_corner_with_its_neighbours_hidden_is_measured_in_lattice_steps():
     res = lattice_residuals(ids, pts)
     assert abs(res[0] - 0.1) < 0.01
     assert res[1:].max() < 0.05
+
+
+def test_the_proposer_takes_shadowed_corners_and_leaves_the_board_edge():
+    # evaluate shading #11: a shadow edge crosses the rings of corners (5, 2), (7, 2), (5, 4), (5, 5)
+    # (ring asymmetry 1.2-1.3 x amplitude, as at a T-junction) and the CNN misses them; the board
+    # came back partial. The T-junctions one step beyond the pattern must still be refused.
+    from aicalib_tf.conditions import PATTERN, named_conditions
+
+    cond = {c.name: c for c in named_conditions()}["shading"]
+    s = make_sample(cond.preset, cond.seed, 11, size=cond.size, pattern=PATTERN)
+    gray = s.image.astype(np.float32) / 255.0
+    smooth = cv2.GaussianBlur(gray, (0, 0), 1.0)
+    grid = s.corners.reshape(6, 9, 2).astype(np.float64)
+    shadowed = grid[[2, 2, 4, 5], [5, 7, 5, 5]]
+    step = np.full(4, 15.5)
+    amp, asym = ring_symmetry(smooth, shadowed, 0.3 * step)
+    assert (asym > amp).all()
+    ref_amp = float(np.median(ring_symmetry(smooth, grid.reshape(-1, 2), np.full(54, 4.6))[0]))
+    propose = proposer(Smoothed(gray), smooth, ref_amp)
+    got = propose(shadowed + [0.8, -0.6], step)
+    assert np.linalg.norm(got - shadowed, axis=1).max() < 0.2
+    beyond = np.concatenate([2 * grid[:, 0] - grid[:, 1], 2 * grid[:, -1] - grid[:, -2],
+                             2 * grid[0] - grid[1], 2 * grid[-1] - grid[-2]])
+    assert np.isnan(propose(beyond, np.full(len(beyond), 15.5))).all()
