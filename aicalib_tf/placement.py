@@ -9,7 +9,11 @@ contract):
   and white paper just beyond it is the pattern's outermost line;
 * colours (:func:`_square_colours`): the grid's black squares must be the board's black squares.
 
-Ids come back only when the placements left agree up to the board's symmetry.
+When placements of more than one kind are left, each is drawn around the grid
+(:func:`_contradicted`): where it puts squares, white paper or the background, up to
+``RENDER_BAND`` squares beyond the grid, against the image there. A corner of the board whose
+one border lies mostly beyond the frame still shows, in its last few pixels, paper where another
+placement puts squares. Ids come back only when the placements left agree up to the board's symmetry.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import cv2
 import numpy as np
 
 from .board_order import choose_reading, symmetric_ids
+from .lattice import predict_ids
 
 __all__ = ["place_cells"]
 
@@ -33,6 +38,18 @@ BORDER_T = 0.7  # white-normalised grey the margin must reach there (0 black squ
 
 
 FAILED_RATIO = 2  # a border side: untested (corner missing in view) squares at most 1/FAILED_RATIO of the tested
+
+
+RENDER_BAND = 2  # squares beyond the grid where placements are drawn and compared with the image
+
+
+RENDER_MIN = 2  # squares a placement must contradict to be ruled out by the image
+
+
+_INNER = 0.2  # of a step: samples inside a square stay this far from its edges (blur)
+
+
+_PAPER = (0.04, 0.1)  # of a step beyond the outer squares' edge: still white paper (the margin is >= 0.15 square)
 
 
 def _sample(gray: np.ndarray, xy: np.ndarray) -> np.ndarray:
@@ -67,6 +84,96 @@ def _square_colours(cells: dict, gray: np.ndarray):
     if agree < 0.9 or contrast < 0.08:
         return None, contrast
     return black, contrast
+
+
+def _grid_samples(ext: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Sample points around a grid, in continuous grid coordinates, and the square each lies in.
+
+    Every grid square (a, b) (between corners (a, b) and (a+1, b+1)) up to ``RENDER_BAND`` beyond
+    the grid's extent gets five points at least ``_INNER`` of a step inside it (its colour, were it
+    a board square) and four just inside its edges (white paper, were the board to end there).
+    Returns (points (M, 2) float, squares (M, 2) int).
+    """
+    k = RENDER_BAND
+    a, b = np.meshgrid(np.arange(-k, ext[0] - 1 + k), np.arange(-k, ext[1] - 1 + k), indexing="ij")
+    sq = np.stack([a.ravel(), b.ravel()], 1)
+    lo, hi = _INNER, 1.0 - _INNER
+    e = 0.5 * (_PAPER[0] + _PAPER[1])
+    offs = np.array([[0.5, 0.5], [lo, 0.5], [hi, 0.5], [0.5, lo], [0.5, hi],
+                     [e, 0.5], [1 - e, 0.5], [0.5, e], [0.5, 1 - e]])
+    pts = (sq[:, None, :] + offs[None]).reshape(-1, 2)
+    return pts, np.repeat(sq, len(offs), axis=0)
+
+
+def _expected(uv: np.ndarray, pattern_size) -> np.ndarray:
+    """What a board shows at board-plane points uv (M, 2) (corner units, (col, row)): 0 black, 1 white, −1 unknown.
+
+    The squares cover [−1, cols] × [−1, rows]; a point nearer than ``_INNER`` to a square's edge
+    is unknown (blur), so is one off the board except ``_PAPER`` beyond a side (not a corner),
+    which is white paper.
+    """
+    cols, rows = pattern_size
+    u, v = uv[:, 0], uv[:, 1]
+    out = np.full(len(uv), -1, np.int8)
+    fu, fv = u - np.floor(u), v - np.floor(v)
+    inner = (np.minimum(fu, 1 - fu) >= _INNER - 1e-9) & (np.minimum(fv, 1 - fv) >= _INNER - 1e-9)
+    on = (u > -1) & (u < cols) & (v > -1) & (v < rows)
+    par = (np.floor(u).astype(int) + np.floor(v).astype(int)) % 2  # board square (floor(u)+1, floor(v)+1)
+    out[on & inner] = np.where(par[on & inner] == 0, 0, 1)
+    du = np.maximum(-1 - u, u - cols)  # > 0 beyond a side of the board
+    dv = np.maximum(-1 - v, v - rows)
+    paper_u = (du >= _PAPER[0] - 1e-9) & (du <= _PAPER[1] + 1e-9) & (v >= -1 + _INNER) & (v <= rows - _INNER)
+    paper_v = (dv >= _PAPER[0] - 1e-9) & (dv <= _PAPER[1] + 1e-9) & (u >= -1 + _INNER) & (u <= cols - _INNER)
+    out[paper_u | paper_v] = 1
+    return out
+
+
+def _grid_to_board(ij: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rotation m (2, 2) and shift t (2,) with ids = ij @ m.T + t."""
+    for m in _ROTATIONS:
+        t = ids[0] - m @ ij[0]
+        if np.array_equal(ij @ m.T + t, ids):
+            return m, t
+    raise ValueError("ids are not a rotation and shift of the grid")
+
+
+def _contradicted(ij: np.ndarray, pts: np.ndarray, found: list[np.ndarray], pattern_size, gray: np.ndarray,
+                  black: int) -> list[int]:
+    """For each placement, how many squares around the grid the image contradicts.
+
+    ij : (K, 2) grid positions (min 0), pts : (K, 2) px, found : placements (K, 2) ids. The
+    sample points of :func:`_grid_samples` are put in the image by homographies of their nearest
+    grid corners (:func:`aicalib_tf.lattice.predict_ids`); grey is normalised by the grid's own
+    black and white squares (0 black, 1 white). A square is contradicted when a point the
+    placement expects black reads above 0.6, or one it expects white below 0.4.
+    """
+    h, w = gray.shape
+    cells = {(int(i), int(j)): p for (i, j), p in zip(ij, pts)}
+    sq_keys, centres = [], []
+    for (i, j), p in cells.items():
+        q = [cells.get(c) for c in ((i + 1, j), (i, j + 1), (i + 1, j + 1))]
+        if all(v is not None for v in q):
+            sq_keys.append(i + j)
+            centres.append(0.25 * (p + q[0] + q[1] + q[2]))
+    vals = _sample(gray, np.array(centres))
+    is_black = np.array(sq_keys) % 2 == black
+    blk, wht = np.median(vals[is_black]), np.median(vals[~is_black])
+    ext = (int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1)
+    grid_pts, squares = _grid_samples(ext)
+    xy = predict_ids(ij, pts.astype(np.float64), grid_pts)
+    view = np.all(np.isfinite(xy), axis=1)
+    view[view] = (xy[view, 0] >= 2) & (xy[view, 0] <= w - 3) & (xy[view, 1] >= 2) & (xy[view, 1] <= h - 3)
+    grid_pts, squares, xy = grid_pts[view], squares[view], xy[view]
+    if len(xy) == 0:
+        return [0] * len(found)
+    t = (_sample(gray, xy) - blk) / (wht - blk)
+    out = []
+    for ids in found:
+        m, sh = _grid_to_board(ij, ids)
+        want = _expected(grid_pts @ m.T + sh, pattern_size)
+        bad = ((want == 0) & (t > 0.6)) | ((want == 1) & (t < 0.4))
+        out.append(len({tuple(s) for s in squares[bad].tolist()}))
+    return out
 
 
 def _border_sides(cells: dict, ext: tuple[int, int], gray: np.ndarray, black: int, contrast: float) -> dict:
@@ -191,7 +298,16 @@ def place_cells(cells: dict, pattern_size, gray: np.ndarray) -> np.ndarray | Non
         return None  # the colours must tell 180° apart, as for a full board
     borders = _border_sides(cells_xy, ext, gray, black, contrast) if black is not None else {}
     found = _placements(ij, pattern_size, borders, black)
-    if not found or len({_board_keys(f, pattern_size) for f in found}) != 1:
+    if not found:
+        return None
+    keys = [_board_keys(f, pattern_size) for f in found]
+    if len(set(keys)) > 1 and black is not None:  # draw each placement around the grid: the image may tell
+        bad = _contradicted(ij, pts, found, pattern_size, gray, black)
+        clean = {k for k, b in zip(keys, bad) if b == 0}
+        if len(clean) == 1 and all(b >= RENDER_MIN for k, b in zip(keys, bad) if k not in clean):
+            found = [f for k, f in zip(keys, found) if k in clean]
+            keys = [k for k in keys if k in clean]
+    if len(set(keys)) != 1:
         return None
     ids = found[0]
     if black is None or (cols + rows) % 2 == 0:

@@ -128,6 +128,25 @@ def test_a_line_on_one_corner_at_the_frame_does_not_shift_the_ids(model):
     assert not det.found or st["correct"] == len(det.corners)
 
 
+@pytest.mark.parametrize("index", [74, 85])
+def test_the_image_beyond_the_grid_decides_a_board_corner_turned_or_not(model, index):
+    # evaluate's partial #74 and #85: a corner of the board, two sides cut by the frame; borders and
+    # colours left two placements (the grid's long side along the columns or the rows). Drawn around
+    # the grid, one puts squares where the image shows paper or background: the other is taken
+    s = make_sample("partial", 21, index, pattern=(9, 6), size=(640, 480))
+    det = detect_corners(s.image, (9, 6), model=model)
+    st = _partial_stats(det, s)
+    assert det.found and st["wrong_ids"] == 0
+    assert st["correct"] >= 0.9 * st["visible"]
+
+
+def test_a_board_corner_whose_cut_sides_show_nothing_more_gives_no_board(model):
+    # evaluate's partial #0: 19 corners at the board's corner (0, 0), the two other sides cut by
+    # the frame before any square or paper that would tell 9 columns from 6 rows: no board
+    s = make_sample("partial", 21, 0, pattern=(9, 6), size=(640, 480))
+    assert not detect_corners(s.image, (9, 6), model=model).found
+
+
 @pytest.mark.parametrize("index", [52, 55])
 def test_a_corner_whose_window_leaves_the_frame_is_accurate_or_left_out(model, index):
     # evaluate's partial #52 and #55: a corner 0.6 and 0.8 px from the frame, its refinement window
