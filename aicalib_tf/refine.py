@@ -137,10 +137,13 @@ def window_radius(spacing: np.ndarray) -> np.ndarray:
     return np.clip(np.round(0.45 * np.asarray(spacing, np.float64)), 2, 5).astype(int)
 
 
-def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, max_shift: np.ndarray | None = None):
+def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, max_shift: np.ndarray | None = None,
+                    *, restarts: bool = True):
     """Saddle refinement with a window that fits inside the local squares.
 
     pts : (N, 2). spacing : (N,) px, the local corner spacing. max_shift : (N,) px or None.
+    restarts : let the shadow-robust fit start again where its result is not symmetric (see
+        :func:`_shadow_fit`; costly where many windows are asymmetric, e.g. beside objects).
     Returns refined (N, 2) float32 and ok (N,) bool.
     """
     from .robust_refine import asymmetry  # it uses this module's saddle fit
@@ -158,7 +161,8 @@ def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, ma
         asym = asymmetry(img, out[sel], int(r))
         odd = ok[sel] & (asym > MAX_ASYMMETRY)
         if odd.any():
-            got, got_ok = _shadow_fit(smoothed, pts[sel[odd]], int(r))
+            # restarts only where a shadow edge is likely (SHADOWED), not for the asymmetry of noise alone
+            got, got_ok = _shadow_fit(smoothed, pts[sel[odd]], int(r), restarts & (asym[odd] > SHADOWED))
             out[sel[odd][got_ok]] = got[got_ok]
             # neither fit to be trusted where the window is far from symmetric and this fit failed
             ok[sel[odd][~got_ok & (asym[odd] > SHADOWED)]] = False
@@ -171,7 +175,7 @@ RESTART = 0.012  # above it (robust_refine.shadow_asymmetry at its result) the s
 RESTARTS = 8  # starts on a circle of 0.4 window radius around the point
 
 
-def _shadow_fit(smoothed: Smoothed, pts: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
+def _shadow_fit(smoothed: Smoothed, pts: np.ndarray, r: int, restarts=True) -> tuple[np.ndarray, np.ndarray]:
     """The shadow-robust fit (:func:`aicalib_tf.robust_refine.refine_symmetric`) of a radius-``r`` window's points.
 
     On a lightly smoothed image (more smoothing mixes the shadow into the board), in a window one
@@ -189,7 +193,7 @@ def _shadow_fit(smoothed: Smoothed, pts: np.ndarray, r: int) -> tuple[np.ndarray
     img = smoothed.sigma(SHADOW_SIGMA)
     got, ok = refine_symmetric(img, pts, radius=r + 1)
     left = shadow_asymmetry(img, got, r + 1)
-    again = np.flatnonzero(ok & (left > RESTART))
+    again = np.flatnonzero(ok & (left > RESTART) & np.broadcast_to(restarts, ok.shape))
     if len(again):
         ang = 2 * np.pi * np.arange(RESTARTS) / RESTARTS
         ring = 0.4 * r * np.stack([np.cos(ang), np.sin(ang)], 1)

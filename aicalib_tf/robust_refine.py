@@ -101,17 +101,34 @@ def shadow_asymmetry(img: np.ndarray, points: np.ndarray, radius: int, direction
     return np.maximum(left, 0.0) / np.maximum(4 * (ec * ec) @ w, 1e-12)
 
 
-def _gradients(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=1, scale=0.5)  # central differences
-    gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=1, scale=0.5)
-    return gx, gy
+@functools.lru_cache(maxsize=16)
+def _ringed_window(radius: int):
+    """The (2r+3)² offsets around a (2r+1)² window, and for each window offset (in
+    :func:`symmetric_operators` order) the indices of itself and of its ±x and ±y neighbours in them."""
+    r = int(radius)
+    d = np.arange(-r - 1, r + 2, dtype=np.float64)
+    ox, oy = (a.ravel() for a in np.meshgrid(d, d))
+    side = 2 * r + 3
+    inner = np.array([(yy + 1) * side + (xx + 1) for yy in range(2 * r + 1) for xx in range(2 * r + 1)])
+    out = (np.stack([ox, oy], 1), inner, inner + 1, inner - 1, inner + side, inner - side)
+    for a in out:
+        a.flags.writeable = False
+    return out
 
 
-def _step(img, gx, gy, x, y, radius, directions):
+def _window_and_gradients(img: np.ndarray, pts: np.ndarray, radius: int):
+    """(P, M) each: the window of :func:`symmetric_operators` about each point, and its x and y
+    central differences. Bilinear sampling at integer offsets commutes with differencing, so these
+    are the image gradients sampled there, from one (2r+3)² sample per point."""
+    offsets, inner, px, mx, py, my = _ringed_window(radius)
+    big = _window(img, pts, offsets)
+    return big[:, inner], 0.5 * (big[:, px] - big[:, mx]), 0.5 * (big[:, py] - big[:, my])
+
+
+def _step(img, x, y, radius, directions):
     """One Gauss–Newton step per point: (ux, uy), each (P,), of the best model (none or a direction)."""
     offsets, w, mirror, bins, signed = symmetric_operators(radius, directions)
-    pts = np.stack([x, y], 1)
-    i, ix, iy = (_window(a, pts, offsets) for a in (img, gx, gy))
+    i, ix, iy = _window_and_gradients(img, np.stack([x, y], 1), radius)
     d = i - i[:, mirror]  # odd part (x2) of the window about the current point
     e = 0.5 * (i + i[:, mirror])  # even part
     jx, jy = ix - ix[:, mirror], iy - iy[:, mirror]  # d(d)/d(point)
@@ -173,7 +190,6 @@ def refine_symmetric(
     if n == 0:
         return np.zeros((0, 2), np.float32), np.zeros(0, bool)
     g = np.asarray(img, np.float32)
-    gx, gy = _gradients(g)
     r = int(radius)
     max_shift = float(r if max_shift is None else max_shift)
     x, y = pts0[:, 0].copy(), pts0[:, 1].copy()
@@ -181,7 +197,7 @@ def refine_symmetric(
     prev, damp = np.zeros((n, 2)), np.ones(n)
     act = np.arange(n)
     for _ in range(iterations):
-        ux, uy = _step(g, gx, gy, x[act], y[act], r, directions)
+        ux, uy = _step(g, x[act], y[act], r, directions)
         # the model (which shadow direction) can switch between two points a step apart, each
         # sending the fit back to the other: a step against the last one halves the steps from then on
         damp[act] *= np.where(ux * prev[act, 0] + uy * prev[act, 1] < 0, 0.5, 1.0)
