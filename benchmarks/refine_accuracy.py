@@ -1,10 +1,13 @@
 """Subpixel refiners against data_gen's exact corners: our saddle fit versus OpenCV's cornerSubPix.
 
-    python benchmarks/refine_accuracy.py [--images 20] [--start 0.7]
+    python benchmarks/refine_accuracy.py [--images 20] [--start 0.7] [--shading]
 
 Each refiner starts from the true corners moved by a random offset of up to --start px (what a
 CNN peak gives) and the error after refinement is measured, per condition: clean (σ = 0.6 px
-lens blur) and Gaussian noise σ = 10, 20 and 40 grey levels on top of it.
+lens blur) and Gaussian noise σ = 10, 20 and 40 grey levels on top of it; with --shading also
+evaluate's ``shading`` condition (illumination gradient and a hard shadow). "windowed" is the
+detector's own refinement (:func:`aicalib_tf.refine.refine_windowed`: the window sized to the
+squares, and the shadow-robust fit where the window is not point-symmetric).
 """
 
 from __future__ import annotations
@@ -15,8 +18,9 @@ from dataclasses import replace
 
 import numpy as np
 
+from aicalib_tf.junctions import nearest_spacing
 from aicalib_tf.metrics import corner_error_stats
-from aicalib_tf.refine import refine_saddle, refine_subpix
+from aicalib_tf.refine import Smoothed, refine_saddle, refine_subpix, refine_windowed
 from data_gen import make_sample
 from data_gen.presets import Rule, get_preset
 
@@ -26,6 +30,7 @@ REFINERS = {
     "saddle s2.0 r5": lambda g, p: refine_saddle(g, p, sigma=2.0, radius=5),
     "cornerSubPix hw3": lambda g, p: refine_subpix(g, p, half_window=3),
     "cornerSubPix hw5": lambda g, p: refine_subpix(g, p, half_window=5),
+    "windowed": lambda g, p: refine_windowed(Smoothed(g), p, nearest_spacing(p)),
 }
 
 
@@ -38,11 +43,16 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--images", type=int, default=20)
     ap.add_argument("--start", type=float, default=0.7, help="px, the largest starting offset")
+    ap.add_argument("--shading", action="store_true", help="also evaluate's shading condition")
     args = ap.parse_args(argv)
     rng = np.random.default_rng(0)
     print(f"| condition | refiner | corners | ok % | median px | p95 px |\n|---|---|---|---|---|---|")
-    for noise in (0, 10, 20, 40):
-        preset = condition(noise)
+    presets = [condition(noise) for noise in (0, 10, 20, 40)]
+    if args.shading:
+        from aicalib_tf.conditions import select_conditions
+
+        presets.append(select_conditions("shading")[0].preset)
+    for preset in presets:
         samples = [make_sample(preset, 0, i, pattern=(9, 6)) for i in range(args.images)]
         starts = []
         for s in samples:
