@@ -53,7 +53,10 @@ the visible sides could be the long or the short ones.
 Large images (longer side ≥ 1600 px) are searched coarse to fine (:mod:`aicalib_tf.pyramid`):
 first at a reduced scale (block means, the longer side kept ≥ 800 px), the corners found there
 refined again on the full image; a finer scale is tried only when no complete board was found,
-and the partial board with the most corners over all scales is returned otherwise. A 1920×1080
+and the partial board with the most corners over all scales is returned otherwise. Without
+``pattern_size`` every scale is searched and the largest grid wins (the coarsest of equal ones):
+at a coarse scale a tilted board's far squares can fall below the CNN's reach and leave a complete
+grid of its near rows only. A 1920×1080
 image costs about a quarter as much; a board whose squares are too small for the coarse scale is
 found at full size.
 
@@ -175,8 +178,10 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
         if det.found and f > 1:
             corners = refine_full(gray, to_full(det.corners, f))
             det = Detection(corners, det.ids, det.scores, det.pattern_size, det.complete, (w, h))
-        if det.complete:
+        if det.complete and pattern_size is not None:
             return det
+        # without a pattern every scale is searched: a coarse scale can miss a board's smallest
+        # squares and come back with a complete sub-grid of it
         if best is None or len(det.corners) > len(best.corners):
             best = det
     return Detection(best.corners, best.ids, best.scores, best.pattern_size, best.complete, (w, h))

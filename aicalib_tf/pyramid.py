@@ -41,12 +41,17 @@ def scales(width: int, height: int, min_side: int = MIN_SIDE) -> list[int]:
 
 
 def downscale(gray: np.ndarray, factor: int) -> np.ndarray:
-    """Each f×f block's mean: (H // f, W // f) float32 (the last H % f rows and W % f columns are dropped)."""
+    """Each f×f block's mean: (H // f, W // f) float32 (the last H % f rows and W % f columns are dropped).
+
+    Empty where a side is shorter than f (an 8000×1 image at f = 8: (0, 1000)).
+    """
     f = int(factor)
     g = np.asarray(gray, np.float32)
     if f == 1:
         return g
     h, w = g.shape[0] // f, g.shape[1] // f
+    if h == 0 or w == 0:  # cv2.resize refuses an empty size
+        return np.zeros((h, w), np.float32)
     # INTER_AREA at an integer factor is the block mean
     return cv2.resize(g[: h * f, : w * f], (w, h), interpolation=cv2.INTER_AREA)
 

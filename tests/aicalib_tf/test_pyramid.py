@@ -34,7 +34,55 @@ def test_refine_full_brings_coarse_corners_back_to_subpixel_accuracy():
     assert np.median(err) < 0.03 and err.max() < 0.2
 
 
+def test_downscale_of_a_side_shorter_than_the_factor_is_empty():
+    # cv2.resize raised on the empty size: detect_corners crashed on an 8000×1 image
+    assert downscale(np.zeros((1, 8000), np.float32), 8).shape == (0, 1000)
+    assert downscale(np.zeros((8000, 7), np.float32), 8).shape == (1000, 0)
+
+
 pytest.importorskip("keras")
+
+
+@pytest.mark.parametrize("shape", [(1, 8000), (7, 8000), (8000, 1)])
+def test_a_long_thin_image_is_no_board_not_a_crash(shape):
+    from aicalib_tf.detect import detect_corners
+
+    for pattern in (None, (9, 6)):
+        det = detect_corners(np.zeros(shape, np.uint8), pattern)
+        assert not det.found and det.image_size == shape[::-1]
+
+
+def _tilted_board(cols, rows, quad, size, square=40):
+    """A (cols+1)×(rows+1)-square board warped onto quad ((4, 2) px, outer corners TL TR BR BL) on
+    grey paper in a (width, height) uint8 image, and its inner corners (cols·rows, 2) px."""
+    import cv2
+
+    sq_w, sq_h = (cols + 1) * square, (rows + 1) * square
+    yy, xx = np.mgrid[0:sq_h, 0:sq_w]
+    ink = (((yy // square) + (xx // square)) % 2 == 0).astype(np.float32)
+    src = np.float32([[0, 0], [sq_w, 0], [sq_w, sq_h], [0, sq_h]]) - 0.5
+    hom = cv2.getPerspectiveTransform(src, np.float32(quad))
+    ink = cv2.warpPerspective(ink, hom, size, flags=cv2.INTER_AREA)
+    inside = cv2.warpPerspective(np.ones((sq_h, sq_w), np.float32), hom, size)
+    img = np.full(size[::-1], 0.55, np.float32)
+    centre = np.float32(quad).mean(0)
+    paper = (np.float32(quad) - centre) * 1.12 + centre
+    cv2.fillPoly(img, [np.round(paper * 16).astype(np.int32)], 0.95, cv2.LINE_AA, shift=4)
+    img = img * (1 - inside) + inside * (0.95 - 0.85 * ink)
+    inner = np.float32([[(c + 1) * square, (r + 1) * square] for r in range(rows) for c in range(cols)]) - 0.5
+    return np.round(np.clip(img, 0, 1) * 255).astype(np.uint8), cv2.perspectiveTransform(inner[None], hom)[0]
+
+
+def test_without_a_pattern_a_coarse_scales_sub_grid_does_not_hide_the_whole_board():
+    from aicalib_tf.detect import detect_corners
+
+    # a 9x6 board tilted away: its far squares (~10 px wide, ~6 px tall) are too small at half
+    # scale, where only its 9x5 near rows form a complete grid
+    quad = [[911, 447.5], [1009, 447.5], [1065, 552.5], [855, 552.5]]
+    img, truth = _tilted_board(9, 6, quad, (1920, 1080))
+    det = detect_corners(img, None)
+    assert det.complete and sorted(det.pattern_size) == [6, 9]
+    assert np.abs(np.sort(det.corners, axis=0) - np.sort(truth, axis=0)).max() < 0.5
 
 
 def test_a_large_image_is_detected_at_half_scale_as_accurately_as_at_full(monkeypatch):
