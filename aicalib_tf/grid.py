@@ -347,8 +347,7 @@ def edge_contrast(gray: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
 _OFFS = np.array([(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)], np.float64)
 
 
-def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | None = None,
-          gray: np.ndarray | None = None) -> bool:
+def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | None = None) -> bool:
     """Try to place a 3×3 lattice centred on point ``k``; True (and cells taken) on success.
 
     Any two independent lattice steps generate the same points, so a diagonal step would give a
@@ -373,7 +372,6 @@ def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | 
     single = ~((t > 0.2) & (t < 0.8) & (off < TOLERANCE * length[None, :])).any(axis=1)
     if contrast is not None:  # keep the steps that run along edges between squares
         single &= contrast >= 0.5 * contrast.max()
-        contrast = contrast[single]
     neighbours, steps, length = neighbours[single], steps[single], length[single].tolist()
     pairs = []
     for a in range(len(neighbours)):
@@ -439,7 +437,7 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
         if not free[k]:
             continue
         lat = _Lattice(pts, free, propose, limit)
-        if not _seed(lat, int(k), near[k], None if contrast is None else contrast[k], gray):
+        if not _seed(lat, int(k), near[k], None if contrast is None else contrast[k]):
             continue
         _grow(lat)
         _fill_holes(lat)
