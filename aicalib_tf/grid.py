@@ -326,8 +326,6 @@ def edge_contrast(gray: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
     and 65% of the way, a quarter of the length to each side.
     gray : (H, W) float32. p, q : (M, 2) px. Returns (M,) float32, |mean left − mean right|.
     """
-    import cv2
-
     p = np.asarray(p, np.float64).reshape(-1, 2)
     q = np.asarray(q, np.float64).reshape(-1, 2)
     d = q - p
@@ -338,10 +336,30 @@ def edge_contrast(gray: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
     g = np.asarray(gray, np.float32)
 
     def sample(xy):
-        return cv2.remap(g, xy[..., 0].astype(np.float32), xy[..., 1].astype(np.float32), cv2.INTER_LINEAR,
-                         borderMode=cv2.BORDER_REPLICATE)
+        return _bilinear(g, xy.reshape(-1, 2)).reshape(xy.shape[:-1])
 
     return np.abs(sample(left).mean(axis=1) - sample(right).mean(axis=1)).astype(np.float32)
+
+
+_REMAP_COLS = 4096  # cv2.remap needs maps of fewer than 32767 rows and columns
+
+
+def _bilinear(g: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Bilinear grey values (M,) float32 of g (H, W) float32 at xy (M, 2) px, border replicated, any M.
+
+    The points go to cv2.remap as rows of ``_REMAP_COLS``: assemble_grids asks for 3 samples of
+    MAX_CANDIDATES · 12 segments on each side, more than 32767 rows of one map.
+    """
+    import cv2
+
+    m = len(xy)
+    if m == 0:
+        return np.zeros(0, np.float32)
+    rows = -(-m // _REMAP_COLS)
+    flat = np.zeros((rows * _REMAP_COLS, 2), np.float32)
+    flat[:m] = xy
+    flat = flat.reshape(rows, _REMAP_COLS, 2)
+    return cv2.remap(g, flat[..., 0], flat[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()[:m]
 
 
 _OFFS = np.array([(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)], np.float64)

@@ -2,7 +2,7 @@ import cv2
 import numpy as np
 import pytest
 
-from aicalib_tf.grid import assemble_grids
+from aicalib_tf.grid import assemble_grids, edge_contrast
 from data_gen import make_sample
 from data_gen.presets import get_preset
 
@@ -109,3 +109,16 @@ def test_a_board_tilted_60_degrees_assembles_unsheared(index):
     cr = np.stack(np.meshgrid(np.arange(9), np.arange(6)), -1).reshape(-1, 2)
     order = np.argmin(np.linalg.norm(grids[0].points[:, None] - s.corners[None], axis=2), axis=1)
     assert _same_lattice(grids[0].ij, cr[order])
+
+
+def test_edge_contrast_takes_more_segments_than_one_remap_map_holds():
+    # assemble_grids asks for MAX_CANDIDATES (3000) x 12 neighbours = 36000 segments; cv2.remap
+    # refused maps of 32767 rows or more (a checker-like clutter image at 1983x453 crashed)
+    rng = np.random.default_rng(0)
+    gray = rng.random((60, 80)).astype(np.float32)
+    p = rng.uniform(0, 79, (36000, 2))
+    q = p + rng.uniform(-6, 6, (36000, 2))
+    got = edge_contrast(gray, p, q)
+    assert got.shape == (36000,)
+    np.testing.assert_array_equal(got[-500:], edge_contrast(gray, p[-500:], q[-500:]))
+    assert edge_contrast(gray, p[:0], q[:0]).shape == (0,)
