@@ -88,16 +88,18 @@ def full_board(grid: Grid, scores: np.ndarray, pattern_size: tuple[int, int] | N
     ij = handed(grid.ij, grid.points)
     a, b = grid.shape
     if pattern_size is None:
-        cols, rows = a, b
+        # the grid's own size, columns counted along the grid direction nearer the image's x axis
+        u, v = _steps(ij, grid.points)
+        cols, rows = (b, a) if abs(v[0]) * np.hypot(*u) > abs(u[0]) * np.hypot(*v) else (a, b)
     else:
         cols, rows = pattern_size
-        if (a, b) == (rows, cols) and a != b:
-            # the grid's i runs along the board's rows: swap roles, keeping handedness
-            ij = np.stack([ij[:, 1], ij[:, 0]], 1)
-            ij = np.stack([ij[:, 0], ij[:, 1].max() - ij[:, 1]], 1)
-            a, b = b, a
-        if (a, b) != (cols, rows):
-            return None  # a different (e.g. bigger) board, or a partial one: never cut to size
+    if (a, b) == (rows, cols) and a != b:
+        # the grid's i runs along the board's rows: swap roles, keeping handedness
+        ij = np.stack([ij[:, 1], ij[:, 0]], 1)
+        ij = np.stack([ij[:, 0], ij[:, 1].max() - ij[:, 1]], 1)
+        a, b = b, a
+    if (a, b) != (cols, rows):
+        return None  # a different (e.g. bigger) board, or a partial one: never cut to size
     full = len(grid) == cols * rows
     if not full:
         return None

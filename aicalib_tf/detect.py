@@ -61,7 +61,9 @@ image costs about a quarter as much; a board whose squares are too small for the
 found at full size.
 
 Without ``pattern_size``, the largest grid with every corner found is returned, complete, its
-size taken as the pattern; ids are relative to that grid, in the full-board order. A grid with
+size taken as the pattern (columns counted along the grid direction nearer the image's x axis,
+so a 9×6 board held landscape is (9, 6) and turned on its side (6, 9)); ids are relative to that
+grid, in the full-board order. A grid with
 positions missing (a line cut by the frame that kept a few corners, say) counts by its largest
 filled rectangle (:func:`aicalib_tf.grid.full_subgrid`), so a few extra corners never hide it,
 after corners off their neighbours' lattice are dropped as for partial boards.

@@ -307,3 +307,17 @@ def test_no_wrong_ids_where_noise_misleads_the_shadow_fit_restarts(model, index)
     det = detect_corners(s.image, (9, 6), model=model)
     st = _partial_stats(det, s)
     assert det.found and st["wrong_ids"] == 0 and st["correct"] >= 50
+
+
+@pytest.mark.parametrize("index", [0, 1, 2])
+def test_without_a_pattern_columns_run_nearest_the_image_x_axis(model, index):
+    from aicalib_tf.board_order import _steps
+
+    s = make_sample("clean", 8, index, pattern=(9, 6), size=(640, 480))
+    for img in (s.image, np.ascontiguousarray(s.image.T)):  # and the board turned on its side
+        det = detect_corners(img, None, model=model)
+        assert det.complete and sorted(det.pattern_size) == [6, 9]
+        u, v = _steps(det.ids, det.corners)  # px per column, per row
+        assert abs(u[0]) / np.hypot(*u) >= abs(v[0]) / np.hypot(*v)
+    turned = detect_corners(np.ascontiguousarray(s.image.T), None, model=model).pattern_size
+    assert turned == detect_corners(s.image, None, model=model).pattern_size[::-1]
