@@ -52,7 +52,8 @@ the visible sides could be the long or the short ones.
 
 Large images (longer side ≥ 1600 px) are searched coarse to fine (:mod:`aicalib_tf.pyramid`):
 first at a reduced scale (block means, the longer side kept ≥ 800 px), the corners found there
-refined again on the full image; a finer scale is tried only when no complete board was found,
+refined again on the full image (a board any of whose corners that refinement cannot place is
+not trusted); a finer scale is tried only when no complete board was found,
 and the partial board with the most corners over all scales is returned otherwise. Without
 ``pattern_size`` every scale is searched and the largest grid wins (the coarsest of equal ones):
 at a coarse scale a tilted board's far squares can fall below the CNN's reach and leave a complete
@@ -178,7 +179,9 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     for f in scales(w, h):
         det = _detect_at(downscale(gray, f), pattern_size, model, threshold)
         if det.found and f > 1:
-            corners = refine_full(gray, to_full(det.corners, f))
+            corners, ok = refine_full(gray, to_full(det.corners, f))
+            if not ok.all():  # a corner left at its coarse place may be px off: try the finer scales
+                continue
             det = Detection(corners, det.ids, det.scores, det.pattern_size, det.complete, (w, h))
         if det.complete and pattern_size is not None:
             return det

@@ -62,12 +62,14 @@ def to_full(points: np.ndarray, factor: int) -> np.ndarray:
     return (np.asarray(points, np.float64) * f + (f - 1.0) / 2.0).astype(np.float32)
 
 
-def refine_full(gray: np.ndarray, points: np.ndarray) -> np.ndarray:
+def refine_full(gray: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Refine corners found at a reduced scale on the full image (saddle fit, :mod:`aicalib_tf.refine`).
 
     gray : (H, W) full image. points : (N, 2) px on it (from :func:`to_full`), N ≥ 2, of one board.
-    Only the board's bounding box (plus the largest window) is smoothed. A point whose refinement
-    fails, or that would leave the image, keeps its given position. Returns (N, 2) float32.
+    Only the board's bounding box (plus the largest window) is smoothed. Returns refined (N, 2)
+    float32 and ok (N,) bool; a point whose refinement fails, moves more than 2 px or would leave
+    the image keeps its given position, with ok False (at a factor f that position is only good
+    to a fraction of f px, so the caller should not trust the board).
     """
     pts = np.asarray(points, np.float32).reshape(-1, 2)
     h, w = gray.shape
@@ -80,4 +82,4 @@ def refine_full(gray: np.ndarray, points: np.ndarray) -> np.ndarray:
     refined, ok = refine_windowed(Smoothed(crop), pts - offset, spacing, max_shift=np.full(len(pts), 2.0))
     refined = refined + offset
     ok &= (refined[:, 0] >= -0.5) & (refined[:, 0] <= w - 0.5) & (refined[:, 1] >= -0.5) & (refined[:, 1] <= h - 0.5)
-    return np.where(ok[:, None], refined, pts).astype(np.float32)
+    return np.where(ok[:, None], refined, pts).astype(np.float32), ok

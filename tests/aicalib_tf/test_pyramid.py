@@ -29,9 +29,12 @@ def test_refine_full_brings_coarse_corners_back_to_subpixel_accuracy():
     s = make_sample("clean", 4, 0, size=(1920, 1080), pattern=(9, 6))
     gray = s.image.astype(np.float32) / 255.0
     coarse = s.corners + np.random.default_rng(1).uniform(-0.8, 0.8, s.corners.shape)  # a 2x scale's error
-    out = refine_full(gray, coarse)
+    out, ok = refine_full(gray, coarse)
     err = np.linalg.norm(out - s.corners, axis=1)
-    assert np.median(err) < 0.03 and err.max() < 0.2
+    assert ok.all() and np.median(err) < 0.03 and err.max() < 0.2
+    flat = np.array([[5.0, 5.0], [60.0, 5.0]])  # no corner in the blank top-left of the frame
+    out, ok = refine_full(np.zeros((100, 100), np.float32), flat)
+    assert not ok.any() and np.array_equal(out, flat.astype(np.float32))
 
 
 def test_downscale_of_a_side_shorter_than_the_factor_is_empty():
@@ -123,3 +126,22 @@ def test_a_board_too_small_for_the_coarse_scale_is_found_at_full_size(monkeypatc
     from aicalib_tf.metrics import board_detection_outcome
 
     assert board_detection_outcome(det.corners, truth, (9, 6))[0] == "hit"
+
+
+def test_a_board_whose_corner_the_full_image_refinement_cannot_place_is_searched_finer(monkeypatch):
+    import aicalib_tf.detect as detect
+
+    s = make_sample("clean", 4, 0, size=(1920, 1080), pattern=(9, 6))
+    real = detect.refine_full
+
+    def one_fails(gray, pts):
+        out, ok = real(gray, pts)
+        ok[7] = False
+        return out, ok
+
+    tried = []
+    real_at = detect._detect_at
+    monkeypatch.setattr(detect, "refine_full", one_fails)
+    monkeypatch.setattr(detect, "_detect_at", lambda g, *a: tried.append(g.shape) or real_at(g, *a))
+    det = detect.detect_corners(s.image, (9, 6))
+    assert tried == [(540, 960), (1080, 1920)] and det.complete  # found again at full size
