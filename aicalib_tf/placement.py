@@ -158,6 +158,8 @@ def _contradicted(ij: np.ndarray, pts: np.ndarray, found: list[np.ndarray], patt
     vals = _sample(gray, np.array(centres))
     is_black = np.array(sq_keys) % 2 == black
     blk, wht = np.median(vals[is_black]), np.median(vals[~is_black])
+    if not wht > blk:  # no contrast to normalise by: the image contradicts nothing
+        return [0] * len(found)
     ext = (int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1)
     grid_pts, squares = _grid_samples(ext)
     xy = predict_ids(ij, pts.astype(np.float64), grid_pts)

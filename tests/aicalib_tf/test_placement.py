@@ -31,3 +31,14 @@ def test_the_image_rules_out_a_turned_placement_of_a_board_corner():
     turned = np.stack([3 - ids[:, 1], ids[:, 0]], 1)  # a 90° turn (handedness kept), on the same corners
     bad = placement._contradicted(ids, pts, [ids, turned], (9, 6), gray, black=0)
     assert bad[0] == 0 and bad[1] >= placement.RENDER_MIN
+
+
+def test_a_grid_without_contrast_contradicts_no_placement():
+    # equal black and white greys leave nothing to normalise by: no evidence either way (not NaN)
+    s = make_sample("clean", 3, 0, pattern=(9, 6), size=(640, 480))
+    ids = np.array([(c, r) for r in range(4) for c in range(4)])
+    pts = s.corners[ids[:, 1] * 9 + ids[:, 0]].astype(np.float64)
+    turned = np.stack([3 - ids[:, 1], ids[:, 0]], 1)
+    flat = np.full((480, 640), 0.5, np.float32)
+    with np.errstate(all="raise"):
+        assert placement._contradicted(ids, pts, [ids, turned], (9, 6), flat, black=0) == [0, 0]
