@@ -58,12 +58,11 @@ def _sample(gray: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return cv2.remap(gray, xy[..., 0], xy[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()
 
 
-def _square_colours(cells: dict, gray: np.ndarray):
-    """Which grid squares are black, from the grey at their centres.
+def _square_centres(cells: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The grid squares with all four corners found: parity (K,) int of i + j, and centres (K, 2) px.
 
-    cells : {(i, j): (2,) px}. Grid square (i, j) lies between corners (i, j) and (i+1, j+1).
-    Returns (black, contrast): black is the parity of i + j of the black squares (0 or 1), or None
-    when the squares do not split into two clearly different colours; contrast is white − black grey.
+    cells : {(i, j): (2,) px}. Grid square (i, j) lies between corners (i, j) and (i+1, j+1); its
+    centre is the mean of its four corners.
     """
     keys, centres = [], []
     for (i, j), p in cells.items():
@@ -71,10 +70,20 @@ def _square_colours(cells: dict, gray: np.ndarray):
         if all(v is not None for v in q):
             keys.append(i + j)
             centres.append(0.25 * (p + q[0] + q[1] + q[2]))
-    if len(keys) < 2:
+    return np.array(keys, int).reshape(-1) % 2, np.array(centres, np.float64).reshape(-1, 2)
+
+
+def _square_colours(cells: dict, gray: np.ndarray):
+    """Which grid squares are black, from the grey at their centres.
+
+    cells : {(i, j): (2,) px}. Grid square (i, j) lies between corners (i, j) and (i+1, j+1).
+    Returns (black, contrast): black is the parity of i + j of the black squares (0 or 1), or None
+    when the squares do not split into two clearly different colours; contrast is white − black grey.
+    """
+    par, centres = _square_centres(cells)
+    if len(par) < 2:
         return None, 0.0
-    par = np.array(keys) % 2
-    vals = _sample(gray, np.array(centres))
+    vals = _sample(gray, centres)
     if par.min() == par.max():
         return None, 0.0
     m0, m1 = vals[par == 0].mean(), vals[par == 1].mean()
@@ -148,15 +157,9 @@ def _contradicted(ij: np.ndarray, pts: np.ndarray, found: list[np.ndarray], patt
     placement expects black reads above 0.6, or one it expects white below 0.4.
     """
     h, w = gray.shape
-    cells = {(int(i), int(j)): p for (i, j), p in zip(ij, pts)}
-    sq_keys, centres = [], []
-    for (i, j), p in cells.items():
-        q = [cells.get(c) for c in ((i + 1, j), (i, j + 1), (i + 1, j + 1))]
-        if all(v is not None for v in q):
-            sq_keys.append(i + j)
-            centres.append(0.25 * (p + q[0] + q[1] + q[2]))
-    vals = _sample(gray, np.array(centres))
-    is_black = np.array(sq_keys) % 2 == black
+    par, centres = _square_centres({(int(i), int(j)): p for (i, j), p in zip(ij, pts)})
+    vals = _sample(gray, centres)
+    is_black = par == black
     blk, wht = np.median(vals[is_black]), np.median(vals[~is_black])
     if not wht > blk:  # no contrast to normalise by: the image contradicts nothing
         return [0] * len(found)

@@ -185,7 +185,8 @@ def _shadow_fit(smoothed: Smoothed, pts: np.ndarray, r: int, restarts=True) -> t
     restart that leaves the least of it, within r + 1 px of the start, replaces the first result
     only where it leaves at most ``RESTART`` and less than half the first's (under heavy noise no
     window is symmetric, and the least asymmetric of nine noisy fits can be a neighbouring
-    feature: data_gen ``hard`` seed 5, 6 wrong ids).
+    feature: data_gen ``hard`` seed 5, 6 wrong ids). restarts : bool, or (M,) bool per point: which
+    points may start again.
     Returns (M, 2) float32 and ok (M,) bool.
     """
     from .robust_refine import refine_symmetric, shadow_asymmetry
