@@ -6,11 +6,23 @@ Both model kinds give the same thing, points (N, 2) float32 (x, y) px and weight
   (:func:`aicalib_tf.corner_map.decode_map`);
 * a patch classifier (``report``) scores 32×32 patches around saddle-point candidates
   (:func:`aicalib_tf.candidates.saddle_points`); its points are those pixel positions.
+
+Precision. On a CPU with native bfloat16 arithmetic (x86 ``avx512_bf16`` or ``amx_bf16``), a
+corner map is computed by a bfloat16 twin of the model (:func:`inference_model`: the same
+weights, every layer but the last computing in bfloat16; the output stays float32). On this
+project's 2-core CPU that runs a 640×480 image in about 2.5 ms instead of 4 ms; its corner
+weights differ from float32's by less than 0.01 and the subpixel offsets by 0.04 px, before the
+refinement on the image, which does not use them. Elsewhere, and with the environment variable
+``AICALIB_PRECISION=float32``, float32 is used (``bfloat16`` forces the twin, for tests).
 """
 
 from __future__ import annotations
 
+import functools
+import os
+
 import cv2
+import keras
 import numpy as np
 import tensorflow as tf
 
@@ -18,7 +30,8 @@ from .candidates import saddle_points
 from .corner_map import decode_map, padded_shape, standardize
 from .model import PATCH_SIZE, model_kind
 
-__all__ = ["corner_map", "corner_points", "patch_weights", "extract_patches"]
+__all__ = ["corner_map", "corner_points", "patch_weights", "extract_patches", "inference_model", "native_bfloat16",
+           "resolve_precision"]
 
 _FN_ATTR = "_aicalib_predict_fn"
 _MAP_FNS_ATTR = "_aicalib_map_fns"
@@ -34,48 +47,113 @@ def _predict_fn(model):
     return fn
 
 
+PRECISION_ENV = "AICALIB_PRECISION"
+
+
+@functools.lru_cache(maxsize=1)
+def native_bfloat16() -> bool:
+    """Whether this CPU has native bfloat16 arithmetic (Linux x86: ``avx512_bf16`` or ``amx_bf16`` in /proc/cpuinfo)."""
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("flags"):
+                    flags = set(line.split(":", 1)[1].split())
+                    return bool(flags & {"avx512_bf16", "amx_bf16"})
+    except OSError:
+        pass
+    return False
+
+
+def resolve_precision(precision: str | None = None) -> str:
+    """``"float32"`` or ``"bfloat16"``: ``precision`` if given, else ``AICALIB_PRECISION``, else
+    (``auto``) bfloat16 where the CPU has it natively."""
+    want = precision if precision is not None else os.environ.get(PRECISION_ENV, "auto")
+    want = want.strip().lower() or "auto"
+    if want not in ("auto", "float32", "bfloat16"):
+        raise ValueError(f"precision ({PRECISION_ENV}) must be auto, float32 or bfloat16, got {want!r}")
+    if want == "auto":
+        return "bfloat16" if native_bfloat16() else "float32"
+    return want
+
+
+def inference_model(model, precision: str | None = None):
+    """The model that computes corner maps: ``model`` itself, or its bfloat16 twin (module docstring).
+
+    precision : see :func:`resolve_precision`. The twin is rebuilt from ``model``'s config with
+    every layer but the last set to Keras's ``mixed_bfloat16`` policy (float32 weights, bfloat16
+    arithmetic) and given ``model``'s weights when first asked for; it is kept on ``model`` and
+    does not follow later changes to its weights (training validates in float32). A model that
+    cannot be rebuilt so is used as it is.
+    """
+    if resolve_precision(precision) == "float32" or not isinstance(model, keras.Sequential):
+        return model
+    holder = _holder(model)
+    if holder.twin is None:
+        cfg = model.get_config()
+        layers = cfg["layers"]
+        for layer in layers[:-1]:
+            if layer.get("class_name") != "InputLayer" and "dtype" in layer.get("config", {}):
+                layer["config"]["dtype"] = "mixed_bfloat16"
+        try:
+            twin = keras.Sequential.from_config(cfg)
+            twin.set_weights(model.get_weights())
+        except (ValueError, TypeError):
+            twin = model
+        holder.twin = twin
+    return holder.twin
+
+
 class _MapFns:
-    """Concrete corner-map functions by input size (H, W), or (None, None) for any size."""
+    """What a model keeps for corner maps: concrete functions by input size (H, W), or (None,
+    None) for any size, and the model that computes them (:func:`inference_model`)."""
 
     def __init__(self):
         self.fns: dict = {}
+        self.twin = None
 
 
-def _map_fn(model, shape: tuple[int, int]):
-    """The model as a concrete function for one (1, H, W, 1) float32 input size, kept on the model.
+def _holder(model) -> _MapFns:
+    holder = getattr(model, _MAP_FNS_ATTR, None)
+    if holder is None:  # not a dict or a layer: Keras would track it as part of the model
+        holder = _MapFns()
+        setattr(model, _MAP_FNS_ATTR, holder)
+    return holder
+
+
+def _map_fn(model, shape: tuple[int, int], precision: str):
+    """The model (at ``precision``) as a concrete function for one (1, H, W, 1) float32 input size, kept on the model.
 
     Calling a concrete function skips ``tf.function``'s per-call dispatch (about 0.5 ms), and a
     graph traced for a fixed size runs a little faster than one for any size. Beyond
     ``MAX_MAP_SHAPES`` sizes, one function for any size serves the rest (its outputs are the same).
     """
-    holder = getattr(model, _MAP_FNS_ATTR, None)
-    if holder is None:  # not a dict: Keras would wrap one in a tracked copy
-        holder = _MapFns()
-        setattr(model, _MAP_FNS_ATTR, holder)
-    fns = holder.fns
-    fn = fns.get(shape)
+    fns = _holder(model).fns
+    fn = fns.get((precision, shape))
     if fn is None:
         dims = shape if len(fns) < MAX_MAP_SHAPES else (None, None)
-        fn = fns.get(dims)
+        fn = fns.get((precision, dims))
         if fn is None:
-            traced = tf.function(lambda x: model(x, training=False))
+            net = inference_model(model, precision)
+            traced = tf.function(lambda x: net(x, training=False))
             fn = traced.get_concrete_function(tf.TensorSpec((1, *dims, 1), tf.float32))
-            fns[dims] = fn
+            fns[(precision, dims)] = fn
     return fn
 
 
-def corner_map(model, gray: np.ndarray) -> np.ndarray:
+def corner_map(model, gray: np.ndarray, *, precision: str | None = None) -> np.ndarray:
     """The corner map of a grey image.
 
     gray : (H, W) float or uint8. The standardised image is padded (edge-replicated) at the
-    bottom and right to multiples of 4. Returns (ceil(H/4), ceil(W/4), 3) float32.
+    bottom and right to multiples of 4. precision : ``"float32"``, ``"bfloat16"`` or ``"auto"``
+    (default: ``AICALIB_PRECISION``, else auto; see the module docstring).
+    Returns (ceil(H/4), ceil(W/4), 3) float32.
     """
     g = standardize(gray)
     h, w = g.shape
     ph, pw = padded_shape(h, w)
     if (ph, pw) != (h, w):
         g = np.pad(g, ((0, ph - h), (0, pw - w)), mode="edge")
-    out = _map_fn(model, (ph, pw))(tf.constant(g[None, :, :, None]))
+    out = _map_fn(model, (ph, pw), resolve_precision(precision))(tf.constant(g[None, :, :, None]))
     return out.numpy()[0]
 
 
@@ -106,15 +184,17 @@ def patch_weights(model, gray: np.ndarray, points: np.ndarray, batch_size: int =
     return np.concatenate(out).astype(np.float32)
 
 
-def corner_points(model, gray: np.ndarray, threshold: float = 0.5, *, max_candidates: int = 800):
+def corner_points(model, gray: np.ndarray, threshold: float = 0.5, *, max_candidates: int = 800,
+                  precision: str | None = None):
     """Corner points of an image by either model kind.
 
     gray : (H, W) float or uint8. threshold : minimum corner weight.
     max_candidates : patch classifiers only, how many saddle candidates to score.
+    precision : corner-map models only, see :func:`corner_map` (patch classifiers run in float32).
     Returns points (N, 2) float32 (x, y) px and weights (N,) float32, strongest first.
     """
     if model_kind(model) == "map":
-        return decode_map(corner_map(model, gray), threshold)
+        return decode_map(corner_map(model, gray, precision=precision), threshold)
     cand = saddle_points(gray, max_points=max_candidates)
     w = patch_weights(model, gray, cand)
     keep = w >= threshold
