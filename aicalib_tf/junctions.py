@@ -62,6 +62,7 @@ def ring_symmetry(gray: np.ndarray, pts: np.ndarray, radius: np.ndarray) -> tupl
     return amp, asym
 
 
+GATE = 0.15  # of the reference ring amplitude: below it at the saddle, no shadow-robust fit (see proposer)
 SHADOWED_X = 0.01  # most robust_refine.shadow_asymmetry of an X-junction under a shadow edge
 
 
@@ -96,7 +97,9 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float):
     0.3·``ref_amp`` and asymmetry at most half the amplitude (a T-junction at a board edge has
     asymmetry ≈ 1.3·amplitude), or, where a shadow edge crosses the ring (asymmetry up to ~1.5·amplitude
     on evaluate ``shading``), the fit window point-symmetric once a straight shadow edge is allowed
-    for (:func:`_shadowed_x`). A point asked again (same prediction and step) is answered from
+    for (:func:`_shadowed_x`). The shadow-robust refinement, the costly part, is only tried where the ring about
+    the saddle has at least ``GATE``·``ref_amp`` of amplitude (behind an object or on plain paper
+    the ring test fails either way). A point asked again (same prediction and step) is answered from
     memory: each point's answer depends on that point alone (:func:`aicalib_tf.refine.refine_saddle`).
     """
     h, w = ring_image.shape
@@ -110,10 +113,16 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float):
             p, s = pred[todo], step[todo]
             k = np.flatnonzero(np.all((p >= margin) & (p <= np.array([w - 1 - margin, h - 1 - margin])), axis=1))
             if len(k):
+                radius = ring(s[k])
+
+                def ringed(idx, q):  # the shadow-robust fit only where the ring test could pass
+                    return ring_symmetry(ring_image, q.astype(np.float64), radius[idx])[0] >= GATE * ref_amp
+
                 # no restarts of the shadow fit: a prediction starts within a fraction of a step, and
                 # beside objects most windows are asymmetric (restarts doubled evaluate occluded's time)
-                q, ok = refine_windowed(smoothed, p[k], window(s[k]), max_shift=shift * s[k], restarts=False)
-                amp, asym = ring_symmetry(ring_image, q.astype(np.float64), ring(s[k]))
+                q, ok = refine_windowed(smoothed, p[k], window(s[k]), max_shift=shift * s[k], restarts=False,
+                                        shadow_gate=ringed)
+                amp, asym = ring_symmetry(ring_image, q.astype(np.float64), radius)
                 ok &= amp >= 0.3 * ref_amp
                 odd = np.flatnonzero(ok & (asym > 0.5 * amp))  # a shadow edge across the ring, or no X-junction
                 if len(odd):

@@ -138,12 +138,16 @@ def window_radius(spacing: np.ndarray) -> np.ndarray:
 
 
 def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, max_shift: np.ndarray | None = None,
-                    *, restarts: bool = True):
+                    *, restarts: bool = True, shadow_gate=None):
     """Saddle refinement with a window that fits inside the local squares.
 
     pts : (N, 2). spacing : (N,) px, the local corner spacing. max_shift : (N,) px or None.
     restarts : let the shadow-robust fit start again where its result is not symmetric (see
         :func:`_shadow_fit`; costly where many windows are asymmetric, e.g. beside objects).
+    shadow_gate : None, or ``gate(idx (M,) int, saddles (M, 2)) -> (M,) bool``: which of the points
+        ``idx`` whose window is not point-symmetric about their saddle ``saddles`` may still be a
+        corner. The shadow-robust fit, the costly part, runs for those only; the others keep their
+        saddle (the caller's own test rejects them). None: all.
     Returns refined (N, 2) float32 and ok (N,) bool.
     """
     from .robust_refine import asymmetry  # it uses this module's saddle fit
@@ -160,6 +164,8 @@ def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, ma
         # about it, the fit that allows a shadow edge decides
         asym = asymmetry(img, out[sel], int(r))
         odd = ok[sel] & (asym > MAX_ASYMMETRY)
+        if shadow_gate is not None and odd.any():
+            odd[odd] = shadow_gate(sel[odd], out[sel[odd]])
         if odd.any():
             # restarts only where a shadow edge is likely (SHADOWED), not for the asymmetry of noise alone
             got, got_ok = _shadow_fit(smoothed, pts[sel[odd]], int(r), restarts & (asym[odd] > SHADOWED))

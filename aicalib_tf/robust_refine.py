@@ -133,25 +133,17 @@ def _step(img, x, y, radius, directions):
     e = 0.5 * (i + i[:, mirror])  # even part
     jx, jy = ix - ix[:, mirror], iy - iy[:, mirror]  # d(d)/d(point)
     # no-shadow model: sums over the window, each (P,)
-    a11, a12, a22 = (w * jx * jx).sum(1), (w * jx * jy).sum(1), (w * jy * jy).sum(1)
-    b1, b2, c0 = (w * jx * d).sum(1), (w * jy * d).sum(1), (w * d * d).sum(1)
+    wjx, wjy = w * jx, w * jy
+    base = np.stack([(wjx * jx).sum(1), (wjx * jy).sum(1), (wjy * jy).sum(1),
+                     (wjx * d).sum(1), (wjy * d).sum(1), (w * d * d).sum(1)])  # (6, P): a11 a12 a22 b1 b2 c0
     # per direction and bin, each (P, directions·K): eliminate h = (Σ w e d) / (Σ w e²) in closed form
     we = w * e
     see = (we * e) @ bins + 1e-12
     sed, sex, sey = (we * d) @ signed, (we * jx) @ signed, (we * jy) @ signed
     p, n = len(x), directions
-
-    def per_dir(num):
-        return num.reshape(p, n, -1).sum(2)
-
-    cand = np.stack([
-        np.concatenate([a11[:, None], a11[:, None] - per_dir(sex * sex / see)], 1),
-        np.concatenate([a12[:, None], a12[:, None] - per_dir(sex * sey / see)], 1),
-        np.concatenate([a22[:, None], a22[:, None] - per_dir(sey * sey / see)], 1),
-        np.concatenate([b1[:, None], b1[:, None] - per_dir(sex * sed / see)], 1),
-        np.concatenate([b2[:, None], b2[:, None] - per_dir(sey * sed / see)], 1),
-        np.concatenate([c0[:, None], c0[:, None] - per_dir(sed * sed / see)], 1),
-    ])  # (6, P, 1 + directions)
+    gone = np.stack([sex * sex, sex * sey, sey * sey, sex * sed, sey * sed, sed * sed]) / see  # (6, P, n·K)
+    cand = np.concatenate([base[:, :, None], base[:, :, None] - gone.reshape(6, p, n, -1).sum(3)], 2)
+    # (6, P, 1 + directions): the no-shadow model, then each direction's
     A11, A12, A22, B1, B2, C0 = cand
     det = A11 * A22 - A12 * A12
     good = det > 1e-18 * np.maximum(A11 * A22, 1e-30)

@@ -94,3 +94,25 @@ def test_the_proposer_takes_shadowed_corners_and_leaves_the_board_edge():
     beyond = np.concatenate([2 * grid[:, 0] - grid[:, 1], 2 * grid[:, -1] - grid[:, -2],
                              2 * grid[0] - grid[1], 2 * grid[-1] - grid[-2]])
     assert np.isnan(propose(beyond, np.full(len(beyond), 15.5))).all()
+
+
+def test_the_proposer_skips_the_shadow_fit_where_the_ring_test_must_fail(monkeypatch):
+    # evaluate shading #11's shadowed corners need the shadow-robust fit; asked with a reference
+    # amplitude no ring reaches (as behind an object), the costly fit is never run and none is taken
+    import aicalib_tf.refine as refine
+    from aicalib_tf.conditions import PATTERN, named_conditions
+
+    cond = {c.name: c for c in named_conditions()}["shading"]
+    s = make_sample(cond.preset, cond.seed, 11, size=cond.size, pattern=PATTERN)
+    gray = s.image.astype(np.float32) / 255.0
+    smooth = cv2.GaussianBlur(gray, (0, 0), 1.0)
+    shadowed = s.corners.reshape(6, 9, 2).astype(np.float64)[[2, 2, 4, 5], [5, 7, 5, 5]]
+    calls = []
+    real = refine._shadow_fit
+    monkeypatch.setattr(refine, "_shadow_fit", lambda sm, pts, *a: calls.append(len(pts)) or real(sm, pts, *a))
+    ref_amp = float(np.median(ring_symmetry(smooth, s.corners.astype(np.float64), np.full(54, 4.6))[0]))
+    got = proposer(Smoothed(gray), smooth, ref_amp)(shadowed + [0.8, -0.6], np.full(4, 15.5))
+    assert sum(calls) >= 1 and np.isfinite(got).all()
+    calls.clear()
+    got = proposer(Smoothed(gray), smooth, 100 * ref_amp)(shadowed + [0.8, -0.6], np.full(4, 15.5))
+    assert calls == [] and np.isnan(got).all()

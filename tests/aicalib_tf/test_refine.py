@@ -70,6 +70,27 @@ def test_a_hard_shadow_edge_does_not_pull_the_windowed_refinement():
     err = np.linalg.norm(out - gt, axis=1)
     assert ok.mean() > 0.95
     assert err[ok].max() < 0.5
+    # a gate that lets every asymmetric window through changes nothing; one that lets none through
+    # leaves those points at their saddle (the pulled ones), each gate call seeing saddles of its points
+    asked = []
+
+    def gate(value):
+        def g(idx, saddles):
+            asked.append((idx.copy(), saddles.copy()))
+            return np.full(len(idx), value)
+        return g
+
+    out_all, ok_all = refine_windowed(smoothed, start, spacing, shadow_gate=gate(True))
+    np.testing.assert_array_equal(out_all, out)
+    np.testing.assert_array_equal(ok_all, ok)
+    asked.clear()
+    out_none, _ = refine_windowed(smoothed, start, spacing, shadow_gate=gate(False))
+    idx = np.concatenate([a[0] for a in asked])
+    assert len(idx) >= 3 and np.linalg.norm(out_none - gt, axis=1).max() > 1.5
+    for i, q in asked:
+        np.testing.assert_array_equal(out_none[i], q)
+    rest = np.setdiff1d(np.arange(len(gt)), idx)
+    np.testing.assert_array_equal(out_none[rest], out[rest])
 
 
 
