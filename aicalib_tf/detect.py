@@ -210,7 +210,7 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     refined, scores = refined[ok], scores[ok]
     keep = dedupe(refined, scores)
     refined, scores = refined[keep], scores[keep]
-    smooth = cv2.GaussianBlur(gray, (0, 0), 1.0)
+    smooth = smoothed.sigma(1.0)
     propose = None
     if len(refined) >= 9:
         spacing = nearest_spacing(refined)

@@ -24,7 +24,7 @@ import functools
 import cv2
 import numpy as np
 
-__all__ = ["Smoothed", "refine_saddle", "refine_subpix", "refine_windowed", "saddle_fit_matrix", "window_radius"]
+__all__ = ["Smoothed", "gaussian", "refine_saddle", "refine_subpix", "refine_windowed", "saddle_fit_matrix", "window_radius"]
 
 
 @functools.lru_cache(maxsize=16)
@@ -71,7 +71,7 @@ def refine_saddle(
         return np.zeros((0, 2), np.float32), np.zeros(0, bool)
     g = np.asarray(gray, dtype=np.float32)
     if sigma > 0:
-        g = cv2.GaussianBlur(g, (0, 0), sigma)
+        g = gaussian(g, sigma)
     offsets, fit = saddle_fit_matrix(radius)
     ox, oy = offsets[None, :, 0].astype(np.float64), offsets[None, :, 1].astype(np.float64)
     max_shift = float(radius if max_shift is None else max_shift)
@@ -110,6 +110,13 @@ def refine_saddle(
     return out.astype(np.float32), ok
 
 
+def gaussian(gray: np.ndarray, sigma: float) -> np.ndarray:
+    """``gray`` blurred by a Gaussian of ``sigma`` px, its kernel cut at 3σ (OpenCV's default for
+    float images is 4σ, a third more work for under 0.3% of the kernel's weight); borders reflected."""
+    k = 2 * int(np.ceil(3.0 * sigma)) + 1
+    return cv2.GaussianBlur(gray, (k, k), sigma)
+
+
 class Smoothed:
     """The image smoothed for each refinement radius r (σ = 0.4·r) or σ, made once per image on demand."""
 
@@ -123,7 +130,7 @@ class Smoothed:
         """The image smoothed with a Gaussian of ``sigma`` px."""
         key = round(float(sigma), 6)
         if key not in self.cache:
-            self.cache[key] = cv2.GaussianBlur(self.gray, (0, 0), key)
+            self.cache[key] = gaussian(self.gray, key)
         return self.cache[key]
 
 
