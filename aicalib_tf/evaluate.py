@@ -13,7 +13,9 @@ lenses, two strong barrel lenses) with known K and distortion. ``--conditions`` 
 names, sweep names (noise, blur, contrast, jpeg, distortion, tilt), ``named``, ``sweeps`` or
 ``all`` (default); ``calib`` adds the calibration sequences (always run with ``all``).
 
-Detectors, all in this one process and timed per call (time.perf_counter, after a warm-up):
+Detectors, all in this one process and timed per call (time.perf_counter, after a warm-up); each
+image goes through every detector in turn, and a condition's images are all rendered before any
+is timed:
 cnn (the CNN pipeline with --model, default models/default.keras), report (the same pipeline
 with the report's patch classifier), opencv (cv2.findChessboardCorners + cornerSubPix), and
 opencv-sb (cv2.findChessboardCornersSB).
@@ -120,14 +122,12 @@ def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *,
     rows, errors, hardest = [], {}, {}
     render_s = 0.0
     for cond in conditions:
-        gen = condition_samples(cond, n_for(cond))
-        while True:
-            t0 = time.perf_counter()
-            item = next(gen, None)
-            render_s += time.perf_counter() - t0
-            if item is None:
-                break
-            index, s = item
+        # a condition's images are all rendered before any is timed: rendering between detections
+        # (large numpy and OpenCV passes) would leave caches and thread pools cold for the next one
+        t0 = time.perf_counter()
+        samples = list(condition_samples(cond, n_for(cond)))
+        render_s += time.perf_counter() - t0
+        for index, s in samples:
             img_rows, found_by = _detect_sample(cond.name, cond, index, s, detectors, rows, errors)
             score = _difficulty(img_rows)
             group = cond.sweep or cond.name  # one example per named condition or sweep

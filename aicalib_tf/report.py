@@ -278,7 +278,8 @@ def write_report(out: Path, cfg, conds, result: dict, info: dict, versions: dict
           "A hit: a full board with every corner within 2 px of the truth (board symmetries allowed); wrong: a full board "
           "with any corner further off (wrong_worst_px: the median over wrong boards of their worst corner's error); "
           "partial: an incomplete board. Errors in px over hit corners; recall over visible corners; times per image in "
-          "this one process.\n",
+          "this one process, each image through every detector in turn, a condition's images rendered before any "
+          "is timed.\n",
           _md_table(named_sum[cols], {"detection_rate": ".0%", "recall": ".1%", "wrong_worst_px": ".2f",
                                        "err_median": ".4f", "err_rmse": ".4f", "err_p95": ".4f",
                                        "time_median_ms": ".1f", "time_max_ms": ".0f"})]
