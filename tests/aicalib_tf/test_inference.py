@@ -47,6 +47,9 @@ def test_precision_comes_from_the_argument_then_the_environment(monkeypatch):
     assert inference.resolve_precision("bfloat16") == "bfloat16"
     monkeypatch.setenv(inference.PRECISION_ENV, "auto")
     assert inference.resolve_precision() == ("bfloat16" if inference.native_bfloat16() else "float32")
+    monkeypatch.setenv("TF_ENABLE_ONEDNN_OPTS", "0")  # bfloat16 is emulated, slower, without oneDNN
+    assert inference.resolve_precision() == "float32"
+    assert inference.resolve_precision("bfloat16") == "bfloat16"
     monkeypatch.setenv(inference.PRECISION_ENV, "half")
     with pytest.raises(ValueError, match="AICALIB_PRECISION.*'half'"):
         inference.resolve_precision()
