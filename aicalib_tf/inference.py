@@ -7,20 +7,21 @@ Both model kinds give the same thing, points (N, 2) float32 (x, y) px and weight
 * a patch classifier (``report``) scores 32×32 patches around saddle-point candidates
   (:func:`aicalib_tf.candidates.saddle_points`); its points are those pixel positions.
 
-Precision. On a CPU with native bfloat16 arithmetic (x86 ``avx512_bf16`` or ``amx_bf16``), a
-corner map is computed by a bfloat16 twin of the model (:func:`inference_model`: the same
-weights, every layer but the last computing in bfloat16; the output stays float32). On this
-project's 2-core CPU that runs a 640×480 image in about 2.5 ms instead of 4 ms; its corner
-weights differ from float32's by about 0.01 and its subpixel offsets by under 0.07 px, before
-the refinement on the image, which does not use them. Elsewhere (also with oneDNN turned off by
-``TF_ENABLE_ONEDNN_OPTS=0``, where bfloat16 is emulated and slower) and with the environment
-variable ``AICALIB_PRECISION=float32``, float32 is used (``bfloat16`` forces the twin, for tests).
+Precision. On a CPU with native bfloat16 arithmetic (x86 ``avx512_bf16`` or ``amx_bf16``) and
+TensorFlow's oneDNN kernels on (the default), the corner map is computed in bfloat16: the model's
+layers but the last run under Keras's ``mixed_bfloat16`` policy while its graph is traced (the
+weights stay float32 and are read afresh on every call; the output stays float32). On this
+project's 2-core CPU a 640×480 map takes about 2.5–3 ms instead of 4–5 ms; corner weights differ
+from float32's by about 0.01 and subpixel offsets by under 0.07 px, before the refinement on the
+image, which does not use them. Elsewhere, where a bfloat16 run fails, and with the environment
+variable ``AICALIB_PRECISION=float32``, float32 is used (``bfloat16`` asks for it regardless).
 """
 
 from __future__ import annotations
 
 import functools
 import os
+import threading
 
 import cv2
 import keras
@@ -31,8 +32,7 @@ from .candidates import saddle_points
 from .corner_map import decode_map, padded_shape, standardize
 from .model import PATCH_SIZE, model_kind
 
-__all__ = ["corner_map", "corner_points", "patch_weights", "extract_patches", "inference_model", "native_bfloat16",
-           "resolve_precision"]
+__all__ = ["corner_map", "corner_points", "patch_weights", "extract_patches", "native_bfloat16", "resolve_precision"]
 
 _FN_ATTR = "_aicalib_predict_fn"
 _MAP_FNS_ATTR = "_aicalib_map_fns"
@@ -65,55 +65,59 @@ def native_bfloat16() -> bool:
     return False
 
 
+def _onednn_on() -> bool:
+    """Whether TensorFlow runs its CPU kernels through oneDNN (on by default on x86 Linux; read as TensorFlow reads it)."""
+    return os.environ.get("TF_ENABLE_ONEDNN_OPTS", "1").strip().lower() not in ("0", "false")
+
+
 def resolve_precision(precision: str | None = None) -> str:
     """``"float32"`` or ``"bfloat16"``: ``precision`` if given, else ``AICALIB_PRECISION``, else
-    (``auto``) bfloat16 where the CPU has it natively."""
+    (``auto``) bfloat16 where the CPU has it natively and oneDNN is on."""
     want = precision if precision is not None else os.environ.get(PRECISION_ENV, "auto")
     want = want.strip().lower() or "auto"
     if want not in ("auto", "float32", "bfloat16"):
         raise ValueError(f"precision ({PRECISION_ENV}) must be auto, float32 or bfloat16, got {want!r}")
     if want == "auto":
-        # bfloat16 is only fast through oneDNN (TensorFlow's default on x86 Linux); without it,
-        # TensorFlow's own kernels emulate it (measured: 17 ms a 640x480 map, against 13 in float32)
-        onednn = os.environ.get("TF_ENABLE_ONEDNN_OPTS", "1").strip() not in ("0", "false", "False")
-        return "bfloat16" if native_bfloat16() and onednn else "float32"
+        # bfloat16 is only fast through oneDNN; without it TensorFlow's own kernels emulate it
+        # (measured: 17 ms a 640x480 map, against 13 ms in float32)
+        return "bfloat16" if native_bfloat16() and _onednn_on() else "float32"
     return want
 
 
-def inference_model(model, precision: str | None = None):
-    """The model that computes corner maps: ``model`` itself, or its bfloat16 twin (module docstring).
+_TRACE_LOCK = threading.Lock()  # a bfloat16 trace changes the model's layer policies for a moment
 
-    precision : see :func:`resolve_precision`. The twin is rebuilt from ``model``'s config with
-    every layer but the last set to Keras's ``mixed_bfloat16`` policy (float32 weights, bfloat16
-    arithmetic) and given ``model``'s weights when first asked for; it is kept on ``model`` and
-    does not follow later changes to its weights (training validates in float32). A model that
-    cannot be rebuilt so is used as it is.
+
+def _trace(model, dims, precision: str):
+    """A concrete function of ``model`` for (1, *dims, 1) float32 input, computing in ``precision``.
+
+    For bfloat16, every layer but the last is switched to Keras's ``mixed_bfloat16`` policy
+    (bfloat16 arithmetic on float32 weights) while the function is traced, then switched back:
+    the graph reads the model's own weights, so it follows any later change to them, and the
+    model itself is left as it was. The last layer keeps its policy, so the output stays float32.
     """
-    if resolve_precision(precision) == "float32" or not isinstance(model, keras.Sequential):
-        return model
-    holder = _holder(model)
-    if holder.twin is None:
-        cfg = model.get_config()
-        layers = cfg["layers"]
-        for layer in layers[:-1]:
-            if layer.get("class_name") != "InputLayer" and "dtype" in layer.get("config", {}):
-                layer["config"]["dtype"] = "mixed_bfloat16"
+    traced = tf.function(lambda x: model(x, training=False))
+    spec = tf.TensorSpec((1, *dims, 1), tf.float32)
+    if precision == "float32":
+        return traced.get_concrete_function(spec)
+    with _TRACE_LOCK:
+        layers = [layer for layer in model.layers[:-1] if hasattr(layer, "dtype_policy")]
+        saved = [layer.dtype_policy for layer in layers]
         try:
-            twin = keras.Sequential.from_config(cfg)
-            twin.set_weights(model.get_weights())
-        except Exception:  # any layer Keras cannot rebuild so: the model as it is, in float32
-            twin = model
-        holder.twin = twin
-    return holder.twin
+            for layer in layers:
+                layer.dtype_policy = keras.DTypePolicy("mixed_bfloat16")
+            return traced.get_concrete_function(spec)
+        finally:
+            for layer, policy in zip(layers, saved):
+                layer.dtype_policy = policy
 
 
 class _MapFns:
-    """What a model keeps for corner maps: concrete functions by input size (H, W), or (None,
-    None) for any size, and the model that computes them (:func:`inference_model`)."""
+    """What a model keeps for corner maps: concrete functions by (precision, (H, W)), or
+    (precision, (None, None)) for any size; and whether bfloat16 failed to run (float32 then)."""
 
     def __init__(self):
         self.fns: dict = {}
-        self.twin = None
+        self.no_bfloat16 = False
 
 
 def _holder(model) -> _MapFns:
@@ -129,19 +133,31 @@ def _map_fn(model, shape: tuple[int, int], precision: str):
 
     Calling a concrete function skips ``tf.function``'s per-call dispatch (about 0.5 ms), and a
     graph traced for a fixed size runs a little faster than one for any size. Beyond
-    ``MAX_MAP_SHAPES`` sizes, one function for any size serves the rest (its outputs are the same).
+    ``MAX_MAP_SHAPES`` sizes per precision, one function for any size serves the rest (its
+    outputs are the same).
     """
     fns = _holder(model).fns
     fn = fns.get((precision, shape))
     if fn is None:
-        dims = shape if len(fns) < MAX_MAP_SHAPES else (None, None)
+        sized = sum(1 for p, d in fns if p == precision and d != (None, None))
+        dims = shape if sized < MAX_MAP_SHAPES else (None, None)
         fn = fns.get((precision, dims))
         if fn is None:
-            net = inference_model(model, precision)
-            traced = tf.function(lambda x: net(x, training=False))
-            fn = traced.get_concrete_function(tf.TensorSpec((1, *dims, 1), tf.float32))
+            fn = _trace(model, dims, precision)
             fns[(precision, dims)] = fn
     return fn
+
+
+def _run_map(model, x, shape: tuple[int, int], precision: str):
+    """The map of standardised input ``x``; a bfloat16 run that fails (oneDNN limited to an ISA
+    without bfloat16, say) falls back to float32 for this model from then on."""
+    holder = _holder(model)
+    if precision == "bfloat16" and not holder.no_bfloat16:
+        try:
+            return _map_fn(model, shape, "bfloat16")(x)
+        except (tf.errors.OpError, ValueError, TypeError):
+            holder.no_bfloat16 = True
+    return _map_fn(model, shape, "float32")(x)
 
 
 def corner_map(model, gray: np.ndarray, *, precision: str | None = None) -> np.ndarray:
@@ -157,7 +173,7 @@ def corner_map(model, gray: np.ndarray, *, precision: str | None = None) -> np.n
     ph, pw = padded_shape(h, w)
     if (ph, pw) != (h, w):
         g = np.pad(g, ((0, ph - h), (0, pw - w)), mode="edge")
-    out = _map_fn(model, (ph, pw), resolve_precision(precision))(tf.constant(g[None, :, :, None]))
+    out = _run_map(model, tf.constant(g[None, :, :, None]), (ph, pw), resolve_precision(precision))
     return out.numpy()[0]
 
 

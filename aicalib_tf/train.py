@@ -100,8 +100,8 @@ def validation_set(preset: str, count: int, *, workers: int = 1, progress: bool 
 def evaluate_points(model, images, corners, threshold: float = 0.5) -> dict:
     """Corner precision/recall/localisation of ``model`` on whole images (see metrics.point_detection_stats).
 
-    In float32 on every machine: the figures are the trained weights' (and a bfloat16 twin made
-    once would not follow the weights as they train; see aicalib_tf.inference)."""
+    In float32 on every machine, so the figures are the same wherever training runs (inference
+    may use bfloat16, see aicalib_tf.inference)."""
     from .inference import corner_points
     from .metrics import point_detection_stats
 
