@@ -98,8 +98,9 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float):
     asymmetry ≈ 1.3·amplitude), or, where a shadow edge crosses the ring (asymmetry up to ~1.5·amplitude
     on evaluate ``shading``), the fit window point-symmetric once a straight shadow edge is allowed
     for (:func:`_shadowed_x`). The shadow-robust refinement, the costly part, is only tried where the ring about
-    the saddle has at least ``GATE``·``ref_amp`` of amplitude (behind an object or on plain paper
-    the ring test fails either way). A point asked again (same prediction and step) is answered from
+    the saddle has at least ``GATE``·``ref_amp`` of amplitude: behind an object or on plain paper
+    the ring test (``0.3``·``ref_amp``) then fails either way (on evaluate's occluded, partial,
+    shading, clutter and tilt60 images the gate changed no answer). A point asked again (same prediction and step) is answered from
     memory: each point's answer depends on that point alone (:func:`aicalib_tf.refine.refine_saddle`).
     """
     h, w = ring_image.shape

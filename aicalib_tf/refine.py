@@ -154,7 +154,8 @@ def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, ma
     shadow_gate : None, or ``gate(idx (M,) int, saddles (M, 2)) -> (M,) bool``: which of the points
         ``idx`` whose window is not point-symmetric about their saddle ``saddles`` may still be a
         corner. The shadow-robust fit, the costly part, runs for those only; the others keep their
-        saddle (the caller's own test rejects them). None: all.
+        saddle and stay ok (without a gate, a far-from-symmetric window whose shadow fit failed
+        would not be ok), so the caller's own test must reject them. None: all.
     Returns refined (N, 2) float32 and ok (N,) bool.
     """
     from .robust_refine import asymmetry  # it uses this module's saddle fit
