@@ -190,37 +190,23 @@ def square_px(label: dict) -> float:
     return float(np.median(d))
 
 
-def _render(job: tuple) -> Sample:
-    """One condition image: job = (preset, seed, index, size). Top level, so worker processes can run it."""
-    preset, seed, index, size = job
-    return make_sample(preset, seed, index, size=size, pattern=PATTERN)
-
-
-def condition_samples(cond: Condition, count: int, *, max_tries: int = 20, pool=None):
+def condition_samples(cond: Condition, count: int, *, max_tries: int = 20):
     """Yield ``(index, Sample)`` for the first ``count`` images of ``cond`` that pass its filter.
 
     Renders up to ``max_tries · count`` candidates (the tilt filter rejects some); raises
-    RuntimeError if too few pass. pool : a ``multiprocessing`` pool (spawned) to render in, in
-    batches of the images still needed (twice that where a filter rejects some); the images and
-    their order are the same as without one.
+    RuntimeError if too few pass.
     """
     if count < 0:
         raise ValueError(f"count must be >= 0, got {count}")
-    limit = max_tries * max(count, 1)
-    kept, index = 0, 0
-    while kept < count and index < limit:
-        need = count - kept
-        n = 1 if pool is None else min(limit - index, need * (2 if cond.min_tilt_deg > 0 else 1))
-        jobs = [(cond.preset, cond.seed, i, cond.size) for i in range(index, index + n)]
-        batch = map(_render, jobs) if pool is None else pool.map(_render, jobs, chunksize=max(1, n // 8))
-        for (_, _, i, _), s in zip(jobs, batch):
-            if kept >= count:
-                return
-            if cond.min_tilt_deg > 0 and not board_tilt_deg(s.label) >= cond.min_tilt_deg:
-                continue
-            kept += 1
-            yield i, s
-        index += n
+    kept = 0
+    for index in range(max_tries * max(count, 1)):
+        if kept >= count:
+            return
+        s = make_sample(cond.preset, cond.seed, index, size=cond.size, pattern=PATTERN)
+        if cond.min_tilt_deg > 0 and not board_tilt_deg(s.label) >= cond.min_tilt_deg:
+            continue
+        kept += 1
+        yield index, s
     if kept < count:
         raise RuntimeError(f"condition {cond.name}: only {kept} of {count} images passed its filter")
 

@@ -1,7 +1,7 @@
 """The benchmark report: the CNN against OpenCV's chessboard detectors, on the same images.
 
     python -m aicalib_tf.evaluate [--out reports/DATE] [--quick] [--model PATH]
-        [--detectors cnn,report,opencv,opencv-sb] [--conditions LIST] [--limit N] [--workers N] [--quiet]
+        [--detectors cnn,report,opencv,opencv-sb] [--conditions LIST] [--limit N] [--quiet]
     python -m aicalib_tf.evaluate --images DIR --pattern 9x6 [--degrade] [--out ...]
 
 Default suite (no download, fixed seeds): data_gen renders of 9×6 boards at 640×480 under the
@@ -15,7 +15,7 @@ names, sweep names (noise, blur, contrast, jpeg, distortion, tilt), ``named``, `
 
 Detectors, all in this one process and timed per call (time.perf_counter, after a warm-up); each
 image goes through every detector in turn, and a condition's images are all rendered before any
-is timed (by --workers processes, 2 by default, idle while detectors run):
+is timed:
 cnn (the CNN pipeline with --model, default models/default.keras), report (the same pipeline
 with the report's patch classifier), opencv (cv2.findChessboardCorners + cornerSubPix), and
 opencv-sb (cv2.findChessboardCornersSB).
@@ -45,7 +45,6 @@ Exit codes: 0 done; 2 bad arguments.
 
 from __future__ import annotations
 
-import contextlib
 import os
 import sys
 import time
@@ -81,7 +80,6 @@ class EvalConfig:
     seed: int = 0
     quiet: bool = False
     command: str = ""
-    workers: int = 1
 
     def counts(self) -> dict:
         """Images per named condition, per sweep level, at 1920×1080, and views per calibration sequence."""
@@ -107,14 +105,12 @@ def _warm_up(detectors: dict) -> None:
 
 
 def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *, with_calibration: bool = True,
-                  progress: bool = True, workers: int = 1) -> dict:
+                  progress: bool = True) -> dict:
     """Run every detector on every image of ``conditions`` (and the calibration sequences).
 
-    counts : see :meth:`EvalConfig.counts`. workers : processes that render the images (spawned
-    once for the run and idle while detectors are timed; the images do not depend on it).
-    Returns {"rows": [dict per image × detector], "errors": {(condition, detector): [(K,) px
-    arrays]}, "examples": [hardest images], "calibration": [dict per sequence × detector],
-    "render_s": seconds spent rendering}.
+    counts : see :meth:`EvalConfig.counts`. Returns {"rows": [dict per image × detector],
+    "errors": {(condition, detector): [(K,) px arrays]}, "examples": [hardest images],
+    "calibration": [dict per sequence × detector], "render_s": seconds spent rendering}.
     """
     from tqdm import tqdm
 
@@ -125,14 +121,19 @@ def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *,
     bar = tqdm(total=total, desc="evaluate", unit="img", disable=not progress)
     rows, errors, hardest = [], {}, {}
     render_s = 0.0
-    with _render_pool(workers if conditions else 1) as pool:
-        for cond in conditions:
-            # a condition's images are all rendered before any is timed: rendering between detections
-            # (large numpy and OpenCV passes) would leave caches and thread pools cold for the next one
-            t0 = time.perf_counter()
-            samples = list(condition_samples(cond, n_for(cond), pool=pool))
-            render_s += time.perf_counter() - t0
-            _detect_condition(cond, samples, detectors, rows, errors, hardest, bar)
+    for cond in conditions:
+        # a condition's images are all rendered before any is timed: rendering between detections
+        # (large numpy and OpenCV passes) would leave caches and thread pools cold for the next one
+        t0 = time.perf_counter()
+        samples = list(condition_samples(cond, n_for(cond)))
+        render_s += time.perf_counter() - t0
+        for index, s in samples:
+            img_rows, found_by = _detect_sample(cond.name, cond, index, s, detectors, rows, errors)
+            score = _difficulty(img_rows)
+            group = cond.sweep or cond.name  # one example per named condition or sweep
+            if score > 0 and score > hardest.get(group, (0,))[0]:
+                hardest[group] = (score, cond.name, index, s.image, s.corners if cond.has_board else None, found_by)
+            bar.update(1)
     calib = []
     if with_calibration:
         t0 = time.perf_counter()
@@ -142,29 +143,6 @@ def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *,
     bar.close()
     examples = sorted(hardest.values(), key=lambda h: -h[0])[:6]
     return {"rows": rows, "errors": errors, "examples": examples, "calibration": calib, "render_s": render_s}
-
-
-@contextlib.contextmanager
-def _render_pool(workers: int):
-    """A spawned process pool of ``workers`` (None for 1): spawned, so TensorFlow in this process is safe."""
-    if workers <= 1:
-        yield None
-        return
-    import multiprocessing as mp
-
-    with mp.get_context("spawn").Pool(workers) as pool:
-        yield pool
-
-
-def _detect_condition(cond: Condition, samples: list, detectors: dict, rows: list, errors: dict, hardest: dict, bar):
-    """Every detector on every ``(index, Sample)`` of one condition; keeps its hardest image in ``hardest``."""
-    for index, s in samples:
-        img_rows, found_by = _detect_sample(cond.name, cond, index, s, detectors, rows, errors)
-        score = _difficulty(img_rows)
-        group = cond.sweep or cond.name  # one example per named condition or sweep
-        if score > 0 and score > hardest.get(group, (0,))[0]:
-            hardest[group] = (score, cond.name, index, s.image, s.corners if cond.has_board else None, found_by)
-        bar.update(1)
 
 
 def _detect_sample(name: str, cond: Condition | None, index: int, s, detectors: dict, rows: list, errors: dict):
@@ -299,8 +277,7 @@ def run(cfg: EvalConfig, detectors: dict | None = None, info: dict | None = None
     spec, with_calib = _split_calib(cfg.conditions)
     conds = select_conditions(spec) if spec != "" else []
     _warm_up(detectors)
-    result = run_synthetic(conds, detectors, cfg.counts(), with_calibration=with_calib, progress=not cfg.quiet,
-                           workers=cfg.workers)
+    result = run_synthetic(conds, detectors, cfg.counts(), with_calibration=with_calib, progress=not cfg.quiet)
     result["wall_s"] = time.perf_counter() - t0
     report.write_report(out, cfg, conds, result, info, _versions())
     return out
@@ -322,8 +299,6 @@ def _parse_args(argv):
     ap.add_argument("--degrade", action="store_true", help="with --images: also score seeded degradations of each photo")
     ap.add_argument("--seed", type=int, default=0, help="seed of the --degrade noise (default: %(default)s)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
-    ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
-                    help="processes rendering the synthetic images, idle while detectors are timed (default: %(default)s)")
     return ap.parse_args(argv)
 
 
@@ -339,8 +314,6 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"unknown detector(s) {', '.join(bad) or '(none)'}; choose from {', '.join(DETECTORS)}")
         if args.limit is not None and args.limit < 1:
             raise ValueError(f"--limit must be >= 1, got {args.limit}")
-        if args.workers < 1:
-            raise ValueError(f"--workers must be >= 1, got {args.workers}")
         pattern = None
         if args.images is not None:
             from data_gen.board import parse_pattern
@@ -362,7 +335,7 @@ def main(argv: list[str] | None = None) -> int:
         out = args.out or str(Path("reports") / time.strftime("%Y%m%d-%H%M%S"))
         cfg = EvalConfig(out=out, quick=args.quick, model=args.model, detectors=dets, conditions=args.conditions,
                          limit=args.limit, images=args.images, pattern=pattern, degrade=args.degrade, seed=args.seed,
-                         quiet=args.quiet, workers=args.workers, command="python -m aicalib_tf.evaluate " + " ".join(
+                         quiet=args.quiet, command="python -m aicalib_tf.evaluate " + " ".join(
                              sys.argv[1:] if argv is None else argv))
         detectors, info = make_detectors(dets, pattern or PATTERN, args.model)  # a bad model is a bad argument
     except (ValueError, FileNotFoundError) as exc:

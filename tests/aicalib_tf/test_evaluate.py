@@ -111,7 +111,6 @@ def test_photos_with_degradations(tmp_path):
     (["--detectors", "cnn,yolo"], "unknown detector"),
     (["--conditions", "clean,foggy"], "unknown condition"),
     (["--limit", "0"], "--limit"),
-    (["--workers", "0"], "--workers"),
     (["--images", "."], "--pattern"),
     (["--pattern", "9x6"], "go with --images"),
     (["--images", "/no/such/folder", "--pattern", "9x6"], "not a folder"),
@@ -174,21 +173,6 @@ def test_photo_degradations_are_seeded_and_uint8():
         assert a.dtype == np.uint8 and a.shape == gray.shape and np.array_equal(a, b)
     with pytest.raises(ValueError, match="unknown degradation"):
         degrade_photo(gray, "fog", np.random.default_rng(0))
-
-
-def test_rendering_in_worker_processes_gives_the_same_images():
-    import multiprocessing as mp
-
-    from aicalib_tf.conditions import condition_samples
-
-    tilt = select_conditions("tilt60")[0]  # its filter rejects some renders: batches must keep the order
-    alone = list(condition_samples(tilt, 4))
-    with mp.get_context("spawn").Pool(2) as pool:
-        pooled = list(condition_samples(tilt, 4, pool=pool))
-    assert [i for i, _ in pooled] == [i for i, _ in alone] and alone[-1][0] > 3
-    for (_, a), (_, b) in zip(alone, pooled):
-        np.testing.assert_array_equal(a.image, b.image)
-        np.testing.assert_array_equal(a.corners, b.corners)
 
 
 def test_condition_selection():
