@@ -3,6 +3,8 @@ import pytest
 
 pytest.importorskip("keras")
 
+import tensorflow as tf  # noqa: E402
+
 from aicalib_tf import inference  # noqa: E402
 from aicalib_tf.corner_map import standardize  # noqa: E402
 from aicalib_tf.model import build_model  # noqa: E402
@@ -93,7 +95,6 @@ def test_a_bfloat16_run_that_fails_falls_back_to_float32(monkeypatch):
             raise tf.errors.InternalError(None, None, "could not create a primitive descriptor")
         return fail
 
-    import tensorflow as tf
     monkeypatch.setattr(inference, "_trace", broken)
     out = inference.corner_map(m, gray, precision="bfloat16")
     np.testing.assert_array_equal(out, inference.corner_map(m, gray, precision="float32"))
