@@ -1,11 +1,11 @@
-"""Subpixel corner refinement on the original image (pure numpy/OpenCV).
+"""Subpixel corner refinement on the original image (numpy/OpenCV, loops compiled by numba).
 
 An ideal X-junction is point-symmetric: the intensity at c + d equals the intensity at c − d,
 whatever the angles of its two lines. Any symmetric blur keeps that, so the centre is a
 stationary point (a saddle) of the smoothed image. :func:`refine_saddle` finds it: it fits a
 quadratic surface to a Gaussian-weighted window of the smoothed image around each estimate, moves
-to the quadratic's saddle point and repeats until the step is below 1e-3 px, all points at once
-(each point stops on its own, so its result never depends on the others). :func:`refine_windowed` picks
+to the quadratic's saddle point and repeats until the step is below 1e-3 px, each point on its
+own (:func:`aicalib_tf.kernels.saddle_loop`), so its result never depends on the others. :func:`refine_windowed` picks
 each point's window to fit inside its squares, on an image smoothed once per window size
 (:class:`Smoothed`). A hard shadow edge across the window pulls the saddle up to ~3 px towards it
 (evaluate ``shading``: 15 wrong boards); where the window about the saddle is not point-symmetric
@@ -23,6 +23,8 @@ import functools
 
 import cv2
 import numpy as np
+
+from .kernels import saddle_loop
 
 __all__ = ["Smoothed", "gaussian", "refine_saddle", "refine_subpix", "refine_windowed", "saddle_fit_matrix", "window_radius"]
 
@@ -72,40 +74,19 @@ def refine_saddle(
     g = np.asarray(gray, dtype=np.float32)
     if sigma > 0:
         g = gaussian(g, sigma)
-    offsets, fit = saddle_fit_matrix(radius)
-    ox, oy = offsets[None, :, 0].astype(np.float64), offsets[None, :, 1].astype(np.float64)
+    _, fit = saddle_fit_matrix(radius)
     max_shift = float(radius if max_shift is None else max_shift)
-    x0, y0 = pts0[:, 0].copy(), pts0[:, 1].copy()
-    x, y = x0.copy(), y0.copy()
-    n = len(pts0)
-    sx, sy, saddle = np.zeros(n), np.zeros(n), np.zeros(n, bool)
-    act = np.arange(n)  # points still moving: each stops on its own, so none depends on the others
-    for _ in range(iterations):
-        xa, ya = x[act], y[act]
-        vals = cv2.remap(g, (xa[:, None] + ox).astype(np.float32), (ya[:, None] + oy).astype(np.float32),
-                         cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float64)
-        a, b, c, d, e, _ = fit @ vals.T  # each (len(act),)
-        det = 4 * a * c - b * b
-        sad = det < 0
-        safe = np.where(sad, det, -1.0)
-        ux = np.where(sad, (-2 * c * d + b * e) / safe, 0.0)
-        uy = np.where(sad, (b * d - 2 * a * e) / safe, 0.0)
-        scale = np.minimum(1.0, 1.0 / np.maximum(np.sqrt(ux * ux + uy * uy), 1e-12))  # at most 1 px per iteration
-        ux, uy = ux * scale, uy * scale
-        sx[act], sy[act], saddle[act] = ux, uy, sad
-        x[act], y[act] = xa + ux, ya + uy
-        act = act[(np.abs(ux) >= 1e-3) | (np.abs(uy) >= 1e-3)]
-        if len(act) == 0:
-            break
+    pts, step, saddle = saddle_loop(np.ascontiguousarray(g), pts0, fit, int(radius), int(iterations))
+    x, y = pts[:, 0], pts[:, 1]
+    sx, sy = step[:, 0], step[:, 1]
     h, w = g.shape
-    dx, dy = x - x0, y - y0
+    dx, dy = x - pts0[:, 0], y - pts0[:, 1]
     ok = (
         saddle
         & (np.sqrt(sx * sx + sy * sy) < 0.05)
         & (np.sqrt(dx * dx + dy * dy) <= max_shift)
         & (x >= -0.5) & (x <= w - 0.5) & (y >= -0.5) & (y <= h - 0.5)
     )
-    pts = np.stack([x, y], axis=1)
     out = np.where(ok[:, None], pts, pts0)
     return out.astype(np.float32), ok
 

@@ -1,0 +1,199 @@
+"""Compiled inner loops of the subpixel fits (numba; pure numpy/OpenCV callers, no TensorFlow).
+
+Each refinement call fits only a handful of points, so as numpy array code its time went on
+per-call overhead: a grid or a partial board asks the fits about a few points at a time, hundreds
+of times per image. Here each point runs its whole Gauss–Newton loop in compiled code, on exact
+bilinear samples of the image (``cv2.remap`` rounds the sample position to 1/32 px).
+
+The maths is that of :func:`aicalib_tf.refine.refine_saddle` and
+:func:`aicalib_tf.robust_refine.refine_symmetric`, whose docstrings define it; these functions are
+their loops and take the fixed operators those modules build. Images are (H, W) float32; points
+are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0); samples outside the image take the
+nearest edge pixel (OpenCV's BORDER_REPLICATE). Compiled on first use and cached on disk.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["sample_windows", "saddle_loop", "symmetric_loop"]
+
+
+@njit(cache=True, nogil=True)
+def _sample_grid(img, x, y, lo, side, out):
+    """Bilinear samples at (x + i, y + j) for i, j in lo .. lo + side − 1, row-major into out (side²,)."""
+    h, w = img.shape
+    x0, y0 = math.floor(x), math.floor(y)
+    fx, fy = x - x0, y - y0
+    k = 0
+    for j in range(side):
+        r0 = min(max(y0 + lo + j, 0), h - 1)
+        r1 = min(max(y0 + lo + j + 1, 0), h - 1)
+        for i in range(side):
+            c0 = min(max(x0 + lo + i, 0), w - 1)
+            c1 = min(max(x0 + lo + i + 1, 0), w - 1)
+            top = img[r0, c0] + fx * (img[r0, c1] - img[r0, c0])
+            bot = img[r1, c0] + fx * (img[r1, c1] - img[r1, c0])
+            out[k] = top + fy * (bot - top)
+            k += 1
+
+
+@njit(cache=True, nogil=True)
+def sample_windows(img, pts, radius):
+    """(P, (2r+1)²) float64: bilinear samples of img about each point, offsets row-major (dy outer)."""
+    side = 2 * radius + 1
+    out = np.empty((pts.shape[0], side * side))
+    for p in range(pts.shape[0]):
+        _sample_grid(img, pts[p, 0], pts[p, 1], -radius, side, out[p])
+    return out
+
+
+@njit(cache=True, nogil=True)
+def saddle_loop(img, pts, fit, radius, iterations):
+    """The saddle fit's iterations for each point.
+
+    img (H, W) float32, pts (P, 2) float64, fit (6, (2r+1)²) the quadratic fit operator.
+    Returns (P, 2) positions, (P, 2) the last step (px) and (P,) bool: the last fit was a saddle.
+    """
+    n = pts.shape[0]
+    side = 2 * radius + 1
+    m = side * side
+    out = pts.copy()
+    step = np.zeros((n, 2))
+    saddle = np.zeros(n, np.bool_)
+    vals = np.empty(m)
+    for p in range(n):
+        x, y = pts[p, 0], pts[p, 1]
+        for _ in range(iterations):
+            _sample_grid(img, x, y, -radius, side, vals)
+            a = b = c = d = e = 0.0
+            for k in range(m):
+                v = vals[k]
+                a += fit[0, k] * v
+                b += fit[1, k] * v
+                c += fit[2, k] * v
+                d += fit[3, k] * v
+                e += fit[4, k] * v
+            det = 4 * a * c - b * b
+            ux = uy = 0.0
+            sad = det < 0
+            if sad:
+                ux = (-2 * c * d + b * e) / det
+                uy = (b * d - 2 * a * e) / det
+                norm = math.sqrt(ux * ux + uy * uy)
+                if norm > 1.0:  # at most 1 px per iteration
+                    ux, uy = ux / norm, uy / norm
+            x += ux
+            y += uy
+            step[p, 0], step[p, 1], saddle[p] = ux, uy, sad
+            if abs(ux) < 1e-3 and abs(uy) < 1e-3:
+                break
+        out[p, 0], out[p, 1] = x, y
+    return out, step, saddle
+
+
+@njit(cache=True, nogil=True)
+def _symmetric_step(big, side, inner, weights, mirror, kbin, sign, nk, acc, cand):
+    """One Gauss–Newton step of the shadow-robust fit from the (2r+3)² samples ``big``: (ux, uy)."""
+    m = inner.shape[0]
+    ndir = kbin.shape[1]
+    acc[:] = 0.0  # (ndir, nk, 4): Σ w e² , Σ± w e d, Σ± w e jx, Σ± w e jy per direction and bin
+    a11 = a12 = a22 = b1 = b2 = c0 = 0.0
+    for k in range(m):
+        q, qm = inner[k], inner[mirror[k]]
+        i0, i1 = big[q], big[qm]
+        d = i0 - i1
+        e = 0.5 * (i0 + i1)
+        jx = 0.5 * (big[q + 1] - big[q - 1]) - 0.5 * (big[qm + 1] - big[qm - 1])
+        jy = 0.5 * (big[q + side] - big[q - side]) - 0.5 * (big[qm + side] - big[qm - side])
+        w = weights[k]
+        a11 += w * jx * jx
+        a12 += w * jx * jy
+        a22 += w * jy * jy
+        b1 += w * jx * d
+        b2 += w * jy * d
+        c0 += w * d * d
+        we = w * e
+        for t in range(ndir):
+            b = kbin[k, t]
+            s = sign[k, t]
+            acc[t, b, 0] += we * e
+            acc[t, b, 1] += s * we * d
+            acc[t, b, 2] += s * we * jx
+            acc[t, b, 3] += s * we * jy
+    cand[0, 0], cand[0, 1], cand[0, 2], cand[0, 3], cand[0, 4], cand[0, 5] = a11, a12, a22, b1, b2, c0
+    for t in range(ndir):
+        g0 = g1 = g2 = g3 = g4 = g5 = 0.0
+        for b in range(nk):
+            see = acc[t, b, 0] + 1e-12
+            sed, sex, sey = acc[t, b, 1], acc[t, b, 2], acc[t, b, 3]
+            g0 += sex * sex / see
+            g1 += sex * sey / see
+            g2 += sey * sey / see
+            g3 += sex * sed / see
+            g4 += sey * sed / see
+            g5 += sed * sed / see
+        cand[t + 1, 0], cand[t + 1, 1], cand[t + 1, 2] = a11 - g0, a12 - g1, a22 - g2
+        cand[t + 1, 3], cand[t + 1, 4], cand[t + 1, 5] = b1 - g3, b2 - g4, c0 - g5
+    best, best_ux, best_uy = np.inf, 0.0, 0.0
+    for t in range(ndir + 1):  # the model (none, or a shadow direction) that leaves the least
+        A11, A12, A22, B1, B2, C0 = cand[t, 0], cand[t, 1], cand[t, 2], cand[t, 3], cand[t, 4], cand[t, 5]
+        det = A11 * A22 - A12 * A12
+        if not det > 1e-18 * max(A11 * A22, 1e-30):
+            continue
+        ux = -(A22 * B1 - A12 * B2) / det
+        uy = -(A11 * B2 - A12 * B1) / det
+        resid = C0 + B1 * ux + B2 * uy
+        if resid < best:
+            best, best_ux, best_uy = resid, ux, uy
+    return best_ux, best_uy
+
+
+@njit(cache=True, nogil=True)
+def symmetric_loop(img, pts, radius, weights, mirror, kbin, sign, iterations):
+    """The shadow-robust fit's iterations for each point.
+
+    img (H, W) float32, pts (P, 2) float64; for the (2r+1)² window in row-major order: weights (M,),
+    mirror (M,) int (index of −o), kbin (M, D) int (bin of |n·o| per direction) and sign (M, D)
+    (±1 sign of n·o). Returns (P, 2) positions and (P,) the last step's length (px).
+    """
+    n = pts.shape[0]
+    side = 2 * radius + 3
+    m = (2 * radius + 1) ** 2
+    inner = np.empty(m, np.int64)
+    for k in range(m):
+        inner[k] = (k // (2 * radius + 1) + 1) * side + (k % (2 * radius + 1)) + 1
+    nk = 0
+    for k in range(m):
+        for t in range(kbin.shape[1]):
+            nk = max(nk, kbin[k, t] + 1)
+    acc = np.empty((kbin.shape[1], nk, 4))
+    cand = np.empty((kbin.shape[1] + 1, 6))
+    big = np.empty(side * side)
+    out = pts.copy()
+    last = np.full(n, np.inf)
+    for p in range(n):
+        x, y = pts[p, 0], pts[p, 1]
+        px = py = 0.0
+        damp = 1.0
+        for _ in range(iterations):
+            _sample_grid(img, x, y, -radius - 1, side, big)
+            ux, uy = _symmetric_step(big, side, inner, weights, mirror, kbin, sign, nk, acc, cand)
+            # the model can switch between two points a step apart, each sending the fit back to the
+            # other: a step against the last one halves the steps from then on
+            if ux * px + uy * py < 0:
+                damp *= 0.5
+            ux, uy = ux * damp, uy * damp
+            norm = math.sqrt(ux * ux + uy * uy)
+            scale = min(1.0, 1.0 / max(norm, 1e-12))  # at most 1 px per iteration
+            x += ux * scale
+            y += uy * scale
+            px, py = ux, uy
+            last[p] = norm
+            if norm < 1e-3:
+                break
+        out[p, 0], out[p, 1] = x, y
+    return out, last
