@@ -13,7 +13,7 @@ lenses, two strong barrel lenses) with known K and distortion. ``--conditions`` 
 names, sweep names (noise, blur, contrast, jpeg, distortion, tilt), ``named``, ``sweeps`` or
 ``all`` (default); ``calib`` adds the calibration sequences (always run with ``all``).
 
-Detectors, all in this one process and timed per call (time.perf_counter, after a warm-up); each
+Detectors, all in this one process and timed per call (time.perf_counter, after a warm-up at each image size); each
 image goes through every detector in turn, and a condition's images are all rendered before any
 is timed:
 cnn (the CNN pipeline with --model, default models/default.keras), report (the same pipeline
@@ -96,10 +96,12 @@ def _difficulty(rows: list[dict]) -> float:
     return bad + 0.01 * min(99.0, max([r["err_max"] for r in rows if np.isfinite(r["err_max"])] or [0.0]))
 
 
-def _warm_up(detectors: dict) -> None:
+def _warm_up(detectors: dict, size: tuple[int, int]) -> None:
+    """Run every detector once, untimed, on a clean board of ``size`` (W, H) px: the first call at a
+    new image size traces the network's graph for it (tens of ms), which no later call pays."""
     from data_gen import make_sample
 
-    img = make_sample("clean", 0, 0, size=(640, 480), pattern=PATTERN).image
+    img = make_sample("clean", 0, 0, size=tuple(size), pattern=PATTERN).image
     for fn in detectors.values():
         fn(img)
 
@@ -121,7 +123,11 @@ def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *,
     bar = tqdm(total=total, desc="evaluate", unit="img", disable=not progress)
     rows, errors, hardest = [], {}, {}
     render_s = 0.0
+    warm = set()  # image sizes (W, H) the detectors have been warmed up at
     for cond in conditions:
+        if tuple(cond.size) not in warm:
+            _warm_up(detectors, cond.size)
+            warm.add(tuple(cond.size))
         # a condition's images are all rendered before any is timed: rendering between detections
         # (large numpy and OpenCV passes) would leave caches and thread pools cold for the next one
         t0 = time.perf_counter()
@@ -139,6 +145,8 @@ def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *,
         t0 = time.perf_counter()
         seqs = calibration_sequences(counts["calib_views"])
         render_s += time.perf_counter() - t0
+        for size in {s.image.shape[::-1] for _, views in seqs for s in views} - warm:
+            _warm_up(detectors, size)
         calib = calibrate_sequences(seqs, detectors, rows, errors, bar)
     bar.close()
     examples = sorted(hardest.values(), key=lambda h: -h[0])[:6]
@@ -276,7 +284,6 @@ def run(cfg: EvalConfig, detectors: dict | None = None, info: dict | None = None
         return out
     spec, with_calib = _split_calib(cfg.conditions)
     conds = select_conditions(spec) if spec != "" else []
-    _warm_up(detectors)
     result = run_synthetic(conds, detectors, cfg.counts(), with_calibration=with_calib, progress=not cfg.quiet)
     result["wall_s"] = time.perf_counter() - t0
     report.write_report(out, cfg, conds, result, info, _versions())

@@ -183,3 +183,20 @@ def test_condition_selection():
         select_conditions("fog")
     names = [c.name for c in all_conditions()]
     assert len(names) == len(set(names))
+
+
+def test_detectors_warm_up_once_per_image_size_before_timing():
+    from aicalib_tf.evaluate import run_synthetic
+
+    seen = []
+
+    def counting(img):
+        seen.append(img.shape)
+        return Found(np.zeros((0, 2)), np.zeros(0, np.int64), False)
+
+    conds = select_conditions("clean,hd1080,noise20")
+    out = run_synthetic(conds, {"counting": counting}, {"named": 2, "sweep": 1, "hd": 1, "calib_views": 3},
+                        with_calibration=False, progress=False)
+    # one untimed call at 640x480, two timed; one untimed at 1920x1080, one timed; two timed at 640x480
+    assert seen == [(480, 640)] * 3 + [(1080, 1920)] * 2 + [(480, 640)] * 2
+    assert len(out["rows"]) == 5
