@@ -197,3 +197,94 @@ def symmetric_loop(img, pts, radius, weights, mirror, kbin, sign, iterations):
                 break
         out[p, 0], out[p, 1] = x, y
     return out, last
+
+
+@njit(cache=True, nogil=True)
+def _normaliser(p, idx):
+    """Mean (2,) and scale of points p[idx]: centred, their mean distance from the mean becomes √2."""
+    mx = my = 0.0
+    for t in idx:
+        mx += p[t, 0]
+        my += p[t, 1]
+    mx /= len(idx)
+    my /= len(idx)
+    dist = 0.0
+    for t in idx:
+        dist += math.sqrt((p[t, 0] - mx) ** 2 + (p[t, 1] - my) ** 2)
+    return mx, my, math.sqrt(2.0) / max(dist / len(idx), 1e-12)
+
+
+@njit(cache=True, nogil=True)
+def _solve8(a, b):
+    """Solve a (8, 8) x = b (8,) in place by Gaussian elimination with partial pivoting; returns det(a)."""
+    n = 8
+    det = 1.0
+    for c in range(n):
+        piv = c
+        for r in range(c + 1, n):
+            if abs(a[r, c]) > abs(a[piv, c]):
+                piv = r
+        if piv != c:
+            for q in range(n):
+                a[c, q], a[piv, q] = a[piv, q], a[c, q]
+            b[c], b[piv] = b[piv], b[c]
+            det = -det
+        det *= a[c, c]
+        if a[c, c] == 0.0:
+            return 0.0
+        for r in range(c + 1, n):
+            f = a[r, c] / a[c, c]
+            if f != 0.0:
+                for q in range(c, n):
+                    a[r, q] -= f * a[c, q]
+                b[r] -= f * b[c]
+    for c in range(n - 1, -1, -1):
+        s = b[c]
+        for q in range(c + 1, n):
+            s -= a[c, q] * b[q]
+        b[c] = s / a[c, c]
+    return det
+
+
+@njit(cache=True, nogil=True)
+def lattice_predict(ids, pts, near, want):
+    """Image positions of lattice ids, each set from a homography of its own known corners.
+
+    ids (N, 2) float64 lattice ids, pts (N, 2) float64 px, near (M, K) int (K >= 4) the known
+    corners of each set, want (M, Q, 2) float64 ids to place with set m. The homography is the
+    linear (DLT, h33 = 1) least-squares fit on ids and points each centred and scaled to a mean
+    distance of √2. Returns (M, Q, 2) px; NaN for a set whose normal equations are singular
+    (|det| <= 1e-12).
+    """
+    m, q = want.shape[0], want.shape[1]
+    out = np.full((m, q, 2), np.nan)
+    ata = np.empty((8, 8))
+    atb = np.empty(8)
+    row = np.empty(8)
+    for s in range(m):
+        idx = near[s]
+        sx, sy, ss = _normaliser(ids, idx)
+        dx, dy, ds = _normaliser(pts, idx)
+        ata[:] = 0.0
+        atb[:] = 0.0
+        for t in idx:
+            x, y = (ids[t, 0] - sx) * ss, (ids[t, 1] - sy) * ss
+            u, v = (pts[t, 0] - dx) * ds, (pts[t, 1] - dy) * ds
+            for rhs, other in ((u, 0), (v, 1)):
+                row[:] = 0.0
+                row[3 * other], row[3 * other + 1], row[3 * other + 2] = x, y, 1.0
+                row[6], row[7] = -rhs * x, -rhs * y
+                for i in range(8):
+                    if row[i] != 0.0:
+                        atb[i] += row[i] * rhs
+                        for j in range(8):
+                            ata[i, j] += row[i] * row[j]
+        if not abs(_solve8(ata, atb)) > 1e-12:
+            continue
+        h = atb
+        for k in range(q):
+            x, y = (want[s, k, 0] - sx) * ss, (want[s, k, 1] - sy) * ss
+            w = h[6] * x + h[7] * y + 1.0
+            out[s, k, 0] = (h[0] * x + h[1] * y + h[2]) / w / ds + dx
+            out[s, k, 1] = (h[3] * x + h[4] * y + h[5]) / w / ds + dy
+    return out
