@@ -288,3 +288,57 @@ def lattice_predict(ids, pts, near, want):
             out[s, k, 0] = (h[0] * x + h[1] * y + h[2]) / w / ds + dx
             out[s, k, 1] = (h[3] * x + h[4] * y + h[5]) / w / ds + dy
     return out
+
+
+@njit(cache=True, nogil=True)
+def symmetry_energies(img, pts, radius, weights, mirror, kbin, sign, shadow):
+    """How far the window about each point is from point symmetry, as three energies per point.
+
+    img (H, W) float32, pts (P, 2) float64; weights, mirror, kbin, sign as in :func:`symmetric_loop`.
+    Returns (P, 3): odd Σ w d², even 4 Σ w (e − ē)² (ē the weighted mean of e), and, with
+    ``shadow``, the most of the odd energy that one shadow direction's model d = e·h(n·o) explains,
+    max over directions of Σ_bins (Σ ± w e d)² / (Σ w e² + 1e-12) (0 without ``shadow``);
+    d = I(p + o) − I(p − o), e = (I(p + o) + I(p − o)) / 2.
+    """
+    side = 2 * radius + 1
+    m = side * side
+    ndir = kbin.shape[1]
+    nk = 0
+    for k in range(m):
+        for t in range(ndir):
+            nk = max(nk, kbin[k, t] + 1)
+    acc = np.empty((ndir, nk, 2))
+    vals = np.empty(m)
+    even = np.empty(m)
+    wsum = 0.0
+    for k in range(m):
+        wsum += weights[k]
+    out = np.zeros((pts.shape[0], 3))
+    for p in range(pts.shape[0]):
+        _sample_grid(img, pts[p, 0], pts[p, 1], -radius, side, vals)
+        odd = mean = 0.0
+        acc[:] = 0.0
+        for k in range(m):
+            i0, i1 = vals[k], vals[mirror[k]]
+            d, e = i0 - i1, 0.5 * (i0 + i1)
+            w = weights[k]
+            odd += w * d * d
+            mean += w * e
+            even[k] = e
+            if shadow:
+                for t in range(ndir):
+                    acc[t, kbin[k, t], 0] += w * e * e
+                    acc[t, kbin[k, t], 1] += sign[k, t] * w * e * d
+        mean /= wsum
+        ev = 0.0
+        for k in range(m):
+            ev += weights[k] * (even[k] - mean) ** 2
+        best = -np.inf
+        if shadow:
+            for t in range(ndir):
+                s = 0.0
+                for b in range(nk):
+                    s += acc[t, b, 1] ** 2 / (acc[t, b, 0] + 1e-12)
+                best = max(best, s)
+        out[p, 0], out[p, 1], out[p, 2] = odd, 4 * ev, best if shadow else 0.0
+    return out

@@ -24,7 +24,7 @@ import functools
 
 import numpy as np
 
-from .kernels import sample_windows, symmetric_loop
+from .kernels import sample_windows, symmetric_loop, symmetry_energies
 from .refine import saddle_fit_matrix
 
 __all__ = ["asymmetry", "refine_symmetric", "shadow_asymmetry", "symmetric_operators"]
@@ -34,10 +34,10 @@ __all__ = ["asymmetry", "refine_symmetric", "shadow_asymmetry", "symmetric_opera
 def symmetric_operators(radius: int, directions: int = 12):
     """The fit's fixed arrays for a (2r+1)² window, cached per (radius, directions): read-only.
 
-    Returns offsets (M, 2) float64 (dx, dy) px, weights (M,) (Gaussian, σ = r/2 + 0.5, as the
-    saddle fit), mirror (M,) int (index of −o), bins (M, directions·K) 0/1 and signed_bins
-    (M, directions·K) ±1/0: offset m lies in bin k of |n·o| (1 px wide) for direction n, with the
-    sign of n·o in the signed one.
+    Returns offsets (M, 2) float64 (dx, dy) px in row-major order, weights (M,) (Gaussian,
+    σ = r/2 + 0.5, as the saddle fit), mirror (M,) int (index of −o), kbin (M, directions) int
+    (offset m lies in bin round(|n·o|) of 1 px for direction n) and sign (M, directions) (±1, the
+    sign of n·o); the directions are ``directions`` angles in [0, π).
     """
     r = int(radius)
     d = np.arange(-r, r + 1, dtype=np.float64)
@@ -45,14 +45,10 @@ def symmetric_operators(radius: int, directions: int = 12):
     sigma = r / 2.0 + 0.5
     weights = np.exp(-(ox * ox + oy * oy) / (2 * sigma * sigma))
     ang = np.arange(directions) * np.pi / directions
-    proj = np.cos(ang)[:, None] * ox[None] + np.sin(ang)[:, None] * oy[None]  # (directions, M)
-    k = np.floor(np.abs(proj) + 0.5).astype(int)
-    nk = int(k.max()) + 1
-    bins = np.zeros((len(ox), directions, nk))
-    bins[np.arange(len(ox))[:, None], np.arange(directions)[None, :], k.T] = 1.0
-    signed = bins * np.where(proj >= 0, 1.0, -1.0).T[:, :, None]
-    out = (np.stack([ox, oy], 1), weights, np.arange(len(ox))[::-1].copy(),
-           bins.reshape(len(ox), -1), signed.reshape(len(ox), -1))
+    proj = np.cos(ang)[None, :] * ox[:, None] + np.sin(ang)[None, :] * oy[:, None]  # (M, directions)
+    kbin = np.floor(np.abs(proj) + 0.5).astype(np.int64)
+    sign = np.where(proj >= 0, 1.0, -1.0)
+    out = (np.stack([ox, oy], 1), weights, np.arange(len(ox))[::-1].copy(), kbin, sign)
     for a in out:
         a.flags.writeable = False
     return out
@@ -65,12 +61,8 @@ def asymmetry(img: np.ndarray, points: np.ndarray, radius: int) -> np.ndarray:
     Gaussian weights. About 0 at a clean corner's centre (below 0.005 on data_gen's clean boards),
     ~0.002–0.01 under noise σ = 40 grey levels, up to ~0.8 where a shadow edge crosses the window.
     """
-    pts = np.asarray(points, np.float64).reshape(-1, 2)
-    offsets, w, mirror, _, _ = symmetric_operators(int(radius))
-    i = sample_windows(np.ascontiguousarray(img, np.float32), pts, int(radius))
-    d, e = i - i[:, mirror], 0.5 * (i + i[:, mirror])
-    e = e - (e @ w / w.sum())[:, None]
-    return (d * d) @ w / np.maximum(4 * (e * e) @ w, 1e-12)
+    odd, even, _ = _energies(img, points, int(radius), 12, False)
+    return odd / np.maximum(even, 1e-12)
 
 
 def shadow_asymmetry(img: np.ndarray, points: np.ndarray, radius: int, directions: int = 12) -> np.ndarray:
@@ -82,29 +74,16 @@ def shadow_asymmetry(img: np.ndarray, points: np.ndarray, radius: int, direction
     is 0.3–1.4 on evaluate ``shading``); a T-junction at a board's edge, whose odd part fills two
     opposite quadrants, is not a product of its even part and one edge profile and keeps much of it.
     """
-    pts = np.asarray(points, np.float64).reshape(-1, 2)
-    if len(pts) == 0:
-        return np.zeros(0)
-    offsets, w, mirror, bins, signed = symmetric_operators(int(radius), directions)
-    i = sample_windows(np.ascontiguousarray(img, np.float32), pts, int(radius))
-    d, e = i - i[:, mirror], 0.5 * (i + i[:, mirror])
-    we = w * e
-    explained = (((we * d) @ signed) ** 2 / ((we * e) @ bins + 1e-12)).reshape(len(pts), directions, -1).sum(2)
-    left = (w * d * d).sum(1) - np.maximum(explained.max(axis=1), 0.0)
-    ec = e - (e @ w / w.sum())[:, None]
-    return np.maximum(left, 0.0) / np.maximum(4 * (ec * ec) @ w, 1e-12)
+    odd, even, explained = _energies(img, points, int(radius), directions, True)
+    return np.maximum(odd - np.maximum(explained, 0.0), 0.0) / np.maximum(even, 1e-12)
 
 
-@functools.lru_cache(maxsize=16)
-def _bin_tables(radius: int, directions: int):
-    """:func:`symmetric_operators`' bins as tables: (M, directions) int bin of |n·o| and (M, directions)
-    ±1 sign of n·o, per window offset and direction, for :func:`aicalib_tf.kernels.symmetric_loop`."""
-    offsets, _, _, bins, signed = symmetric_operators(radius, directions)
-    m = len(offsets)
-    kbin = bins.reshape(m, directions, -1).argmax(2).astype(np.int64)
-    sign = signed.reshape(m, directions, -1).sum(2)
-    kbin.flags.writeable = sign.flags.writeable = False
-    return kbin, sign
+def _energies(img, points, radius: int, directions: int, shadow: bool):
+    """:func:`aicalib_tf.kernels.symmetry_energies` of the points: odd (N,), even (N,), explained (N,)."""
+    pts = np.ascontiguousarray(np.asarray(points, np.float64).reshape(-1, 2))
+    _, w, mirror, kbin, sign = symmetric_operators(radius, directions)
+    e = symmetry_energies(np.ascontiguousarray(img, np.float32), pts, radius, w, mirror, kbin, sign, shadow)
+    return e[:, 0], e[:, 1], e[:, 2]
 
 
 def refine_symmetric(
@@ -134,8 +113,7 @@ def refine_symmetric(
     g = np.ascontiguousarray(img, np.float32)
     r = int(radius)
     max_shift = float(r if max_shift is None else max_shift)
-    _, w, mirror, _, _ = symmetric_operators(r, directions)
-    kbin, sign = _bin_tables(r, directions)
+    _, w, mirror, kbin, sign = symmetric_operators(r, directions)
     pts, last = symmetric_loop(g, pts0, r, w, mirror, kbin, sign, int(iterations))
     x, y = pts[:, 0], pts[:, 1]
     _, fit = saddle_fit_matrix(r)
