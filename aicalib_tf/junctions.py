@@ -1,4 +1,4 @@
-"""X-junction evidence where a corner is expected (pure numpy/OpenCV).
+"""X-junction evidence where a corner is expected (numpy, numba).
 
 A chessboard's inner corner is an X-junction: point-symmetric, with two dark and two bright arcs
 on a ring around it. This module cleans the CNN's candidate points (:func:`nearest_spacing`,
@@ -11,9 +11,9 @@ Coordinates are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0).
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
+from .kernels import ring_stats
 from .refine import SHADOW_SIGMA, Smoothed, refine_windowed, window_radius
 from .robust_refine import shadow_asymmetry
 
@@ -54,12 +54,10 @@ def ring_symmetry(gray: np.ndarray, pts: np.ndarray, radius: np.ndarray) -> tupl
     two bright arcs. gray : (H, W) float32. pts : (M, 2) px. radius : (M,) px.
     Returns amplitude (M,) (mean |I − mean| on the ring) and asymmetry (M,) (mean |I(θ) − I(θ + π)|).
     """
-    xy = pts[:, None, :] + radius[:, None, None] * _RING[None]
-    ring = cv2.remap(gray, xy[..., 0].astype(np.float32), xy[..., 1].astype(np.float32), cv2.INTER_LINEAR,
-                     borderMode=cv2.BORDER_REPLICATE)
-    amp = np.abs(ring - ring.mean(axis=1, keepdims=True)).mean(axis=1)
-    asym = np.abs(ring[:, :8] - ring[:, 8:]).mean(axis=1)
-    return amp, asym
+    pts = np.ascontiguousarray(np.asarray(pts, np.float64).reshape(-1, 2))
+    radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, np.float64), (len(pts),)))
+    out = ring_stats(np.ascontiguousarray(gray, np.float32), pts, radius, _RING)
+    return out[:, 0], out[:, 1]
 
 
 GATE = 0.15  # of the reference ring amplitude: below it at the saddle, no shadow-robust fit (see proposer)

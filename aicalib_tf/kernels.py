@@ -342,3 +342,43 @@ def symmetry_energies(img, pts, radius, weights, mirror, kbin, sign, shadow):
                 best = max(best, s)
         out[p, 0], out[p, 1], out[p, 2] = odd, 4 * ev, best if shadow else 0.0
     return out
+
+
+@njit(cache=True, nogil=True)
+def _bilinear(img, x, y):
+    """The image at (x, y) px, bilinear, the nearest edge pixel outside."""
+    h, w = img.shape
+    x0, y0 = math.floor(x), math.floor(y)
+    fx, fy = x - x0, y - y0
+    c0, c1 = min(max(x0, 0), w - 1), min(max(x0 + 1, 0), w - 1)
+    r0, r1 = min(max(y0, 0), h - 1), min(max(y0 + 1, 0), h - 1)
+    top = img[r0, c0] + fx * (img[r0, c1] - img[r0, c0])
+    bot = img[r1, c0] + fx * (img[r1, c1] - img[r1, c0])
+    return top + fy * (bot - top)
+
+
+@njit(cache=True, nogil=True)
+def ring_stats(img, pts, radius, ring):
+    """Amplitude and point asymmetry of the image on a ring about each point.
+
+    img (H, W) float32, pts (P, 2) float64 px, radius (P,) px, ring (R, 2) unit directions, R even,
+    the second half opposite the first. Returns (P, 2): mean |I − mean I| over the ring and mean
+    |I(θ) − I(θ + π)| over its R / 2 opposite pairs.
+    """
+    nr = ring.shape[0]
+    half = nr // 2
+    vals = np.empty(nr)
+    out = np.empty((pts.shape[0], 2))
+    for p in range(pts.shape[0]):
+        mean = 0.0
+        for k in range(nr):
+            vals[k] = _bilinear(img, pts[p, 0] + radius[p] * ring[k, 0], pts[p, 1] + radius[p] * ring[k, 1])
+            mean += vals[k]
+        mean /= nr
+        amp = asym = 0.0
+        for k in range(nr):
+            amp += abs(vals[k] - mean)
+        for k in range(half):
+            asym += abs(vals[k] - vals[k + half])
+        out[p, 0], out[p, 1] = amp / nr, asym / half
+    return out
