@@ -14,8 +14,9 @@ import numpy as np
 import pandas as pd
 
 from .io import atomic_write_bytes, atomic_write_text
-from .plotting import new_figure, png_bytes
 from .metrics import corner_error_stats
+from .plotting import new_figure, png_bytes
+from .targets import check_targets
 
 __all__ = ["summarize", "write_report", "write_photo_report", "SUMMARY_COLUMNS", "RESULT_COLUMNS"]
 
@@ -195,6 +196,17 @@ def _headline(summary: pd.DataFrame, conds) -> str:
     return "\n".join(lines)
 
 
+def _targets_section(summary: pd.DataFrame, results: pd.DataFrame) -> list[str]:
+    """The issue-4 targets this run checks for the cnn detector (:mod:`aicalib_tf.targets`), if it ran."""
+    t = check_targets(summary, results)
+    if not len(t):
+        return []
+    t = t.assign(met=np.where(t["met"], "yes", "**no**"))
+    return ["\n## Targets (cnn)\n",
+            f"{int((t['met'] == 'yes').sum())} of {len(t)} met in this run. Real photos are checked by "
+            "`evaluate --images` and `calibrate`; times are this run's, on this machine.\n", _md_table(t)]
+
+
 def _headline_times(results: pd.DataFrame) -> str:
     """Two extra headline rows: median / max ms per image at each image size."""
     dets = list(dict.fromkeys(results["detector"]))
@@ -274,6 +286,7 @@ def write_report(out: Path, cfg, conds, result: dict, info: dict, versions: dict
           "Hits / images (wrong detections), median corner error of hits; occluded and partial: corner recall and wrong ids; "
           "clutter: full boards reported on board-free images.\n",
           _headline(summary, conds) + ("\n" + _headline_times(results) if len(results) else ""),
+          *_targets_section(summary, results),
           "\n## Detection by condition\n",
           "A hit: a full board with every corner within 2 px of the truth (board symmetries allowed); wrong: a full board "
           "with any corner further off (wrong_worst_px: the median over wrong boards of their worst corner's error); "

@@ -7,6 +7,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from aicalib_tf.conditions import all_conditions, named_conditions, select_conditions
@@ -71,7 +72,7 @@ def test_quick_suite_end_to_end_writes_every_file(tmp_path):
             "sweep_tilt.png", "error_histogram.png", "time.png"} <= names
     assert any(n.startswith("example_") for n in names)
     text = (out / "report.md").read_text()
-    assert "## Headline" in text and "python -m aicalib_tf.evaluate" in text
+    assert "## Headline" in text and "## Targets (cnn)" in text and "python -m aicalib_tf.evaluate" in text
     cfg = json.loads((out / "config.json").read_text())
     assert re.fullmatch(r"[0-9a-f]{64}", cfg["models"]["cnn"]["sha256"])
     assert {"python", "numpy", "opencv", "tensorflow", "keras"} <= set(cfg["versions"])
@@ -200,3 +201,26 @@ def test_detectors_warm_up_once_per_image_size_before_timing():
     # one untimed call at 640x480, two timed; one untimed at 1920x1080, one timed; two timed at 640x480
     assert seen == [(480, 640)] * 3 + [(1080, 1920)] * 2 + [(480, 640)] * 2
     assert len(out["rows"]) == 5
+
+
+def test_targets_flag_what_a_run_misses():
+    from aicalib_tf.targets import check_targets
+
+    def summ(cond, det, **kw):
+        base = {"condition": cond, "detector": det, "boards": 10, "detection_rate": 1.0, "err_median": 0.01,
+                "recall": 1.0, "wrong_ids": 0, "wrong": 0, "false_boards": 0}
+        return {**base, **kw}
+
+    summary = pd.DataFrame([summ("clean", "cnn"), summ("clean", "opencv", detection_rate=0.9),
+                            summ("barrel", "cnn", detection_rate=0.9), summ("barrel", "opencv", detection_rate=0.95),
+                            summ("occluded", "cnn", recall=0.99, wrong_ids=1), summ("clutter", "cnn", boards=0)])
+    times = [5.0] * 9 + [16.0]  # slowest 3.2x the median
+    results = pd.DataFrame({"detector": "cnn", "width": 640, "height": 480, "time_ms": times})
+    t = check_targets(summary, results).set_index("target")["met"]
+    assert t["clean: full boards 100%, median error <= 0.03 px"]
+    assert not t["barrel: full boards >= 97%"]
+    assert not t["barrel: detection at least OpenCV's best"] and t["clean: detection at least OpenCV's best"]
+    assert not t["occluded: recall >= 95%, 0 wrong ids"]
+    assert t["clutter: 0 false boards"] and t["no wrong full board on any condition"]
+    assert t["640×480: median <= 10 ms"] and not t["640×480: slowest <= 3× median"]
+    assert "1920×1080: median <= 40 ms" not in t.index  # no such images in the run
