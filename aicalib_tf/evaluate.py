@@ -97,13 +97,15 @@ def _difficulty(rows: list[dict]) -> float:
 
 
 def _warm_up(detectors: dict, size: tuple[int, int]) -> None:
-    """Run every detector once, untimed, on a clean board of ``size`` (W, H) px: the first call at a
-    new image size traces the network's graph for it (tens of ms), which no later call pays."""
+    """Run every detector, untimed, on a clean and an occluded board of ``size`` (W, H) px: the first
+    call at a new image size traces the network's graph for it (tens of ms), and the first call of
+    each compiled refinement loop loads it (:mod:`aicalib_tf.kernels`); no later call pays either."""
     from data_gen import make_sample
 
-    img = make_sample("clean", 0, 0, size=tuple(size), pattern=PATTERN).image
-    for fn in detectors.values():
-        fn(img)
+    for preset in ("clean", "occluded"):
+        img = make_sample(preset, 0, 0, size=tuple(size), pattern=PATTERN).image
+        for fn in detectors.values():
+            fn(img)
 
 
 def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *, with_calibration: bool = True,

@@ -198,8 +198,9 @@ def test_detectors_warm_up_once_per_image_size_before_timing():
     conds = select_conditions("clean,hd1080,noise20")
     out = run_synthetic(conds, {"counting": counting}, {"named": 2, "sweep": 1, "hd": 1, "calib_views": 3},
                         with_calibration=False, progress=False)
-    # one untimed call at 640x480, two timed; one untimed at 1920x1080, one timed; two timed at 640x480
-    assert seen == [(480, 640)] * 3 + [(1080, 1920)] * 2 + [(480, 640)] * 2
+    # two untimed calls (clean, occluded) at 640x480, two timed; two untimed at 1920x1080, one timed;
+    # two timed at 640x480
+    assert seen == [(480, 640)] * 4 + [(1080, 1920)] * 3 + [(480, 640)] * 2
     assert len(out["rows"]) == 5
 
 
