@@ -184,7 +184,7 @@ def _headline(summary: pd.DataFrame, conds) -> str:
             if not c.has_board:
                 cells.append(f"{int(r['false_boards'])} false / {int(r['images'])}")
             elif c.name in ("occluded", "partial"):
-                cells.append(f"recall {100 * r['recall']:.0f}%, {int(r['wrong_ids'])} wrong ids")
+                cells.append(f"recall {100 * r['recall']:.1f}%, {int(r['wrong_ids'])} wrong ids")
             else:
                 cell = f"{int(r['hits'])}/{int(r['boards'])}"
                 if r["wrong"]:
