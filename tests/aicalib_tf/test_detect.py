@@ -161,6 +161,16 @@ def test_a_light_object_along_a_side_is_not_the_board_border(model):
     assert _partial_stats(det, s)["wrong_ids"] == 0
 
 
+def test_corners_across_a_wide_object_come_from_the_whole_boards_lattice(model):
+    # evaluate's occluded #77: a bar hides two columns; the 12 corners beyond it are 6-17 px from
+    # where the 12 nearest placed corners put them, 4-9 px from the whole placed board's homography
+    s = make_sample("occluded", 21, 77, pattern=(9, 6), size=(640, 480))
+    det = detect_corners(s.image, (9, 6), model=model)
+    st = _partial_stats(det, s)
+    assert det.found and st["wrong_ids"] == 0
+    assert st["correct"] >= 0.9 * st["visible"]
+
+
 def test_a_board_corner_whose_cut_sides_show_nothing_more_gives_no_board(model):
     # evaluate's partial #0: 19 corners at the board's corner (0, 0), the two other sides cut by
     # the frame before any square or paper that would tell 9 columns from 6 rows: no board
