@@ -5,9 +5,10 @@ per-call overhead: a grid or a partial board asks the fits about a few points at
 of times per image. Here each point runs its whole Gauss–Newton loop in compiled code, on exact
 bilinear samples of the image (``cv2.remap`` rounds the sample position to 1/32 px).
 
-The maths is that of :func:`aicalib_tf.refine.refine_saddle` and
-:func:`aicalib_tf.robust_refine.refine_symmetric`, whose docstrings define it; these functions are
-their loops and take the fixed operators those modules build. Images are (H, W) float32; points
+The maths is that of :func:`aicalib_tf.refine.refine_saddle`,
+:func:`aicalib_tf.robust_refine.refine_symmetric` (and its asymmetry measures),
+:func:`aicalib_tf.junctions.ring_symmetry` and :func:`aicalib_tf.lattice.predict_ids`, whose
+docstrings define it; these functions are their loops and take the fixed operators those modules build. Images are (H, W) float32; points
 are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0); samples outside the image take the
 nearest edge pixel (OpenCV's BORDER_REPLICATE). Compiled on first use and cached on disk.
 """
@@ -19,7 +20,25 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["sample_windows", "saddle_loop", "symmetric_loop"]
+__all__ = ["lattice_predict", "ring_stats", "saddle_loop", "sample_windows", "symmetric_loop", "symmetry_energies"]
+
+
+@njit(cache=True, nogil=True)
+def _lerp(img, r0, r1, c0, c1, fx, fy):
+    """Bilinear value between pixels (r0, c0), (r0, c1), (r1, c0), (r1, c1) at fractions fx, fy."""
+    top = img[r0, c0] + fx * (img[r0, c1] - img[r0, c0])
+    bot = img[r1, c0] + fx * (img[r1, c1] - img[r1, c0])
+    return top + fy * (bot - top)
+
+
+@njit(cache=True, nogil=True)
+def _n_bins(kbin):
+    """How many 1 px bins of |n·o| the (M, D) bin table uses."""
+    nk = 0
+    for k in range(kbin.shape[0]):
+        for t in range(kbin.shape[1]):
+            nk = max(nk, kbin[k, t] + 1)
+    return nk
 
 
 @njit(cache=True, nogil=True)
@@ -35,9 +54,7 @@ def _sample_grid(img, x, y, lo, side, out):
         for i in range(side):
             c0 = min(max(x0 + lo + i, 0), w - 1)
             c1 = min(max(x0 + lo + i + 1, 0), w - 1)
-            top = img[r0, c0] + fx * (img[r0, c1] - img[r0, c0])
-            bot = img[r1, c0] + fx * (img[r1, c1] - img[r1, c0])
-            out[k] = top + fy * (bot - top)
+            out[k] = _lerp(img, r0, r1, c0, c1, fx, fy)
             k += 1
 
 
@@ -166,10 +183,7 @@ def symmetric_loop(img, pts, radius, weights, mirror, kbin, sign, iterations):
     inner = np.empty(m, np.int64)
     for k in range(m):
         inner[k] = (k // (2 * radius + 1) + 1) * side + (k % (2 * radius + 1)) + 1
-    nk = 0
-    for k in range(m):
-        for t in range(kbin.shape[1]):
-            nk = max(nk, kbin[k, t] + 1)
+    nk = _n_bins(kbin)
     acc = np.empty((kbin.shape[1], nk, 4))
     cand = np.empty((kbin.shape[1] + 1, 6))
     big = np.empty(side * side)
@@ -303,10 +317,7 @@ def symmetry_energies(img, pts, radius, weights, mirror, kbin, sign, shadow):
     side = 2 * radius + 1
     m = side * side
     ndir = kbin.shape[1]
-    nk = 0
-    for k in range(m):
-        for t in range(ndir):
-            nk = max(nk, kbin[k, t] + 1)
+    nk = _n_bins(kbin)
     acc = np.empty((ndir, nk, 2))
     vals = np.empty(m)
     even = np.empty(m)
@@ -352,9 +363,7 @@ def _bilinear(img, x, y):
     fx, fy = x - x0, y - y0
     c0, c1 = min(max(x0, 0), w - 1), min(max(x0 + 1, 0), w - 1)
     r0, r1 = min(max(y0, 0), h - 1), min(max(y0 + 1, 0), h - 1)
-    top = img[r0, c0] + fx * (img[r0, c1] - img[r0, c0])
-    bot = img[r1, c0] + fx * (img[r1, c1] - img[r1, c0])
-    return top + fy * (bot - top)
+    return _lerp(img, r0, r1, c0, c1, fx, fy)
 
 
 @njit(cache=True, nogil=True)

@@ -42,8 +42,10 @@ def predict_ids(ids: np.ndarray, pts: np.ndarray, want: np.ndarray, k: int = 12)
     want = np.asarray(want, np.float64).reshape(-1, 2)
     if len(ids) < 4 or len(want) == 0:
         return np.full((len(want), 2), np.nan)
+    if k >= len(ids):  # every id's set is all of them: one homography serves all
+        return lattice_predict(_f64(ids), _f64(pts), np.arange(len(ids))[None], want[None])[0]
     d2 = ((want[:, None, :] - ids[None, :, :]) ** 2).sum(-1)
-    near = np.argsort(d2, axis=1, kind="stable")[:, : min(k, len(ids))]
+    near = np.argsort(d2, axis=1, kind="stable")[:, :k]
     return lattice_predict(_f64(ids), _f64(pts), near, want[:, None, :])[:, 0]
 
 

@@ -18,7 +18,8 @@ each other in at least ``RENDER_MIN`` squares; when an object in front contradic
 the least contradicted is kept when each other has ``RENDER_MARGIN`` squares more. Measured with
 ``benchmarks/partial_boards.py`` (data_gen ``occluded``, ``hard`` and ``partial``, seeds 5 and 7–12,
 100 images each), against the rule before (a placement not contradicted, each other in 2 squares
-or more): the same wrong ids on every seed, recall up 0.5–4 points. Ids come back only when the placements left agree up to the board's symmetry.
+or more): the same wrong ids on every seed, recall up 0.5–4 points. Ids come back only when the
+placements left agree up to the board's symmetry.
 """
 
 from __future__ import annotations

@@ -34,8 +34,9 @@ __all__ = ["asymmetry", "refine_symmetric", "shadow_asymmetry", "symmetric_opera
 def symmetric_operators(radius: int, directions: int = 12):
     """The fit's fixed arrays for a (2r+1)² window, cached per (radius, directions): read-only.
 
-    Returns offsets (M, 2) float64 (dx, dy) px in row-major order, weights (M,) (Gaussian,
-    σ = r/2 + 0.5, as the saddle fit), mirror (M,) int (index of −o), kbin (M, directions) int
+    The M offsets o are the window's in row-major order (dy outer), as the kernels sample them.
+    Returns weights (M,) (Gaussian, σ = r/2 + 0.5, as the saddle fit), mirror (M,) int (index of
+    −o), kbin (M, directions) int
     (offset m lies in bin round(|n·o|) of 1 px for direction n) and sign (M, directions) (±1, the
     sign of n·o); the directions are ``directions`` angles in [0, π).
     """
@@ -48,7 +49,7 @@ def symmetric_operators(radius: int, directions: int = 12):
     proj = np.cos(ang)[None, :] * ox[:, None] + np.sin(ang)[None, :] * oy[:, None]  # (M, directions)
     kbin = np.floor(np.abs(proj) + 0.5).astype(np.int64)
     sign = np.where(proj >= 0, 1.0, -1.0)
-    out = (np.stack([ox, oy], 1), weights, np.arange(len(ox))[::-1].copy(), kbin, sign)
+    out = (weights, np.arange(len(ox))[::-1].copy(), kbin, sign)
     for a in out:
         a.flags.writeable = False
     return out
@@ -81,7 +82,7 @@ def shadow_asymmetry(img: np.ndarray, points: np.ndarray, radius: int, direction
 def _energies(img, points, radius: int, directions: int, shadow: bool):
     """:func:`aicalib_tf.kernels.symmetry_energies` of the points: odd (N,), even (N,), explained (N,)."""
     pts = np.ascontiguousarray(np.asarray(points, np.float64).reshape(-1, 2))
-    _, w, mirror, kbin, sign = symmetric_operators(radius, directions)
+    w, mirror, kbin, sign = symmetric_operators(radius, directions)
     e = symmetry_energies(np.ascontiguousarray(img, np.float32), pts, radius, w, mirror, kbin, sign, shadow)
     return e[:, 0], e[:, 1], e[:, 2]
 
@@ -113,7 +114,7 @@ def refine_symmetric(
     g = np.ascontiguousarray(img, np.float32)
     r = int(radius)
     max_shift = float(r if max_shift is None else max_shift)
-    _, w, mirror, kbin, sign = symmetric_operators(r, directions)
+    w, mirror, kbin, sign = symmetric_operators(r, directions)
     pts, last = symmetric_loop(g, pts0, r, w, mirror, kbin, sign, int(iterations))
     x, y = pts[:, 0], pts[:, 1]
     _, fit = saddle_fit_matrix(r)

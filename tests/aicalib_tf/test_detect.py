@@ -24,6 +24,17 @@ def _partial_stats(det, s, pattern=(9, 6)):
     return partial_board_stats(det.corners, det.ids, s.corners, s.visible, pattern)
 
 
+def _decided_board(model, preset: str, seed: int, index: int) -> dict:
+    """Detect a 640×480 data_gen 9×6 sample that the image decides: a board with 0 wrong ids and
+    at least 90% of the visible corners. Returns its :func:`_partial_stats`."""
+    s = make_sample(preset, seed, index, pattern=(9, 6), size=(640, 480))
+    det = detect_corners(s.image, (9, 6), model=model)
+    st = _partial_stats(det, s)
+    assert det.found and st["wrong_ids"] == 0
+    assert st["correct"] >= 0.9 * st["visible"]
+    return st
+
+
 @pytest.fixture(scope="module")
 def model():
     return load_model("default")
@@ -133,11 +144,7 @@ def test_the_image_beyond_the_grid_decides_a_board_corner_turned_or_not(model, i
     # evaluate's partial #74 and #85: a corner of the board, two sides cut by the frame; borders and
     # colours left two placements (the grid's long side along the columns or the rows). Drawn around
     # the grid, one puts squares where the image shows paper or background: the other is taken
-    s = make_sample("partial", 21, index, pattern=(9, 6), size=(640, 480))
-    det = detect_corners(s.image, (9, 6), model=model)
-    st = _partial_stats(det, s)
-    assert det.found and st["wrong_ids"] == 0
-    assert st["correct"] >= 0.9 * st["visible"]
+    _decided_board(model, "partial", 21, index)
 
 
 @pytest.mark.parametrize("index", [94, 99])
@@ -145,11 +152,7 @@ def test_an_object_in_front_contradicting_every_placement_leaves_the_least_contr
     # evaluate's occluded #94 and #99: a bar across the board hides a line, so two shifts of the
     # grid fit the borders and colours, and the bar contradicts both when drawn (19 and 23 squares;
     # 24 and 18). The one the image contradicts RENDER_MARGIN squares less is taken
-    s = make_sample("occluded", 21, index, pattern=(9, 6), size=(640, 480))
-    det = detect_corners(s.image, (9, 6), model=model)
-    st = _partial_stats(det, s)
-    assert det.found and st["wrong_ids"] == 0
-    assert st["correct"] >= 0.9 * st["visible"]
+    _decided_board(model, "occluded", 21, index)
 
 
 def test_a_light_object_along_a_side_is_not_the_board_border(model):
@@ -164,11 +167,7 @@ def test_a_light_object_along_a_side_is_not_the_board_border(model):
 def test_corners_across_a_wide_object_come_from_the_whole_boards_lattice(model):
     # evaluate's occluded #77: a bar hides two columns; the 12 corners beyond it are 6-17 px from
     # where the 12 nearest placed corners put them, 4-9 px from the whole placed board's homography
-    s = make_sample("occluded", 21, 77, pattern=(9, 6), size=(640, 480))
-    det = detect_corners(s.image, (9, 6), model=model)
-    st = _partial_stats(det, s)
-    assert det.found and st["wrong_ids"] == 0
-    assert st["correct"] >= 0.9 * st["visible"]
+    _decided_board(model, "occluded", 21, 77)
 
 
 def test_a_board_corner_whose_cut_sides_show_nothing_more_gives_no_board(model):
@@ -182,11 +181,7 @@ def test_a_board_corner_whose_cut_sides_show_nothing_more_gives_no_board(model):
 def test_a_corner_whose_window_leaves_the_frame_is_accurate_or_left_out(model, index):
     # evaluate's partial #52 and #55: a corner 0.6 and 0.8 px from the frame, its refinement window
     # mostly outside the image, was refined 2.2 and 2.4 px off (right id, wrong place)
-    s = make_sample("partial", 21, index, pattern=(9, 6), size=(640, 480))
-    det = detect_corners(s.image, (9, 6), model=model)
-    st = _partial_stats(det, s)
-    assert det.found and st["wrong_ids"] == 0
-    assert st["correct"] >= 0.9 * st["visible"]
+    st = _decided_board(model, "partial", 21, index)
     assert np.max(st["errors"]) < 0.6
 
 
