@@ -16,7 +16,7 @@ from .degrade import DEGRADATIONS, apply_degradations
 from .pose import PoseConfig, project_points, sample_pose
 from .presets import PRESETS, Preset, Rule, get_preset
 from .render import render_board
-from .sample import Sample, make_sample, make_sequence
+from .sample import Sample, Scene, draw_scene, make_sample, make_sequence
 
 __all__ = [
     "Board",
@@ -28,9 +28,11 @@ __all__ = [
     "Preset",
     "Rule",
     "Sample",
+    "Scene",
     "apply_degradations",
     "distort_normalized",
     "get_preset",
+    "draw_scene",
     "make_sample",
     "make_sequence",
     "project_points",

@@ -46,15 +46,14 @@ def sample_occluders(
     return polys
 
 
-def draw_occluders(img: np.ndarray, polys: list[np.ndarray], rng: np.random.Generator) -> np.ndarray:
-    """Paint each polygon, anti-aliased, with a flat grey plus a gentle shading. (H, W) float32."""
+def draw_occluders(img: np.ndarray, polys: list[np.ndarray], levels: list[float]) -> np.ndarray:
+    """Paint each polygon, anti-aliased, in its flat grey ``levels[k]`` (0..1). (H, W) float32."""
     out = img.copy()
     h, w = img.shape
-    for poly in polys:
+    for poly, level in zip(polys, levels, strict=True):
         mask = np.zeros((h, w), np.uint8)
         cv2.fillPoly(mask, [np.round(poly * 16).astype(np.int32)], 255, cv2.LINE_AA, shift=4)
         m = mask.astype(np.float32) / 255.0
-        level = rng.uniform(0.05, 0.95)
         out = out * (1.0 - m) + np.float32(level) * m
     return out
 

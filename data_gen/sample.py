@@ -8,6 +8,7 @@ image depends only on (preset, seed, index, size, pattern): the same on any work
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -21,7 +22,7 @@ from .pose import corner_visibility, sample_pose
 from .presets import INT_PARAMS, Preset, Rule, get_preset
 from .render import render_board
 
-__all__ = ["Sample", "make_sample", "make_sequence", "draw_steps", "scene_for"]
+__all__ = ["Sample", "Scene", "draw_scene", "make_sample", "make_sequence", "draw_steps", "scene_for"]
 
 GENERATOR_VERSION = "1.0"
 
@@ -98,6 +99,84 @@ def _occluders_leaving_corners(rng, corners, visible, p: Preset, tries: int = 10
     return []
 
 
+@dataclass(frozen=True)
+class Scene:
+    """Everything one image draws before it is rendered; :meth:`render` makes the image.
+
+    camera, board : shared by the camera's views. background : (H, W) float32 in [0, 1].
+    rvec, tvec : (3,) the board's pose (None without a board). framing : the pose's framing.
+    occluders : polygons (K, 2) px drawn in front, with their grey ``occluder_levels``.
+    corners : (cols·rows, 2) px; visible : (cols·rows,) bool, in frame and not hidden.
+    steps : the degradations (see :func:`draw_steps`); degrade_rng : the generator they draw their
+    noise from, copied before each render so that every render draws the same noise.
+    """
+
+    preset: Preset
+    camera: Camera
+    board: Board
+    background: np.ndarray
+    has_board: bool
+    framing: str | None
+    rvec: np.ndarray | None
+    tvec: np.ndarray | None
+    occluders: list
+    occluder_levels: list
+    corners: np.ndarray
+    visible: np.ndarray
+    steps: list
+    degrade_rng: np.random.Generator
+
+    def render(self, rvec: np.ndarray | None = None, tvec: np.ndarray | None = None) -> np.ndarray:
+        """(H, W) uint8: the image, with the board at (rvec, tvec) when given (default: its own pose).
+
+        Everything else (background, occluders, degradations and their noise) is as drawn, so two
+        poses give images that differ only where the board does.
+        """
+        img = self.background
+        if self.has_board:
+            rvec = self.rvec if rvec is None else rvec
+            tvec = self.tvec if tvec is None else tvec
+            img = render_board(self.camera, self.board, rvec, tvec, self.background)
+            img = draw_occluders(img, self.occluders, self.occluder_levels)
+        return apply_degradations(img, self.steps, copy.deepcopy(self.degrade_rng))
+
+
+def draw_scene(
+    preset: str | Preset,
+    seed: int,
+    index: int = 0,
+    *,
+    size: tuple[int, int] | None = None,
+    pattern: tuple[int, int] | None = None,
+) -> Scene:
+    """Draw image ``index`` of the dataset (preset, seed) without rendering it (see :func:`make_sample`)."""
+    p = get_preset(preset)
+    if index < 0 or seed < 0:
+        raise ValueError(f"seed and index must be >= 0, got seed={seed}, index={index}")
+    cam, board = scene_for(p, seed, index // p.views_per_camera, size, pattern)
+    rng = np.random.default_rng([seed, index, 1])
+    w, h = cam.image_size
+    has_board = bool(rng.random() < p.board_probability)
+    background = make_background(
+        rng, (w, h), clutter=_draw(rng, p.clutter), checker_distractors=_draw(rng, p.checker_distractors)
+    )
+    framing = rvec = tvec = None
+    polys: list[np.ndarray] = []
+    levels: list[float] = []
+    corners, visible = np.zeros((0, 2)), np.zeros(0, bool)
+    if has_board:
+        framing = "partial" if rng.random() < p.partial_probability else p.pose.framing
+        rvec, tvec = sample_pose(rng, cam, board, replace(p.pose, framing=framing))
+        corners, visible = corner_visibility(board, rvec, tvec, cam)
+        if rng.random() < p.occlusion_probability and visible.any():
+            polys = _occluders_leaving_corners(rng, corners, visible, p)
+            levels = [float(rng.uniform(0.05, 0.95)) for _ in polys]
+            visible &= ~occluded(corners, polys)
+    steps = draw_steps(p.rules, rng)
+    return Scene(p, cam, board, background, has_board, framing, rvec, tvec, polys, levels, corners, visible,
+                 steps, copy.deepcopy(rng))
+
+
 def make_sample(
     preset: str | Preset,
     seed: int,
@@ -111,18 +190,9 @@ def make_sample(
     size : (width, height) to force; default: the preset's sizes.
     pattern : (cols, rows) inner corners to force; default: the preset's.
     """
-    p = get_preset(preset)
-    if index < 0 or seed < 0:
-        raise ValueError(f"seed and index must be >= 0, got seed={seed}, index={index}")
-    camera_id = index // p.views_per_camera
-    cam, board = scene_for(p, seed, camera_id, size, pattern)
-    rng = np.random.default_rng([seed, index, 1])
+    sc = draw_scene(preset, seed, index, size=size, pattern=pattern)
+    cam, board = sc.camera, sc.board
     w, h = cam.image_size
-
-    has_board = bool(rng.random() < p.board_probability)
-    background = make_background(
-        rng, (w, h), clutter=_draw(rng, p.clutter), checker_distractors=_draw(rng, p.checker_distractors)
-    )
     label = {
         "image_size": [w, h],
         "pattern_size": list(board.pattern_size),
@@ -133,38 +203,26 @@ def make_sample(
         "tvec": None,
         "corners": [],
         "visible": [],
-        "condition": p.name,
-        "camera_id": camera_id,
+        "condition": sc.preset.name,
+        "camera_id": index // sc.preset.views_per_camera,
         "seed": seed,
         "index": index,
-        "has_board": has_board,
+        "has_board": sc.has_board,
         "board": board.to_dict(),
         "framing": None,
         "occluders": [],
     }
-    img = background
-    if has_board:
-        framing = "partial" if rng.random() < p.partial_probability else p.pose.framing
-        rvec, tvec = sample_pose(rng, cam, board, replace(p.pose, framing=framing))
-        img = render_board(cam, board, rvec, tvec, background)
-        corners, visible = corner_visibility(board, rvec, tvec, cam)
-        polys: list[np.ndarray] = []
-        if rng.random() < p.occlusion_probability and visible.any():
-            polys = _occluders_leaving_corners(rng, corners, visible, p)
-            img = draw_occluders(img, polys, rng)
-            visible &= ~occluded(corners, polys)
+    if sc.has_board:
         label.update(
-            rvec=rvec.tolist(),
-            tvec=tvec.tolist(),
-            corners=corners.tolist(),
-            visible=visible.tolist(),
-            framing=framing,
-            occluders=[poly.tolist() for poly in polys],
+            rvec=sc.rvec.tolist(),
+            tvec=sc.tvec.tolist(),
+            corners=sc.corners.tolist(),
+            visible=sc.visible.tolist(),
+            framing=sc.framing,
+            occluders=[poly.tolist() for poly in sc.occluders],
         )
-    steps = draw_steps(p.rules, rng)
-    image = apply_degradations(img, steps, rng)
-    label["degradations"] = steps
-    return Sample(image=image, label=label)
+    label["degradations"] = sc.steps
+    return Sample(image=sc.render(), label=label)
 
 
 def make_sequence(

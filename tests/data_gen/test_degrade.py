@@ -112,7 +112,7 @@ def test_occluder_paint_covers_its_polygon():
     rng = np.random.default_rng(0)
     pts = np.array([[100.0, 100.0], [200.0, 100.0], [150.0, 180.0]])
     polys = sample_occluders(rng, pts, severity=0.3)
-    img = draw_occluders(np.zeros((240, 320), np.float32), polys, rng)
+    img = draw_occluders(np.zeros((240, 320), np.float32), polys, [0.5] * len(polys))
     centre = polys[0].mean(axis=0)
     assert img[int(centre[1]), int(centre[0])] > 0
     assert occluded(centre[None], polys)[0]
