@@ -5,7 +5,8 @@ locally regular: each corner's neighbours along a grid line sit about one step a
 step changes slowly. :func:`assemble_grids` finds such lattices among the candidate points:
 
 1. Seed: a point, two of its near neighbours at an angle (steps u and v), and all 8 points of
-   the 3×3 lattice they predict, each found within a tolerance.
+   the 3×3 lattice they predict, each found within a tolerance (with ``strips``: the 5 other
+   points of a 3×2 block, for boards of which only strips 2 corners wide are in view).
 2. Grow: extrapolate every grid line one step outwards (quadratically when three points are
    known, so barrel distortion's curvature is followed), accept a new row or column when most
    of its predictions find a point, and repeat in all four directions.
@@ -363,10 +364,17 @@ def _bilinear(g: np.ndarray, xy: np.ndarray) -> np.ndarray:
 
 
 _OFFS = np.array([(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)], np.float64)
+# a 3×2 block about the middle of its long side, on either side of it (``strips`` seeds)
+_STRIP_OFFS = tuple(np.array([(di, dj) for di in (-1, 0, 1) for dj in (0, s) if (di, dj) != (0, 0)], np.float64)
+                    for s in (1, -1))
 
 
-def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | None = None) -> bool:
+def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | None = None,
+          strips: bool = False) -> bool:
     """Try to place a 3×3 lattice centred on point ``k``; True (and cells taken) on success.
+
+    strips : place a 3×2 block instead, ``k`` in the middle of a long side (either step along it,
+    the block on either side), for strips of a board 2 corners wide.
 
     Any two independent lattice steps generate the same points, so a diagonal step would give a
     sheared grid. With ``contrast`` (:func:`edge_contrast` of each step to a neighbour), only steps
@@ -411,22 +419,26 @@ def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | 
         short = ~large & (span <= MAX_SPAN_RATIO * span[~large].min())
         pairs = sorted((n, *pair) for n, pair, ok in zip(span.tolist(), pairs, short) if ok)
     dist2 = ((lat.pts - p) ** 2).sum(axis=1)
+    blocks = (_OFFS,) if not strips else _STRIP_OFFS
     for _, _, a, b in pairs:
-        u, v = steps[a], steps[b]
         tol = TOLERANCE * min(length[a], length[b])
-        preds = p + _OFFS[:, :1] * u + _OFFS[:, 1:] * v
         reach = length[a] + length[b] + tol + 1.0  # every prediction lies within |u| + |v| of p
-        found, _ = lat._nearest_free(preds, np.full(8, tol), np.flatnonzero(dist2 <= reach * reach))
-        if np.all(found >= 0) and len(set(found.tolist())) == 8 and k not in found:
-            lat.take((0, 0), k)
-            for (di, dj), f in zip(_OFFS.astype(int).tolist(), found):
-                lat.take((di, dj), f)
-            return True
+        among = np.flatnonzero(dist2 <= reach * reach)
+        for u, v in ((steps[a], steps[b]), (steps[b], steps[a])) if strips else ((steps[a], steps[b]),):
+            for offs in blocks:
+                preds = p + offs[:, :1] * u + offs[:, 1:] * v
+                found, _ = lat._nearest_free(preds, np.full(len(offs), tol), among)
+                if np.all(found >= 0) and len(set(found.tolist())) == len(offs) and k not in found:
+                    lat.take((0, 0), k)
+                    for (di, dj), f in zip(offs.astype(int).tolist(), found):
+                        lat.take((di, dj), f)
+                    return True
     return False
 
 
 def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray: np.ndarray | None = None,
-                   min_size: int = 9, neighbours: int = 12, propose=None, limit: int | None = None) -> list[Grid]:
+                   min_size: int = 9, neighbours: int = 12, propose=None, limit: int | None = None,
+                   strips: bool = False) -> list[Grid]:
     """Find lattices among candidate corner points.
 
     points : (N, 2) float (x, y) px. scores : (N,) or None; seeds are tried strongest first.
@@ -436,6 +448,9 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
     propose : optional callable that looks for a corner where the lattice predicts one and no
         candidate is (see ``_Lattice``); it fills holes, and with ``limit`` also extends edges.
     limit : the largest number of positions along either grid axis (e.g. max(cols, rows)).
+    strips : seed with 3×2 blocks, not 3×3 (see :func:`_seed`). Such seeds also fit sheared
+        lattices of a board whose 3×3 blocks are in view; :mod:`aicalib_tf.detect` uses them
+        only on the points that no 3×3-seeded grid took.
     Returns grids, largest first; they share no point.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
@@ -455,7 +470,7 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
         if not free[k]:
             continue
         lat = _Lattice(pts, free, propose, limit)
-        if not _seed(lat, int(k), near[k], None if contrast is None else contrast[k]):
+        if not _seed(lat, int(k), near[k], None if contrast is None else contrast[k], strips):
             continue
         _grow(lat)
         _fill_holes(lat)

@@ -358,3 +358,19 @@ def test_a_noisy_next_line_is_not_taken_for_the_paper_margin(model):
     s = make_sample("hard", 8, 75, pattern=(9, 6), size=(640, 480))
     det = detect_corners(s.image, (9, 6), model=model)
     assert _partial_stats(det, s)["wrong_ids"] == 0
+
+
+@pytest.mark.parametrize("index", [57, 85])
+def test_strips_two_corners_wide_between_objects_are_found(model, index):
+    # evaluate's occluded #57 (two 2-wide columns either side of a bar) and #85 (a ring 2 corners
+    # wide around an object): no 3×3 block of corners is visible, so only 3×2 seeds start a grid
+    _decided_board(model, "occluded", 21, index)
+
+
+def test_strip_seeds_use_only_points_no_3x3_grid_took(model):
+    # evaluate's partial #66: a 3×3-seeded grid shows one board corner that a quarter turn reads as
+    # another, so it is not placed. Seeded again by 3×2 blocks, its points gave a sheared lattice
+    # (steps of one column and of two columns plus a row) that was placed with 10 wrong ids
+    s = make_sample("partial", 21, 66, pattern=(9, 6), size=(640, 480))
+    det = detect_corners(s.image, (9, 6), model=model)
+    assert _partial_stats(det, s)["wrong_ids"] == 0

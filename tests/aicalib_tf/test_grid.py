@@ -122,3 +122,16 @@ def test_edge_contrast_takes_more_segments_than_one_remap_map_holds():
     assert got.shape == (36000,)
     np.testing.assert_array_equal(got[-500:], edge_contrast(gray, p[-500:], q[-500:]))
     assert edge_contrast(gray, p[:0], q[:0]).shape == (0,)
+
+
+def test_strip_seeds_assemble_a_strip_two_corners_wide():
+    # two whole columns of a board (a bar in front hides the rest): no corner has all 8 neighbours,
+    # so no 3×3 seed starts; a 3×2 seed does, with the board's own lattice
+    s = make_sample("clean", 5, 0, pattern=(9, 6))
+    keep = np.flatnonzero(np.arange(54) % 9 < 2)
+    gray = s.image.astype(np.float32)
+    assert assemble_grids(s.corners[keep], gray=gray) == []
+    grids = assemble_grids(s.corners[keep], gray=gray, strips=True)
+    assert len(grids) == 1 and len(grids[0]) == 12
+    idx = keep[grids[0].index]
+    assert _same_lattice(grids[0].ij, np.stack([idx % 9, idx // 9], 1))
