@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["STRIDE", "standardize", "padded_shape", "encode_corners", "decode_map"]
+__all__ = ["STRIDE", "standardize", "padded_shape", "network_input", "encode_corners", "decode_map"]
 
 STRIDE = 4
 
@@ -34,6 +34,17 @@ def standardize(gray: np.ndarray, mean: float | None = None, std: float | None =
 def padded_shape(height: int, width: int) -> tuple[int, int]:
     """(H, W) rounded up to multiples of STRIDE, the size the network is run at."""
     return (-(-int(height) // STRIDE) * STRIDE, -(-int(width) // STRIDE) * STRIDE)
+
+
+def network_input(gray: np.ndarray) -> np.ndarray:
+    """(1, H', W', 1) float32: ``gray`` (H, W) standardised and edge-padded at the bottom and right
+    to :func:`padded_shape`, the batch a corner-map model runs on."""
+    g = standardize(gray)
+    h, w = g.shape
+    ph, pw = padded_shape(h, w)
+    if (ph, pw) != (h, w):
+        g = np.pad(g, ((0, ph - h), (0, pw - w)), mode="edge")
+    return g[None, :, :, None]
 
 
 def encode_corners(corners: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:

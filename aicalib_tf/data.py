@@ -29,7 +29,6 @@ from data_gen.presets import get_preset
 
 from .candidates import saddle_points
 from .corner_map import STRIDE, encode_corners, standardize
-from .inference import extract_patches
 from .model import PATCH_SIZE
 
 __all__ = ["Pool", "parse_mix", "render_pool", "CornerMapBatches", "PatchBatches", "CROP_SIZE"]
@@ -189,6 +188,14 @@ class CornerMapBatches(_PoolBatches):
         return x, y
 
 
+def _extract_patches(image: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """:func:`aicalib_tf.inference.extract_patches`, imported on first use (it imports TensorFlow,
+    which the corner-map batches do not need)."""
+    from .inference import extract_patches
+
+    return extract_patches(image, points)
+
+
 class PatchBatches(_PoolBatches):
     """Balanced batches (B, 32, 32, 1) float32 -> (B, 1) labels for the report's patch classifier."""
 
@@ -226,7 +233,7 @@ class PatchBatches(_PoolBatches):
                     pts = self.pool.corners[i]
                     if len(pts) and (((pts - p) ** 2).sum(1) < 9.0).any():
                         p = p + 4  # nudge off a corner; rare
-            patch = self.pool.standardized(i, extract_patches(self.pool.images[i], p[None])[0])
+            patch = self.pool.standardized(i, _extract_patches(self.pool.images[i], p[None])[0])
             k = int(rng.integers(8))
             # corner at (16, 16) ± 0.5; the flips keep it within a pixel of the centre
             patch, _ = _dihedral(patch, np.zeros((0, 2), np.float32), k)

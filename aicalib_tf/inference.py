@@ -29,7 +29,7 @@ import numpy as np
 import tensorflow as tf
 
 from .candidates import saddle_points
-from .corner_map import decode_map, padded_shape, standardize
+from .corner_map import decode_map, network_input, standardize
 from .model import PATCH_SIZE, model_kind
 
 __all__ = ["corner_map", "corner_points", "patch_weights", "extract_patches", "native_bfloat16", "resolve_precision"]
@@ -168,12 +168,8 @@ def corner_map(model, gray: np.ndarray, *, precision: str | None = None) -> np.n
     (default: ``AICALIB_PRECISION``, else auto; see the module docstring).
     Returns (ceil(H/4), ceil(W/4), 3) float32.
     """
-    g = standardize(gray)
-    h, w = g.shape
-    ph, pw = padded_shape(h, w)
-    if (ph, pw) != (h, w):
-        g = np.pad(g, ((0, ph - h), (0, pw - w)), mode="edge")
-    out = _run_map(model, tf.constant(g[None, :, :, None]), (ph, pw), resolve_precision(precision))
+    x = network_input(gray)
+    out = _run_map(model, tf.constant(x), tuple(x.shape[1:3]), resolve_precision(precision))
     return out.numpy()[0]
 
 

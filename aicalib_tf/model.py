@@ -41,7 +41,7 @@ __all__ = [
     "MODELS_DIR",
 ]
 
-ARCHITECTURES = ("default", "report")
+ARCHITECTURES = ("default", "report", "default_c12", "default_c16", "default_pre")
 PATCH_SIZE = 32
 MODELS_DIR = Path(os.environ.get("AICALIB_MODELS", Path(__file__).resolve().parents[1] / "models"))
 POSITIVE_WEIGHT = 2.0  # corners fill ~1% of cells; up-weight them in the loss
@@ -69,12 +69,16 @@ def _report() -> keras.Sequential:
     )
 
 
-def _default() -> keras.Sequential:
+def _default(conv1: int = 8, pre: int = 0, name: str = "default") -> keras.Sequential:
+    """The ``default`` corner-map network; ``conv1`` filters in the first layer and, when ``pre`` > 0,
+    one more 3×3 conv of ``pre`` filters at full resolution before it (experimental variants)."""
     conv = dict(kernel_size=3, padding="same", activation="relu")
+    extra = [layers.Conv2D(pre, name="conv0", **conv)] if pre else []
     return keras.Sequential(
         [
             keras.Input((None, None, 1), name="image"),
-            layers.Conv2D(8, name="conv1", **conv),
+            *extra,
+            layers.Conv2D(conv1, name="conv1", **conv),
             layers.MaxPooling2D(2, name="pool1"),
             layers.Conv2D(16, name="conv2", **conv),
             layers.MaxPooling2D(2, name="pool2"),
@@ -83,13 +87,20 @@ def _default() -> keras.Sequential:
             layers.Conv2D(32, name="conv5", **conv),
             layers.Conv2D(3, 1, activation="sigmoid", name="corner_map"),
         ],
-        name="default",
+        name=name,
     )
 
 
 def build_model(name: str = "default") -> keras.Sequential:
     """A fresh, untrained model: ``"default"`` or ``"report"`` (see the module docstring)."""
-    builders = {"default": _default, "report": _report}
+    builders = {
+        "default": _default,
+        "report": _report,
+        # experimental variants of default (more capacity at full resolution), same corner-map output
+        "default_c12": lambda: _default(conv1=12, name="default_c12"),
+        "default_c16": lambda: _default(conv1=16, name="default_c16"),
+        "default_pre": lambda: _default(conv1=8, pre=4, name="default_pre"),
+    }
     if name not in builders:
         raise ValueError(f"unknown architecture {name!r}; choose from: {', '.join(ARCHITECTURES)}")
     return builders[name]()

@@ -22,6 +22,11 @@ trained on) and saves a checkpoint. RUN_DIR receives:
 
 Determinism: the same seed gives the same pool, crops and data order. On CPU the weights are
 reproducible run to run when TensorFlow's op determinism is on (it is, see ``--no-determinism``).
+
+Other Keras backends: with ``KERAS_BACKEND=jax`` (e.g. on a GPU machine without TensorFlow) a
+corner-map model trains and validates the same way (float32 map, same decoding), without
+TensorBoard logs or op determinism; its .keras file loads under TensorFlow. Several runs on one
+machine can share their rendered pools through ``AICALIB_POOL_CACHE=DIR`` (see :func:`cached_pool`).
 """
 
 from __future__ import annotations
@@ -89,11 +94,46 @@ def _write_json(path: Path, obj) -> None:
     atomic_write_text(path, json.dumps(obj, indent=2) + "\n")
 
 
+POOL_CACHE_ENV = "AICALIB_POOL_CACHE"
+
+
+def cached_pool(count: int, seed: int, *, preset: str, workers: int = 1, progress: bool = True):
+    """:func:`aicalib_tf.data.render_pool`, kept in the folder ``$AICALIB_POOL_CACHE`` when that is set.
+
+    For running several trainings on one machine: the pool of a (count, seed, preset) is rendered
+    once (saved atomically as .npz) and loaded by the other runs. The images are the same as
+    rendering them; without the variable nothing is cached.
+    """
+    import numpy as np
+
+    from .data import Pool, render_pool
+    from .io import atomic_write_bytes
+
+    folder = os.environ.get(POOL_CACHE_ENV)
+    if not folder:
+        return render_pool(count, seed, preset=preset, workers=workers, progress=progress)
+    from data_gen.sample import GENERATOR_VERSION
+
+    name = f"pool-v{GENERATOR_VERSION}-{preset.replace(':', '_').replace(',', '+')}-{count}-{seed}.npz"
+    path = Path(folder) / name
+    if path.is_file():
+        with np.load(path) as z:
+            images, flat, counts, mean, std = z["images"], z["corners"], z["counts"], z["mean"], z["std"]
+        return Pool(images, np.split(flat, np.cumsum(counts)[:-1]), mean, std)
+    pool = render_pool(count, seed, preset=preset, workers=workers, progress=progress)
+    import io
+
+    buf = io.BytesIO()
+    np.savez(buf, images=pool.images, corners=np.concatenate([c.reshape(-1, 2) for c in pool.corners]).astype(np.float32),
+             counts=np.array([len(c) for c in pool.corners], np.int64), mean=pool.mean, std=pool.std)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(path, buf.getvalue())
+    return pool
+
+
 def validation_set(preset: str, count: int, *, workers: int = 1, progress: bool = True):
     """The fixed validation images: (images (N, 480, 640) uint8, corners list of (k, 2))."""
-    from .data import render_pool
-
-    pool = render_pool(count, VALIDATION_SEED, preset=preset, workers=workers, progress=progress)
+    pool = cached_pool(count, VALIDATION_SEED, preset=preset, workers=workers, progress=progress)
     return pool.images, pool.corners
 
 
@@ -102,11 +142,30 @@ def evaluate_points(model, images, corners, threshold: float = 0.5) -> dict:
 
     In float32 on every machine, so the figures are the same wherever training runs (inference
     may use bfloat16, see aicalib_tf.inference)."""
-    from .inference import corner_points
+    import keras
+
     from .metrics import point_detection_stats
 
-    pairs = [(corner_points(model, img, threshold, precision="float32")[0], gt) for img, gt in zip(images, corners)]
+    if keras.backend.backend() == "tensorflow":
+        from .inference import corner_points
+
+        pairs = [(corner_points(model, img, threshold, precision="float32")[0], gt) for img, gt in zip(images, corners)]
+    else:  # aicalib_tf.inference needs TensorFlow; the same float32 map and decoding on any backend
+        pairs = [(_backend_corner_points(model, img, threshold), gt) for img, gt in zip(images, corners)]
     return point_detection_stats(pairs, max_distance=1.0)
+
+
+def _backend_corner_points(model, gray, threshold: float):
+    """Corner points of a corner-map model on a non-TensorFlow Keras backend (e.g. JAX, for training
+    on a GPU machine without TensorFlow): as :func:`aicalib_tf.inference.corner_points` in float32."""
+    import numpy as np
+
+    from .corner_map import decode_map, network_input
+    from .model import model_kind
+
+    if model_kind(model) != "map":
+        raise ValueError("validation of patch classifiers needs the TensorFlow backend")
+    return decode_map(np.asarray(model.predict_on_batch(network_input(gray)))[0], threshold)[0]
 
 
 def _callbacks(cfg: TrainConfig, run: Path, val, initial_epoch: int, wall_before: float, t_start: float):
@@ -139,10 +198,16 @@ def _callbacks(cfg: TrainConfig, run: Path, val, initial_epoch: int, wall_before
                 if old.name != name:
                     old.unlink(missing_ok=True)
 
+    try:  # Keras's TensorBoard callback writes through tf.summary: left out where TensorFlow is not installed
+        import tensorflow  # noqa: F401
+
+        tensorboard = [keras.callbacks.TensorBoard(str(run / "tensorboard"), write_graph=False, profile_batch=0)]
+    except ImportError:
+        tensorboard = []
     return [
         Validation(),  # first: it adds to the logs that the CSV logger writes
         keras.callbacks.CSVLogger(str(run / "log.csv"), append=initial_epoch > 0),
-        keras.callbacks.TensorBoard(str(run / "tensorboard"), write_graph=False, profile_batch=0),
+        *tensorboard,
         Checkpoint(),
     ]
 
@@ -174,24 +239,25 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
     _write_json(run / "config.json", asdict(cfg))
 
     import keras
-    import tensorflow as tf
 
-    from .data import CornerMapBatches, PatchBatches, parse_mix, render_pool
-    from .model import build_model, compile_model, file_sha256, load_model, save_model
+    from .data import CornerMapBatches, PatchBatches, parse_mix
+    from .model import build_model, compile_model, file_sha256, load_model, model_kind, save_model
 
     keras.utils.set_random_seed(cfg.seed)
-    if cfg.determinism:
+    if cfg.determinism and keras.backend.backend() == "tensorflow":
+        import tensorflow as tf
+
         tf.config.experimental.enable_op_determinism()
     t0 = time.perf_counter()
-    pool = render_pool(cfg.pool_images, cfg.seed, preset=cfg.preset, workers=cfg.workers, progress=progress)
+    pool = cached_pool(cfg.pool_images, cfg.seed, preset=cfg.preset, workers=cfg.workers, progress=progress)
     val_preset = parse_mix(cfg.preset)[0][0]  # a mix validates on its first preset
     val = validation_set(val_preset, cfg.val_images, workers=cfg.workers, progress=progress)
-    batches_cls = CornerMapBatches if cfg.arch == "default" else PatchBatches
-    batches = batches_cls(pool, batch_size=cfg.batch_size, steps=cfg.steps, seed=cfg.seed, epoch=initial_epoch)
     if resume:
         model = load_model(run / state["checkpoint"], compile=True)
     else:
         model = compile_model(build_model(cfg.arch), cfg.learning_rate, focal_gamma=cfg.focal_gamma)
+    batches_cls = CornerMapBatches if model_kind(model) == "map" else PatchBatches
+    batches = batches_cls(pool, batch_size=cfg.batch_size, steps=cfg.steps, seed=cfg.seed, epoch=initial_epoch)
     prep_s = time.perf_counter() - t0
     if initial_epoch < cfg.epochs:
         schedule = keras.callbacks.LearningRateScheduler(
@@ -228,7 +294,7 @@ def _parser() -> argparse.ArgumentParser:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     d = TrainConfig(out="")
     ap.add_argument("--out", required=True, metavar="RUN_DIR", help="run folder (created)")
-    ap.add_argument("--arch", default=d.arch, help="default | report (default: %(default)s)")
+    ap.add_argument("--arch", default=d.arch, help="default | report | default_c12 | default_c16 | default_pre (default: %(default)s)")
     ap.add_argument("--epochs", type=int, default=None, help=f"epochs (default: {d.epochs}; with --resume: the run's own)")
     ap.add_argument("--steps", type=int, default=d.steps, help="batches per epoch (default: %(default)s)")
     ap.add_argument("--batch-size", type=int, default=d.batch_size, help="(default: %(default)s)")
@@ -241,7 +307,7 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--threshold", type=float, default=d.threshold, help="corner weight for validation (default: %(default)s)")
     ap.add_argument("--focal-gamma", type=float, default=d.focal_gamma,
                     help="default model: focal-loss γ; 0 for weighted cross-entropy (default: %(default)s)")
-    ap.add_argument("--no-determinism", action="store_true", help="allow non-deterministic TensorFlow ops")
+    ap.add_argument("--no-determinism", action="store_true", help="allow non-deterministic TensorFlow ops (other Keras backends: no effect)")
     ap.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     ap.add_argument("--quiet", action="store_true", help="no progress bars")
     return ap

@@ -1,6 +1,6 @@
 """Corner-point precision and recall of the shipped CNNs, per data_gen condition.
 
-    python benchmarks/model_compare.py [--images 30] [--models default,report] [--thresholds 0.5,0.4] [--conditions noisy,blur]
+    python benchmarks/model_compare.py [--images 30] [--models default,report,mine=runs/x/model.keras] [--thresholds 0.5,0.4] [--conditions noisy,blur]
 
 Each model scores whole 640×480 images (the default model decodes its corner map; the report's
 patch classifier scores saddle-point candidates). A detection matches a visible true corner
@@ -30,13 +30,17 @@ CONDITIONS = ("clean", "noisy", "blur", "distorted", "occluded", "hard")
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--images", type=int, default=30)
-    ap.add_argument("--models", default="default,report")
+    ap.add_argument("--models", default="default,report",
+                    help="comma list of shipped names (default, report), .keras paths or LABEL=PATH (default: %(default)s)")
     ap.add_argument("--seed", type=int, default=77)
     ap.add_argument("--thresholds", default="0.5", help="comma list of corner-weight thresholds (default: %(default)s)")
     ap.add_argument("--conditions", default=",".join(CONDITIONS))
     args = ap.parse_args(argv)
     thresholds = [float(t) for t in args.thresholds.split(",")]
-    models = {name: load_model(name) for name in args.models.split(",")}
+    models = {}
+    for spec in args.models.split(","):  # a shipped name, a .keras path, or LABEL=PATH
+        label, _, path = spec.rpartition("=")
+        models[label or spec] = load_model(path)
     print("| condition | model | threshold | precision | recall | F1 | loc median px | network ms/image |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for cond in args.conditions.split(","):

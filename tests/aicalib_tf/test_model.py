@@ -36,8 +36,9 @@ def test_report_architecture_is_the_reports_stack():
     assert model_kind(m) == "patch"
 
 
-def test_default_is_fully_convolutional_with_a_stride_4_map():
-    m = build_model("default")
+@pytest.mark.parametrize("arch", ["default", "default_c12", "default_c16", "default_pre"])
+def test_default_is_fully_convolutional_with_a_stride_4_map(arch):
+    m = build_model(arch)
     assert isinstance(m, keras.Sequential) and model_kind(m) == "map"
     assert m.input_shape == (None, None, None, 1) and m.output_shape == (None, None, None, 3)
     assert all(l.name for l in m.layers)

@@ -107,3 +107,36 @@ def test_refuses_to_overwrite_a_run(tmp_path, capsys):
     (run / "model.keras").write_bytes(b"x")
     assert main(["--out", str(run), *TINY]) == 2
     assert "already holds a run" in capsys.readouterr().err
+
+
+def test_validation_without_tensorflow_decodes_the_same_points():
+    # the path other Keras backends take (no aicalib_tf.inference): the same float32 map and decoding
+    import numpy as np
+
+    from aicalib_tf.inference import corner_points
+    from aicalib_tf.model import load_model
+    from aicalib_tf.train import _backend_corner_points
+    from data_gen import make_sample
+
+    model = load_model("default")
+    for i in range(2):
+        img = make_sample("distorted", 3, i, size=(322, 241)).image  # not a multiple of 4: padded
+        want = corner_points(model, img, 0.5, precision="float32")[0]
+        got = _backend_corner_points(model, img, 0.5)
+        assert len(want) > 0
+        np.testing.assert_allclose(got, want, atol=1e-4)
+
+
+def test_a_pool_cache_renders_a_pool_once(tmp_path, monkeypatch):
+    import numpy as np
+
+    from aicalib_tf import train
+
+    monkeypatch.setenv(train.POOL_CACHE_ENV, str(tmp_path))
+    first = train.cached_pool(3, 5, preset="train", progress=False)
+    files = list(tmp_path.glob("pool-*.npz"))
+    assert len(files) == 1
+    second = train.cached_pool(3, 5, preset="train", progress=False)
+    assert np.array_equal(first.images, second.images)
+    assert np.array_equal(first.mean, second.mean) and np.array_equal(first.std, second.std)
+    assert all(np.array_equal(a, b) for a, b in zip(first.corners, second.corners, strict=True))
