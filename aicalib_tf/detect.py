@@ -48,9 +48,10 @@ a tenth of them, else no board), so are corners so near the frame that their ref
 leaves the image by more than 0.3 of its radius (pulled towards the frame), and a board with
 X-junctions one step outside the pattern is dropped. If every corner is found, the board is complete and ordered by the full-board rules.
 A view of one corner of a non-square board alone (two sides cut by the frame) cannot be placed:
-the visible sides could be the long or the short ones. When no grid can be placed, the points no
-grid took are assembled again from 3×2 seeds (:func:`aicalib_tf.grid.assemble_grids` with
-``strips``): strips of a board 2 corners wide, between objects or around one, hold no 3×3 block.
+the visible sides could be the long or the short ones. When no 3×3 seed starts a grid at all,
+the candidates are assembled again from 3×2 seeds (:func:`aicalib_tf.grid.assemble_grids` with
+``strips``, growing by candidates only; the partial board then grows as above): strips of a board
+2 corners wide, between objects or around one, hold no 3×3 block.
 
 Large images (longer side ≥ 1600 px) are searched coarse to fine (:mod:`aicalib_tf.pyramid`):
 first at a reduced scale (block means, the longer side kept ≥ 800 px), the corners found there
@@ -230,12 +231,9 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
             return Detection(corners, ids, sc, pattern, True, (w, h))
     if pattern_size is not None:
         board = partial_board(grids, scores, pattern_size, smooth, (w, h), propose)
-        if board is None:  # a strip 2 corners wide (between objects, say) holds no 3×3 seed
-            left = np.ones(len(refined), bool)  # the points no 3×3-seeded grid took
-            for grid in grids:
-                left[grid.index[grid.index >= 0]] = False
-            strips = assemble_grids(refined[left], scores[left], gray=smooth, propose=propose, limit=limit, strips=True)
-            board = partial_board(strips, scores[left], pattern_size, smooth, (w, h), propose)
+        if board is None and not grids:  # no 3×3 block anywhere: strips 2 corners wide (between objects, say)
+            strips = assemble_grids(refined, scores, gray=smooth, limit=limit, strips=True)
+            board = partial_board(strips, scores, pattern_size, smooth, (w, h), propose)
         if board is not None:
             corners, ids, sc, complete = board
             return Detection(corners, ids, sc, tuple(pattern_size), complete, (w, h))

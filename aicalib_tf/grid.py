@@ -418,21 +418,39 @@ def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | 
         # the board's own 3×3 is incomplete, and then as a sheared grid: leave that to other seeds
         short = ~large & (span <= MAX_SPAN_RATIO * span[~large].min())
         pairs = sorted((n, *pair) for n, pair, ok in zip(span.tolist(), pairs, short) if ok)
-    dist2 = ((lat.pts - p) ** 2).sum(axis=1)
+    if not pairs:
+        return False
+    # every block that each pair (both ways round for strips) places, in the order they are tried,
+    # looked up in one go: the free points do not change while a seed is tried
     blocks = (_OFFS,) if not strips else _STRIP_OFFS
+    ua, va, offs, tol = [], [], [], []
     for _, _, a, b in pairs:
-        tol = TOLERANCE * min(length[a], length[b])
-        reach = length[a] + length[b] + tol + 1.0  # every prediction lies within |u| + |v| of p
-        among = np.flatnonzero(dist2 <= reach * reach)
-        for u, v in ((steps[a], steps[b]), (steps[b], steps[a])) if strips else ((steps[a], steps[b]),):
-            for offs in blocks:
-                preds = p + offs[:, :1] * u + offs[:, 1:] * v
-                found, _ = lat._nearest_free(preds, np.full(len(offs), tol), among)
-                if np.all(found >= 0) and len(set(found.tolist())) == len(offs) and k not in found:
-                    lat.take((0, 0), k)
-                    for (di, dj), f in zip(offs.astype(int).tolist(), found):
-                        lat.take((di, dj), f)
-                    return True
+        for first, second in ((a, b), (b, a)) if strips else ((a, b),):
+            for block in blocks:
+                ua.append(first)
+                va.append(second)
+                offs.append(block)
+                tol.append(TOLERANCE * min(length[a], length[b]))
+    u, v, offs, tol = steps[ua], steps[va], np.array(offs), np.array(tol)  # offs (C, M, 2)
+    dist2 = ((lat.pts - p) ** 2).sum(axis=1)
+    preds = p + offs[..., :1] * u[:, None, :] + offs[..., 1:] * v[:, None, :]  # (C, M, 2)
+    # every prediction lies within |u| + |v| of p: a point within tol of one lies within reach
+    reach = float(np.max(np.sqrt((u * u).sum(1)) + np.sqrt((v * v).sum(1)) + tol)) + 1.0
+    idx = np.flatnonzero(dist2 <= reach * reach)
+    idx = idx[lat.free[idx]]
+    if len(idx) == 0:
+        return False
+    d2 = ((preds[:, :, None, :] - lat.pts[idx][None, None, :, :]) ** 2).sum(-1)  # (C, M, A)
+    best = d2.argmin(axis=-1)
+    near = np.take_along_axis(d2, best[..., None], axis=-1)[..., 0] <= (tol**2)[:, None]
+    found = np.where(near, idx[best], -1)
+    for c in np.flatnonzero(near.all(axis=1)):
+        f = found[c]
+        if len(set(f.tolist())) == len(f) and k not in f:
+            lat.take((0, 0), k)
+            for (di, dj), q in zip(offs[c].astype(int).tolist(), f.tolist()):
+                lat.take((di, dj), q)
+            return True
     return False
 
 
@@ -450,7 +468,7 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
     limit : the largest number of positions along either grid axis (e.g. max(cols, rows)).
     strips : seed with 3×2 blocks, not 3×3 (see :func:`_seed`). Such seeds also fit sheared
         lattices of a board whose 3×3 blocks are in view; :mod:`aicalib_tf.detect` uses them
-        only on the points that no 3×3-seeded grid took.
+        only where no 3×3 seed started a grid.
     Returns grids, largest first; they share no point.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)

@@ -35,6 +35,13 @@ def _decided_board(model, preset: str, seed: int, index: int) -> dict:
     return st
 
 
+def _no_wrong_ids(model, preset: str, seed: int, index: int) -> None:
+    """Detect a 640×480 data_gen 9×6 sample and check that no corner comes back with a wrong id."""
+    s = make_sample(preset, seed, index, pattern=(9, 6), size=(640, 480))
+    det = detect_corners(s.image, (9, 6), model=model)
+    assert _partial_stats(det, s)["wrong_ids"] == 0
+
+
 @pytest.fixture(scope="module")
 def model():
     return load_model("default")
@@ -159,9 +166,7 @@ def test_a_light_object_along_a_side_is_not_the_board_border(model):
     # data_gen occluded seed 7 #44: a light grey object hides the board's first two columns, its
     # edge along a grid line; at 0.68 of white (normalised 0.71) it passed for the paper margin and
     # the board came back shifted by two columns (36 wrong ids). The margin is white (~1.0)
-    s = make_sample("occluded", 7, 44, pattern=(9, 6), size=(640, 480))
-    det = detect_corners(s.image, (9, 6), model=model)
-    assert _partial_stats(det, s)["wrong_ids"] == 0
+    _no_wrong_ids(model, "occluded", 7, 44)
 
 
 def test_corners_across_a_wide_object_come_from_the_whole_boards_lattice(model):
@@ -355,9 +360,7 @@ def test_a_noisy_next_line_is_not_taken_for_the_paper_margin(model):
     # samples of the next line of squares passed for white paper (0.87 and 0.85 of white): the board
     # came back turned 180° and one column off (42 wrong ids). Each depth is now the mean of five
     # samples across the square
-    s = make_sample("hard", 8, 75, pattern=(9, 6), size=(640, 480))
-    det = detect_corners(s.image, (9, 6), model=model)
-    assert _partial_stats(det, s)["wrong_ids"] == 0
+    _no_wrong_ids(model, "hard", 8, 75)
 
 
 @pytest.mark.parametrize("index", [57, 85])
@@ -367,10 +370,8 @@ def test_strips_two_corners_wide_between_objects_are_found(model, index):
     _decided_board(model, "occluded", 21, index)
 
 
-def test_strip_seeds_use_only_points_no_3x3_grid_took(model):
+def test_strip_seeds_only_where_no_3x3_seed_started_a_grid(model):
     # evaluate's partial #66: a 3×3-seeded grid shows one board corner that a quarter turn reads as
     # another, so it is not placed. Seeded again by 3×2 blocks, its points gave a sheared lattice
     # (steps of one column and of two columns plus a row) that was placed with 10 wrong ids
-    s = make_sample("partial", 21, 66, pattern=(9, 6), size=(640, 480))
-    det = detect_corners(s.image, (9, 6), model=model)
-    assert _partial_stats(det, s)["wrong_ids"] == 0
+    _no_wrong_ids(model, "partial", 21, 66)
