@@ -205,8 +205,10 @@ def _border_sides(cells: dict, ext: tuple[int, int], gray: np.ndarray, black: in
     extrapolated from the last grid lines, and each square between the last line and L1 is tested:
     the squares alternate black and white as the grid's colours predict, a black square stays black
     up to 0.2 step before L1, and ``BORDER_BEYOND`` of a step beyond L1 the paper is white
-    (normalised grey > ``BORDER_T``). Were the board to go on, a black square would lie beyond each
-    white one; an object in front would have to line up with L1 along the whole side to pass.
+    (normalised grey > ``BORDER_T``). Each of these three greys is the mean of samples across the
+    square (``_ACROSS``): one sample each let noise pass the next line of squares for paper. Were
+    the board to go on, a black square would lie beyond each white one; an object in front would
+    have to line up with L1 along the whole side to pass.
     A side is a border when at least two of its squares are tested, all pass, and at most a third
     of the squares that lie in the image could not be tested because a corner of the last line is
     missing there (hidden, say). Squares outside the image are not counted.
