@@ -68,7 +68,9 @@ def make_detector(name: str, pattern_size: tuple[int, int], model: str = "defaul
     name : "cnn" (full or partial boards, with ``model``: default, report or a .keras path),
     "report" (the same pipeline with the report's network), "opencv" (classic + cornerSubPix) or
     "opencv-sb" (full boards only). The function's ``info`` attribute holds the model path and
-    sha256 for the CNN detectors. The detectors are those of :mod:`aicalib_tf.detectors`.
+    sha256 for the CNN detectors; after a call that found nothing, its ``why`` attribute says why
+    where the detector tells (the CNN detectors), else "". The detectors are those of
+    :mod:`aicalib_tf.detectors`.
     """
     from data_gen.degrade import quantize
 
@@ -82,9 +84,10 @@ def make_detector(name: str, pattern_size: tuple[int, int], model: str = "defaul
     def detect(gray):
         g = np.asarray(gray)
         found = found_by(g if g.dtype == np.uint8 else quantize(g))
+        detect.why = found.why
         return (found.corners, found.ids) if len(found.corners) else None
 
-    detect.info = info.get(name, {})
+    detect.info, detect.why = info.get(name, {}), ""
     return detect
 
 
@@ -111,6 +114,7 @@ class _Found:
     file: str
     size: tuple[int, int]
     view: View | None
+    why: str = ""  # no view: why, where the detector says
 
 
 def _labels(files: list[str]) -> dict[str, str]:
@@ -133,7 +137,8 @@ def _detect_all(files: list[str], labels: dict[str, str], detect, quiet: bool) -
             continue
         h, w = gray.shape
         hit = detect(gray)
-        found.append(_Found(labels[f], f, (w, h), View(labels[f], *hit) if hit is not None else None))
+        found.append(_Found(labels[f], f, (w, h), View(labels[f], *hit) if hit is not None else None,
+                            "" if hit is not None else detect.why))
     return found, skipped
 
 
@@ -169,7 +174,7 @@ def _apply_size_policy(found: list[_Found], policy: str, skipped: dict) -> tuple
             view = View(view.name, (view.corners + 0.5) * s - 0.5, view.ids)
         print(f"note: {f.label} is {tag}; {'cropped' if policy == 'crop' else 'scaled'} to {size[0]}x{size[1]}",
               file=sys.stderr)
-        out.append(_Found(f.label, f.file, size, view))
+        out.append(_Found(f.label, f.file, size, view, f.why))
     return out, size
 
 
@@ -237,7 +242,7 @@ def run(cfg: CalibrateConfig) -> tuple[Calibration, str]:
     found, size = _apply_size_policy(found, cfg.resize_policy, skipped)
     for f in found:
         if f.view is None:
-            skipped[f.label] = f"no {cfg.pattern[0]}x{cfg.pattern[1]} board found"
+            skipped[f.label] = f"no {cfg.pattern[0]}x{cfg.pattern[1]} board found" + (f": {f.why}" if f.why else "")
     views = [f.view for f in found if f.view is not None]
     if not views:
         hint = _suggest_pattern(files, detect.info["model"]) if "model" in detect.info else ""

@@ -76,7 +76,7 @@ after corners off their neighbours' lattice are dropped as for partial boards.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -106,6 +106,8 @@ class Detection:
     pattern_size : (cols, rows) inner corners (the found grid's size when none was given).
     complete : every corner of ``pattern_size`` is present.
     image_size : (width, height) px.
+    reason : why no board came back ("" when one did): one of ``REASONS``, the furthest the
+        search got on any scale.
     """
 
     corners: np.ndarray
@@ -114,10 +116,19 @@ class Detection:
     pattern_size: tuple[int, int] | None
     complete: bool
     image_size: tuple[int, int]
+    reason: str = ""
 
     @property
     def found(self) -> bool:
         return len(self.corners) > 0
+
+
+NO_CANDIDATES = "fewer than 9 corner candidates"
+NO_GRID = "no grid of chessboard corners"
+NO_MATCH = "grids of corners, but none fits the pattern as a board"
+UNDECIDED = ("part of a board is in view, but the image leaves open where it lies on the pattern "
+             "(e.g. one corner of the board, its other two sides cut by the frame)")
+REASONS = (NO_CANDIDATES, NO_GRID, NO_MATCH, UNDECIDED)  # from the least to the furthest the search got
 
 
 _DEFAULT_MODEL = None
@@ -178,21 +189,25 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
 
         check_pattern(pattern_size)
     model = model if model is not None else _default_model()
-    best = None
+    best, reason = None, REASONS[0]
     for f in scales(w, h):
         det = _detect_at(downscale(gray, f), pattern_size, model, threshold)
         if det.found and f > 1:
             corners, ok = refine_full(gray, to_full(det.corners, f))
             if not ok.all():  # a corner left at its coarse place may be px off: try the finer scales
-                continue
-            det = Detection(corners, det.ids, det.scores, det.pattern_size, det.complete, (w, h))
+                det = replace(det, corners=corners[:0], ids=det.ids[:0], scores=det.scores[:0], complete=False,
+                              pattern_size=pattern_size, reason=NO_MATCH)
+            else:
+                det = replace(det, corners=corners, image_size=(w, h))
         if det.complete and pattern_size is not None:
             return det
+        if not det.found and REASONS.index(det.reason) > REASONS.index(reason):
+            reason = det.reason
         # without a pattern every scale is searched: a coarse scale can miss a board's smallest
         # squares and come back with a complete sub-grid of it
         if best is None or len(det.corners) > len(best.corners):
             best = det
-    return Detection(best.corners, best.ids, best.scores, best.pattern_size, best.complete, (w, h))
+    return replace(best, image_size=(w, h), reason="" if best.found else reason)
 
 
 def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, threshold: float) -> Detection:
@@ -201,7 +216,7 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
 
     h, w = gray.shape
     empty = Detection(np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
-                      pattern_size, False, (w, h))
+                      pattern_size, False, (w, h), NO_CANDIDATES)
     if h < 8 or w < 8:
         return empty
     pts, scores = corner_points(model, gray, threshold)
@@ -229,15 +244,16 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
         if board is not None:
             corners, ids, sc, pattern = board
             return Detection(corners, ids, sc, pattern, True, (w, h))
+    undecided = False
     if pattern_size is not None:
-        board = partial_board(grids, scores, pattern_size, smooth, (w, h), propose)
+        board, undecided = partial_board(grids, scores, pattern_size, smooth, (w, h), propose)
         if board is None and not grids:  # no 3×3 block anywhere: strips 2 corners wide (between objects, say)
-            strips = assemble_grids(refined, scores, gray=smooth, limit=limit, strips=True)
-            board = partial_board(strips, scores, pattern_size, smooth, (w, h), propose)
+            grids = assemble_grids(refined, scores, gray=smooth, limit=limit, strips=True)
+            board, undecided = partial_board(grids, scores, pattern_size, smooth, (w, h), propose)
         if board is not None:
             corners, ids, sc, complete = board
             return Detection(corners, ids, sc, tuple(pattern_size), complete, (w, h))
-    return empty
+    return replace(empty, reason=UNDECIDED if undecided else NO_MATCH if grids else NO_GRID)
 
 
 def find_chessboard_corners(image, pattern_size: tuple[int, int], *, model=None) -> tuple[bool, np.ndarray | None]:
@@ -255,6 +271,9 @@ def draw_detection(gray: np.ndarray, det: Detection) -> np.ndarray:
     img = cv2.cvtColor(quantize(gray), cv2.COLOR_GRAY2BGR)
     if not det.found:
         cv2.putText(img, "no board", (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (0, 0, 255), 2)
+        if det.reason:  # the first clause fits an image's width
+            cv2.putText(img, det.reason.split(",")[0].split(" (")[0], (10, 55), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
+                        (0, 0, 255), 1)
         return img
     for r in np.unique(det.ids[:, 1]):  # a partial board's rows too: its corners are ordered by id
         row = det.corners[det.ids[:, 1] == r]
@@ -312,6 +331,7 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     sha = file_sha256(model.aicalib_path) if hasattr(model, "aicalib_path") else None
     counts = {"complete": 0, "partial": 0, "none": 0, "failed": 0}
+    reasons: dict[str, int] = {}
     failures = []
     used: set[str] = set()
     for f in tqdm(files, desc="detect", unit="img", disable=args.quiet):
@@ -323,6 +343,8 @@ def main(argv: list[str] | None = None) -> int:
             failures.append(str(exc))
             continue
         counts["complete" if det.complete else "partial" if det.found else "none"] += 1
+        if not det.found:
+            reasons[det.reason] = reasons.get(det.reason, 0) + 1
         stem = Path(f).stem
         if stem in used:  # a/x.jpg and b/x.png must not overwrite each other
             stem = f"{stem}-{len(used)}"
@@ -331,12 +353,14 @@ def main(argv: list[str] | None = None) -> int:
         atomic_write_bytes(out / f"{stem}.png", png.tobytes())
         record = {
             "file": str(f), "image_size": list(det.image_size), "pattern_size": list(pattern),
-            "found": det.found, "complete": det.complete, "corners": det.corners.tolist(),
+            "found": det.found, "complete": det.complete, "reason": det.reason, "corners": det.corners.tolist(),
             "ids": det.ids.tolist(), "scores": det.scores.tolist(), "model": str(args.model), "model_sha256": sha,
         }
         atomic_write_text(out / f"{stem}.json", json.dumps(record, indent=1) + "\n")
     print(f"{len(files)} images: {counts['complete']} full boards, {counts['partial']} partial (seen corners, ids fixed by the image), "
           f"{counts['none']} without a board, {counts['failed']} unreadable")
+    for reason, n in sorted(reasons.items(), key=lambda kv: -kv[1]):
+        print(f"  no board in {n}: {reason}")
     for msg in failures:
         print(f"  skipped: {msg}")
     return 0

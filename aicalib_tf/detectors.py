@@ -26,11 +26,13 @@ class Found(NamedTuple):
 
     corners : (N, 2) float64 (x, y) px (N = 0 when nothing was found).
     ids : (N, 2) int (col, row). complete : a full board (N = cols·rows).
+    why : when nothing was found, why, if the detector says (the CNN's ``Detection.reason``).
     """
 
     corners: np.ndarray
     ids: np.ndarray
     complete: bool
+    why: str = ""
 
 
 _NOTHING = Found(np.zeros((0, 2)), np.zeros((0, 2), np.int64), False)
@@ -56,7 +58,9 @@ def make_detectors(names, pattern: tuple[int, int], model: str = "default") -> t
 
         def f(img):
             d = detect_corners(img, pattern, model=m)
-            return Found(d.corners.astype(np.float64), d.ids.astype(np.int64), bool(d.complete)) if d.found else _NOTHING
+            if not d.found:
+                return _NOTHING._replace(why=d.reason)
+            return Found(d.corners.astype(np.float64), d.ids.astype(np.int64), bool(d.complete))
         return f
 
     def cv(fn):

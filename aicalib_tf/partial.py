@@ -269,12 +269,14 @@ def partial_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int
     outside the pattern. grids : from :func:`aicalib_tf.grid.assemble_grids`, largest first.
     scores : (N,) candidate weights. gray : (H, W) float32 smoothed. size : (width, height) px.
     propose : from :func:`aicalib_tf.junctions.proposer`, or None (no board).
-    Returns (corners (K, 2) float32 px, ids (K, 2) int32 (col, row), scores (K,) float32,
-    complete) with corners in row-major order of their ids (a completed board in the full-board
-    order), or None.
+    Returns (board, undecided): board is (corners (K, 2) float32 px, ids (K, 2) int32 (col, row),
+    scores (K,) float32, complete) with corners in row-major order of their ids (a completed board
+    in the full-board order), or None; undecided is True when a grid was left out because the
+    image leaves its place on the pattern open.
     """
+    undecided = False
     if propose is None:
-        return None
+        return None, undecided
     cols, rows = pattern_size
     for grid in grids:
         if len(grid) < MIN_PARTIAL:
@@ -286,6 +288,7 @@ def partial_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int
         _reach(cells, propose, max(pattern_size) + 1, size)
         ids = placement.place_cells(cells, pattern_size, gray)
         if ids is None:
+            undecided = True
             continue
         pts = np.array([v[0] for v in cells.values()])
         sc = np.array([v[1] for v in cells.values()], np.float32)
@@ -309,6 +312,6 @@ def partial_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int
         ids, pts, sc = ids[order].astype(np.int32), pts[order].astype(np.float32), sc[order].astype(np.float32)
         if len(ids) == cols * rows:  # completed: read it like any full board
             perm = reading(pts, pattern_size, gray)
-            return pts[perm], ids, sc[perm], True
-        return pts, ids, sc, False
-    return None
+            return (pts[perm], ids, sc[perm], True), undecided
+        return (pts, ids, sc, False), undecided
+    return None, undecided

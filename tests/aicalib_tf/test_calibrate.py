@@ -223,6 +223,22 @@ def test_cli_skips_a_corrupt_jpeg_and_goes_on(tmp_path, capsys):
     assert "5 images: 4 used, 1 skipped" in out and "skipped  broken.jpg: truncated JPEG" in out
 
 
+def test_cli_says_why_an_image_gave_no_board(tmp_path, capsys):
+    from data_gen import make_sample
+
+    for f in sorted(LEFT.glob("*.jpg"))[:3]:
+        shutil.copy(f, tmp_path)
+    cv2.imwrite(str(tmp_path / "blank.png"), np.full((480, 640), 128, np.uint8))
+    # evaluate's partial #0: one corner of the board in view, its other two sides cut by the frame
+    corner = make_sample("partial", 21, 0, pattern=(9, 6), size=(640, 480)).image
+    cv2.imwrite(str(tmp_path / "corner.png"), corner)
+    rc, out, err = _run_cli(capsys, tmp_path / "*", "--pattern", "9x6", "--out", tmp_path / "c",
+                            "--resize-policy", "skip")
+    assert rc == 0, err
+    assert "skipped  blank.png: no 9x6 board found: fewer than 9 corner candidates" in out
+    assert "skipped  corner.png: no 9x6 board found: part of a board is in view, but the image leaves open" in out
+
+
 @pytest.mark.parametrize("args,message", [
     (["{tmp}/nothing*.jpg", "--pattern", "9x6"], "no images match"),
     (["{left}/left01.jpg", "--pattern", "9x"], "pattern must look like COLSxROWS"),

@@ -8,7 +8,7 @@ import pytest
 
 pytest.importorskip("keras")
 
-from aicalib_tf.detect import detect_corners, find_chessboard_corners  # noqa: E402
+from aicalib_tf.detect import NO_CANDIDATES, NO_GRID, UNDECIDED, detect_corners, find_chessboard_corners  # noqa: E402
 from aicalib_tf.io import ImageError  # noqa: E402
 from aicalib_tf.model import MODELS_DIR, load_model  # noqa: E402
 from data_gen import make_sample  # noqa: E402
@@ -294,6 +294,18 @@ def test_all_real_opencv_left_photos_are_detected(model):
         assert ok
         # same order as OpenCV, and the same corners to within a fraction of a pixel
         assert np.abs(det.corners - ref).max() < 0.8, f.name
+
+
+@pytest.mark.parametrize("preset, index, reason", [
+    ("clean", 0, ""),
+    ("partial", 0, UNDECIDED),  # one corner of the board in view: a quarter turn reads it as another
+    ("clutter", 0, NO_GRID),
+])
+def test_a_detection_says_why_no_board_came_back(model, preset, index, reason):
+    s = make_sample(preset, 21, index, pattern=(9, 6), size=(640, 480))
+    det = detect_corners(s.image, (9, 6), model=model)
+    assert det.found == (reason == "") and det.reason == reason
+    assert detect_corners(np.full((60, 80), 0.5, np.float32), (9, 6), model=model).reason == NO_CANDIDATES
 
 
 def test_cli_writes_overlays_and_corner_files_and_skips_bad_files(tmp_path, capsys):
