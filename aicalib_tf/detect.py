@@ -76,6 +76,7 @@ after corners off their neighbours' lattice are dropped as for partial boards.
 
 from __future__ import annotations
 
+import textwrap
 from dataclasses import dataclass, replace
 
 import cv2
@@ -271,9 +272,8 @@ def draw_detection(gray: np.ndarray, det: Detection) -> np.ndarray:
     img = cv2.cvtColor(quantize(gray), cv2.COLOR_GRAY2BGR)
     if not det.found:
         cv2.putText(img, "no board", (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (0, 0, 255), 2)
-        if det.reason:  # the first clause fits an image's width
-            cv2.putText(img, det.reason.split(",")[0].split(" (")[0], (10, 55), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
-                        (0, 0, 255), 1)
+        for k, line in enumerate(textwrap.wrap(det.reason, 60)):  # why, in lines that fit a 640 px image
+            cv2.putText(img, line, (10, 55 + 18 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 255), 1, cv2.LINE_AA)
         return img
     for r in np.unique(det.ids[:, 1]):  # a partial board's rows too: its corners are ordered by id
         row = det.corners[det.ids[:, 1] == r]
