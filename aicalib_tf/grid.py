@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .kernels import seed_block
+
 __all__ = ["Grid", "assemble_grids", "edge_contrast", "full_subgrid"]
 
 TOLERANCE = 0.3  # of the local step: how far a predicted corner may be from the point it takes
@@ -365,8 +367,8 @@ def _bilinear(g: np.ndarray, xy: np.ndarray) -> np.ndarray:
 
 _OFFS = np.array([(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)], np.float64)
 # a 3×2 block about the middle of its long side, on either side of it (``strips`` seeds)
-_STRIP_OFFS = tuple(np.array([(di, dj) for di in (-1, 0, 1) for dj in (0, s) if (di, dj) != (0, 0)], np.float64)
-                    for s in (1, -1))
+_STRIP_BLOCKS = np.array([[(di, dj) for di in (-1, 0, 1) for dj in (0, s) if (di, dj) != (0, 0)] for s in (1, -1)],
+                         np.float64)
 
 
 def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | None = None,
@@ -389,69 +391,17 @@ def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | 
       A longer one such as (col, 2·col − row) is more orthogonal on a board tilted 60°, and it
       seeds where the board's own 3×3 is incomplete, as a sheared grid.
     """
-    p = lat.pts[k]
-    steps = lat.pts[neighbours] - p
-    length = np.sqrt((steps * steps).sum(axis=1))
-    # a multiple step (a near point part-way along it: 2·col, 3·col) generates every other line only
-    t = (steps @ steps.T) / np.maximum(length**2, 1e-12)[:, None]  # [a, b]: b's position along a
-    off = np.abs(steps[:, 0:1] * steps[None, :, 1] - steps[:, 1:2] * steps[None, :, 0]) / np.maximum(length, 1e-12)[:, None]
-    single = ~((t > 0.2) & (t < 0.8) & (off < TOLERANCE * length[None, :])).any(axis=1)
-    if contrast is not None:  # keep the steps that run along edges between squares
-        single &= contrast >= 0.5 * contrast.max()
-    neighbours, steps, length = neighbours[single], steps[single], length[single].tolist()
-    pairs = []
-    for a in range(len(neighbours)):
-        for b in range(a + 1, len(neighbours)):
-            nu, nv = length[a], length[b]
-            if nu < 1.0 or nv < 1.0 or not 1 / MAX_STEP_RATIO <= nu / nv <= MAX_STEP_RATIO:
-                continue
-            cos = abs(float(steps[a] @ steps[b])) / (nu * nv)
-            if cos < 0.95:  # otherwise nearly collinear: not two grid directions
-                pairs.append((cos, a, b))
-    if pairs:
-        ab = np.array([(a, b) for _, a, b in pairs])
-        u, v = steps[ab[:, 0]], steps[ab[:, 1]]
-        area = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
-        large = area > MAX_CELL_AREA * area.min()
-        span = np.array([length[a] + length[b] for _, a, b in pairs])
-        # a longer pair that generates the whole lattice too (col, 2·col − row) only seeds where
-        # the board's own 3×3 is incomplete, and then as a sheared grid: leave that to other seeds
-        short = ~large & (span <= MAX_SPAN_RATIO * span[~large].min())
-        pairs = sorted((n, *pair) for n, pair, ok in zip(span.tolist(), pairs, short) if ok)
-    if not pairs:
+    blocks, orders = (_OFFS[None], 1) if not strips else (_STRIP_BLOCKS, 2)
+    no_contrast = np.zeros(0)
+    b, _, _, found = seed_block(lat.pts, int(k), np.asarray(neighbours, np.int64),
+                                  no_contrast if contrast is None else np.asarray(contrast, np.float64), lat.free,
+                                  blocks, orders, TOLERANCE, MAX_STEP_RATIO, MAX_CELL_AREA, MAX_SPAN_RATIO)
+    if b < 0:
         return False
-    # every block that each pair (both ways round for strips) places, in the order they are tried,
-    # looked up in one go: the free points do not change while a seed is tried
-    blocks = (_OFFS,) if not strips else _STRIP_OFFS
-    ua, va, offs, tol = [], [], [], []
-    for _, _, a, b in pairs:
-        for first, second in ((a, b), (b, a)) if strips else ((a, b),):
-            for block in blocks:
-                ua.append(first)
-                va.append(second)
-                offs.append(block)
-                tol.append(TOLERANCE * min(length[a], length[b]))
-    u, v, offs, tol = steps[ua], steps[va], np.array(offs), np.array(tol)  # offs (C, M, 2)
-    dist2 = ((lat.pts - p) ** 2).sum(axis=1)
-    preds = p + offs[..., :1] * u[:, None, :] + offs[..., 1:] * v[:, None, :]  # (C, M, 2)
-    # every prediction lies within |u| + |v| of p: a point within tol of one lies within reach
-    reach = float(np.max(np.sqrt((u * u).sum(1)) + np.sqrt((v * v).sum(1)) + tol)) + 1.0
-    idx = np.flatnonzero(dist2 <= reach * reach)
-    idx = idx[lat.free[idx]]
-    if len(idx) == 0:
-        return False
-    d2 = ((preds[:, :, None, :] - lat.pts[idx][None, None, :, :]) ** 2).sum(-1)  # (C, M, A)
-    best = d2.argmin(axis=-1)
-    near = np.take_along_axis(d2, best[..., None], axis=-1)[..., 0] <= (tol**2)[:, None]
-    found = np.where(near, idx[best], -1)
-    for c in np.flatnonzero(near.all(axis=1)):
-        f = found[c]
-        if len(set(f.tolist())) == len(f) and k not in f:
-            lat.take((0, 0), k)
-            for (di, dj), q in zip(offs[c].astype(int).tolist(), f.tolist()):
-                lat.take((di, dj), q)
-            return True
-    return False
+    lat.take((0, 0), k)
+    for (di, dj), q in zip(blocks[b].astype(int).tolist(), found.tolist()):
+        lat.take((di, dj), q)
+    return True
 
 
 def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray: np.ndarray | None = None,

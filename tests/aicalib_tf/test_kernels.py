@@ -39,3 +39,28 @@ def test_sample_windows_is_bilinear_with_replicated_borders():
             want.append((1 - fy) * ((1 - fx) * v(y0, x0) + fx * v(y0, x0 + 1))
                         + fy * ((1 - fx) * v(y0 + 1, x0) + fx * v(y0 + 1, x0 + 1)))
         np.testing.assert_allclose(row, want, atol=1e-6)
+
+
+def test_seed_block_places_the_3x3_block_of_a_lattice_and_no_block_on_a_line():
+    from aicalib_tf.grid import _OFFS, MAX_CELL_AREA, MAX_SPAN_RATIO, MAX_STEP_RATIO, TOLERANCE
+    from aicalib_tf.kernels import seed_block
+
+    u, v = np.array([10.0, 1.0]), np.array([-2.0, 9.0])
+    ij = np.array([(i, j) for j in range(-2, 3) for i in range(-2, 3)], np.float64)
+    pts = 100 + ij[:, :1] * u + ij[:, 1:] * v
+    k = 12  # (0, 0)
+    d2 = ((pts - pts[k]) ** 2).sum(1)
+    d2[k] = np.inf
+    near = np.argsort(d2)[:12].astype(np.int64)
+    rules = (_OFFS[None], 1, TOLERANCE, MAX_STEP_RATIO, MAX_CELL_AREA, MAX_SPAN_RATIO)
+    b, ua, va, found = seed_block(pts, k, near, np.zeros(0), np.ones(len(pts), bool), *rules)
+    assert b == 0
+    steps = {tuple(np.round(pts[near[ua]] - pts[k], 6)), tuple(np.round(pts[near[va]] - pts[k], 6))}
+    assert steps <= {tuple(u), tuple(-u), tuple(v), tuple(-v)} and len(steps) == 2  # the board's own steps
+    got = pts[found] - pts[k]
+    want = _OFFS[:, :1] * (pts[near[ua]] - pts[k]) + _OFFS[:, 1:] * (pts[near[va]] - pts[k])
+    np.testing.assert_allclose(got, want, atol=1e-9)
+    line = np.flatnonzero(ij[:, 1] == 0)  # one row of the lattice only: no two directions
+    k_line = int(np.flatnonzero(line == k)[0])
+    near_line = np.array([i for i in range(len(line)) if i != k_line], np.int64)
+    assert seed_block(pts[line], k_line, near_line, np.zeros(0), np.ones(len(line), bool), *rules)[0] == -1
