@@ -77,6 +77,7 @@ after corners off their neighbours' lattice are dropped as for partial boards.
 from __future__ import annotations
 
 import textwrap
+from collections import Counter
 from dataclasses import dataclass, replace
 
 import cv2
@@ -196,14 +197,13 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
         if det.found and f > 1:
             corners, ok = refine_full(gray, to_full(det.corners, f))
             if not ok.all():  # a corner left at its coarse place may be px off: try the finer scales
-                det = replace(det, corners=corners[:0], ids=det.ids[:0], scores=det.scores[:0], complete=False,
-                              pattern_size=pattern_size, reason=NO_MATCH)
-            else:
-                det = replace(det, corners=corners, image_size=(w, h))
+                reason = max(reason, NO_MATCH, key=REASONS.index)
+                continue
+            det = replace(det, corners=corners, image_size=(w, h))
         if det.complete and pattern_size is not None:
             return det
-        if not det.found and REASONS.index(det.reason) > REASONS.index(reason):
-            reason = det.reason
+        if not det.found:
+            reason = max(reason, det.reason, key=REASONS.index)
         # without a pattern every scale is searched: a coarse scale can miss a board's smallest
         # squares and come back with a complete sub-grid of it
         if best is None or len(det.corners) > len(best.corners):
@@ -331,7 +331,7 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     sha = file_sha256(model.aicalib_path) if hasattr(model, "aicalib_path") else None
     counts = {"complete": 0, "partial": 0, "none": 0, "failed": 0}
-    reasons: dict[str, int] = {}
+    reasons: Counter[str] = Counter()
     failures = []
     used: set[str] = set()
     for f in tqdm(files, desc="detect", unit="img", disable=args.quiet):
@@ -344,7 +344,7 @@ def main(argv: list[str] | None = None) -> int:
             continue
         counts["complete" if det.complete else "partial" if det.found else "none"] += 1
         if not det.found:
-            reasons[det.reason] = reasons.get(det.reason, 0) + 1
+            reasons[det.reason] += 1
         stem = Path(f).stem
         if stem in used:  # a/x.jpg and b/x.png must not overwrite each other
             stem = f"{stem}-{len(used)}"
@@ -359,7 +359,7 @@ def main(argv: list[str] | None = None) -> int:
         atomic_write_text(out / f"{stem}.json", json.dumps(record, indent=1) + "\n")
     print(f"{len(files)} images: {counts['complete']} full boards, {counts['partial']} partial (seen corners, ids fixed by the image), "
           f"{counts['none']} without a board, {counts['failed']} unreadable")
-    for reason, n in sorted(reasons.items(), key=lambda kv: -kv[1]):
+    for reason, n in reasons.most_common():
         print(f"  no board in {n}: {reason}")
     for msg in failures:
         print(f"  skipped: {msg}")

@@ -108,18 +108,12 @@ class _Lattice:
     def point(self, k: int) -> np.ndarray:
         return self.pts[k] if k < self.n0 else self.extra[k - self.n0]
 
-    def _nearest_free(self, pred: np.ndarray, tol: np.ndarray, among: np.ndarray | None = None):
-        """(M,) index of the nearest free candidate within tol of each prediction, or -1; and the misses.
-
-        among : sorted candidate indices that hold every candidate within tol of a prediction
-        (a cheaper search, same answer), or None for all.
-        """
-        if among is not None:
-            idx = among[self.free[among]]
-        else:  # while a lattice grows only its take() changes free: the list holds until the next version
-            if self.free_idx[0] != self.version:
-                self.free_idx = (self.version, np.flatnonzero(self.free))
-            idx = self.free_idx[1]
+    def _nearest_free(self, pred: np.ndarray, tol: np.ndarray):
+        """(M,) index of the nearest free candidate within tol of each prediction, or -1; and the misses."""
+        # while a lattice grows only its take() changes free: the list holds until the next version
+        if self.free_idx[0] != self.version:
+            self.free_idx = (self.version, np.flatnonzero(self.free))
+        idx = self.free_idx[1]
         if len(idx) == 0:
             return np.full(len(pred), -1), np.arange(len(pred))
         d2 = ((pred[:, None, :] - self.pts[None, idx, :]) ** 2).sum(-1)
@@ -369,6 +363,7 @@ _OFFS = np.array([(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj)
 # a 3×2 block about the middle of its long side, on either side of it (``strips`` seeds)
 _STRIP_BLOCKS = np.array([[(di, dj) for di in (-1, 0, 1) for dj in (0, s) if (di, dj) != (0, 0)] for s in (1, -1)],
                          np.float64)
+_NO_CONTRAST = np.zeros(0)  # seed_block's "no edge test"
 
 
 def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | None = None,
@@ -392,10 +387,8 @@ def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | 
       seeds where the board's own 3×3 is incomplete, as a sheared grid.
     """
     blocks, orders = (_OFFS[None], 1) if not strips else (_STRIP_BLOCKS, 2)
-    no_contrast = np.zeros(0)
-    b, _, _, found = seed_block(lat.pts, int(k), np.asarray(neighbours, np.int64),
-                                  no_contrast if contrast is None else np.asarray(contrast, np.float64), lat.free,
-                                  blocks, orders, TOLERANCE, MAX_STEP_RATIO, MAX_CELL_AREA, MAX_SPAN_RATIO)
+    b, _, _, found = seed_block(lat.pts, int(k), neighbours, _NO_CONTRAST if contrast is None else contrast, lat.free,
+                                blocks, orders, TOLERANCE, MAX_STEP_RATIO, MAX_CELL_AREA, MAX_SPAN_RATIO)
     if b < 0:
         return False
     lat.take((0, 0), k)
@@ -431,7 +424,8 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
     near = np.argsort(d2, axis=1)[:, : min(neighbours, n - 1)]
     contrast = None  # of every point's steps to its near points, in one go (seeds use them)
     if gray is not None:
-        contrast = edge_contrast(gray, np.repeat(pts, near.shape[1], axis=0), pts[near.ravel()]).reshape(near.shape)
+        contrast = edge_contrast(gray, np.repeat(pts, near.shape[1], axis=0), pts[near.ravel()])
+        contrast = contrast.reshape(near.shape).astype(np.float64)  # seed_block's dtype, converted once
     free = np.ones(n, bool)
     grids = []
     for k in order:

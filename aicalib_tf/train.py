@@ -104,7 +104,12 @@ def cached_pool(count: int, seed: int, *, preset: str, workers: int = 1, progres
     once (saved atomically as .npz) and loaded by the other runs. The images are the same as
     rendering them; without the variable nothing is cached.
     """
+    import io
+    import zipfile
+
     import numpy as np
+
+    from data_gen.sample import GENERATOR_VERSION
 
     from .data import Pool, render_pool
     from .io import atomic_write_bytes
@@ -112,17 +117,16 @@ def cached_pool(count: int, seed: int, *, preset: str, workers: int = 1, progres
     folder = os.environ.get(POOL_CACHE_ENV)
     if not folder:
         return render_pool(count, seed, preset=preset, workers=workers, progress=progress)
-    from data_gen.sample import GENERATOR_VERSION
-
     name = f"pool-v{GENERATOR_VERSION}-{preset.replace(':', '_').replace(',', '+')}-{count}-{seed}.npz"
     path = Path(folder) / name
     if path.is_file():
-        with np.load(path) as z:
-            images, flat, counts, mean, std = z["images"], z["corners"], z["counts"], z["mean"], z["std"]
+        try:
+            with np.load(path) as z:
+                images, flat, counts, mean, std = z["images"], z["corners"], z["counts"], z["mean"], z["std"]
+        except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
+            raise ValueError(f"{path}: not a readable pool cache ({exc}); delete it to render the pool again") from None
         return Pool(images, np.split(flat, np.cumsum(counts)[:-1]), mean, std)
     pool = render_pool(count, seed, preset=preset, workers=workers, progress=progress)
-    import io
-
     buf = io.BytesIO()
     np.savez(buf, images=pool.images, corners=np.concatenate([c.reshape(-1, 2) for c in pool.corners]).astype(np.float32),
              counts=np.array([len(c) for c in pool.corners], np.int64), mean=pool.mean, std=pool.std)

@@ -174,7 +174,7 @@ def draw_scene(
             visible &= ~occluded(corners, polys)
     steps = draw_steps(p.rules, rng)
     return Scene(p, cam, board, background, has_board, framing, rvec, tvec, polys, levels, corners, visible,
-                 steps, copy.deepcopy(rng))
+                 steps, rng)  # render() copies rng before each use
 
 
 def make_sample(

@@ -140,3 +140,6 @@ def test_a_pool_cache_renders_a_pool_once(tmp_path, monkeypatch):
     assert np.array_equal(first.images, second.images)
     assert np.array_equal(first.mean, second.mean) and np.array_equal(first.std, second.std)
     assert all(np.array_equal(a, b) for a, b in zip(first.corners, second.corners, strict=True))
+    files[0].write_bytes(b"not an npz")
+    with pytest.raises(ValueError, match="pool-.*not a readable pool cache"):
+        train.cached_pool(3, 5, preset="train", progress=False)
