@@ -23,7 +23,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["lattice_predict", "ring_stats", "saddle_loop", "sample_windows", "seed_block", "symmetric_loop", "symmetry_energies"]
+__all__ = ["lattice_predict", "nearest_predict", "ring_stats", "saddle_loop", "sample_windows", "seed_block", "symmetric_loop", "symmetry_energies"]
 
 
 @njit(cache=True, nogil=True)
@@ -304,6 +304,30 @@ def lattice_predict(ids, pts, near, want):
             w = h[6] * x + h[7] * y + 1.0
             out[s, k, 0] = (h[0] * x + h[1] * y + h[2]) / w / ds + dx
             out[s, k, 1] = (h[3] * x + h[4] * y + h[5]) / w / ds + dy
+    return out
+
+
+@njit(cache=True, nogil=True)
+def nearest_predict(ids, pts, want, k):
+    """Image positions of lattice ids ``want`` (M, 2) float64, each from a homography of its k nearest known ids.
+
+    ids (N, 2) float64, pts (N, 2) float64 px, N > k. Each want's set is its k nearest ids by
+    squared distance, ties to the lower index (a stable sort), in that order; then as
+    :func:`lattice_predict`. Returns (M, 2) px, NaN where the fit is singular.
+    """
+    n, m = ids.shape[0], want.shape[0]
+    out = np.empty((m, 2))
+    d2 = np.empty(n)
+    near = np.empty((1, k), np.int64)
+    one = np.empty((1, 1, 2))
+    for s in range(m):
+        for t in range(n):
+            dx, dy = want[s, 0] - ids[t, 0], want[s, 1] - ids[t, 1]
+            d2[t] = dx * dx + dy * dy
+        near[0, :] = np.argsort(d2, kind="mergesort")[:k]
+        one[0, 0, 0], one[0, 0, 1] = want[s, 0], want[s, 1]
+        got = lattice_predict(ids, pts, near, one)
+        out[s, 0], out[s, 1] = got[0, 0, 0], got[0, 0, 1]
     return out
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels import lattice_predict
+from .kernels import lattice_predict, nearest_predict
 
 __all__ = ["MAX_RESIDUAL", "MIN_PARTIAL", "drop_outliers", "in_view", "lattice_residuals",
            "local_step", "predict_ids"]
@@ -27,6 +27,12 @@ MAX_RESIDUAL = 0.08  # of a step: how far a corner of a partial board may be fro
 
 def _f64(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, np.float64)
+
+
+def _id_keys(ids: np.ndarray) -> np.ndarray:
+    """One int64 per (i, j) id (any leading shape; ids within ±2**20)."""
+    ids = np.asarray(ids, np.int64)
+    return (ids[..., 0] << 21) + ids[..., 1]
 
 
 def in_view(pts: np.ndarray, size) -> np.ndarray:
@@ -44,9 +50,7 @@ def predict_ids(ids: np.ndarray, pts: np.ndarray, want: np.ndarray, k: int = 12)
         return np.full((len(want), 2), np.nan)
     if k >= len(ids):  # every id's set is all of them: one homography serves all
         return lattice_predict(_f64(ids), _f64(pts), np.arange(len(ids))[None], want[None])[0]
-    d2 = ((want[:, None, :] - ids[None, :, :]) ** 2).sum(-1)
-    near = np.argsort(d2, axis=1, kind="stable")[:, :k]
-    return lattice_predict(_f64(ids), _f64(pts), near, want[:, None, :])[:, 0]
+    return nearest_predict(_f64(ids), _f64(pts), want, k)
 
 
 def local_step(ids: np.ndarray, pts: np.ndarray, want_xy: np.ndarray) -> np.ndarray:
@@ -79,8 +83,7 @@ def lattice_residuals(ids: np.ndarray, pts: np.ndarray, k: int = 8) -> np.ndarra
     # a corner whose four neighbours are all hidden (an object in front) is further from the nearest
     # found one than a step: the step is then the lattice's own, the shortest of its four unit steps
     unit = np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])
-    have = set(map(tuple, ids.tolist()))
-    alone = np.array([not any((int(i + a), int(j + b)) in have for a, b in unit) for i, j in ids])
+    alone = ~np.isin(_id_keys(ids[:, None, :] + unit[None]), _id_keys(ids)).any(axis=1)
     if alone.any():
         qs = lattice_predict(fids, fpts, near[alone], fids[alone, None, :] + unit[None])
         lat = np.linalg.norm(qs - pred[alone, None, :], axis=2).min(axis=1)

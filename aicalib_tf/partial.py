@@ -184,14 +184,17 @@ def _reach(cells: dict, propose, limit: int, size, passes: int = 3, radius: int 
         outside = hit & np.any((cand < lo) | (cand > hi), axis=1)
         pair = np.abs(cand[:, None, :] - cand[None, outside, :]).max(-1) == 1  # (M, #outside)
         hit &= ~outside | pair.any(axis=1)
-        cand, pred, step, got = cand[hit], pred[hit], step[hit], got[hit]
         added = 0
-        for c, p, s, q in zip(cand, pred, step, got):
-            ij_now = np.array(list(cells.keys()))
-            lo_n, hi_n = np.minimum(ij_now.min(0), c), np.maximum(ij_now.max(0), c)
-            if np.any(hi_n - lo_n + 1 > limit):
+        (i0, j0), (i1, j1) = lo.tolist(), hi.tolist()
+        for (i, j), s, q in zip(cand[hit].tolist(), step[hit], got[hit]):
+            if max(i1, i) - min(i0, i) + 1 > limit or max(j1, j) - min(j0, j) + 1 > limit:
                 continue
-            added += _take(cells, [(int(c[0]), int(c[1]))], p[None], np.array([s]), q[None])
+            if np.min(np.linalg.norm(pts - q, axis=1)) < 0.5 * s:  # it repeats a point (see _take)
+                continue
+            cells[(i, j)] = (q.astype(np.float64), 0.0)
+            pts = np.vstack([pts, q])
+            i0, j0, i1, j1 = min(i0, i), min(j0, j), max(i1, i), max(j1, j)
+            added += 1
         if not added:
             return
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from aicalib_tf.kernels import lattice_predict, sample_windows
+from aicalib_tf.kernels import lattice_predict, nearest_predict, sample_windows
 
 
 def test_lattice_predict_recovers_an_exact_homography_and_refuses_a_line():
@@ -21,6 +21,19 @@ def test_lattice_predict_recovers_an_exact_homography_and_refuses_a_line():
     assert np.abs(got[0] - project(want[0])).max() < 1e-8
     line = np.flatnonzero(ids[:, 1] == 0)[None]  # collinear ids: no homography
     assert np.isnan(lattice_predict(ids, pts, line, want)).all()
+
+
+def test_nearest_predict_fits_each_want_to_its_k_nearest_ids_ties_to_the_lower_index():
+    rng = np.random.default_rng(3)
+    c, r = np.meshgrid(np.arange(7), np.arange(5))
+    ids = np.stack([c.ravel(), r.ravel()], 1).astype(np.float64)
+    pts = ids * 20.0 + rng.normal(0, 1.5, ids.shape)  # a bent lattice: each set's fit differs
+    want = np.array([[3.0, 2.0], [-1.0, 0.0], [2.5, 1.5], [8.0, 4.0], [0.2, 3.9]])
+    d2 = ((want[:, None, :] - ids[None]) ** 2).sum(-1)
+    near = np.argsort(d2, axis=1, kind="stable")[:, :12]  # the reference: a stable sort, then the first 12
+    expect = lattice_predict(ids, pts, near, want[:, None, :])[:, 0]
+    assert np.array_equal(nearest_predict(ids, pts, want, 12), expect)
+    assert not np.array_equal(nearest_predict(ids, pts, want, 8), expect)
 
 
 def test_sample_windows_is_bilinear_with_replicated_borders():
