@@ -264,6 +264,43 @@ def _solve8(a, b):
 
 
 @njit(cache=True, nogil=True)
+def _fit_lattice(ids, pts, idx, ata, atb, row, norm):
+    """Fit the homography of ids[idx] -> pts[idx] (see :func:`lattice_predict`) into atb (8,).
+
+    norm (6,) gets the id and point normalisers (sx, sy, ss, dx, dy, ds). Returns False where the
+    normal equations are singular.
+    """
+    sx, sy, ss = _normaliser(ids, idx)
+    dx, dy, ds = _normaliser(pts, idx)
+    norm[0], norm[1], norm[2], norm[3], norm[4], norm[5] = sx, sy, ss, dx, dy, ds
+    ata[:] = 0.0
+    atb[:] = 0.0
+    for t in idx:
+        x, y = (ids[t, 0] - sx) * ss, (ids[t, 1] - sy) * ss
+        u, v = (pts[t, 0] - dx) * ds, (pts[t, 1] - dy) * ds
+        for rhs, other in ((u, 0), (v, 1)):
+            row[:] = 0.0
+            row[3 * other], row[3 * other + 1], row[3 * other + 2] = x, y, 1.0
+            row[6], row[7] = -rhs * x, -rhs * y
+            for i in range(8):
+                if row[i] != 0.0:
+                    atb[i] += row[i] * rhs
+                    for j in range(8):
+                        ata[i, j] += row[i] * row[j]
+    return abs(_solve8(ata, atb)) > 1e-12
+
+
+@njit(cache=True, nogil=True)
+def _apply_lattice(h, norm, wx, wy, out):
+    """Put id (wx, wy) in the image with a fit of :func:`_fit_lattice`: out (2,) px."""
+    sx, sy, ss, dx, dy, ds = norm[0], norm[1], norm[2], norm[3], norm[4], norm[5]
+    x, y = (wx - sx) * ss, (wy - sy) * ss
+    w = h[6] * x + h[7] * y + 1.0
+    out[0] = (h[0] * x + h[1] * y + h[2]) / w / ds + dx
+    out[1] = (h[3] * x + h[4] * y + h[5]) / w / ds + dy
+
+
+@njit(cache=True, nogil=True)
 def lattice_predict(ids, pts, near, want):
     """Image positions of lattice ids, each set from a homography of its own known corners.
 
@@ -275,35 +312,12 @@ def lattice_predict(ids, pts, near, want):
     """
     m, q = want.shape[0], want.shape[1]
     out = np.full((m, q, 2), np.nan)
-    ata = np.empty((8, 8))
-    atb = np.empty(8)
-    row = np.empty(8)
+    ata, atb, row, norm = np.empty((8, 8)), np.empty(8), np.empty(8), np.empty(6)
     for s in range(m):
-        idx = near[s]
-        sx, sy, ss = _normaliser(ids, idx)
-        dx, dy, ds = _normaliser(pts, idx)
-        ata[:] = 0.0
-        atb[:] = 0.0
-        for t in idx:
-            x, y = (ids[t, 0] - sx) * ss, (ids[t, 1] - sy) * ss
-            u, v = (pts[t, 0] - dx) * ds, (pts[t, 1] - dy) * ds
-            for rhs, other in ((u, 0), (v, 1)):
-                row[:] = 0.0
-                row[3 * other], row[3 * other + 1], row[3 * other + 2] = x, y, 1.0
-                row[6], row[7] = -rhs * x, -rhs * y
-                for i in range(8):
-                    if row[i] != 0.0:
-                        atb[i] += row[i] * rhs
-                        for j in range(8):
-                            ata[i, j] += row[i] * row[j]
-        if not abs(_solve8(ata, atb)) > 1e-12:
+        if not _fit_lattice(ids, pts, near[s], ata, atb, row, norm):
             continue
-        h = atb
         for k in range(q):
-            x, y = (want[s, k, 0] - sx) * ss, (want[s, k, 1] - sy) * ss
-            w = h[6] * x + h[7] * y + 1.0
-            out[s, k, 0] = (h[0] * x + h[1] * y + h[2]) / w / ds + dx
-            out[s, k, 1] = (h[3] * x + h[4] * y + h[5]) / w / ds + dy
+            _apply_lattice(atb, norm, want[s, k, 0], want[s, k, 1], out[s, k])
     return out
 
 
@@ -312,22 +326,32 @@ def nearest_predict(ids, pts, want, k):
     """Image positions of lattice ids ``want`` (M, 2) float64, each from a homography of its k nearest known ids.
 
     ids (N, 2) float64, pts (N, 2) float64 px, N > k. Each want's set is its k nearest ids by
-    squared distance, ties to the lower index (a stable sort), in that order; then as
-    :func:`lattice_predict`. Returns (M, 2) px, NaN where the fit is singular.
+    squared distance, ties to the lower index (a stable sort); the set is fitted in index order
+    as in :func:`lattice_predict`, once for all wants that share it (around a grid, nine of a
+    square's sample points often do). Returns (M, 2) px, NaN where the fit is singular.
     """
     n, m = ids.shape[0], want.shape[0]
-    out = np.empty((m, 2))
+    out = np.full((m, 2), np.nan)
+    sets = np.empty((m, k), np.int64)
+    keys = np.empty(m, np.int64)
     d2 = np.empty(n)
-    near = np.empty((1, k), np.int64)
-    one = np.empty((1, 1, 2))
     for s in range(m):
         for t in range(n):
             dx, dy = want[s, 0] - ids[t, 0], want[s, 1] - ids[t, 1]
             d2[t] = dx * dx + dy * dy
-        near[0, :] = np.argsort(d2, kind="mergesort")[:k]
-        one[0, 0, 0], one[0, 0, 1] = want[s, 0], want[s, 1]
-        got = lattice_predict(ids, pts, near, one)
-        out[s, 0], out[s, 1] = got[0, 0, 0], got[0, 0, 1]
+        sets[s] = np.sort(np.argsort(d2, kind="mergesort")[:k])
+        key = 0
+        for t in range(k):
+            key = (key * 1000003 + sets[s, t]) % 2305843009213693951
+        keys[s] = key
+    ata, atb, row, norm = np.empty((8, 8)), np.empty(8), np.empty(8), np.empty(6)
+    prev, ok = -1, False
+    for s in np.argsort(keys, kind="mergesort"):  # wants of one set are neighbours here: one fit each
+        if prev < 0 or not np.array_equal(sets[s], sets[prev]):
+            ok = _fit_lattice(ids, pts, sets[s], ata, atb, row, norm)
+        prev = s
+        if ok:
+            _apply_lattice(atb, norm, want[s, 0], want[s, 1], out[s])
     return out
 
 

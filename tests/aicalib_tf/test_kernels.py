@@ -30,7 +30,7 @@ def test_nearest_predict_fits_each_want_to_its_k_nearest_ids_ties_to_the_lower_i
     pts = ids * 20.0 + rng.normal(0, 1.5, ids.shape)  # a bent lattice: each set's fit differs
     want = np.array([[3.0, 2.0], [-1.0, 0.0], [2.5, 1.5], [8.0, 4.0], [0.2, 3.9]])
     d2 = ((want[:, None, :] - ids[None]) ** 2).sum(-1)
-    near = np.argsort(d2, axis=1, kind="stable")[:, :12]  # the reference: a stable sort, then the first 12
+    near = np.sort(np.argsort(d2, axis=1, kind="stable")[:, :12], axis=1)  # a stable sort, the first 12, in index order
     expect = lattice_predict(ids, pts, near, want[:, None, :])[:, 0]
     assert np.array_equal(nearest_predict(ids, pts, want, 12), expect)
     assert not np.array_equal(nearest_predict(ids, pts, want, 8), expect)
