@@ -23,7 +23,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["lattice_predict", "nearest_predict", "ring_stats", "saddle_loop", "sample_windows", "seed_block", "symmetric_loop", "symmetry_energies"]
+__all__ = ["lattice_predict", "lattice_residuals_loop", "nearest_predict", "ring_stats", "saddle_loop", "sample_windows", "seed_block", "symmetric_loop", "symmetry_energies"]
 
 
 @njit(cache=True, nogil=True)
@@ -352,6 +352,57 @@ def nearest_predict(ids, pts, want, k):
         prev = s
         if ok:
             _apply_lattice(atb, norm, want[s, 0], want[s, 1], out[s])
+    return out
+
+
+@njit(cache=True, nogil=True)
+def lattice_residuals_loop(ids, pts, k, single):
+    """The loop of :func:`aicalib_tf.lattice.lattice_residuals`: ids (N, 2) float64, pts (N, 2) px, N >= 5.
+
+    Each corner's set is its k nearest other ids (stable order, itself left out), fitted as in
+    :func:`lattice_predict`. The nearest-corner step is computed in pts' own precision (``single``:
+    pts are float32, and so is the step, as numpy would have it). Returns (N,) residuals in local steps, 0 where not finite.
+    """
+    n = ids.shape[0]
+    kk = min(k, n - 1)
+    out = np.zeros(n)
+    di = np.empty(n)
+    ata, atb, row, norm = np.empty((8, 8)), np.empty(8), np.empty(8), np.empty(6)
+    pred, q = np.empty(2), np.empty(2)
+    units = ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))
+    for i in range(n):
+        step = np.inf
+        for j in range(n):
+            if j != i:
+                dx, dy = pts[i, 0] - pts[j, 0], pts[i, 1] - pts[j, 1]
+                step = min(step, dx * dx + dy * dy)
+                ex, ey = ids[i, 0] - ids[j, 0], ids[i, 1] - ids[j, 1]
+                di[j] = ex * ex + ey * ey
+        di[i] = np.inf
+        step = math.sqrt(step)
+        if single:
+            step = np.float32(step)  # sqrt rounded to float32: numpy's float32 sqrt (correctly rounded both)
+        if not _fit_lattice(ids, pts, np.argsort(di, kind="mergesort")[:kk], ata, atb, row, norm):
+            continue
+        _apply_lattice(atb, norm, ids[i, 0], ids[i, 1], pred)
+        alone = True  # none of its four neighbours found (an object in front): the lattice's own step counts too
+        for a, b in units:
+            for j in range(n):
+                if ids[j, 0] == ids[i, 0] + a and ids[j, 1] == ids[i, 1] + b:
+                    alone = False
+        if alone:
+            lat = np.inf
+            for a, b in units:
+                _apply_lattice(atb, norm, ids[i, 0] + a, ids[i, 1] + b, q)
+                d = math.sqrt((q[0] - pred[0]) ** 2 + (q[1] - pred[1]) ** 2)
+                lat = d if math.isnan(d) or math.isnan(lat) else min(lat, d)
+            if math.isfinite(lat):
+                step = min(step, lat)
+                if single:
+                    step = np.float32(step)
+        res = math.sqrt((pred[0] - pts[i, 0]) ** 2 + (pred[1] - pts[i, 1]) ** 2) / step
+        if math.isfinite(res):
+            out[i] = res
     return out
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels import lattice_predict, nearest_predict
+from .kernels import lattice_predict, lattice_residuals_loop, nearest_predict
 
 __all__ = ["MAX_RESIDUAL", "MIN_PARTIAL", "drop_outliers", "in_view", "lattice_residuals",
            "local_step", "predict_ids"]
@@ -27,12 +27,6 @@ MAX_RESIDUAL = 0.08  # of a step: how far a corner of a partial board may be fro
 
 def _f64(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, np.float64)
-
-
-def _id_keys(ids: np.ndarray) -> np.ndarray:
-    """One int64 per (i, j) id (any leading shape; ids within ±2**20)."""
-    ids = np.asarray(ids, np.int64)
-    return (ids[..., 0] << 21) + ids[..., 1]
 
 
 def in_view(pts: np.ndarray, size) -> np.ndarray:
@@ -69,27 +63,10 @@ def lattice_residuals(ids: np.ndarray, pts: np.ndarray, k: int = 8) -> np.ndarra
     neighbours is found (hidden by an object in front), the shorter of that and the lattice's own
     step there (the predicted neighbours' distance).
     """
-    n = len(ids)
-    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
-    np.fill_diagonal(d2, np.inf)
-    step = np.sqrt(d2.min(axis=1))
-    if n < 5:
-        return np.zeros(n)
-    di = ((ids[:, None, :] - ids[None, :, :]) ** 2).sum(-1).astype(np.float64)
-    np.fill_diagonal(di, np.inf)  # leave each corner out of its own fit
-    near = np.argsort(di, axis=1, kind="stable")[:, : min(k, n - 1)]
-    fids, fpts = _f64(ids), _f64(pts)
-    pred = lattice_predict(fids, fpts, near, fids[:, None, :])[:, 0]
-    # a corner whose four neighbours are all hidden (an object in front) is further from the nearest
-    # found one than a step: the step is then the lattice's own, the shortest of its four unit steps
-    unit = np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])
-    alone = ~np.isin(_id_keys(ids[:, None, :] + unit[None]), _id_keys(ids)).any(axis=1)
-    if alone.any():
-        qs = lattice_predict(fids, fpts, near[alone], fids[alone, None, :] + unit[None])
-        lat = np.linalg.norm(qs - pred[alone, None, :], axis=2).min(axis=1)
-        step[alone] = np.where(np.isfinite(lat), np.minimum(step[alone], lat), step[alone])
-    res = np.linalg.norm(pred - pts, axis=1) / step
-    return np.where(np.isfinite(res), res, 0.0)
+    if len(ids) < 5:
+        return np.zeros(len(ids))
+    single = np.asarray(pts).dtype == np.float32
+    return lattice_residuals_loop(_f64(ids), np.ascontiguousarray(pts, np.float32 if single else np.float64), k, single)
 
 
 def drop_outliers(ids, pts, sc, free=None, max_residual: float = MAX_RESIDUAL):

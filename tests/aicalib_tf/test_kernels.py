@@ -77,3 +77,46 @@ def test_seed_block_places_the_3x3_block_of_a_lattice_and_no_block_on_a_line():
     k_line = int(np.flatnonzero(line == k)[0])
     near_line = np.array([i for i in range(len(line)) if i != k_line], np.int64)
     assert seed_block(pts[line], k_line, near_line, np.zeros(0), np.ones(len(line), bool), *rules)[0] == -1
+
+
+def _residuals_reference(ids, pts, k=8):
+    """lattice_residuals written as array code: each corner against a fit of its k nearest other ids."""
+    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1)  # in pts' precision
+    np.fill_diagonal(d2, np.inf)
+    step = np.sqrt(d2.min(axis=1))
+    di = ((ids[:, None, :] - ids[None, :, :]) ** 2).sum(-1).astype(np.float64)
+    np.fill_diagonal(di, np.inf)
+    near = np.argsort(di, axis=1, kind="stable")[:, :k]
+    fids, fpts = ids.astype(np.float64), pts.astype(np.float64)
+    pred = lattice_predict(fids, fpts, near, fids[:, None, :])[:, 0]
+    unit = np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])
+    have = set(map(tuple, ids.tolist()))
+    alone = np.array([not any((i + a, j + b) in have for a, b in unit) for i, j in ids.tolist()])
+    if alone.any():
+        qs = lattice_predict(fids, fpts, near[alone], fids[alone, None, :] + unit[None])
+        lat = np.linalg.norm(qs - pred[alone, None, :], axis=2).min(axis=1)
+        step[alone] = np.where(np.isfinite(lat), np.minimum(step[alone], lat), step[alone])
+    res = np.linalg.norm(pred - pts, axis=1) / step
+    return np.where(np.isfinite(res), res, 0.0)
+
+
+def test_lattice_residuals_match_the_array_code_in_float32_and_float64():
+    from aicalib_tf.lattice import lattice_residuals
+
+    rng = np.random.default_rng(0)
+    c, r = np.meshgrid(np.arange(9), np.arange(6))
+    grid = np.stack([c.ravel(), r.ravel()], 1)
+    lone = 0
+    for trial in range(60):
+        ids = grid[rng.random(len(grid)) < rng.uniform(0.3, 1.0)]  # holes: some corners have no found neighbour
+        if len(ids) < 9:
+            continue
+        h = np.array([[20 + rng.normal(), rng.normal(), 100], [rng.normal(), 20 + rng.normal(), 80],
+                      [rng.normal(0, 1e-3), rng.normal(0, 1e-3), 1]])
+        p = np.c_[ids, np.ones(len(ids))] @ h.T
+        pts = p[:, :2] / p[:, 2:] + rng.normal(0, 0.3, (len(ids), 2))
+        pts = pts.astype(np.float32) if trial % 2 else pts
+        have = set(map(tuple, ids.tolist()))
+        lone += sum(not any((i + a, j + b) in have for a, b in ((1, 0), (-1, 0), (0, 1), (0, -1))) for i, j in ids.tolist())
+        assert np.array_equal(lattice_residuals(ids, pts), _residuals_reference(ids, pts))
+    assert lone > 0
