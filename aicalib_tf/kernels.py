@@ -334,20 +334,39 @@ def nearest_predict(ids, pts, want, k):
     out = np.full((m, 2), np.nan)
     sets = np.empty((m, k), np.int64)
     keys = np.empty(m, np.int64)
-    d2 = np.empty(n)
+    d2, bv, bi = np.empty(n), np.empty(k), np.empty(k, np.int64)
     for s in range(m):
         for t in range(n):
             dx, dy = want[s, 0] - ids[t, 0], want[s, 1] - ids[t, 1]
             d2[t] = dx * dx + dy * dy
-        sets[s] = np.sort(np.argsort(d2, kind="mergesort")[:k])
+        # the first k of a stable sort: an insertion into k sorted slots, later ids after equal ones
+        got = 0
+        for t in range(n):
+            if got == k and not d2[t] < bv[k - 1]:
+                continue
+            j = min(got, k - 1)
+            while j > 0 and bv[j - 1] > d2[t]:
+                bv[j], bi[j] = bv[j - 1], bi[j - 1]
+                j -= 1
+            bv[j], bi[j] = d2[t], t
+            got = min(got + 1, k)
+        for a in range(k):  # in index order, as they are fitted
+            j = a
+            while j > 0 and sets[s, j - 1] > bi[a]:
+                sets[s, j] = sets[s, j - 1]
+                j -= 1
+            sets[s, j] = bi[a]
         key = 0
-        for t in range(k):
-            key = (key * 1000003 + sets[s, t]) % 2305843009213693951
+        for a in range(k):
+            key = key * 1000003 + sets[s, a]  # wraps: a hash only, equal sets are compared in full
         keys[s] = key
     ata, atb, row, norm = np.empty((8, 8)), np.empty(8), np.empty(8), np.empty(6)
     prev, ok = -1, False
-    for s in np.argsort(keys, kind="mergesort"):  # wants of one set are neighbours here: one fit each
-        if prev < 0 or not np.array_equal(sets[s], sets[prev]):
+    for s in np.argsort(keys):  # wants of one set are neighbours here: one fit each
+        same = prev >= 0
+        for a in range(k):
+            same = same and sets[s, a] == sets[prev, a]
+        if not same:
             ok = _fit_lattice(ids, pts, sets[s], ata, atb, row, norm)
         prev = s
         if ok:
