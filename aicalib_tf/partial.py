@@ -67,12 +67,13 @@ def _grow_cut_lines(cells: dict, propose, limit: int, size) -> None:
     """
     for _ in range(2 * limit):
         grown = False
-        sides = [side for axis in (0, 1) for sign in (-1, 1) if (side := _cut_side(cells, axis, sign, limit))]
+        first = {(axis, sign): _cut_side(cells, axis, sign, limit) for axis in (0, 1) for sign in (-1, 1)}
+        sides = [side for side in first.values() if side is not None]
         if len(sides) > 1:  # one batch; propose remembers, so the sides' own asks below cost nothing more
             propose(np.concatenate([p for _, p, _ in sides]), np.concatenate([st for _, _, st in sides]))
         for axis in (0, 1):
             for sign in (-1, 1):
-                side = _cut_side(cells, axis, sign, limit)
+                side = _cut_side(cells, axis, sign, limit) if grown else first[(axis, sign)]
                 if side is None:
                     continue
                 new, pred, step = side
@@ -104,21 +105,27 @@ def _cut_side(cells: dict, axis: int, sign: int, limit: int):
     keys = np.array(list(cells.keys()))
     if keys[:, axis].max() - keys[:, axis].min() + 1 >= limit:
         return None
-    e = keys[:, axis].max() if sign > 0 else keys[:, axis].min()
-    new, pred, step = [], [], []
-    for o in np.unique(keys[:, 1 - axis]):
-        def at(a, o=int(o)):
-            v = cells.get((int(a), o) if axis == 0 else (o, int(a)))
-            return None if v is None else v[0]
-        p0, p1, p2 = at(e), at(e - sign), at(e - 2 * sign)
-        if p0 is None or p1 is None:
+    e = int(keys[:, axis].max() if sign > 0 else keys[:, axis].min())
+
+    def at(a, o):
+        v = cells.get((a, o) if axis == 0 else (o, a))
+        return None if v is None else v[0]
+
+    new, p0, p1, p2, quad = [], [], [], [], []
+    for o in np.unique(keys[:, 1 - axis]).tolist():
+        a0, a1, a2 = at(e, o), at(e - sign, o), at(e - 2 * sign, o)
+        if a0 is None or a1 is None:
             continue
-        new.append((int(e + sign), int(o)) if axis == 0 else (int(o), int(e + sign)))
-        pred.append(2 * p0 - p1 if p2 is None else 3 * p0 - 3 * p1 + p2)
-        step.append(np.linalg.norm(p0 - p1))
+        new.append((e + sign, o) if axis == 0 else (o, e + sign))
+        p0.append(a0)
+        p1.append(a1)
+        p2.append(a1 if a2 is None else a2)
+        quad.append(a2 is not None)
     if not new:
         return None
-    return new, np.array(pred), np.array(step)
+    p0, p1, p2 = np.array(p0), np.array(p1), np.array(p2)
+    pred = np.where(np.array(quad)[:, None], 3 * p0 - 3 * p1 + p2, 2 * p0 - p1)
+    return new, pred, np.linalg.norm(p0 - p1, axis=1)
 
 
 def _fill_cells(cells: dict, propose, passes: int = 3) -> None:
