@@ -23,7 +23,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["lattice_predict", "lattice_residuals_loop", "nearest_predict", "ring_stats", "saddle_loop", "sample_windows", "seed_block", "symmetric_loop", "symmetry_energies"]
+__all__ = ["lattice_predict", "nearest_steps", "lattice_residuals_loop", "nearest_predict", "ring_stats", "saddle_loop", "sample_windows", "seed_block", "symmetric_loop", "symmetry_energies"]
 
 
 @njit(cache=True, nogil=True)
@@ -371,6 +371,31 @@ def nearest_predict(ids, pts, want, k):
         prev = s
         if ok:
             _apply_lattice(atb, norm, want[s, 0], want[s, 1], out[s])
+    return out
+
+
+@njit(cache=True, nogil=True)
+def nearest_steps(pts, want):
+    """For each want (M, 2) px: the nearest point of pts (N, 2) px (first on ties), and that point's
+    distance to its own nearest other point. Returns (M,) px (inf where N < 2)."""
+    n, m = pts.shape[0], want.shape[0]
+    spacing = np.empty(n)
+    for i in range(n):
+        best = np.inf
+        for j in range(n):
+            if j != i:
+                dx, dy = pts[i, 0] - pts[j, 0], pts[i, 1] - pts[j, 1]
+                best = min(best, dx * dx + dy * dy)
+        spacing[i] = math.sqrt(best)
+    out = np.empty(m)
+    for s in range(m):
+        best, arg = np.inf, 0
+        for j in range(n):
+            dx, dy = want[s, 0] - pts[j, 0], want[s, 1] - pts[j, 1]
+            d = dx * dx + dy * dy
+            if d < best:
+                best, arg = d, j
+        out[s] = spacing[arg]
     return out
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels import lattice_predict, lattice_residuals_loop, nearest_predict
+from .kernels import lattice_predict, lattice_residuals_loop, nearest_predict, nearest_steps
 
 __all__ = ["MAX_RESIDUAL", "MIN_PARTIAL", "drop_outliers", "in_view", "lattice_residuals",
            "local_step", "predict_ids"]
@@ -49,11 +49,7 @@ def predict_ids(ids: np.ndarray, pts: np.ndarray, want: np.ndarray, k: int = 12)
 
 def local_step(ids: np.ndarray, pts: np.ndarray, want_xy: np.ndarray) -> np.ndarray:
     """(M,) px corner spacing near each position: the nearest known corner's distance to its nearest one."""
-    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
-    np.fill_diagonal(d2, np.inf)
-    spacing = np.sqrt(d2.min(axis=1))
-    near = np.argmin(((want_xy[:, None, :] - pts[None, :, :]) ** 2).sum(-1), axis=1)
-    return spacing[near]
+    return nearest_steps(_f64(pts), _f64(np.asarray(want_xy).reshape(-1, 2)))
 
 
 def lattice_residuals(ids: np.ndarray, pts: np.ndarray, k: int = 8) -> np.ndarray:

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from aicalib_tf.kernels import lattice_predict, nearest_predict, sample_windows
+from aicalib_tf.kernels import lattice_predict, nearest_predict, nearest_steps, sample_windows
 
 
 def test_lattice_predict_recovers_an_exact_homography_and_refuses_a_line():
@@ -120,3 +120,9 @@ def test_lattice_residuals_match_the_array_code_in_float32_and_float64():
         lone += sum(not any((i + a, j + b) in have for a, b in ((1, 0), (-1, 0), (0, 1), (0, -1))) for i, j in ids.tolist())
         assert np.array_equal(lattice_residuals(ids, pts), _residuals_reference(ids, pts))
     assert lone > 0
+
+
+def test_nearest_steps_gives_the_spacing_at_the_nearest_point():
+    pts = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 4.0], [30.0, 0.0]])  # spacings 10, 4, 4, 20
+    want = np.array([[1.0, 1.0], [9.0, 3.0], [29.0, 0.0], [5.0, 0.0]])  # the last is a tie: the first point counts
+    assert np.array_equal(nearest_steps(pts, want), [10.0, 4.0, 20.0, 10.0])
