@@ -228,12 +228,15 @@ def _complete(ids: np.ndarray, pts: np.ndarray, sc: np.ndarray, pattern_size, pr
             break
         want, pred = want[view], pred[view]
         step = local_step(ids, pts, pred)
-        got = propose(pred, step)
+        # far across an object in front: the whole board's homography; asked in the same batch
+        # (each point's answer is its own), used where the near prediction finds nothing
+        wide = predict_ids(ids, pts, want, k=len(ids)) if len(ids) > 12 else np.zeros((0, 2))
+        got_all = propose(np.concatenate([pred, wide]), np.concatenate([step, step[: len(wide)]]))
+        got = got_all[: len(pred)]
         ok = np.all(np.isfinite(got), axis=1) & (np.linalg.norm(got - pred, axis=1) <= 0.3 * step)
-        if (~ok).any() and len(ids) > 12:  # far across an object in front: the whole board's homography
+        if (~ok).any() and len(wide):
             miss = np.flatnonzero(~ok)
-            wide = predict_ids(ids, pts, want[miss], k=len(ids))
-            got_w = propose(wide, step[miss])
+            wide, got_w = wide[miss], got_all[len(pred):][miss]
             hit = np.all(np.isfinite(got_w), axis=1) & (np.linalg.norm(got_w - wide, axis=1) <= 0.3 * step[miss])
             got[miss[hit]], pred[miss[hit]], ok[miss[hit]] = got_w[hit], wide[hit], True
         by_tight = np.zeros(len(ok), bool)
