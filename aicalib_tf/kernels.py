@@ -6,11 +6,15 @@ of times per image. Here each point runs its whole Gauss–Newton loop in compil
 bilinear samples of the image (``cv2.remap`` rounds the sample position to 1/32 px).
 
 The grid seed search (:func:`seed_block`) is compiled for the same reason: grid assembly tries a
-seed at every candidate, dozens per image, each a few dozen small array operations.
+seed at every candidate, dozens per image, each a few dozen small array operations. So are the
+lattice sums of a partial board's growth (:func:`nearest_predict`, :func:`lattice_residuals_loop`,
+:func:`nearest_steps`): a board grown from a strip of corners asks them some forty times, with
+N × N distance tables and sorts each time.
 
 The maths is that of :func:`aicalib_tf.refine.refine_saddle`,
 :func:`aicalib_tf.robust_refine.refine_symmetric` (and its asymmetry measures),
-:func:`aicalib_tf.junctions.ring_symmetry`, :func:`aicalib_tf.lattice.predict_ids` and
+:func:`aicalib_tf.junctions.ring_symmetry`, :func:`aicalib_tf.lattice.predict_ids`,
+:func:`aicalib_tf.lattice.lattice_residuals`, :func:`aicalib_tf.lattice.local_step` and
 :func:`aicalib_tf.grid._seed`, whose docstrings define it; these functions are their loops and take the fixed operators those modules build. Images are (H, W) float32; points
 are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0); samples outside the image take the
 nearest edge pixel (OpenCV's BORDER_REPLICATE). Compiled on first use and cached on disk.
