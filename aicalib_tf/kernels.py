@@ -379,18 +379,24 @@ def nearest_predict(ids, pts, want, k):
 
 
 @njit(cache=True, nogil=True)
+def _nearest_sq(pts, i):
+    """Squared distance (in pts' own precision) from pts[i] to the nearest other point; inf when alone."""
+    best = np.inf
+    for j in range(pts.shape[0]):
+        if j != i:
+            dx, dy = pts[i, 0] - pts[j, 0], pts[i, 1] - pts[j, 1]
+            best = min(best, dx * dx + dy * dy)
+    return best
+
+
+@njit(cache=True, nogil=True)
 def nearest_steps(pts, want):
     """For each want (M, 2) px: the nearest point of pts (N, 2) px (first on ties), and that point's
     distance to its own nearest other point. Returns (M,) px (inf where N < 2)."""
     n, m = pts.shape[0], want.shape[0]
     spacing = np.empty(n)
     for i in range(n):
-        best = np.inf
-        for j in range(n):
-            if j != i:
-                dx, dy = pts[i, 0] - pts[j, 0], pts[i, 1] - pts[j, 1]
-                best = min(best, dx * dx + dy * dy)
-        spacing[i] = math.sqrt(best)
+        spacing[i] = math.sqrt(_nearest_sq(pts, i))
     out = np.empty(m)
     for s in range(m):
         best, arg = np.inf, 0
@@ -409,7 +415,8 @@ def lattice_residuals_loop(ids, pts, k, single):
 
     Each corner's set is its k nearest other ids (stable order, itself left out), fitted as in
     :func:`lattice_predict`. The nearest-corner step is computed in pts' own precision (``single``:
-    pts are float32, and so is the step, as numpy would have it). Returns (N,) residuals in local steps, 0 where not finite.
+    pts are float32, and so is the step, as numpy would have it). Returns (N,) residuals in local
+    steps, 0 where not finite.
     """
     n = ids.shape[0]
     kk = min(k, n - 1)
@@ -419,15 +426,11 @@ def lattice_residuals_loop(ids, pts, k, single):
     pred, q = np.empty(2), np.empty(2)
     units = ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))
     for i in range(n):
-        step = np.inf
         for j in range(n):
-            if j != i:
-                dx, dy = pts[i, 0] - pts[j, 0], pts[i, 1] - pts[j, 1]
-                step = min(step, dx * dx + dy * dy)
-                ex, ey = ids[i, 0] - ids[j, 0], ids[i, 1] - ids[j, 1]
-                di[j] = ex * ex + ey * ey
+            ex, ey = ids[i, 0] - ids[j, 0], ids[i, 1] - ids[j, 1]
+            di[j] = ex * ex + ey * ey
         di[i] = np.inf
-        step = math.sqrt(step)
+        step = math.sqrt(_nearest_sq(pts, i))
         if single:
             step = np.float32(step)  # sqrt rounded to float32: numpy's float32 sqrt (correctly rounded both)
         if not _fit_lattice(ids, pts, np.argsort(di, kind="mergesort")[:kk], ata, atb, row, norm):
