@@ -36,17 +36,26 @@ def _room(pts: np.ndarray, size) -> np.ndarray:
     return np.minimum(np.minimum(pts[:, 0], pts[:, 1]), np.minimum(w - 1 - pts[:, 0], h - 1 - pts[:, 1]))
 
 
-def _take(cells: dict, new: dict, pred: np.ndarray, step: np.ndarray, got: np.ndarray) -> int:
-    """Add proposals ``got`` (M, 2, NaN where none) for cells ``new`` (M keys) unless they repeat a point."""
+def _take(cells: dict, new: list, pred: np.ndarray, step: np.ndarray, got: np.ndarray, limit: int | None = None) -> int:
+    """Add proposals ``got`` (M, 2, NaN where none) for cells ``new`` (M (i, j) keys) unless they repeat a point.
+
+    With ``limit``, a cell that would stretch the cells past ``limit`` positions on an axis is left out.
+    Returns how many were added.
+    """
     pts = np.array([v[0] for v in cells.values()])
+    ij = np.array(list(cells.keys()))
+    (i0, j0), (i1, j1) = ij.min(0).tolist(), ij.max(0).tolist()
     added = 0
-    for key, p, s, q in zip(new, pred, step, got):
+    for (i, j), p, s, q in zip(new, pred, step, got):
+        if limit is not None and (max(i1, i) - min(i0, i) + 1 > limit or max(j1, j) - min(j0, j) + 1 > limit):
+            continue
         if not np.all(np.isfinite(q)) or np.linalg.norm(q - p) > 0.3 * s:
             continue
         if np.min(np.linalg.norm(pts - q, axis=1)) < 0.5 * s:
             continue
-        cells[key] = (q.astype(np.float64), 0.0)
+        cells[(i, j)] = (q.astype(np.float64), 0.0)
         pts = np.vstack([pts, q])
+        i0, j0, i1, j1 = min(i0, i), min(j0, j), max(i1, i), max(j1, j)
         added += 1
     return added
 
@@ -191,18 +200,7 @@ def _reach(cells: dict, propose, limit: int, size, passes: int = 3, radius: int 
         outside = hit & np.any((cand < lo) | (cand > hi), axis=1)
         pair = np.abs(cand[:, None, :] - cand[None, outside, :]).max(-1) == 1  # (M, #outside)
         hit &= ~outside | pair.any(axis=1)
-        added = 0
-        (i0, j0), (i1, j1) = lo.tolist(), hi.tolist()
-        for (i, j), s, q in zip(cand[hit].tolist(), step[hit], got[hit]):
-            if max(i1, i) - min(i0, i) + 1 > limit or max(j1, j) - min(j0, j) + 1 > limit:
-                continue
-            if np.min(np.linalg.norm(pts - q, axis=1)) < 0.5 * s:  # it repeats a point (see _take)
-                continue
-            cells[(i, j)] = (q.astype(np.float64), 0.0)
-            pts = np.vstack([pts, q])
-            i0, j0, i1, j1 = min(i0, i), min(j0, j), max(i1, i), max(j1, j)
-            added += 1
-        if not added:
+        if not _take(cells, [tuple(c) for c in cand[hit].tolist()], pred[hit], step[hit], got[hit], limit):
             return
 
 
