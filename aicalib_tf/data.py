@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import keras
 import numpy as np
 from tqdm import tqdm
@@ -142,6 +143,30 @@ def _dihedral(img: np.ndarray, pts: np.ndarray, k: int) -> tuple[np.ndarray, np.
     return np.ascontiguousarray(img), np.stack([x, y], axis=1)
 
 
+def squeeze_matrix(angle: float, ratio: float) -> np.ndarray:
+    """(2, 2) area-preserving stretch: ``sqrt(ratio)``× along the direction at ``angle`` rad and
+    ``1/sqrt(ratio)``× across it (symmetric, determinant 1)."""
+    c, s = np.cos(angle), np.sin(angle)
+    rot = np.array([[c, -s], [s, c]])
+    return rot @ np.diag([np.sqrt(ratio), 1.0 / np.sqrt(ratio)]) @ rot.T
+
+
+def _warp_crop(img: np.ndarray, pts: np.ndarray, a: np.ndarray, centre, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """A (size, size) crop of ``img`` whose pixel offsets d from the crop's centre sample the image
+    at ``centre + a @ d`` (bilinear, edges replicated), and ``pts`` (n, 2) (x, y) moved with it.
+
+    ``a`` maps crop offsets to image offsets, so the image seen in the crop is squeezed by ``a``'s
+    larger singular value in its direction. Pixel centres at integers, as in OpenCV.
+    """
+    c_out = np.full(2, (size - 1) / 2.0)
+    c_src = np.asarray(centre, np.float64)
+    m = np.hstack([a, (c_src - a @ c_out)[:, None]])
+    crop = cv2.warpAffine(img, m, (size, size), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                          borderMode=cv2.BORDER_REPLICATE)
+    local = (np.asarray(pts, np.float64) - c_src) @ np.linalg.inv(a).T + c_out
+    return crop, local.astype(np.float32)
+
+
 class _PoolBatches(keras.utils.PyDataset):
     """``steps`` batches a epoch cut from a pool; batch ``idx`` of epoch ``epoch`` is seeded by both."""
 
@@ -157,11 +182,18 @@ class _PoolBatches(keras.utils.PyDataset):
 
 
 class CornerMapBatches(_PoolBatches):
-    """Batches (B, 128, 128, 1) float32 -> corner-map targets (B, 32, 32, 3) for the default model."""
+    """Batches (B, 128, 128, 1) float32 -> corner-map targets (B, 32, 32, 3) for the default model.
 
-    def __init__(self, pool: Pool, *, corner_bias: float = 0.6, **kwargs):
+    corner_bias : share of crops placed to contain a board corner.
+    squeeze : share of crops warped by :func:`squeeze_matrix` (area-preserving, squeezed up to
+        ``max_squeeze``× in a random direction): X-junctions with acute angles and thin squares,
+        as at the edge of a wide lens or under steep tilt. 0 (the default) draws exactly the crops
+        drawn before the option existed.
+    """
+
+    def __init__(self, pool: Pool, *, corner_bias: float = 0.6, squeeze: float = 0.0, max_squeeze: float = 3.0, **kwargs):
         super().__init__(pool, **kwargs)
-        self.corner_bias = corner_bias
+        self.corner_bias, self.squeeze, self.max_squeeze = corner_bias, squeeze, max_squeeze
 
     def __getitem__(self, idx: int):
         rng = np.random.default_rng([self.seed, self.epoch, idx, 7])
@@ -178,8 +210,13 @@ class CornerMapBatches(_PoolBatches):
                 y0 = int(np.clip(cy - rng.uniform(8, s - 8), 0, h - s))
             else:
                 x0, y0 = int(rng.integers(w - s + 1)), int(rng.integers(h - s + 1))
-            crop = self.pool.standardized(i, img[y0 : y0 + s, x0 : x0 + s])
-            local = pts - np.array([x0, y0], np.float32)
+            if self.squeeze > 0 and rng.random() < self.squeeze:
+                a = squeeze_matrix(rng.uniform(0.0, np.pi), np.exp(rng.uniform(0.0, np.log(self.max_squeeze))))
+                crop, local = _warp_crop(img, pts, a, (x0 + (s - 1) / 2, y0 + (s - 1) / 2), s)
+                crop = self.pool.standardized(i, crop)
+            else:
+                crop = self.pool.standardized(i, img[y0 : y0 + s, x0 : x0 + s])
+                local = pts - np.array([x0, y0], np.float32)
             crop, local = _dihedral(crop, local, int(rng.integers(8)))
             if rng.random() < 0.5:
                 crop = -crop

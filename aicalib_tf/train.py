@@ -63,6 +63,7 @@ class TrainConfig:
     threshold: float = 0.5
     focal_gamma: float = 2.0
     determinism: bool = True
+    squeeze: float = 0.0
 
     def check(self) -> None:
         """Raise ``ValueError`` naming the first bad option."""
@@ -84,6 +85,8 @@ class TrainConfig:
             raise ValueError(f"--learning-rate must be in (0, 1), got {self.learning_rate}")
         if self.focal_gamma < 0:
             raise ValueError(f"--focal-gamma must be >= 0, got {self.focal_gamma}")
+        if not 0.0 <= self.squeeze <= 1.0:
+            raise ValueError(f"--squeeze must be in [0, 1], got {self.squeeze}")
         if not 0.0 < self.threshold < 1.0:
             raise ValueError(f"--threshold must be in (0, 1), got {self.threshold}")
 
@@ -261,7 +264,8 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
     else:
         model = compile_model(build_model(cfg.arch), cfg.learning_rate, focal_gamma=cfg.focal_gamma)
     batches_cls = CornerMapBatches if model_kind(model) == "map" else PatchBatches
-    batches = batches_cls(pool, batch_size=cfg.batch_size, steps=cfg.steps, seed=cfg.seed, epoch=initial_epoch)
+    extra = {"squeeze": cfg.squeeze} if batches_cls is CornerMapBatches else {}
+    batches = batches_cls(pool, batch_size=cfg.batch_size, steps=cfg.steps, seed=cfg.seed, epoch=initial_epoch, **extra)
     prep_s = time.perf_counter() - t0
     if initial_epoch < cfg.epochs:
         schedule = keras.callbacks.LearningRateScheduler(
@@ -311,6 +315,9 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--threshold", type=float, default=d.threshold, help="corner weight for validation (default: %(default)s)")
     ap.add_argument("--focal-gamma", type=float, default=d.focal_gamma,
                     help="default model: focal-loss γ; 0 for weighted cross-entropy (default: %(default)s)")
+    ap.add_argument("--squeeze", type=float, default=d.squeeze,
+                    help="default model: share of training crops squeezed up to 3x in a random direction "
+                         "(acute X-junctions, thin squares) (default: %(default)s)")
     ap.add_argument("--no-determinism", action="store_true", help="allow non-deterministic TensorFlow ops (other Keras backends: no effect)")
     ap.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     ap.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -326,7 +333,7 @@ def main(argv: list[str] | None = None) -> int:
         out=args.out, arch=args.arch, epochs=args.epochs if args.epochs is not None else d.epochs, steps=args.steps, batch_size=args.batch_size,
         seed=args.seed, preset=args.preset, pool_images=args.pool_images, val_images=args.val_images,
         learning_rate=args.learning_rate, workers=args.workers, threshold=args.threshold, focal_gamma=args.focal_gamma,
-        determinism=not args.no_determinism,
+        determinism=not args.no_determinism, squeeze=args.squeeze,
     )
     try:
         metrics = train(cfg, resume=args.resume, progress=not args.quiet, epochs_given=args.epochs)

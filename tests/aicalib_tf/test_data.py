@@ -3,7 +3,7 @@ import pytest
 
 pytest.importorskip("keras")
 
-from aicalib_tf.data import CROP_SIZE, CornerMapBatches, PatchBatches, _dihedral, render_pool  # noqa: E402
+from aicalib_tf.data import CROP_SIZE, CornerMapBatches, PatchBatches, _dihedral, _warp_crop, render_pool, squeeze_matrix  # noqa: E402
 from aicalib_tf.corner_map import decode_map  # noqa: E402
 
 
@@ -34,9 +34,10 @@ def test_dihedral_moves_points_with_the_pixels(k):
     assert out.sum() == 2.0
 
 
-def test_crop_batches_are_deterministic_and_labels_sit_on_x_junctions(pool):
-    a = CornerMapBatches(pool, batch_size=8, steps=3, seed=5)
-    b = CornerMapBatches(pool, batch_size=8, steps=3, seed=5)
+@pytest.mark.parametrize("squeeze", [0.0, 1.0])
+def test_crop_batches_are_deterministic_and_labels_sit_on_x_junctions(pool, squeeze):
+    a = CornerMapBatches(pool, batch_size=8, steps=3, seed=5, squeeze=squeeze)
+    b = CornerMapBatches(pool, batch_size=8, steps=3, seed=5, squeeze=squeeze)
     x1, y1 = a[1]
     x2, y2 = b[1]
     np.testing.assert_array_equal(x1, x2)
@@ -61,6 +62,28 @@ def test_crop_batches_are_deterministic_and_labels_sit_on_x_junctions(pool):
                 at_random.append(diag_contrast(img, *rng.integers(4, CROP_SIZE - 5, 2)))
     assert len(at_corners) > 10
     assert np.mean(at_corners) > 2.5 * np.mean(at_random)
+
+
+@pytest.mark.parametrize("angle, ratio", [(0.0, 1.0), (0.4, 2.0), (2.0, 3.0)])
+def test_warped_crop_moves_points_with_the_pixels(angle, ratio):
+    # a smooth blob's centroid in the warped crop is where its centre's point went
+    a = squeeze_matrix(angle, ratio)
+    assert np.isclose(np.linalg.det(a), 1.0) and np.allclose(np.linalg.svd(a)[1], [np.sqrt(ratio), 1 / np.sqrt(ratio)])
+    yy, xx = np.mgrid[0:200, 0:300]
+    for px, py in [(150.3, 100.7), (171.2, 88.9)]:
+        img = (200 * np.exp(-((xx - px) ** 2 + (yy - py) ** 2) / (2 * 3.0**2))).astype(np.float32)
+        crop, moved = _warp_crop(img, np.array([[px, py]], np.float32), a, (140.0, 95.0), 128)
+        w = crop / crop.sum()
+        ys, xs = np.mgrid[0:128, 0:128]
+        np.testing.assert_allclose([(w * xs).sum(), (w * ys).sum()], moved[0], atol=0.01)
+
+
+def test_squeeze_zero_draws_the_crops_it_drew_before(pool):
+    plain = CornerMapBatches(pool, batch_size=4, steps=1, seed=2)
+    off = CornerMapBatches(pool, batch_size=4, steps=1, seed=2, squeeze=0.0)
+    on = CornerMapBatches(pool, batch_size=4, steps=1, seed=2, squeeze=1.0)
+    np.testing.assert_array_equal(plain[0][0], off[0][0])
+    assert not np.array_equal(plain[0][0], on[0][0])
 
 
 def test_patch_batches_are_balanced(pool):
