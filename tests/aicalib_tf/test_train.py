@@ -93,6 +93,7 @@ def test_same_seed_gives_the_same_weights(tmp_path):
         (["--arch", "resnet"], "unknown architecture"),
         (["--preset", "nope"], "unknown preset"),
         (["--epochs", "0"], "--epochs must be >= 1"),
+        (["--squeeze", "1.5"], "--squeeze must be in [0, 1]"),
         (["--resume"], "holds no checkpoint"),
     ],
 )
