@@ -7,7 +7,8 @@ Examples::
     python -m aicalib_tf.train --out runs/default --resume                  # continue a killed run
 
 A run renders a seeded pool of ``--preset`` images in memory, then trains on crops cut from it
-(see :mod:`aicalib_tf.data`; ``--preset`` may mix presets, e.g. ``train:0.8,distorted:0.2``).
+(see :mod:`aicalib_tf.data`; ``--preset`` may mix presets, e.g. ``train:0.8,distorted:0.2``;
+``--squeeze P`` warps a share P of the corner-map crops into acute junctions and thin squares).
 After each epoch it scores corner precision, recall (a match is within 1 px) and localisation
 error on a fixed validation set (``--preset``, or a mix's first preset; seed 900001, never
 trained on) and saves a checkpoint. RUN_DIR receives:
