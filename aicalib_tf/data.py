@@ -213,11 +213,9 @@ class CornerMapBatches(_PoolBatches):
             if self.squeeze > 0 and rng.random() < self.squeeze:
                 a = squeeze_matrix(rng.uniform(0.0, np.pi), np.exp(rng.uniform(0.0, np.log(self.max_squeeze))))
                 crop, local = _warp_crop(img, pts, a, (x0 + (s - 1) / 2, y0 + (s - 1) / 2), s)
-                crop = self.pool.standardized(i, crop)
             else:
-                crop = self.pool.standardized(i, img[y0 : y0 + s, x0 : x0 + s])
-                local = pts - np.array([x0, y0], np.float32)
-            crop, local = _dihedral(crop, local, int(rng.integers(8)))
+                crop, local = img[y0 : y0 + s, x0 : x0 + s], pts - np.array([x0, y0], np.float32)
+            crop, local = _dihedral(self.pool.standardized(i, crop), local, int(rng.integers(8)))
             if rng.random() < 0.5:
                 crop = -crop
             x[b, :, :, 0] = crop
