@@ -92,7 +92,7 @@ from .partial import partial_board
 from .pyramid import downscale, refine_full, scales, to_full
 from .refine import Smoothed, refine_windowed
 
-__all__ = ["Detection", "detect_corners", "draw_detection", "find_chessboard_corners", "main", "order_full_board"]
+__all__ = ["Detection", "detect_corners", "draw_detection", "find_chessboard_corners", "main", "order_full_board", "refined_points"]
 
 
 @dataclass(frozen=True)
@@ -211,24 +211,42 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     return replace(best, image_size=(w, h), reason="" if best.found else reason)
 
 
-def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, threshold: float) -> Detection:
-    """:func:`detect_corners` on one scale: gray (H, W) float32, pattern already checked."""
+def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed: Smoothed | None = None,
+                   min_points: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The detector's corner candidates: the CNN's points, refined on the image, duplicates merged.
+
+    gray : (H, W) float32 or uint8. The network's points (:func:`aicalib_tf.inference.corner_points`,
+    at most ``MAX_CANDIDATES``, strongest first) are moved to the saddle point of the image around
+    them (:func:`aicalib_tf.refine.refine_windowed`, a window fitting the local spacing); points
+    whose fit fails are dropped, and of points that meet within 1.5 px the strongest stays.
+    smoothed : the image's :class:`~aicalib_tf.refine.Smoothed` when the caller has it.
+    min_points : fewer network points than this give no candidates (nothing is refined).
+    Returns points (N, 2) float32 (x, y) px and weights (N,) float32, strongest first.
+    """
     from .inference import corner_points
 
+    pts, scores = corner_points(model, gray, threshold)
+    pts, scores = pts[:MAX_CANDIDATES], scores[:MAX_CANDIDATES]  # strongest first; bounds the N² steps
+    if len(pts) < max(min_points, 1):
+        return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
+    smoothed = Smoothed(np.asarray(gray, np.float32)) if smoothed is None else smoothed
+    refined, ok = refine_windowed(smoothed, pts, nearest_spacing(pts))
+    refined, scores = refined[ok], scores[ok]
+    keep = dedupe(refined, scores)
+    return refined[keep].astype(np.float32), scores[keep].astype(np.float32)
+
+
+def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, threshold: float) -> Detection:
+    """:func:`detect_corners` on one scale: gray (H, W) float32, pattern already checked."""
     h, w = gray.shape
     empty = Detection(np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
                       pattern_size, False, (w, h), NO_CANDIDATES)
     if h < 8 or w < 8:
         return empty
-    pts, scores = corner_points(model, gray, threshold)
-    pts, scores = pts[:MAX_CANDIDATES], scores[:MAX_CANDIDATES]  # strongest first; bounds the N² steps
-    if len(pts) < 9:
-        return empty
     smoothed = Smoothed(gray)
-    refined, ok = refine_windowed(smoothed, pts, nearest_spacing(pts))
-    refined, scores = refined[ok], scores[ok]
-    keep = dedupe(refined, scores)
-    refined, scores = refined[keep], scores[keep]
+    refined, scores = refined_points(model, gray, threshold, smoothed=smoothed, min_points=9)
+    if len(refined) == 0:
+        return empty
     smooth = smoothed.sigma(1.0)
     propose = None
     if len(refined) >= 9:

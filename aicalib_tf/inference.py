@@ -87,20 +87,27 @@ def resolve_precision(precision: str | None = None) -> str:
 _TRACE_LOCK = threading.Lock()  # a bfloat16 trace changes the model's layer policies for a moment
 
 
+def _bfloat16_layers(model) -> list:
+    """The layers a bfloat16 trace switches: those before the last layer with weights."""
+    head = max((i for i, layer in enumerate(model.layers) if layer.weights), default=len(model.layers) - 1)
+    return [layer for layer in model.layers[:head] if hasattr(layer, "dtype_policy")]
+
+
 def _trace(model, dims, precision: str):
     """A concrete function of ``model`` for (1, *dims, 1) float32 input, computing in ``precision``.
 
-    For bfloat16, every layer but the last is switched to Keras's ``mixed_bfloat16`` policy
-    (bfloat16 arithmetic on float32 weights) while the function is traced, then switched back:
-    the graph reads the model's own weights, so it follows any later change to them, and the
-    model itself is left as it was. The last layer keeps its policy, so the output stays float32.
+    For bfloat16, every layer before the last one with weights is switched to Keras's
+    ``mixed_bfloat16`` policy (bfloat16 arithmetic on float32 weights) while the function is
+    traced, then switched back: the graph reads the model's own weights, so it follows any later
+    change to them, and the model itself is left as it was. The last layer with weights and any
+    after it (``cell_reach``) keep their policy, so the output stays float32.
     """
     traced = tf.function(lambda x: model(x, training=False))
     spec = tf.TensorSpec((1, *dims, 1), tf.float32)
     if precision == "float32":
         return traced.get_concrete_function(spec)
     with _TRACE_LOCK:
-        layers = [layer for layer in model.layers[:-1] if hasattr(layer, "dtype_policy")]
+        layers = _bfloat16_layers(model)
         saved = [layer.dtype_policy for layer in layers]
         try:
             for layer in layers:

@@ -249,7 +249,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
     import keras
 
     from .data import CornerMapBatches, PatchBatches, parse_mix
-    from .model import build_model, compile_model, file_sha256, load_model, model_kind, save_model
+    from .model import build_model, cell_reach, compile_model, file_sha256, load_model, model_kind, save_model
 
     keras.utils.set_random_seed(cfg.seed)
     if cfg.determinism and keras.backend.backend() == "tensorflow":
@@ -265,7 +265,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
     else:
         model = compile_model(build_model(cfg.arch), cfg.learning_rate, focal_gamma=cfg.focal_gamma)
     batches_cls = CornerMapBatches if model_kind(model) == "map" else PatchBatches
-    extra = {"squeeze": cfg.squeeze} if batches_cls is CornerMapBatches else {}
+    extra = {"squeeze": cfg.squeeze, "reach": cell_reach(model)} if batches_cls is CornerMapBatches else {}
     batches = batches_cls(pool, batch_size=cfg.batch_size, steps=cfg.steps, seed=cfg.seed, epoch=initial_epoch, **extra)
     prep_s = time.perf_counter() - t0
     if initial_epoch < cfg.epochs:
@@ -303,7 +303,7 @@ def _parser() -> argparse.ArgumentParser:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     d = TrainConfig(out="")
     ap.add_argument("--out", required=True, metavar="RUN_DIR", help="run folder (created)")
-    ap.add_argument("--arch", default=d.arch, help="default | report | default_c12 | default_c16 | default_pre (default: %(default)s)")
+    ap.add_argument("--arch", default=d.arch, help="default | report | default_c12 | default_c16 | default_pre | default_reach (default: %(default)s)")
     ap.add_argument("--epochs", type=int, default=None, help=f"epochs (default: {d.epochs}; with --resume: the run's own)")
     ap.add_argument("--steps", type=int, default=d.steps, help="batches per epoch (default: %(default)s)")
     ap.add_argument("--batch-size", type=int, default=d.batch_size, help="(default: %(default)s)")

@@ -1,11 +1,16 @@
 """Corner-point precision and recall of the shipped CNNs, per data_gen condition.
 
-    python benchmarks/model_compare.py [--images 30] [--models default,report,mine=runs/x/model.keras] [--thresholds 0.5,0.4] [--conditions noisy,blur] [--by-spacing]
+    python benchmarks/model_compare.py [--images 30] [--models default,report,mine=runs/x/model.keras] [--thresholds 0.5,0.4] [--conditions noisy,blur] [--by-spacing] [--refine]
 
 Each model scores whole 640×480 images (the default model decodes its corner map; the report's
 patch classifier scores saddle-point candidates). A detection matches a visible true corner
 within 1 px. This measures the networks alone, before refinement and grid assembly. It also
 times the network step per image.
+
+``--refine`` scores the detector's candidates instead: each model's points refined to the image's
+saddle point and merged within 1.5 px (:func:`aicalib_tf.detect.refined_points`), as detection
+does before grid assembly. Both models' points then get the same classical localisation (the
+report's raw points are the saddle detector's whole pixels, the default's the map's offsets).
 
 ``--by-spacing`` adds, for each row, the recall of the true corners binned by the distance to
 their nearest neighbouring corner on the board (px; tiny and squeezed boards have close corners):
@@ -23,6 +28,7 @@ os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
 
 import numpy as np  # noqa: E402
 
+from aicalib_tf.detect import refined_points  # noqa: E402
 from aicalib_tf.inference import corner_points  # noqa: E402
 from aicalib_tf.junctions import nearest_spacing  # noqa: E402
 from aicalib_tf.metrics import match_points, point_detection_stats  # noqa: E402
@@ -66,14 +72,16 @@ def main(argv=None) -> int:
     ap.add_argument("--thresholds", default="0.5", help="comma list of corner-weight thresholds (default: %(default)s)")
     ap.add_argument("--conditions", default=",".join(CONDITIONS))
     ap.add_argument("--by-spacing", action="store_true", help="also recall by the corners' nearest-neighbour distance")
+    ap.add_argument("--refine", action="store_true", help="score the points after the detector's saddle refinement and merging")
     args = ap.parse_args(argv)
     thresholds = [float(t) for t in args.thresholds.split(",")]
     models = {}
     for spec in args.models.split(","):  # a shipped name, a .keras path, or LABEL=PATH
         label, _, path = spec.rpartition("=")
         models[label or spec] = load_model(path)
+    points = refined_points if args.refine else corner_points
     rows = []
-    print("| condition | model | threshold | precision | recall | F1 | loc median px | network ms/image |")
+    print(f"| condition | model | threshold | precision | recall | F1 | loc median px | {'network + refinement' if args.refine else 'network'} ms/image |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for cond in args.conditions.split(","):
         samples = [make_sample(cond, args.seed, i, size=(640, 480)) for i in range(args.images)]
@@ -84,7 +92,7 @@ def main(argv=None) -> int:
                 pairs, times = [], []
                 for s in samples:
                     t = time.perf_counter()
-                    pts, _ = corner_points(model, s.image, thr)
+                    pts, _ = points(model, s.image, thr)
                     times.append(time.perf_counter() - t)
                     pairs.append((pts, s.corners[s.visible] if s.label["has_board"] else np.zeros((0, 2))))
                 st = point_detection_stats(pairs, 1.0)

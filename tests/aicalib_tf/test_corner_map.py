@@ -70,3 +70,30 @@ def test_standardize_and_padding():
     assert s.dtype == np.float32 and abs(s.mean()) < 1e-6 and abs(s.std() - 1) < 1e-6
     assert np.all(standardize(np.full((3, 3), 7, np.uint8)) == 0)
     assert padded_shape(481, 640) == (484, 640)
+
+
+def test_reach_targets_point_every_neighbouring_cell_at_the_nearest_corner():
+    pts = np.array([[10.2, 9.7], [17.0, 9.4], [40.0, 30.0]])  # the first two 6.8 px apart
+    plain = encode_corners(pts, (64, 48))
+    t = encode_corners(pts, (64, 48), reach=1)
+    assert t.shape == (12, 16, 4)
+    # the corners' own cells are encoded as without reach, and are marked
+    np.testing.assert_array_equal(t[..., 0], plain[..., 0])
+    own = plain[..., 0] == 1
+    np.testing.assert_allclose(t[own][:, :3], plain[own])
+    assert np.all(t[own][:, 3] == 1)
+    # every marked cell is within one cell of a corner's own cell and decodes to its nearest corner
+    u = (pts + 0.5) / STRIDE
+    for i, j in zip(*np.nonzero(t[..., 3])):
+        got = STRIDE * (np.array([j, i]) + t[i, j, 1:3]) - 0.5
+        near = np.argmin(((u - (np.array([j, i]) + 0.5)) ** 2).sum(1))
+        assert np.all(np.abs(np.floor(u[near]) - [j, i]) <= 1)
+        np.testing.assert_allclose(got, pts[near], atol=1e-5)
+        assert np.all((t[i, j, 1:3] >= -1) & (t[i, j, 1:3] <= 2))
+    assert t[..., 3].sum() == 9 + 9 + 9 - 3  # the two close corners' 3×3 blocks share a column
+
+
+def test_reach_targets_stay_inside_the_map():
+    t = encode_corners(np.array([[0.0, 0.0], [-3.0, 5.0]]), (16, 16), reach=1)
+    assert t[..., 3].sum() == 4 and t[..., 0].sum() == 1  # the corner at the image's corner: a 2×2 block
+    assert encode_corners(np.zeros((0, 2)), (16, 16), reach=1).shape == (4, 4, 4)

@@ -8,7 +8,14 @@ import pytest
 
 pytest.importorskip("keras")
 
-from aicalib_tf.detect import NO_CANDIDATES, NO_GRID, UNDECIDED, detect_corners, find_chessboard_corners  # noqa: E402
+from aicalib_tf.detect import (  # noqa: E402
+    NO_CANDIDATES,
+    NO_GRID,
+    UNDECIDED,
+    detect_corners,
+    find_chessboard_corners,
+    refined_points,
+)
 from aicalib_tf.io import ImageError  # noqa: E402
 from aicalib_tf.model import MODELS_DIR, load_model  # noqa: E402
 from data_gen import make_sample  # noqa: E402
@@ -45,6 +52,18 @@ def _no_wrong_ids(model, preset: str, seed: int, index: int) -> None:
 @pytest.fixture(scope="module")
 def model():
     return load_model("default")
+
+
+def test_refined_points_are_the_boards_corners_to_subpixel_accuracy(model):
+    s = make_sample("clean", 3, 1, pattern=(9, 6), size=(640, 480))
+    pts, weights = refined_points(model, s.image)
+    truth = s.corners[s.visible]
+    assert pts.dtype == np.float32 and pts.shape == (len(weights), 2) and np.all(np.diff(weights) <= 0)
+    d = np.sqrt(((truth[:, None] - pts[None]) ** 2).sum(-1))
+    assert np.mean(d.min(1) < 0.1) >= 0.95  # the saddle fit, not the map's 4-px cells
+    assert np.all(np.sort(d, axis=1)[:, 1] >= 1.5)  # merged: one point per corner
+    empty, _ = refined_points(model, np.full((64, 64), 128, np.uint8), min_points=9)
+    assert empty.shape == (0, 2)
 
 
 @pytest.mark.parametrize("preset, need", [("clean", 6), ("distorted", 5), ("noisy", 5)])

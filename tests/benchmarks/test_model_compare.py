@@ -27,3 +27,12 @@ def test_spacings_are_those_of_the_visible_corners():
     s = make_sample("occluded", 21, 3, size=(320, 240))
     sp = mc._spacings(s)
     assert sp.shape == (int(s.visible.sum()),) and np.all(sp > 0)
+
+
+def test_refine_scores_the_detectors_candidates(capsys):
+    assert mc.main(["--images", "2", "--conditions", "clean", "--models", "default", "--refine"]) == 0
+    out = capsys.readouterr().out
+    assert "network + refinement ms/image" in out
+    row = next(line for line in out.splitlines() if line.startswith("| clean | default"))
+    precision, recall, _, loc = (float(v) for v in row.split("|")[4:8])
+    assert recall > 0.95 and precision > 0.9 and loc < 0.05  # the saddle fit's accuracy, not the map's
