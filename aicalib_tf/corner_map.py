@@ -105,7 +105,7 @@ POOL_DISTANCE = 1.0  # px: cells whose points agree this closely share one corne
 POOL_FLOOR = 0.2  # a neighbour below this weight adds nothing
 
 
-def decode_map(cmap: np.ndarray, threshold: float = 0.5, min_distance: float = 2.5) -> tuple[np.ndarray, np.ndarray]:
+def decode_map(cmap: np.ndarray, threshold: float = 0.5, min_distance: float = 2.5, reach: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Corner points from a corner map.
 
     cmap : (h, w, 3) float, as the network outputs it.
@@ -115,6 +115,8 @@ def decode_map(cmap: np.ndarray, threshold: float = 0.5, min_distance: float = 2
         points lie within ``POOL_DISTANCE`` px of its own before the threshold applies (capped at 1).
     min_distance : px; of two points closer than this in neighbouring cells, only the stronger
         stays, placed at the weight-weighted mean of the points pooled into it.
+    reach : the map's position reach (:func:`aicalib_tf.model.cell_reach`): cells up to
+        ``1 + reach`` apart can place the same corner, so pooling and suppression look that far.
     Returns points (N, 2) float32 (x, y) px and scores (N,) float32 (pooled weights), strongest first.
 
     Only cells of weight ≥ min(threshold, POOL_FLOOR) can survive (a weaker cell is either below
@@ -127,20 +129,21 @@ def decode_map(cmap: np.ndarray, threshold: float = 0.5, min_distance: float = 2
     h, w = m.shape[:2]
     p_all = m[..., 0]
     ci, cj = np.nonzero(p_all >= min(threshold, POOL_FLOOR))
-    pad = np.pad(m, ((1, 1), (1, 1), (0, 0)))
-    pad[..., 0] = np.pad(p_all, 1, constant_values=-1.0)
+    r = 1 + int(reach)
+    pad = np.pad(m, ((r, r), (r, r), (0, 0)))
+    pad[..., 0] = np.pad(p_all, r, constant_values=-1.0)
 
     def cell(di: int, dj: int):
         """Weight and point (x, y) px of the cells at offset (di, dj) from the candidates."""
-        v = pad[ci + 1 + di, cj + 1 + dj]
+        v = pad[ci + r + di, cj + r + dj]
         col, row = (cj + dj).astype(np.float32), (ci + di).astype(np.float32)
         return v[:, 0], STRIDE * (col + v[:, 1]) - 0.5, STRIDE * (row + v[:, 2]) - 0.5
 
     p, x, y = cell(0, 0)
     pooled, sx, sy = p.copy(), p * x, p * y
     keep = np.ones(len(p), dtype=bool)
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
+    for di in range(-r, r + 1):
+        for dj in range(-r, r + 1):
             if di == 0 and dj == 0:
                 continue
             q, qx, qy = cell(di, dj)

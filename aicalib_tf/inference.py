@@ -30,7 +30,7 @@ import tensorflow as tf
 
 from .candidates import saddle_points
 from .corner_map import decode_map, network_input, standardize
-from .model import PATCH_SIZE, model_kind
+from .model import PATCH_SIZE, cell_reach, model_kind
 
 __all__ = ["corner_map", "corner_points", "patch_weights", "extract_patches", "native_bfloat16", "resolve_precision"]
 
@@ -217,7 +217,7 @@ def corner_points(model, gray: np.ndarray, threshold: float = 0.5, *, max_candid
     Returns points (N, 2) float32 (x, y) px and weights (N,) float32, strongest first.
     """
     if model_kind(model) == "map":
-        return decode_map(corner_map(model, gray, precision=precision), threshold)
+        return decode_map(corner_map(model, gray, precision=precision), threshold, reach=cell_reach(model))
     cand = saddle_points(gray, max_points=max_candidates)
     w = patch_weights(model, gray, cand)
     keep = w >= threshold

@@ -169,11 +169,12 @@ def _backend_corner_points(model, gray, threshold: float):
     import numpy as np
 
     from .corner_map import decode_map, network_input
-    from .model import model_kind
+    from .model import cell_reach, model_kind
 
     if model_kind(model) != "map":
         raise ValueError("validation of patch classifiers needs the TensorFlow backend")
-    return decode_map(np.asarray(model.predict_on_batch(network_input(gray)))[0], threshold)[0]
+    cmap = np.asarray(model.predict_on_batch(network_input(gray)))[0]
+    return decode_map(cmap, threshold, reach=cell_reach(model))[0]
 
 
 def _callbacks(cfg: TrainConfig, run: Path, val, initial_epoch: int, wall_before: float, t_start: float):

@@ -97,3 +97,14 @@ def test_reach_targets_stay_inside_the_map():
     t = encode_corners(np.array([[0.0, 0.0], [-3.0, 5.0]]), (16, 16), reach=1)
     assert t[..., 3].sum() == 4 and t[..., 0].sum() == 1  # the corner at the image's corner: a 2×2 block
     assert encode_corners(np.zeros((0, 2)), (16, 16), reach=1).shape == (4, 4, 4)
+
+
+def test_decode_with_reach_merges_cells_two_apart_that_place_one_corner():
+    m = np.zeros((5, 5, 3), np.float32)
+    m[2, 1] = [0.6, 1.6, 0.5]  # x = 4·(1 + 1.6) − 0.5 = 9.9, from the cell on the left
+    m[2, 3] = [0.5, -0.4, 0.5]  # x = 4·(3 − 0.4) − 0.5 = 9.9, from the cell on the right
+    pts0, _ = decode_map(m, 0.5)
+    assert len(pts0) == 2  # a map without reach: cells two apart hold two corners
+    pts1, scores1 = decode_map(m, 0.5, reach=1)
+    assert len(pts1) == 1 and scores1[0] == pytest.approx(1.0)  # pooled 0.6 + 0.5, capped
+    np.testing.assert_allclose(pts1[0], [9.9, 9.5], atol=1e-5)
