@@ -5,10 +5,7 @@ The fully convolutional network sees an image of (H, W) px and outputs a map of
 [STRIDE·j − 0.5, STRIDE·(j+1) − 0.5) and y in [STRIDE·i − 0.5, STRIDE·(i+1) − 0.5). Its channels are
 
 * 0: the corner weight, the probability that an inner chessboard corner (an X-junction) lies in the cell;
-* 1, 2: where the corner is, as fractions (fx, fy) of the cell: x = STRIDE·(j + fx) − 0.5. In [0, 1]
-  (inside the cell) for models trained on the cell's own corner only; in [−1, 2] (the cell or one of
-  its eight neighbours) for models whose cells next to a corner's cell also point at it
-  (``encode_corners(..., reach=1)``): a cell that fires beside the corner's own then still places it.
+* 1, 2: where in the cell, as fractions (fx, fy) in [0, 1]: x = STRIDE·(j + fx) − 0.5.
 
 Coordinates are OpenCV's (x, y) with the centre of pixel (0, 0) at (0.0, 0.0).
 """
@@ -50,62 +47,33 @@ def network_input(gray: np.ndarray) -> np.ndarray:
     return g[None, :, :, None]
 
 
-def encode_corners(corners: np.ndarray, image_size: tuple[int, int], reach: int = 0) -> np.ndarray:
+def encode_corners(corners: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
     """Training target for the corners of one image.
 
     corners : (N, 2) float (x, y) px; points outside the image are ignored.
     image_size : (width, height) px, multiples of STRIDE.
-    reach : 0 or 1. With 0, returns (height // STRIDE, width // STRIDE, 3) float32: weight 1 and
-        the (fx, fy) fractions in each cell holding a corner, zeros elsewhere. With 1, a fourth
-        channel marks the cells whose position is trained: each corner's own cell (weight 1, as
-        before) and, for the other cells within one cell of a corner's, the fractions of the
-        corner nearest to the cell's centre, in [−1, 2] (weight 0).
-    If two corners share a cell the later one wins.
+    Returns (height // STRIDE, width // STRIDE, 3) float32: weight 1 and the (fx, fy) fractions in
+    each cell holding a corner, zeros elsewhere. If two corners share a cell the later one wins.
     """
     w, h = (int(v) for v in image_size)
-    gw, gh = w // STRIDE, h // STRIDE
-    target = np.zeros((gh, gw, 4 if reach else 3), np.float32)
+    target = np.zeros((h // STRIDE, w // STRIDE, 3), np.float32)
     pts = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
+    if pts.size == 0:
+        return target
     u = (pts + 0.5) / STRIDE  # cell units
     cell = np.floor(u).astype(np.int64)
-    ok = (cell[:, 0] >= 0) & (cell[:, 0] < gw) & (cell[:, 1] >= 0) & (cell[:, 1] < gh)
-    if reach:
-        _encode_neighbours(target, u[ok], int(reach))
+    ok = (cell[:, 0] >= 0) & (cell[:, 0] < w // STRIDE) & (cell[:, 1] >= 0) & (cell[:, 1] < h // STRIDE)
     cell, frac = cell[ok], (u - np.floor(u))[ok]
     target[cell[:, 1], cell[:, 0], 0] = 1.0
-    target[cell[:, 1], cell[:, 0], 1:3] = frac.astype(np.float32)
-    if reach:
-        target[cell[:, 1], cell[:, 0], 3] = 1.0
+    target[cell[:, 1], cell[:, 0], 1:] = frac.astype(np.float32)
     return target
-
-
-def _encode_neighbours(target: np.ndarray, u: np.ndarray, reach: int) -> None:
-    """Write into ``target`` (gh, gw, 4) the fractions of the corner nearest to each cell's centre,
-    over the cells within ``reach`` cells of a corner's cell; u : (N, 2) corners in cell units."""
-    gh, gw = target.shape[:2]
-    if len(u) == 0:
-        return
-    d = np.arange(-reach, reach + 1)
-    step = np.stack(np.meshgrid(d, d), -1).reshape(-1, 2)  # (K, 2) cell offsets (dx, dy)
-    cells = (np.floor(u).astype(np.int64)[:, None, :] + step[None]).reshape(-1, 2)  # (N·K, 2)
-    frac = np.repeat(u, len(step), axis=0) - cells
-    ok = (cells[:, 0] >= 0) & (cells[:, 0] < gw) & (cells[:, 1] >= 0) & (cells[:, 1] < gh)
-    cells, frac = cells[ok], frac[ok]
-    if len(cells) == 0:
-        return
-    dist = ((frac - 0.5) ** 2).sum(1)
-    key = cells[:, 1] * gw + cells[:, 0]
-    order = np.lexsort((dist, key))  # by cell, nearest corner first
-    first = order[np.r_[True, key[order][1:] != key[order][:-1]]]
-    target[cells[first, 1], cells[first, 0], 1:3] = frac[first].astype(np.float32)
-    target[cells[first, 1], cells[first, 0], 3] = 1.0
 
 
 POOL_DISTANCE = 1.0  # px: cells whose points agree this closely share one corner's weight
 POOL_FLOOR = 0.2  # a neighbour below this weight adds nothing
 
 
-def decode_map(cmap: np.ndarray, threshold: float = 0.5, min_distance: float = 2.5, reach: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def decode_map(cmap: np.ndarray, threshold: float = 0.5, min_distance: float = 2.5) -> tuple[np.ndarray, np.ndarray]:
     """Corner points from a corner map.
 
     cmap : (h, w, 3) float, as the network outputs it.
@@ -115,8 +83,6 @@ def decode_map(cmap: np.ndarray, threshold: float = 0.5, min_distance: float = 2
         points lie within ``POOL_DISTANCE`` px of its own before the threshold applies (capped at 1).
     min_distance : px; of two points closer than this in neighbouring cells, only the stronger
         stays, placed at the weight-weighted mean of the points pooled into it.
-    reach : the map's position reach (:func:`aicalib_tf.model.cell_reach`): cells up to
-        ``1 + reach`` apart can place the same corner, so pooling and suppression look that far.
     Returns points (N, 2) float32 (x, y) px and scores (N,) float32 (pooled weights), strongest first.
 
     Only cells of weight ≥ min(threshold, POOL_FLOOR) can survive (a weaker cell is either below
@@ -129,21 +95,20 @@ def decode_map(cmap: np.ndarray, threshold: float = 0.5, min_distance: float = 2
     h, w = m.shape[:2]
     p_all = m[..., 0]
     ci, cj = np.nonzero(p_all >= min(threshold, POOL_FLOOR))
-    r = 1 + int(reach)
-    pad = np.pad(m, ((r, r), (r, r), (0, 0)))
-    pad[..., 0] = np.pad(p_all, r, constant_values=-1.0)
+    pad = np.pad(m, ((1, 1), (1, 1), (0, 0)))
+    pad[..., 0] = np.pad(p_all, 1, constant_values=-1.0)
 
     def cell(di: int, dj: int):
         """Weight and point (x, y) px of the cells at offset (di, dj) from the candidates."""
-        v = pad[ci + r + di, cj + r + dj]
+        v = pad[ci + 1 + di, cj + 1 + dj]
         col, row = (cj + dj).astype(np.float32), (ci + di).astype(np.float32)
         return v[:, 0], STRIDE * (col + v[:, 1]) - 0.5, STRIDE * (row + v[:, 2]) - 0.5
 
     p, x, y = cell(0, 0)
     pooled, sx, sy = p.copy(), p * x, p * y
     keep = np.ones(len(p), dtype=bool)
-    for di in range(-r, r + 1):
-        for dj in range(-r, r + 1):
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
             if di == 0 and dj == 0:
                 continue
             q, qx, qy = cell(di, dj)

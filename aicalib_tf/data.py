@@ -182,27 +182,24 @@ class _PoolBatches(keras.utils.PyDataset):
 
 
 class CornerMapBatches(_PoolBatches):
-    """Batches (B, 128, 128, 1) float32 -> corner-map targets (B, 32, 32, 3 or 4) for the default model.
+    """Batches (B, 128, 128, 1) float32 -> corner-map targets (B, 32, 32, 3) for the default model.
 
     corner_bias : share of crops placed to contain a board corner.
-    reach : 0, or 1 for a model with positions one cell beyond their own (targets of
-        ``encode_corners(..., reach=1)``, (B, 32, 32, 4)); see :func:`aicalib_tf.model.cell_reach`.
     squeeze : share of crops warped by :func:`squeeze_matrix` (area-preserving, squeezed up to
         ``max_squeeze``× in a random direction): X-junctions with acute angles and thin squares,
         as at the edge of a wide lens or under steep tilt. 0 (the default) draws exactly the crops
         drawn before the option existed.
     """
 
-    def __init__(self, pool: Pool, *, corner_bias: float = 0.6, squeeze: float = 0.0, max_squeeze: float = 3.0,
-                 reach: int = 0, **kwargs):
+    def __init__(self, pool: Pool, *, corner_bias: float = 0.6, squeeze: float = 0.0, max_squeeze: float = 3.0, **kwargs):
         super().__init__(pool, **kwargs)
-        self.corner_bias, self.squeeze, self.max_squeeze, self.reach = corner_bias, squeeze, max_squeeze, reach
+        self.corner_bias, self.squeeze, self.max_squeeze = corner_bias, squeeze, max_squeeze
 
     def __getitem__(self, idx: int):
         rng = np.random.default_rng([self.seed, self.epoch, idx, 7])
         s = CROP_SIZE
         x = np.empty((self.batch_size, s, s, 1), np.float32)
-        y = np.empty((self.batch_size, s // STRIDE, s // STRIDE, 4 if self.reach else 3), np.float32)
+        y = np.empty((self.batch_size, s // STRIDE, s // STRIDE, 3), np.float32)
         for b in range(self.batch_size):
             i = int(rng.integers(len(self.pool)))
             img, pts = self.pool.images[i], self.pool.corners[i]
@@ -222,7 +219,7 @@ class CornerMapBatches(_PoolBatches):
             if rng.random() < 0.5:
                 crop = -crop
             x[b, :, :, 0] = crop
-            y[b] = encode_corners(local, (s, s), self.reach)
+            y[b] = encode_corners(local, (s, s))
         return x, y
 
 

@@ -30,7 +30,7 @@ import tensorflow as tf
 
 from .candidates import saddle_points
 from .corner_map import decode_map, network_input, standardize
-from .model import PATCH_SIZE, cell_reach, model_kind
+from .model import PATCH_SIZE, model_kind
 
 __all__ = ["corner_map", "corner_points", "patch_weights", "extract_patches", "native_bfloat16", "resolve_precision"]
 
@@ -87,27 +87,20 @@ def resolve_precision(precision: str | None = None) -> str:
 _TRACE_LOCK = threading.Lock()  # a bfloat16 trace changes the model's layer policies for a moment
 
 
-def _bfloat16_layers(model) -> list:
-    """The layers a bfloat16 trace switches: those before the last layer with weights."""
-    head = max((i for i, layer in enumerate(model.layers) if layer.weights), default=len(model.layers) - 1)
-    return [layer for layer in model.layers[:head] if hasattr(layer, "dtype_policy")]
-
-
 def _trace(model, dims, precision: str):
     """A concrete function of ``model`` for (1, *dims, 1) float32 input, computing in ``precision``.
 
-    For bfloat16, every layer before the last one with weights is switched to Keras's
-    ``mixed_bfloat16`` policy (bfloat16 arithmetic on float32 weights) while the function is
-    traced, then switched back: the graph reads the model's own weights, so it follows any later
-    change to them, and the model itself is left as it was. The last layer with weights and any
-    after it (``cell_reach``) keep their policy, so the output stays float32.
+    For bfloat16, every layer but the last is switched to Keras's ``mixed_bfloat16`` policy
+    (bfloat16 arithmetic on float32 weights) while the function is traced, then switched back:
+    the graph reads the model's own weights, so it follows any later change to them, and the
+    model itself is left as it was. The last layer keeps its policy, so the output stays float32.
     """
     traced = tf.function(lambda x: model(x, training=False))
     spec = tf.TensorSpec((1, *dims, 1), tf.float32)
     if precision == "float32":
         return traced.get_concrete_function(spec)
     with _TRACE_LOCK:
-        layers = _bfloat16_layers(model)
+        layers = [layer for layer in model.layers[:-1] if hasattr(layer, "dtype_policy")]
         saved = [layer.dtype_policy for layer in layers]
         try:
             for layer in layers:
@@ -217,7 +210,7 @@ def corner_points(model, gray: np.ndarray, threshold: float = 0.5, *, max_candid
     Returns points (N, 2) float32 (x, y) px and weights (N,) float32, strongest first.
     """
     if model_kind(model) == "map":
-        return decode_map(corner_map(model, gray, precision=precision), threshold, reach=cell_reach(model))
+        return decode_map(corner_map(model, gray, precision=precision), threshold)
     cand = saddle_points(gray, max_points=max_candidates)
     w = patch_weights(model, gray, cand)
     keep = w >= threshold

@@ -12,11 +12,6 @@ Two architectures:
     standardised grey image of any size (multiples of 4). Output: the corner map of
     :mod:`aicalib_tf.corner_map`, (H/4, W/4, 3) sigmoid channels (corner weight and the corner's
     position inside its 4×4 cell). Receptive field 34 px.
-``default_reach`` (experimental)
-    ``default`` with positions that reach one cell beyond their own: a last ``Rescaling`` layer named
-    ``cell_reach`` maps the sigmoid position channels to [−1, 2] cells. Trained with
-    ``encode_corners(..., reach=1)``: the cells beside a corner's cell learn to point at it, so a
-    cell that fires beside the corner's own cell still places the corner (see :func:`cell_reach`).
 
 Loading always uses ``safe_mode=True``: a model file can hold weights and a layer graph, never code.
 """
@@ -42,12 +37,11 @@ __all__ = [
     "load_model",
     "save_model",
     "model_kind",
-    "cell_reach",
     "file_sha256",
     "MODELS_DIR",
 ]
 
-ARCHITECTURES = ("default", "report", "default_c12", "default_c16", "default_pre", "default_reach")
+ARCHITECTURES = ("default", "report", "default_c12", "default_c16", "default_pre")
 PATCH_SIZE = 32
 MODELS_DIR = Path(os.environ.get("AICALIB_MODELS", Path(__file__).resolve().parents[1] / "models"))
 POSITIVE_WEIGHT = 2.0  # corners fill ~1% of cells; up-weight them in the loss
@@ -75,17 +69,11 @@ def _report() -> keras.Sequential:
     )
 
 
-REACH_LAYER = "cell_reach"
-
-
-def _default(conv1: int = 8, pre: int = 0, reach: int = 0, name: str = "default") -> keras.Sequential:
+def _default(conv1: int = 8, pre: int = 0, name: str = "default") -> keras.Sequential:
     """The ``default`` corner-map network; ``conv1`` filters in the first layer and, when ``pre`` > 0,
-    one more 3×3 conv of ``pre`` filters at full resolution before it (experimental variants).
-    ``reach`` > 0 adds the ``cell_reach`` layer: position channels in [−reach, 1 + reach] cells."""
+    one more 3×3 conv of ``pre`` filters at full resolution before it (experimental variants)."""
     conv = dict(kernel_size=3, padding="same", activation="relu")
     extra = [layers.Conv2D(pre, name="conv0", **conv)] if pre else []
-    span = 1.0 + 2.0 * reach
-    head = [layers.Rescaling([1.0, span, span], [0.0, -float(reach), -float(reach)], name=REACH_LAYER)] if reach else []
     return keras.Sequential(
         [
             keras.Input((None, None, 1), name="image"),
@@ -98,7 +86,6 @@ def _default(conv1: int = 8, pre: int = 0, reach: int = 0, name: str = "default"
             layers.Conv2D(32, name="conv4", **conv),
             layers.Conv2D(32, name="conv5", **conv),
             layers.Conv2D(3, 1, activation="sigmoid", name="corner_map"),
-            *head,
         ],
         name=name,
     )
@@ -113,7 +100,6 @@ def build_model(name: str = "default") -> keras.Sequential:
         "default_c12": lambda: _default(conv1=12, name="default_c12"),
         "default_c16": lambda: _default(conv1=16, name="default_c16"),
         "default_pre": lambda: _default(conv1=8, pre=4, name="default_pre"),
-        "default_reach": lambda: _default(conv1=8, reach=1, name="default_reach"),
     }
     if name not in builders:
         raise ValueError(f"unknown architecture {name!r}; choose from: {', '.join(ARCHITECTURES)}")
@@ -122,11 +108,9 @@ def build_model(name: str = "default") -> keras.Sequential:
 
 @keras.saving.register_keras_serializable(package="aicalib_tf")
 class CornerMapLoss(keras.losses.Loss):
-    """Loss for the corner map: a loss on the corner weight + L1 on the corner's position.
+    """Loss for the corner map: a loss on the corner weight + L1 on the in-cell position.
 
-    y_true : (B, h, w, 3) or (B, h, w, 4); y_pred : (B, h, w, 3). The position term is the mean
-    L1 over the cells that hold a corner, or, given a fourth channel, over the cells it marks
-    (``encode_corners(..., reach=1)``).
+    y_true, y_pred : (B, h, w, 3). The position term counts only cells that hold a corner.
     gamma > 0 : focal loss on the weight (easy cells count little), summed and divided by the
         number of corners. gamma = 0 : cross-entropy with positives weighted ``positive_weight``,
         averaged over cells.
@@ -140,10 +124,9 @@ class CornerMapLoss(keras.losses.Loss):
     def call(self, y_true, y_pred):
         eps = 1e-6
         t, p = y_true[..., 0], ops.clip(y_pred[..., 0], eps, 1.0 - eps)
-        l1 = ops.sum(ops.abs(y_true[..., 1:3] - y_pred[..., 1:3]), axis=-1)
+        l1 = ops.sum(ops.abs(y_true[..., 1:] - y_pred[..., 1:]), axis=-1)
         pos = ops.maximum(ops.sum(t), 1.0)
-        mask = y_true[..., 3] if y_true.shape[-1] == 4 else t
-        offset = self.offset_weight * ops.sum(mask * l1) / ops.maximum(ops.sum(mask), 1.0)
+        offset = self.offset_weight * ops.sum(t * l1) / pos
         if self.gamma > 0:
             g = self.gamma
             focal = -(t * (1.0 - p) ** g * ops.log(p) + (1.0 - t) * p**g * ops.log(1.0 - p))
@@ -186,15 +169,6 @@ def model_kind(model: keras.Model) -> str:
         f"model {model.name!r} has input {shape_in} and output {shape_out}; expected a corner-map model "
         f"(None, None, None, 1) -> (None, None, None, 3) or a patch classifier (None, {PATCH_SIZE}, {PATCH_SIZE}, 1) -> (None, 1)"
     )
-
-
-def cell_reach(model: keras.Model) -> int:
-    """How many cells beyond its own a corner-map model's positions reach: 1 for a model ending in
-    the ``cell_reach`` layer (train it with ``encode_corners(..., reach=1)``), else 0."""
-    last = model.layers[-1] if model.layers else None
-    if last is not None and last.name == REACH_LAYER:
-        return int(round(-float(ops.convert_to_numpy(last.offset).reshape(-1)[1])))
-    return 0
 
 
 def _resolve(weights: str | os.PathLike) -> Path:

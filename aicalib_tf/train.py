@@ -169,12 +169,11 @@ def _backend_corner_points(model, gray, threshold: float):
     import numpy as np
 
     from .corner_map import decode_map, network_input
-    from .model import cell_reach, model_kind
+    from .model import model_kind
 
     if model_kind(model) != "map":
         raise ValueError("validation of patch classifiers needs the TensorFlow backend")
-    cmap = np.asarray(model.predict_on_batch(network_input(gray)))[0]
-    return decode_map(cmap, threshold, reach=cell_reach(model))[0]
+    return decode_map(np.asarray(model.predict_on_batch(network_input(gray)))[0], threshold)[0]
 
 
 def _callbacks(cfg: TrainConfig, run: Path, val, initial_epoch: int, wall_before: float, t_start: float):
@@ -250,7 +249,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
     import keras
 
     from .data import CornerMapBatches, PatchBatches, parse_mix
-    from .model import build_model, cell_reach, compile_model, file_sha256, load_model, model_kind, save_model
+    from .model import build_model, compile_model, file_sha256, load_model, model_kind, save_model
 
     keras.utils.set_random_seed(cfg.seed)
     if cfg.determinism and keras.backend.backend() == "tensorflow":
@@ -266,7 +265,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
     else:
         model = compile_model(build_model(cfg.arch), cfg.learning_rate, focal_gamma=cfg.focal_gamma)
     batches_cls = CornerMapBatches if model_kind(model) == "map" else PatchBatches
-    extra = {"squeeze": cfg.squeeze, "reach": cell_reach(model)} if batches_cls is CornerMapBatches else {}
+    extra = {"squeeze": cfg.squeeze} if batches_cls is CornerMapBatches else {}
     batches = batches_cls(pool, batch_size=cfg.batch_size, steps=cfg.steps, seed=cfg.seed, epoch=initial_epoch, **extra)
     prep_s = time.perf_counter() - t0
     if initial_epoch < cfg.epochs:
@@ -304,7 +303,7 @@ def _parser() -> argparse.ArgumentParser:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     d = TrainConfig(out="")
     ap.add_argument("--out", required=True, metavar="RUN_DIR", help="run folder (created)")
-    ap.add_argument("--arch", default=d.arch, help="default | report | default_c12 | default_c16 | default_pre | default_reach (default: %(default)s)")
+    ap.add_argument("--arch", default=d.arch, help="default | report | default_c12 | default_c16 | default_pre (default: %(default)s)")
     ap.add_argument("--epochs", type=int, default=None, help=f"epochs (default: {d.epochs}; with --resume: the run's own)")
     ap.add_argument("--steps", type=int, default=d.steps, help="batches per epoch (default: %(default)s)")
     ap.add_argument("--batch-size", type=int, default=d.batch_size, help="(default: %(default)s)")

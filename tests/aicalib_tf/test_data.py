@@ -86,18 +86,6 @@ def test_squeeze_zero_draws_the_crops_it_drew_before(pool):
     assert not np.array_equal(plain[0][0], on[0][0])
 
 
-def test_reach_batches_add_the_neighbour_mask_to_the_same_crops(pool):
-    plain = CornerMapBatches(pool, batch_size=6, steps=1, seed=4, squeeze=0.5)
-    reach = CornerMapBatches(pool, batch_size=6, steps=1, seed=4, squeeze=0.5, reach=1)
-    (x0, y0), (x1, y1) = plain[0], reach[0]
-    np.testing.assert_array_equal(x0, x1)
-    assert y1.shape == y0.shape[:3] + (4,)
-    np.testing.assert_array_equal(y1[..., 0], y0[..., 0])
-    own = y0[..., 0] == 1
-    np.testing.assert_array_equal(y1[..., :3][own], y0[own])
-    assert own.sum() > 10 and y1[..., 3].sum() > 4 * own.sum()
-
-
 def test_patch_batches_are_balanced(pool):
     pb = PatchBatches(pool, batch_size=16, steps=2, seed=1)
     x, y = pb[0]

@@ -99,13 +99,3 @@ def test_a_bfloat16_run_that_fails_falls_back_to_float32(monkeypatch):
     out = inference.corner_map(m, gray, precision="bfloat16")
     np.testing.assert_array_equal(out, inference.corner_map(m, gray, precision="float32"))
     assert getattr(m, inference._MAP_FNS_ATTR).no_bfloat16
-
-
-@pytest.mark.parametrize("arch, float_tail", [("default", ["corner_map"]), ("default_reach", ["corner_map", "cell_reach"])])
-def test_bfloat16_keeps_the_last_conv_and_what_follows_it_in_float32(arch, float_tail):
-    m = build_model(arch)
-    switched = inference._bfloat16_layers(m)
-    assert [layer.name for layer in m.layers if layer not in switched] == float_tail
-    gray = np.random.default_rng(5).random((32, 32)).astype(np.float32)
-    half = inference.corner_map(m, gray, precision="bfloat16")
-    assert np.abs(half - inference.corner_map(m, gray, precision="float32")).max() < 0.05

@@ -7,7 +7,6 @@ keras = pytest.importorskip("keras")
 
 from aicalib_tf.model import (  # noqa: E402
     build_model,
-    cell_reach,
     compile_model,
     corner_map_loss,
     load_model,
@@ -37,44 +36,16 @@ def test_report_architecture_is_the_reports_stack():
     assert model_kind(m) == "patch"
 
 
-@pytest.mark.parametrize("arch", ["default", "default_c12", "default_c16", "default_pre", "default_reach"])
+@pytest.mark.parametrize("arch", ["default", "default_c12", "default_c16", "default_pre"])
 def test_default_is_fully_convolutional_with_a_stride_4_map(arch):
     m = build_model(arch)
     assert isinstance(m, keras.Sequential) and model_kind(m) == "map"
     assert m.input_shape == (None, None, None, 1) and m.output_shape == (None, None, None, 3)
     assert all(l.name for l in m.layers)
-    lo, hi = -cell_reach(m), 1 + cell_reach(m)
     for h, w in [(64, 96), (480, 640)]:
         y = np.asarray(m(np.zeros((1, h, w, 1), np.float32)))
         assert y.shape == (1, h // 4, w // 4, 3)
-        assert np.all((y[..., 0] >= 0) & (y[..., 0] <= 1)) and np.all((y[..., 1:] >= lo) & (y[..., 1:] <= hi))
-
-
-def test_default_reach_places_corners_up_to_one_cell_beyond_its_own(tmp_path):
-    m = build_model("default_reach")
-    assert _stack(m)[:-1] == _stack(build_model("default"))
-    assert m.layers[-1].name == "cell_reach" and model_kind(m) == "map"
-    assert cell_reach(m) == 1 and cell_reach(build_model("default")) == 0
-    # the last layer maps sigmoid s to s for the weight and to 3·s − 1 for the positions
-    m.layers[-2].set_weights([np.zeros((1, 1, 32, 3), np.float32), np.array([0.0, 30.0, -30.0], np.float32)])
-    y = np.asarray(m(np.zeros((1, 16, 16, 1), np.float32)))
-    np.testing.assert_allclose(y[0, 0, 0], [0.5, 2.0, -1.0], atol=1e-5)
-    loaded = load_model(save_model(m, tmp_path / "reach.keras"))
-    assert cell_reach(loaded) == 1
-
-
-def test_the_position_loss_covers_the_cells_a_fourth_channel_marks():
-    y = np.zeros((1, 3, 3, 4), np.float32)
-    y[0, 1, 1] = [1.0, 0.5, 0.5, 1.0]  # the corner's own cell
-    y[0, 1, 2] = [0.0, -0.5, 0.5, 1.0]  # its neighbour points back at it
-    pred = np.clip(y[..., :3], 1e-7, 1 - 1e-7)
-    pred[..., 1:] = y[..., 1:3]
-    assert float(corner_map_loss(y, pred)) < 1e-4
-    assert float(corner_map_loss(y[..., :3], pred)) < 1e-4
-    wrong = pred.copy()
-    wrong[0, 1, 2, 1] = 0.5  # the neighbour places the corner one cell off
-    assert float(corner_map_loss(y, wrong)) > 1.0
-    assert float(corner_map_loss(y[..., :3], wrong)) < 1e-4  # without the mask only the own cell counts
+        assert np.all((y >= 0) & (y <= 1))
 
 
 def test_unknown_architecture_is_a_clear_error():
