@@ -167,6 +167,14 @@ def _warp_crop(img: np.ndarray, pts: np.ndarray, a: np.ndarray, centre, size: in
     return crop, local.astype(np.float32)
 
 
+def halve(img: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``img`` (H, W) at half size, each pixel the mean of a 2×2 block ((H // 2, W // 2), same
+    dtype), and its points (n, 2) (x, y) moved with it: x' = (x + 0.5) / 2 − 0.5."""
+    h, w = img.shape[0] // 2, img.shape[1] // 2
+    small = cv2.resize(img[: 2 * h, : 2 * w], (w, h), interpolation=cv2.INTER_AREA)
+    return small, ((np.asarray(pts, np.float32) + 0.5) / 2 - 0.5).astype(np.float32)
+
+
 class _PoolBatches(keras.utils.PyDataset):
     """``steps`` batches a epoch cut from a pool; batch ``idx`` of epoch ``epoch`` is seeded by both."""
 
@@ -189,11 +197,15 @@ class CornerMapBatches(_PoolBatches):
         ``max_squeeze``× in a random direction): X-junctions with acute angles and thin squares,
         as at the edge of a wide lens or under steep tilt. 0 (the default) draws exactly the crops
         drawn before the option existed.
+    shrink : share of crops cut from the image shrunk to half size (:func:`halve`, block means):
+        boards with squares half as wide, integrated over the pixels as a camera would. 0 (the
+        default) draws exactly the crops drawn before the option existed.
     """
 
-    def __init__(self, pool: Pool, *, corner_bias: float = 0.6, squeeze: float = 0.0, max_squeeze: float = 3.0, **kwargs):
+    def __init__(self, pool: Pool, *, corner_bias: float = 0.6, squeeze: float = 0.0, max_squeeze: float = 3.0,
+                 shrink: float = 0.0, **kwargs):
         super().__init__(pool, **kwargs)
-        self.corner_bias, self.squeeze, self.max_squeeze = corner_bias, squeeze, max_squeeze
+        self.corner_bias, self.squeeze, self.max_squeeze, self.shrink = corner_bias, squeeze, max_squeeze, shrink
 
     def __getitem__(self, idx: int):
         rng = np.random.default_rng([self.seed, self.epoch, idx, 7])
@@ -203,6 +215,8 @@ class CornerMapBatches(_PoolBatches):
         for b in range(self.batch_size):
             i = int(rng.integers(len(self.pool)))
             img, pts = self.pool.images[i], self.pool.corners[i]
+            if self.shrink > 0 and rng.random() < self.shrink:
+                img, pts = halve(img, pts)
             h, w = img.shape
             if len(pts) and rng.random() < self.corner_bias:
                 cx, cy = pts[int(rng.integers(len(pts)))]

@@ -8,7 +8,8 @@ Examples::
 
 A run renders a seeded pool of ``--preset`` images in memory, then trains on crops cut from it
 (see :mod:`aicalib_tf.data`; ``--preset`` may mix presets, e.g. ``train:0.8,distorted:0.2``;
-``--squeeze P`` warps a share P of the corner-map crops into acute junctions and thin squares).
+``--squeeze P`` warps a share P of the corner-map crops into acute junctions and thin squares;
+``--shrink P`` cuts a share P from the image at half size: squares half as wide).
 After each epoch it scores corner precision, recall (a match is within 1 px) and localisation
 error on a fixed validation set (``--preset``, or a mix's first preset; seed 900001, never
 trained on) and saves a checkpoint. RUN_DIR receives:
@@ -65,6 +66,7 @@ class TrainConfig:
     focal_gamma: float = 2.0
     determinism: bool = True
     squeeze: float = 0.0
+    shrink: float = 0.0
 
     def check(self) -> None:
         """Raise ``ValueError`` naming the first bad option."""
@@ -86,8 +88,9 @@ class TrainConfig:
             raise ValueError(f"--learning-rate must be in (0, 1), got {self.learning_rate}")
         if self.focal_gamma < 0:
             raise ValueError(f"--focal-gamma must be >= 0, got {self.focal_gamma}")
-        if not 0.0 <= self.squeeze <= 1.0:
-            raise ValueError(f"--squeeze must be in [0, 1], got {self.squeeze}")
+        for name in ("squeeze", "shrink"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"--{name} must be in [0, 1], got {getattr(self, name)}")
         if not 0.0 < self.threshold < 1.0:
             raise ValueError(f"--threshold must be in (0, 1), got {self.threshold}")
 
@@ -265,7 +268,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
     else:
         model = compile_model(build_model(cfg.arch), cfg.learning_rate, focal_gamma=cfg.focal_gamma)
     batches_cls = CornerMapBatches if model_kind(model) == "map" else PatchBatches
-    extra = {"squeeze": cfg.squeeze} if batches_cls is CornerMapBatches else {}
+    extra = {"squeeze": cfg.squeeze, "shrink": cfg.shrink} if batches_cls is CornerMapBatches else {}
     batches = batches_cls(pool, batch_size=cfg.batch_size, steps=cfg.steps, seed=cfg.seed, epoch=initial_epoch, **extra)
     prep_s = time.perf_counter() - t0
     if initial_epoch < cfg.epochs:
@@ -319,6 +322,9 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--squeeze", type=float, default=d.squeeze,
                     help="default model: share of training crops squeezed up to 3x in a random direction "
                          "(acute X-junctions, thin squares) (default: %(default)s)")
+    ap.add_argument("--shrink", type=float, default=d.shrink,
+                    help="default model: share of training crops cut from the image at half size "
+                         "(squares half as wide) (default: %(default)s)")
     ap.add_argument("--no-determinism", action="store_true", help="allow non-deterministic TensorFlow ops (other Keras backends: no effect)")
     ap.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     ap.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -334,7 +340,7 @@ def main(argv: list[str] | None = None) -> int:
         out=args.out, arch=args.arch, epochs=args.epochs if args.epochs is not None else d.epochs, steps=args.steps, batch_size=args.batch_size,
         seed=args.seed, preset=args.preset, pool_images=args.pool_images, val_images=args.val_images,
         learning_rate=args.learning_rate, workers=args.workers, threshold=args.threshold, focal_gamma=args.focal_gamma,
-        determinism=not args.no_determinism, squeeze=args.squeeze,
+        determinism=not args.no_determinism, squeeze=args.squeeze, shrink=args.shrink,
     )
     try:
         metrics = train(cfg, resume=args.resume, progress=not args.quiet, epochs_given=args.epochs)

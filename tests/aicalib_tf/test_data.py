@@ -3,7 +3,16 @@ import pytest
 
 pytest.importorskip("keras")
 
-from aicalib_tf.data import CROP_SIZE, CornerMapBatches, PatchBatches, _dihedral, _warp_crop, render_pool, squeeze_matrix  # noqa: E402
+from aicalib_tf.data import (  # noqa: E402
+    CROP_SIZE,
+    CornerMapBatches,
+    PatchBatches,
+    _dihedral,
+    _warp_crop,
+    halve,
+    render_pool,
+    squeeze_matrix,
+)
 from aicalib_tf.corner_map import decode_map  # noqa: E402
 
 
@@ -34,10 +43,10 @@ def test_dihedral_moves_points_with_the_pixels(k):
     assert out.sum() == 2.0
 
 
-@pytest.mark.parametrize("squeeze", [0.0, 1.0])
-def test_crop_batches_are_deterministic_and_labels_sit_on_x_junctions(pool, squeeze):
-    a = CornerMapBatches(pool, batch_size=8, steps=3, seed=5, squeeze=squeeze)
-    b = CornerMapBatches(pool, batch_size=8, steps=3, seed=5, squeeze=squeeze)
+@pytest.mark.parametrize("squeeze, shrink", [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)])
+def test_crop_batches_are_deterministic_and_labels_sit_on_x_junctions(pool, squeeze, shrink):
+    a = CornerMapBatches(pool, batch_size=8, steps=3, seed=5, squeeze=squeeze, shrink=shrink)
+    b = CornerMapBatches(pool, batch_size=8, steps=3, seed=5, squeeze=squeeze, shrink=shrink)
     x1, y1 = a[1]
     x2, y2 = b[1]
     np.testing.assert_array_equal(x1, x2)
@@ -78,12 +87,26 @@ def test_warped_crop_moves_points_with_the_pixels(angle, ratio):
         np.testing.assert_allclose([(w * xs).sum(), (w * ys).sum()], moved[0], atol=0.01)
 
 
-def test_squeeze_zero_draws_the_crops_it_drew_before(pool):
+@pytest.mark.parametrize("option", ["squeeze", "shrink"])
+def test_squeeze_or_shrink_zero_draws_the_crops_drawn_before(pool, option):
     plain = CornerMapBatches(pool, batch_size=4, steps=1, seed=2)
-    off = CornerMapBatches(pool, batch_size=4, steps=1, seed=2, squeeze=0.0)
-    on = CornerMapBatches(pool, batch_size=4, steps=1, seed=2, squeeze=1.0)
+    off = CornerMapBatches(pool, batch_size=4, steps=1, seed=2, **{option: 0.0})
+    on = CornerMapBatches(pool, batch_size=4, steps=1, seed=2, **{option: 1.0})
     np.testing.assert_array_equal(plain[0][0], off[0][0])
     assert not np.array_equal(plain[0][0], on[0][0])
+
+
+def test_halving_moves_points_with_the_pixels():
+    # a smooth blob's centroid at half size is where its centre's point went
+    yy, xx = np.mgrid[0:120, 0:161]
+    px, py = 70.3, 51.8
+    img = (250 * np.exp(-((xx - px) ** 2 + (yy - py) ** 2) / (2 * 4.0**2))).astype(np.uint8)
+    small, moved = halve(img, np.array([[px, py], [0.0, 0.0]], np.float32))
+    assert small.shape == (60, 80) and small.dtype == np.uint8
+    w = small.astype(np.float64) / small.sum()
+    ys, xs = np.mgrid[0:60, 0:80]
+    np.testing.assert_allclose([(w * xs).sum(), (w * ys).sum()], moved[0], atol=0.05)
+    np.testing.assert_allclose(moved[1], [-0.25, -0.25])  # pixel (0, 0)'s centre: a quarter pixel before block 0's
 
 
 def test_patch_batches_are_balanced(pool):

@@ -94,6 +94,7 @@ def test_same_seed_gives_the_same_weights(tmp_path):
         (["--preset", "nope"], "unknown preset"),
         (["--epochs", "0"], "--epochs must be >= 1"),
         (["--squeeze", "1.5"], "--squeeze must be in [0, 1]"),
+        (["--shrink", "-0.1"], "--shrink must be in [0, 1]"),
         (["--resume"], "holds no checkpoint"),
     ],
 )
