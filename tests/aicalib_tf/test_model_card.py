@@ -41,3 +41,13 @@ def test_an_unfinished_run_is_refused_before_anything_is_written(tmp_path, capsy
     assert main([str(good), str(bad), "--out", str(out)]) == 2
     assert "not a finished training run" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_the_command_names_the_crop_options_and_older_runs_get_their_defaults():
+    config = {"arch": "default", "epochs": 40, "steps": 750, "batch_size": 32, "seed": 0,
+              "preset": "train:0.75,distorted:0.25", "pool_images": 4000, "val_images": 64,
+              "learning_rate": 0.002, "focal_gamma": 2.0, "squeeze": 0.5, "shrink": 0.25}
+    cmd = train_command(config)
+    assert "--preset train:0.75,distorted:0.25" in cmd and cmd.endswith("--squeeze 0.5 --shrink 0.25")
+    older = {k: v for k, v in config.items() if k not in ("squeeze", "shrink", "focal_gamma")}
+    assert train_command(older).endswith("--focal-gamma 0.0 --squeeze 0.0 --shrink 0.0")
