@@ -11,12 +11,7 @@ Two architectures:
     Ours, fully convolutional: the same kind of classifier applied at every pixel, cheaply. Input: a
     standardised grey image of any size (multiples of 4). Output: the corner map of
     :mod:`aicalib_tf.corner_map`, (H/4, W/4, 3) sigmoid channels (corner weight and the corner's
-    position inside its 4×4 cell). 3×3 Conv2D 4 → 8 → max-pool → 16 → max-pool → 32 → 32 → 32,
-    ReLU, then a 1×1 Conv2D to 3 sigmoid channels; receptive field 36 px, 24,739 parameters.
-
-Experimental variants with the same output: ``default_v1``, the ``default`` shipped until session
-10 (no 4-filter layer at full resolution; receptive field 34 px, 24,483 parameters), and
-``default_c12`` and ``default_c16``, ``default_v1`` with 12 or 16 filters in its first layer.
+    position inside its 4×4 cell). Receptive field 34 px.
 
 Loading always uses ``safe_mode=True``: a model file can hold weights and a layer graph, never code.
 """
@@ -46,7 +41,7 @@ __all__ = [
     "MODELS_DIR",
 ]
 
-ARCHITECTURES = ("default", "report", "default_v1", "default_c12", "default_c16")
+ARCHITECTURES = ("default", "report", "default_c12", "default_c16", "default_pre")
 PATCH_SIZE = 32
 MODELS_DIR = Path(os.environ.get("AICALIB_MODELS", Path(__file__).resolve().parents[1] / "models"))
 POSITIVE_WEIGHT = 2.0  # corners fill ~1% of cells; up-weight them in the loss
@@ -74,9 +69,9 @@ def _report() -> keras.Sequential:
     )
 
 
-def _default(conv1: int = 8, pre: int = 4, name: str = "default") -> keras.Sequential:
-    """A corner-map network: ``pre`` > 0 filters in a first 3×3 conv at full resolution (none when
-    0), then ``conv1`` filters before the first pooling (``default``: 4 and 8)."""
+def _default(conv1: int = 8, pre: int = 0, name: str = "default") -> keras.Sequential:
+    """The ``default`` corner-map network; ``conv1`` filters in the first layer and, when ``pre`` > 0,
+    one more 3×3 conv of ``pre`` filters at full resolution before it (experimental variants)."""
     conv = dict(kernel_size=3, padding="same", activation="relu")
     extra = [layers.Conv2D(pre, name="conv0", **conv)] if pre else []
     return keras.Sequential(
@@ -101,11 +96,10 @@ def build_model(name: str = "default") -> keras.Sequential:
     builders = {
         "default": _default,
         "report": _report,
-        # experimental variants, same corner-map output: the default shipped until session 10, and it
-        # with more filters at full resolution
-        "default_v1": lambda: _default(conv1=8, pre=0, name="default_v1"),
-        "default_c12": lambda: _default(conv1=12, pre=0, name="default_c12"),
-        "default_c16": lambda: _default(conv1=16, pre=0, name="default_c16"),
+        # experimental variants of default (more capacity at full resolution), same corner-map output
+        "default_c12": lambda: _default(conv1=12, name="default_c12"),
+        "default_c16": lambda: _default(conv1=16, name="default_c16"),
+        "default_pre": lambda: _default(conv1=8, pre=4, name="default_pre"),
     }
     if name not in builders:
         raise ValueError(f"unknown architecture {name!r}; choose from: {', '.join(ARCHITECTURES)}")

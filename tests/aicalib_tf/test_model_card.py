@@ -29,7 +29,7 @@ def test_the_card_holds_each_models_command_and_the_copied_files_hash(tmp_path):
     card = (out / "MODEL_CARD.md").read_text()
     assert "## `default.keras`" in card and train_command(config) in card
     assert "--arch default --epochs 2 --steps 3 --batch-size 4 --seed 5" in train_command(config)
-    assert "15.0 min" in card and "24,483" in card and "| 0.9000 | 0.8000 |" in card
+    assert "15.0 min." in card and "24,483" in card and "| 0.9000 | 0.8000 |" in card
     assert f"sha256: `{file_sha256(out / 'default.keras')}`" in card
 
 
@@ -51,3 +51,11 @@ def test_the_command_names_the_crop_options_and_older_runs_get_their_defaults():
     assert "--preset train:0.75,distorted:0.25" in cmd and cmd.endswith("--squeeze 0.5 --shrink 0.25")
     older = {k: v for k, v in config.items() if k not in ("squeeze", "shrink", "focal_gamma")}
     assert train_command(older).endswith("--focal-gamma 0.0 --squeeze 0.0 --shrink 0.0")
+
+
+def test_the_card_says_how_much_of_the_wall_time_was_the_image_pool(tmp_path):
+    run, _ = _run(tmp_path)
+    metrics = json.loads((run / "metrics.json").read_text())
+    (run / "metrics.json").write_text(json.dumps({**metrics, "data_prep_s": 6.0}))
+    assert main([str(run), "--out", str(tmp_path / "models")]) == 0
+    assert "15.0 min (of which 0.1 min rendering or loading the image pools)." in (tmp_path / "models" / "MODEL_CARD.md").read_text()
