@@ -32,6 +32,8 @@ def main(argv=None) -> int:
     ap.add_argument("--images", type=int, default=64)
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args(argv)
+    if args.images < 1 or args.repeats < 1:
+        ap.error(f"--images and --repeats must be >= 1, got {args.images} and {args.repeats}")
     model = load_model(args.model)
     images, corners = validation_set("train", args.images, progress=False)
     print(f"model {args.model}; native bfloat16: {native_bfloat16()}\n")
@@ -42,7 +44,7 @@ def main(argv=None) -> int:
         pairs, times = [], []
         for img, gt in zip(images, corners):
             best = np.inf
-            for _ in range(max(args.repeats, 1)):
+            for _ in range(args.repeats):
                 t = time.perf_counter()
                 pts, _ = corner_points(model, img, 0.5, precision=precision)
                 best = min(best, time.perf_counter() - t)
