@@ -41,7 +41,7 @@ __all__ = [
     "MODELS_DIR",
 ]
 
-ARCHITECTURES = ("default", "report", "default_c12", "default_c16", "default_pre")
+ARCHITECTURES = ("default", "report", "default_c12", "default_c16", "default_pre", "default_pre_s2")
 PATCH_SIZE = 32
 MODELS_DIR = Path(os.environ.get("AICALIB_MODELS", Path(__file__).resolve().parents[1] / "models"))
 POSITIVE_WEIGHT = 2.0  # corners fill ~1% of cells; up-weight them in the loss
@@ -69,17 +69,19 @@ def _report() -> keras.Sequential:
     )
 
 
-def _default(conv1: int = 8, pre: int = 0, name: str = "default") -> keras.Sequential:
+def _default(conv1: int = 8, pre: int = 0, strided: bool = False, name: str = "default") -> keras.Sequential:
     """The ``default`` corner-map network; ``conv1`` filters in the first layer and, when ``pre`` > 0,
-    one more 3×3 conv of ``pre`` filters at full resolution before it (experimental variants)."""
+    one more 3×3 conv of ``pre`` filters at full resolution before it (experimental variants).
+    ``strided``: ``conv1`` computes at half resolution (stride 2) in place of conv + 2×2 max-pooling."""
     conv = dict(kernel_size=3, padding="same", activation="relu")
     extra = [layers.Conv2D(pre, name="conv0", **conv)] if pre else []
+    first = ([layers.Conv2D(conv1, strides=2, name="conv1", **conv)] if strided
+             else [layers.Conv2D(conv1, name="conv1", **conv), layers.MaxPooling2D(2, name="pool1")])
     return keras.Sequential(
         [
             keras.Input((None, None, 1), name="image"),
             *extra,
-            layers.Conv2D(conv1, name="conv1", **conv),
-            layers.MaxPooling2D(2, name="pool1"),
+            *first,
             layers.Conv2D(16, name="conv2", **conv),
             layers.MaxPooling2D(2, name="pool2"),
             layers.Conv2D(32, name="conv3", **conv),
@@ -100,6 +102,7 @@ def build_model(name: str = "default") -> keras.Sequential:
         "default_c12": lambda: _default(conv1=12, name="default_c12"),
         "default_c16": lambda: _default(conv1=16, name="default_c16"),
         "default_pre": lambda: _default(conv1=8, pre=4, name="default_pre"),
+        "default_pre_s2": lambda: _default(conv1=8, pre=4, strided=True, name="default_pre_s2"),
     }
     if name not in builders:
         raise ValueError(f"unknown architecture {name!r}; choose from: {', '.join(ARCHITECTURES)}")

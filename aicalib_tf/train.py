@@ -306,7 +306,7 @@ def _parser() -> argparse.ArgumentParser:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     d = TrainConfig(out="")
     ap.add_argument("--out", required=True, metavar="RUN_DIR", help="run folder (created)")
-    ap.add_argument("--arch", default=d.arch, help="default | report | default_c12 | default_c16 | default_pre (default: %(default)s)")
+    ap.add_argument("--arch", default=d.arch, help="default | report | default_c12 | default_c16 | default_pre | default_pre_s2 (default: %(default)s)")
     ap.add_argument("--epochs", type=int, default=None, help=f"epochs (default: {d.epochs}; with --resume: the run's own)")
     ap.add_argument("--steps", type=int, default=d.steps, help="batches per epoch (default: %(default)s)")
     ap.add_argument("--batch-size", type=int, default=d.batch_size, help="(default: %(default)s)")

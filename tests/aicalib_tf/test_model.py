@@ -46,9 +46,12 @@ def test_default_architecture_is_the_documented_stack():
     assert m.count_params() == 24_483
     pre = build_model("default_pre")
     assert _stack(pre) == [("Conv2D", 4)] + _stack(m) and pre.count_params() == 24_739
+    strided = build_model("default_pre_s2")  # conv1 at stride 2 in place of conv1 + pool1
+    assert _stack(strided) == [("Conv2D", 4)] + _stack(m)[:1] + _stack(m)[2:]
+    assert strided.get_layer("conv1").strides == (2, 2) and strided.count_params() == 24_739
 
 
-@pytest.mark.parametrize("arch", ["default", "default_c12", "default_c16", "default_pre"])
+@pytest.mark.parametrize("arch", ["default", "default_c12", "default_c16", "default_pre", "default_pre_s2"])
 def test_default_is_fully_convolutional_with_a_stride_4_map(arch):
     m = build_model(arch)
     assert isinstance(m, keras.Sequential) and model_kind(m) == "map"
