@@ -15,7 +15,10 @@ names, sweep names (noise, blur, contrast, jpeg, distortion, tilt), ``named``, `
 
 Detectors, all in this one process and timed per call (time.perf_counter, after a warm-up at each image size); each
 image goes through every detector in turn, and a condition's images are all rendered before any
-is timed:
+is timed. At the end, each detector's 20 slowest images of each size are timed twice more, round
+robin, and keep their least time (results.csv ``time_runs``): on a shared 2-core machine a single
+stall otherwise sets a detector's slowest time, while an image that is slow every time stays slow.
+The detectors:
 cnn (the CNN pipeline with --model, default models/default.keras), report (the same pipeline
 with the report's patch classifier), opencv (cv2.findChessboardCorners + cornerSubPix), and
 opencv-sb (cv2.findChessboardCornersSB).
@@ -45,6 +48,7 @@ Exit codes: 0 done; 2 bad arguments.
 
 from __future__ import annotations
 
+import heapq
 import os
 import sys
 import time
@@ -96,6 +100,40 @@ def _difficulty(rows: list[dict]) -> float:
     return bad + 0.01 * min(99.0, max([r["err_max"] for r in rows if np.isfinite(r["err_max"])] or [0.0]))
 
 
+RETIME_SLOWEST = 20  # per detector and image size: the slowest images, timed again at the end
+RETIME_RUNS = 2  # more runs of each; the least time counts
+
+
+def _keep_slowest(slowest: dict, img_rows: list[dict], image: np.ndarray, k: int = RETIME_SLOWEST) -> None:
+    """Remember ``image`` for each of its rows that is among the ``k`` slowest of its (detector, W, H) so far.
+
+    slowest : {(detector, W, H): min-heap of (time_ms, tie-break, row, image)}, changed in place.
+    """
+    for row in img_rows:
+        heap = slowest.setdefault((row["detector"], row["width"], row["height"]), [])
+        item = (row["time_ms"], id(row), row, image)
+        if len(heap) < k:
+            heapq.heappush(heap, item)
+        elif item[0] > heap[0][0]:
+            heapq.heapreplace(heap, item)
+
+
+def retime_slowest(slowest: dict, detectors: dict, runs: int = RETIME_RUNS) -> int:
+    """Time the images kept by :func:`_keep_slowest` ``runs`` more times and keep each row's least time.
+
+    The runs go round robin over all kept images (never one image twice in a row), so no run finds
+    the image still in the CPU's caches. Each row's ``time_runs`` counts its timings. Returns how
+    many rows were timed again.
+    """
+    items = [(key[0], row, image) for key, heap in slowest.items() for _, _, row, image in heap]
+    for _ in range(runs):
+        for det, row, image in items:
+            _, ms = time_detector(detectors[det], image)
+            row["time_ms"] = min(row["time_ms"], ms)
+            row["time_runs"] += 1
+    return len(items)
+
+
 def _warm_up(detectors: dict, size: tuple[int, int]) -> None:
     """Run every detector, untimed, on a clean and an occluded board of ``size`` (W, H) px: the first
     call at a new image size traces the network's graph for it (tens of ms), and the first call of
@@ -115,6 +153,7 @@ def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *,
     counts : see :meth:`EvalConfig.counts`. Returns {"rows": [dict per image × detector],
     "errors": {(condition, detector): [(K,) px arrays]}, "examples": [hardest images],
     "calibration": [dict per sequence × detector], "render_s": seconds spent rendering}.
+    Each detector's slowest images are timed again at the end (:func:`retime_slowest`).
     """
     from tqdm import tqdm
 
@@ -125,6 +164,7 @@ def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *,
     bar = tqdm(total=total, desc="evaluate", unit="img", disable=not progress)
     rows, errors, hardest = [], {}, {}
     render_s = 0.0
+    slowest = {}  # (detector, W, H) -> the slowest images so far, timed again at the end
     warm = set()  # image sizes (W, H) the detectors have been warmed up at
     for cond in conditions:
         if tuple(cond.size) not in warm:
@@ -137,6 +177,7 @@ def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *,
         render_s += time.perf_counter() - t0
         for index, s in samples:
             img_rows, found_by = _detect_sample(cond.name, cond, index, s, detectors, rows, errors)
+            _keep_slowest(slowest, img_rows, s.image)
             score = _difficulty(img_rows)
             group = cond.sweep or cond.name  # one example per named condition or sweep
             if score > 0 and score > hardest.get(group, (0,))[0]:
@@ -149,8 +190,9 @@ def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *,
         render_s += time.perf_counter() - t0
         for size in {s.image.shape[::-1] for _, views in seqs for s in views} - warm:
             _warm_up(detectors, size)
-        calib = calibrate_sequences(seqs, detectors, rows, errors, bar)
+        calib = calibrate_sequences(seqs, detectors, rows, errors, bar, slowest=slowest)
     bar.close()
+    retime_slowest(slowest, detectors)
     examples = sorted(hardest.values(), key=lambda h: -h[0])[:6]
     return {"rows": rows, "errors": errors, "examples": examples, "calibration": calib, "render_s": render_s}
 
@@ -169,7 +211,7 @@ def _detect_sample(name: str, cond: Condition | None, index: int, s, detectors: 
     for det, fn in detectors.items():
         found, ms = time_detector(fn, s.image)
         row, e = score_detection(found, truth, visible, has_board, PATTERN)
-        row = {**base, "detector": det, **row, "time_ms": ms}
+        row = {**base, "detector": det, **row, "time_ms": ms, "time_runs": 1}
         rows.append(row)
         img_rows.append(row)
         errors.setdefault((name, det), []).append(e)
@@ -177,7 +219,7 @@ def _detect_sample(name: str, cond: Condition | None, index: int, s, detectors: 
     return img_rows, found_by
 
 
-def calibrate_sequences(seqs, detectors: dict, rows: list, errors: dict, bar=None) -> list[dict]:
+def calibrate_sequences(seqs, detectors: dict, rows: list, errors: dict, bar=None, *, slowest: dict | None = None) -> list[dict]:
     """Detect every view of each calibration sequence, calibrate per detector, compare with the truth.
 
     seqs : [(camera_id, [Sample])] (see :func:`aicalib_tf.conditions.calibration_sequences`).
@@ -185,7 +227,7 @@ def calibrate_sequences(seqs, detectors: dict, rows: list, errors: dict, bar=Non
     sequence × detector: views, views_found (full boards), views_partial, views_used, rejected,
     rms_px, fx_pct, fy_pct, pp_px, dist_field_mean_px, dist_field_max_px (over the whole image),
     dist_field_seen_mean_px, dist_field_seen_max_px (inside the hull of all the sequence's visible
-    true corners: the area the boards covered), status.
+    true corners: the area the boards covered), status. slowest : see :func:`_keep_slowest`.
     """
     from .calibrate import CalibrationError, View, calibrate_camera
 
@@ -193,7 +235,9 @@ def calibrate_sequences(seqs, detectors: dict, rows: list, errors: dict, bar=Non
     for cam, samples in seqs:
         views = {d: [] for d in detectors}
         for s in samples:
-            _, found_by = _detect_sample("calib", None, s.label["index"], s, detectors, rows, errors)
+            img_rows, found_by = _detect_sample("calib", None, s.label["index"], s, detectors, rows, errors)
+            if slowest is not None:
+                _keep_slowest(slowest, img_rows, s.image)
             for d, (found, _) in found_by.items():
                 if len(found.corners):
                     views[d].append(View(f"view{s.label['index']:03d}", found.corners, found.ids))
