@@ -122,8 +122,8 @@ def retime_slowest(slowest: dict, detectors: dict, runs: int = RETIME_RUNS) -> i
     """Time the images kept by :func:`_keep_slowest` ``runs`` more times and keep each row's least time.
 
     The runs go round robin over all kept images, so (with more than one kept) no run follows a run
-    of the same image and finds it still in the CPU's caches. Each row's ``time_runs`` counts its timings. Returns how
-    many rows were timed again.
+    of the same image and finds it still in the CPU's caches. Each row's ``time_runs`` counts its
+    timings. Returns how many rows were timed again.
     """
     items = [(key[0], row, image) for key, heap in slowest.items() for _, _, row, image in heap]
     for _ in range(runs):

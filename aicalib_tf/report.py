@@ -243,6 +243,7 @@ def _config(cfg, versions: dict, info: dict, extra: dict) -> dict:
 def write_report(out: Path, cfg, conds, result: dict, info: dict, versions: dict) -> None:
     """Write results.csv, summary.csv, calibration.csv, figures/, report.md and config.json."""
     from .conditions import CALIB_CAMERAS, CALIB_SEED
+    from .evaluate import RETIME_RUNS, RETIME_SLOWEST
 
     out = Path(out)
     fig_dir = out / "figures"
@@ -292,7 +293,8 @@ def write_report(out: Path, cfg, conds, result: dict, info: dict, versions: dict
           "with any corner further off (wrong_worst_px: the median over wrong boards of their worst corner's error); "
           "partial: an incomplete board. Errors in px over hit corners; recall over visible corners; times per image in "
           "this one process, each image through every detector in turn, a condition's images rendered before any "
-          "is timed; each detector's 20 slowest images per size timed twice more at the end, keeping the least time.\n",
+          f"is timed; each detector's {RETIME_SLOWEST} slowest images per size timed {RETIME_RUNS} more times at the end, "
+          "keeping the least time.\n",
           _md_table(named_sum[cols], {"detection_rate": ".0%", "recall": ".1%", "wrong_worst_px": ".2f",
                                        "err_median": ".4f", "err_rmse": ".4f", "err_p95": ".4f",
                                        "time_median_ms": ".1f", "time_max_ms": ".0f"})]
