@@ -11,7 +11,12 @@ Two architectures:
     Ours, fully convolutional: the same kind of classifier applied at every pixel, cheaply. Input: a
     standardised grey image of any size (multiples of 4). Output: the corner map of
     :mod:`aicalib_tf.corner_map`, (H/4, W/4, 3) sigmoid channels (corner weight and the corner's
-    position inside its 4×4 cell). Receptive field 34 px.
+    position inside its 4×4 cell). 3×3 Conv2D 4 at full resolution, 8 at stride 2, 16, 2×2
+    max-pooling, 32, 32, 32 (ReLU), then a 1×1 Conv2D to the 3 channels. Receptive field 35 px,
+    24,739 parameters.
+
+The experimental variants of ``default`` (``default_v1``, the stack shipped until session 12, and
+others) are listed in :func:`build_model`.
 
 Loading always uses ``safe_mode=True``: a model file can hold weights and a layer graph, never code.
 """
@@ -41,7 +46,7 @@ __all__ = [
     "MODELS_DIR",
 ]
 
-ARCHITECTURES = ("default", "report", "default_c12", "default_c16", "default_pre", "default_pre_s2")
+ARCHITECTURES = ("default", "report", "default_v1", "default_c12", "default_c16", "default_pre")
 PATCH_SIZE = 32
 MODELS_DIR = Path(os.environ.get("AICALIB_MODELS", Path(__file__).resolve().parents[1] / "models"))
 POSITIVE_WEIGHT = 2.0  # corners fill ~1% of cells; up-weight them in the loss
@@ -69,10 +74,10 @@ def _report() -> keras.Sequential:
     )
 
 
-def _default(conv1: int = 8, pre: int = 0, strided: bool = False, name: str = "default") -> keras.Sequential:
-    """The ``default`` corner-map network; ``conv1`` filters in the first layer and, when ``pre`` > 0,
-    one more 3×3 conv of ``pre`` filters at full resolution before it (experimental variants).
-    ``strided``: ``conv1`` computes at half resolution (stride 2) in place of conv + 2×2 max-pooling."""
+def _default(conv1: int = 8, pre: int = 4, strided: bool = True, name: str = "default") -> keras.Sequential:
+    """A corner-map network: ``conv1`` filters in the second 3×3 conv, and, when ``pre`` > 0, a 3×3
+    conv of ``pre`` filters at full resolution before it. ``strided``: ``conv1`` computes at half
+    resolution (stride 2) in place of conv + 2×2 max-pooling. The defaults build ``default``."""
     conv = dict(kernel_size=3, padding="same", activation="relu")
     extra = [layers.Conv2D(pre, name="conv0", **conv)] if pre else []
     first = ([layers.Conv2D(conv1, strides=2, name="conv1", **conv)] if strided
@@ -98,11 +103,12 @@ def build_model(name: str = "default") -> keras.Sequential:
     builders = {
         "default": _default,
         "report": _report,
-        # experimental variants of default (more capacity at full resolution), same corner-map output
-        "default_c12": lambda: _default(conv1=12, name="default_c12"),
-        "default_c16": lambda: _default(conv1=16, name="default_c16"),
-        "default_pre": lambda: _default(conv1=8, pre=4, name="default_pre"),
-        "default_pre_s2": lambda: _default(conv1=8, pre=4, strided=True, name="default_pre_s2"),
+        # experimental variants of default, same corner-map output. default_v1: the default shipped
+        # until session 12 (no full-resolution layer, conv1 + max-pooling); c12/c16: a wider conv1
+        "default_v1": lambda: _default(pre=0, strided=False, name="default_v1"),
+        "default_c12": lambda: _default(conv1=12, pre=0, strided=False, name="default_c12"),
+        "default_c16": lambda: _default(conv1=16, pre=0, strided=False, name="default_c16"),
+        "default_pre": lambda: _default(strided=False, name="default_pre"),
     }
     if name not in builders:
         raise ValueError(f"unknown architecture {name!r}; choose from: {', '.join(ARCHITECTURES)}")

@@ -24,10 +24,10 @@ INTRO = """# Model card
 Two Keras 3 Sequential models find chessboard inner corners (X-junctions) in grey images. Both
 ship here and load with `aicalib_tf.model.load_model("default" | "report")` (`safe_mode=True`).
 
-- `default.keras` is fully convolutional: 3×3 Conv2D 8 → max-pool → 16 → max-pool → 32 → 32 → 32,
-  ReLU, then a 1×1 Conv2D to 3 sigmoid channels. It runs once on a whole standardised image and
-  gives a corner map with one cell per 4×4 pixels: the corner weight, and where in the cell the
-  corner lies. Receptive field 34 px.
+- `default.keras` is fully convolutional: 3×3 Conv2D 4 at full resolution → 8 at stride 2 → 16 →
+  max-pool → 32 → 32 → 32, ReLU, then a 1×1 Conv2D to 3 sigmoid channels. It runs once on a whole
+  standardised image and gives a corner map with one cell per 4×4 pixels: the corner weight, and
+  where in the cell the corner lies. Receptive field 35 px.
 - `report.keras` is the network of the report "Artificial Intelligence based Camera Calibration":
   four 3×3 Conv2D layers (16, 32, 64, 128 filters, ReLU), each followed by 2×2 max-pooling, then
   Flatten, Dense(64, ReLU) and Dense(1, sigmoid). It classifies a 32×32 patch: is there a corner
@@ -36,9 +36,12 @@ ship here and load with `aicalib_tf.model.load_model("default" | "report")` (`sa
 
 Training data: data_gen renders 640×480 scenes of the `train` preset (every lens from 40° to 120°
 HFOV, barrel and pincushion distortion, tilts to 60°, partial and occluded boards, noise, blur,
-JPEG, salt-and-pepper, shadows, low contrast) plus 10% board-free clutter images. Checker-like
-distractor patches are switched off in training: their X-junctions are real, so a local corner
-detector should fire on them, and the grid assembly rejects them.
+JPEG, salt-and-pepper, shadows, low contrast) plus 10% board-free clutter images; `default` also
+trains on a quarter of `distorted` scenes (`--preset train:0.75,distorted:0.25`: strong lenses),
+and on crops squeezed into acute junctions (`--squeeze`) or cut at half size (`--shrink`: squares
+half as wide), see `aicalib_tf/data.py`. Checker-like distractor patches are switched off in
+training: their X-junctions are real, so a local corner detector should fire on them, and the
+grid assembly rejects them.
 
 Both were trained on this project's 2-core CPU without a GPU. The same command and seed give the
 same data order and, with TensorFlow's op determinism on (the default), the same weights on the

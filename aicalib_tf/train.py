@@ -2,9 +2,11 @@
 
 Examples::
 
-    python -m aicalib_tf.train --arch default --out runs/default            # the shipped default
+    python -m aicalib_tf.train --arch default --out runs/default            # the default network
     python -m aicalib_tf.train --arch report --out runs/report              # the report's network
     python -m aicalib_tf.train --out runs/default --resume                  # continue a killed run
+
+The exact commands of the shipped models, with their data options, are in models/MODEL_CARD.md.
 
 A run renders a seeded pool of ``--preset`` images in memory, then trains on crops cut from it
 (see :mod:`aicalib_tf.data`; ``--preset`` may mix presets, e.g. ``train:0.8,distorted:0.2``;
@@ -306,7 +308,7 @@ def _parser() -> argparse.ArgumentParser:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     d = TrainConfig(out="")
     ap.add_argument("--out", required=True, metavar="RUN_DIR", help="run folder (created)")
-    ap.add_argument("--arch", default=d.arch, help="default | report | default_c12 | default_c16 | default_pre | default_pre_s2 (default: %(default)s)")
+    ap.add_argument("--arch", default=d.arch, help="default | report | default_v1 | default_c12 | default_c16 | default_pre (default: %(default)s)")
     ap.add_argument("--epochs", type=int, default=None, help=f"epochs (default: {d.epochs}; with --resume: the run's own)")
     ap.add_argument("--steps", type=int, default=d.steps, help="batches per epoch (default: %(default)s)")
     ap.add_argument("--batch-size", type=int, default=d.batch_size, help="(default: %(default)s)")

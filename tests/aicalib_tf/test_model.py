@@ -39,19 +39,19 @@ def test_report_architecture_is_the_reports_stack():
 def test_default_architecture_is_the_documented_stack():
     m = build_model("default")
     assert _stack(m) == [
-        ("Conv2D", 8), ("MaxPooling2D", None),
+        ("Conv2D", 4), ("Conv2D", 8),
         ("Conv2D", 16), ("MaxPooling2D", None),
         ("Conv2D", 32), ("Conv2D", 32), ("Conv2D", 32), ("Conv2D", 3),
     ]
-    assert m.count_params() == 24_483
+    assert m.get_layer("conv1").strides == (2, 2)  # conv1 at stride 2 in place of conv1 + pool1
+    assert m.get_layer("conv0").strides == (1, 1) and m.count_params() == 24_739
+    v1 = build_model("default_v1")  # shipped until session 12
+    assert _stack(v1) == _stack(m)[1:2] + [("MaxPooling2D", None)] + _stack(m)[2:] and v1.count_params() == 24_483
     pre = build_model("default_pre")
-    assert _stack(pre) == [("Conv2D", 4)] + _stack(m) and pre.count_params() == 24_739
-    strided = build_model("default_pre_s2")  # conv1 at stride 2 in place of conv1 + pool1
-    assert _stack(strided) == [("Conv2D", 4)] + _stack(m)[:1] + _stack(m)[2:]
-    assert strided.get_layer("conv1").strides == (2, 2) and strided.count_params() == 24_739
+    assert _stack(pre) == [("Conv2D", 4)] + _stack(v1) and pre.count_params() == 24_739
 
 
-@pytest.mark.parametrize("arch", ["default", "default_c12", "default_c16", "default_pre", "default_pre_s2"])
+@pytest.mark.parametrize("arch", ["default", "default_v1", "default_c12", "default_c16", "default_pre"])
 def test_default_is_fully_convolutional_with_a_stride_4_map(arch):
     m = build_model(arch)
     assert isinstance(m, keras.Sequential) and model_kind(m) == "map"
