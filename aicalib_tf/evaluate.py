@@ -16,8 +16,9 @@ names, sweep names (noise, blur, contrast, jpeg, distortion, tilt), ``named``, `
 Detectors, all in this one process and timed per call (time.perf_counter, after a warm-up at each image size); each
 image goes through every detector in turn, and a condition's images are all rendered before any
 is timed. At the end, each detector's 20 slowest images of each size are timed twice more, round
-robin, and keep their least time (results.csv ``time_runs``): on a shared 2-core machine a single
-stall otherwise sets a detector's slowest time, while an image that is slow every time stays slow.
+robin, and keep their least time (results.csv ``time_runs``; ``time_first_ms`` keeps the first
+run's time): on a shared 2-core machine a single stall otherwise sets a detector's slowest time,
+while an image that is slow every time stays slow.
 The detectors:
 cnn (the CNN pipeline with --model, default models/default.keras), report (the same pipeline
 with the report's patch classifier), opencv (cv2.findChessboardCorners + cornerSubPix), and
@@ -123,7 +124,8 @@ def retime_slowest(slowest: dict, detectors: dict, runs: int = RETIME_RUNS) -> i
 
     The runs go round robin over all kept images, so (with more than one kept) no run follows a run
     of the same image and finds it still in the CPU's caches. Each row's ``time_runs`` counts its
-    timings. Returns how many rows were timed again.
+    timings; its ``time_first_ms``, when present, is left as it was. Returns how many rows were
+    timed again.
     """
     items = [(key[0], row, image) for key, heap in slowest.items() for _, _, row, image in heap]
     for _ in range(runs):
@@ -211,7 +213,7 @@ def _detect_sample(name: str, cond: Condition | None, index: int, s, detectors: 
     for det, fn in detectors.items():
         found, ms = time_detector(fn, s.image)
         row, e = score_detection(found, truth, visible, has_board, PATTERN)
-        row = {**base, "detector": det, **row, "time_ms": ms, "time_runs": 1}
+        row = {**base, "detector": det, **row, "time_ms": ms, "time_first_ms": ms, "time_runs": 1}
         rows.append(row)
         img_rows.append(row)
         errors.setdefault((name, det), []).append(e)
