@@ -110,19 +110,20 @@ def test_a_board_too_small_for_the_coarse_scale_is_found_at_full_size(monkeypatc
     s = make_sample("clean", 0, 0, size=(640, 480), pattern=(9, 6))
     small = detect.detect_corners(s.image, (9, 6))
     assert small.complete
-    # the 640×480 image shrunk to squares of ~5 px inside a plain 1920×1080 frame
+    # the 640×480 image shrunk to squares of ~4.4 px inside a plain 1920×1080 frame: ~2.2 px at the
+    # coarse scale, too thin for the network (at ~5 px, half size 320×240, the coarse scale finds it)
     import cv2
 
-    img = cv2.resize(s.image, (320, 240), interpolation=cv2.INTER_AREA)
+    img = cv2.resize(s.image, (280, 210), interpolation=cv2.INTER_AREA)
     frame = np.full((1080, 1920), int(np.median(img)), np.uint8)
-    frame[400:640, 800:1120] = img
+    frame[400:610, 800:1080] = img
     tried = []
     real = detect._detect_at
     monkeypatch.setattr(detect, "_detect_at", lambda g, *a: tried.append(g.shape) or real(g, *a))
     det = detect.detect_corners(frame, (9, 6))
     assert tried == [(540, 960), (1080, 1920)]
     assert det.complete
-    truth = (s.corners + 0.5) / 2 - 0.5 + [800, 400]
+    truth = (s.corners + 0.5) * (280 / 640) - 0.5 + [800, 400]
     from aicalib_tf.metrics import board_detection_outcome
 
     assert board_detection_outcome(det.corners, truth, (9, 6))[0] == "hit"
