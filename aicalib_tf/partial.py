@@ -20,7 +20,7 @@ from . import placement
 from .board_order import handed, reading
 from .grid import Grid
 from .junctions import nearest_spacing
-from .lattice import MIN_PARTIAL, drop_outliers, in_view, local_step, predict_ids
+from .lattice import MIN_PARTIAL, curved_residuals, drop_outliers, in_view, local_step, predict_ids
 from .refine import window_radius
 
 __all__ = ["partial_board"]
@@ -307,6 +307,8 @@ def partial_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int
         kept = drop_outliers(ids, pts, sc, tight)
         if kept is None and tight.any():  # the tight corners may have upset their neighbours' fits
             kept = drop_outliers(ids[~tight], pts[~tight], sc[~tight])
+        if kept is None and len(ids) == cols * rows:  # a completed board bent by a strong lens
+            kept = drop_outliers(ids, pts, sc, tight, residuals=curved_residuals)
         if kept is None:
             continue
         ids, pts, sc = kept
