@@ -80,15 +80,15 @@ def curved_residuals(ids: np.ndarray, pts: np.ndarray, k: int = 12) -> np.ndarra
         return np.zeros(n)
     d_ids = ((ids[:, None] - ids[None]) ** 2).sum(-1)
     np.fill_diagonal(d_ids, np.inf)
-    d_pts = np.sqrt(((pts[:, None] - pts[None]) ** 2).sum(-1))
-    np.fill_diagonal(d_pts, np.inf)
+    step = local_step(ids, pts, pts)  # each corner's distance to its nearest other corner
     out = np.zeros(n)
     for i in range(n):
         sel = np.argsort(d_ids[i], kind="stable")[:k]
         u, v = (ids[sel] - ids[i]).T
         design = np.stack([np.ones(k), u, v, u * u, u * v, v * v], 1)
         coef, *_ = np.linalg.lstsq(design, pts[sel], rcond=None)
-        res = np.hypot(*(coef[0] - pts[i])) / d_pts[i].min()
+        with np.errstate(divide="ignore", invalid="ignore"):
+            res = np.hypot(*(coef[0] - pts[i])) / step[i]
         out[i] = res if np.isfinite(res) else 0.0
     return out
 
