@@ -79,6 +79,7 @@ from __future__ import annotations
 import textwrap
 from collections import Counter
 from dataclasses import dataclass, replace
+from functools import partial as bind
 
 import cv2
 import numpy as np
@@ -91,6 +92,7 @@ from .lattice import drop_outliers
 from .partial import partial_board
 from .pyramid import downscale, refine_full, scales, to_full
 from .refine import Smoothed, refine_windowed
+from .zoom import from_zoom, zoom_box, zoom_in
 
 __all__ = ["Detection", "detect_corners", "draw_detection", "find_chessboard_corners", "main", "order_full_board", "refined_points"]
 
@@ -193,7 +195,8 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     model = model if model is not None else _default_model()
     best, reason = None, REASONS[0]
     for f in scales(w, h):
-        det = _detect_at(downscale(gray, f), pattern_size, model, threshold)
+        look = bind(_zoomed, gray, pattern_size, model, threshold) if f == 1 and pattern_size is not None else None
+        det = _detect_at(downscale(gray, f), pattern_size, model, threshold, second_look=look)
         if det.found and f > 1:
             corners, ok = refine_full(gray, to_full(det.corners, f))
             if not ok.all():  # a corner left at its coarse place may be px off: try the finer scales
@@ -209,6 +212,23 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
         if best is None or len(det.corners) > len(best.corners):
             best = det
     return replace(best, image_size=(w, h), reason="" if best.found else reason)
+
+
+def _zoomed(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: float, seen: Grid) -> Detection | None:
+    """The search again on the region of a thin grid, enlarged (:mod:`aicalib_tf.zoom`).
+
+    gray : (H, W) float32, full size. seen : the largest grid assembled on it. Returns the
+    detection in the enlarged region, in gray's coordinates, or None when the grid is not thin or
+    nothing is found there.
+    """
+    h, w = gray.shape
+    box = zoom_box(seen.ij, seen.points, pattern_size, (w, h))
+    if box is None:
+        return None
+    det = _detect_at(zoom_in(gray, box), pattern_size, model, threshold)
+    if not det.found:
+        return None
+    return replace(det, corners=from_zoom(det.corners, box), image_size=(w, h))
 
 
 def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed: Smoothed | None = None,
@@ -236,8 +256,15 @@ def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed:
     return refined[keep].astype(np.float32), scores[keep].astype(np.float32)
 
 
-def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, threshold: float) -> Detection:
-    """:func:`detect_corners` on one scale: gray (H, W) float32, pattern already checked."""
+def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, threshold: float,
+               second_look=None) -> Detection:
+    """:func:`detect_corners` on one scale: gray (H, W) float32, pattern already checked.
+
+    second_look : None, or ``look(grid) -> Detection | None``, asked with the largest grid when no
+    full board is found, before partial boards are looked for (:func:`_zoomed`, at full size). Its
+    complete board is returned at once; its partial board, when it has more corners than this
+    scale's.
+    """
     h, w = gray.shape
     empty = Detection(np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
                       pattern_size, False, (w, h), NO_CANDIDATES)
@@ -263,16 +290,20 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
         if board is not None:
             corners, ids, sc, pattern = board
             return Detection(corners, ids, sc, pattern, True, (w, h))
-    undecided = False
-    if pattern_size is not None:
-        board, undecided = partial_board(grids, scores, pattern_size, smooth, (w, h), propose)
-        if board is None and not grids:  # no 3×3 block anywhere: strips 2 corners wide (between objects, say)
-            grids = assemble_grids(refined, scores, gray=smooth, limit=limit, strips=True)
-            board, undecided = partial_board(grids, scores, pattern_size, smooth, (w, h), propose)
-        if board is not None:
-            corners, ids, sc, complete = board
-            return Detection(corners, ids, sc, tuple(pattern_size), complete, (w, h))
-    return replace(empty, reason=UNDECIDED if undecided else NO_MATCH if grids else NO_GRID)
+    if pattern_size is None:
+        return replace(empty, reason=NO_MATCH if grids else NO_GRID)
+    if not grids:  # no 3×3 block anywhere: strips 2 corners wide (between objects, say)
+        grids = assemble_grids(refined, scores, gray=smooth, limit=limit, strips=True)
+    look = second_look(grids[0]) if second_look is not None and grids else None
+    if look is not None and look.complete:
+        return look
+    board, undecided = partial_board(grids, scores, pattern_size, smooth, (w, h), propose)
+    if board is not None:
+        corners, ids, sc, complete = board
+        det = Detection(corners, ids, sc, tuple(pattern_size), complete, (w, h))
+    else:
+        det = replace(empty, reason=UNDECIDED if undecided else NO_MATCH if grids else NO_GRID)
+    return look if look is not None and len(look.corners) > len(det.corners) else det
 
 
 def find_chessboard_corners(image, pattern_size: tuple[int, int], *, model=None) -> tuple[bool, np.ndarray | None]:

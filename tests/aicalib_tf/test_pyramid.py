@@ -94,7 +94,7 @@ def test_a_large_image_is_detected_at_half_scale_as_accurately_as_at_full(monkey
     s = make_sample("clean", 4, 0, size=(1920, 1080), pattern=(9, 6))
     tried = []
     real = detect._detect_at
-    monkeypatch.setattr(detect, "_detect_at", lambda g, *a: tried.append(g.shape) or real(g, *a))
+    monkeypatch.setattr(detect, "_detect_at", lambda g, *a, **k: tried.append(g.shape) or real(g, *a, **k))
     det = detect.detect_corners(s.image, (9, 6))
     assert det.complete and det.image_size == (1920, 1080)
     assert tried == [(540, 960)]  # found at the coarse scale: full size never searched
@@ -119,7 +119,7 @@ def test_a_board_too_small_for_the_coarse_scale_is_found_at_full_size(monkeypatc
     frame[400:610, 800:1080] = img
     tried = []
     real = detect._detect_at
-    monkeypatch.setattr(detect, "_detect_at", lambda g, *a: tried.append(g.shape) or real(g, *a))
+    monkeypatch.setattr(detect, "_detect_at", lambda g, *a, **k: tried.append(g.shape) or real(g, *a, **k))
     det = detect.detect_corners(frame, (9, 6))
     assert tried == [(540, 960), (1080, 1920)]
     assert det.complete
@@ -143,6 +143,6 @@ def test_a_board_whose_corner_the_full_image_refinement_cannot_place_is_searched
     tried = []
     real_at = detect._detect_at
     monkeypatch.setattr(detect, "refine_full", one_fails)
-    monkeypatch.setattr(detect, "_detect_at", lambda g, *a: tried.append(g.shape) or real_at(g, *a))
+    monkeypatch.setattr(detect, "_detect_at", lambda g, *a, **k: tried.append(g.shape) or real_at(g, *a, **k))
     det = detect.detect_corners(s.image, (9, 6))
     assert tried == [(540, 960), (1080, 1920)] and det.complete  # found again at full size
