@@ -64,6 +64,14 @@ grid of its near rows only. A 1920×1080
 image costs about a quarter as much; a board whose squares are too small for the coarse scale is
 found at full size.
 
+Thin boards (``pattern_size`` given): at the edge of a wide-angle lens a board's squares can be
+2–4 px thick, and the CNN finds few of their corners. When the full-size search finds no full
+board but assembles a grid with corners under 6 px apart, the region the board could cover is
+enlarged 3× (at most 240,000 px enlarged) and searched again (:mod:`aicalib_tf.zoom`). A complete
+board found there is returned, so is a partial one with more than half the pattern's corners;
+otherwise partial boards are looked for at full size too, and the one with more corners is
+returned.
+
 Without ``pattern_size``, the largest grid with every corner found is returned, complete, its
 size taken as the pattern (columns counted along the grid direction nearer the image's x axis,
 so a 9×6 board held landscape is (9, 6) and turned on its side (6, 9)); ids are relative to that
@@ -214,18 +222,22 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     return replace(best, image_size=(w, h), reason="" if best.found else reason)
 
 
-def _zoomed(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: float, seen: Grid) -> Detection | None:
+def _zoomed(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: float, seen: Grid,
+            others: np.ndarray | None = None) -> Detection | None:
     """The search again on the region of a thin grid, enlarged (:mod:`aicalib_tf.zoom`).
 
-    gray : (H, W) float32, full size. seen : the largest grid assembled on it. Returns the
-    detection in the enlarged region, in gray's coordinates, or None when the grid is not thin or
-    nothing is found there.
+    gray : (H, W) float32, full size. seen : the largest grid assembled on it. others : (M, 2) px,
+    the corner candidates found on it (they narrow the region, :func:`aicalib_tf.zoom.zoom_box`).
+    Returns the detection in the enlarged region, in gray's coordinates, or None when the grid is
+    not thin, its region too large, or nothing is found there.
     """
     h, w = gray.shape
-    box = zoom_box(seen.ij, seen.points, pattern_size, (w, h))
+    box = zoom_box(seen.ij, seen.points, pattern_size, (w, h), others)
     if box is None:
         return None
-    det = _detect_at(zoom_in(gray, box), pattern_size, model, threshold)
+    # a partial board is only looked for there when the enlarged grid outgrows the one seen (the
+    # partial search is the costly part, and a grid no larger adds nothing)
+    det = _detect_at(zoom_in(gray, box), pattern_size, model, threshold, partial_above=len(seen))
     if not det.found:
         return None
     return replace(det, corners=from_zoom(det.corners, box), image_size=(w, h))
@@ -257,13 +269,15 @@ def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed:
 
 
 def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, threshold: float,
-               second_look=None) -> Detection:
+               second_look=None, partial_above: int = 0) -> Detection:
     """:func:`detect_corners` on one scale: gray (H, W) float32, pattern already checked.
 
-    second_look : None, or ``look(grid) -> Detection | None``, asked with the largest grid when no
-    full board is found, before partial boards are looked for (:func:`_zoomed`, at full size). Its
-    complete board is returned at once; its partial board, when it has more corners than this
-    scale's.
+    second_look : None, or ``look(grid, candidates) -> Detection | None``, asked with the largest
+    grid and the candidate points when no full board is found (:func:`_zoomed`, at full size). Its board is returned when complete or
+    with more than half the pattern's corners (the partial-board search here is the costly part
+    of a thin board's time); else the one with more corners of its board and this scale's partial
+    board. partial_above : partial boards are only looked for when the largest grid has more
+    corners than this.
     """
     h, w = gray.shape
     empty = Detection(np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
@@ -294,15 +308,17 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
         return replace(empty, reason=NO_MATCH if grids else NO_GRID)
     if not grids:  # no 3×3 block anywhere: strips 2 corners wide (between objects, say)
         grids = assemble_grids(refined, scores, gray=smooth, limit=limit, strips=True)
-    look = second_look(grids[0]) if second_look is not None and grids else None
-    if look is not None and look.complete:
+    look = second_look(grids[0], refined) if second_look is not None and grids else None
+    if look is not None and (look.complete or 2 * len(look.corners) > pattern_size[0] * pattern_size[1]):
         return look
+    if not grids or len(grids[0]) <= partial_above:
+        return replace(empty, reason=NO_MATCH if grids else NO_GRID)
     board, undecided = partial_board(grids, scores, pattern_size, smooth, (w, h), propose)
-    if board is not None:
+    if board is None:
+        det = replace(empty, reason=UNDECIDED if undecided else NO_MATCH if grids else NO_GRID)
+    else:
         corners, ids, sc, complete = board
         det = Detection(corners, ids, sc, tuple(pattern_size), complete, (w, h))
-    else:
-        det = replace(empty, reason=UNDECIDED if undecided else NO_MATCH if grids else NO_GRID)
     return look if look is not None and len(look.corners) > len(det.corners) else det
 
 

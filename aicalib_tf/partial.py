@@ -26,6 +26,7 @@ from .refine import window_radius
 __all__ = ["partial_board"]
 
 
+CURVED_SHARE = 0.9  # of the pattern's corners: a board this complete may be bent by its lens (curved_residuals)
 EDGE_WINDOW = 0.7  # of its refinement window's radius: how far a partial board's corner must be from the frame
 LONE_SHIFT = 0.1  # of a step: how near its prediction a line's lone corner must be when its ring test leaves the frame
 
@@ -307,7 +308,7 @@ def partial_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int
         kept = drop_outliers(ids, pts, sc, tight)
         if kept is None and tight.any():  # the tight corners may have upset their neighbours' fits
             kept = drop_outliers(ids[~tight], pts[~tight], sc[~tight])
-        if kept is None and len(ids) == cols * rows:  # a completed board bent by a strong lens
+        if kept is None and len(ids) >= CURVED_SHARE * cols * rows:  # a (nearly) completed board bent by a strong lens
             kept = drop_outliers(ids, pts, sc, tight, residuals=curved_residuals)
         if kept is None:
             continue

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from aicalib_tf.zoom import FACTOR, MAX_PIXELS, from_zoom, zoom_box, zoom_in
+from aicalib_tf.zoom import FACTOR, from_zoom, zoom_box, zoom_in
 
 
 def _lattice(step_x: float, step_y: float, shape=(4, 3), origin=(300.0, 200.0)):
@@ -51,12 +51,26 @@ def test_the_box_covers_every_place_the_board_could_be_and_stays_inside_the_imag
     assert (x0, y0) == (0, 0) and x1 <= 60 and y1 <= 50
 
 
-def test_a_large_box_is_shrunk_to_the_pixel_budget():
+def test_a_region_too_large_to_enlarge_gets_no_second_look():
     ij, pts = _lattice(5.5, 5.0, shape=(3, 3), origin=(600.0, 500.0))
-    x0, y0, x1, y1 = zoom_box(ij, pts, (20, 15), (1920, 1080))  # a 20 × 15 board could cover 100+ px each way
-    assert (x1 - x0) * (y1 - y0) * FACTOR**2 <= MAX_PIXELS * 1.02
-    centre = pts.mean(axis=0)
-    assert x0 < centre[0] < x1 and y0 < centre[1] < y1
+    assert zoom_box(ij, pts, (9, 6), (1920, 1080)) is not None
+    # a 20 × 15 board could reach 17 steps (about 100 px) past each side of the grid: enlarged,
+    # that region would pass MAX_PIXELS
+    assert zoom_box(ij, pts, (20, 15), (1920, 1080)) is None
+
+
+def test_candidates_near_the_grid_narrow_the_box_to_the_board():
+    ij, pts = _lattice(4.0, 3.0)
+    wide = zoom_box(ij, pts, (9, 6), (640, 480))
+    # candidates 3 steps past one side of the grid, and one far outside where the board could be
+    near = pts[0] + np.array([[-12.0, -3.6], [-12.0, 3.0]])
+    box = zoom_box(ij, pts, (9, 6), (640, 480), others=np.concatenate([near, [[5.0, 5.0]]]))
+    x0, y0, x1, y1 = box
+    assert (x1 - x0) * (y1 - y0) < (wide[2] - wide[0]) * (wide[3] - wide[1])
+    for p in np.concatenate([pts, near]):
+        assert x0 <= p[0] < x1 and y0 <= p[1] < y1
+    assert x0 > 5.0  # the far candidate is not the board's
+    assert all(a >= b for a, b in zip(box[:2], wide[:2])) and all(a <= b for a, b in zip(box[2:], wide[2:]))
 
 
 @pytest.mark.parametrize("index", [70])
