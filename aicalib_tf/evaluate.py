@@ -275,7 +275,7 @@ def _versions() -> dict:
     import cv2
 
     v = {"python": platform.python_version(), "numpy": np.__version__, "opencv": cv2.__version__,
-         "platform": platform.platform(), "cpus": os.cpu_count()}
+         "platform": platform.platform(), "cpu": _cpu_model(), "cpus": os.cpu_count()}
     for mod in ("tensorflow", "keras", "pandas", "matplotlib"):
         try:
             v[mod] = __import__(mod).__version__
@@ -283,6 +283,18 @@ def _versions() -> dict:
             v[mod] = None
     v.update(_git_state())
     return v
+
+
+def _cpu_model() -> str | None:
+    """The CPU's model name (Linux /proc/cpuinfo), or None: timings differ between machines of one kind."""
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip() or None
+    except OSError:
+        pass
+    return None
 
 
 def _git_state() -> dict:

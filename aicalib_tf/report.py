@@ -280,8 +280,9 @@ def write_report(out: Path, cfg, conds, result: dict, info: dict, versions: dict
     md = ["# Chessboard detection benchmark: CNN against OpenCV\n",
           f"Command: `{cfg.command}`  \nWall time: {result['wall_s']:.0f} s (rendering {result['render_s']:.0f} s); "
           f"{len(results)} detections on {len(results) // max(1, len(cfg.detectors))} images. "
-          f"Machine: {versions.get('platform')}, {versions.get('cpus')} CPUs.  ",
-          "Versions: " + ", ".join(f"{k} {v}" for k, v in versions.items() if k not in ("platform", "cpus", "git_uncommitted")) + ".  ",
+          f"Machine: {versions.get('platform')}, {versions.get('cpus')} CPUs ({versions.get('cpu') or 'CPU model unknown'}).  ",
+          "Versions: " + ", ".join(f"{k} {v}" for k, v in versions.items()
+                                   if k not in ("platform", "cpu", "cpus", "git_uncommitted")) + ".  ",
           "Models: " + "; ".join(f"{d}: `{Path(m['model']).name}` sha256 `{m['sha256'][:16]}…`" for d, m in info.items())
           + ("." if info else "none.") + _uncommitted(versions),
           "\n## Headline\n",

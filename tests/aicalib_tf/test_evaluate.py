@@ -76,7 +76,9 @@ def test_quick_suite_end_to_end_writes_every_file(tmp_path):
     assert "| first-run max ms |" in text  # the time table shows the slowest first timing too
     cfg = json.loads((out / "config.json").read_text())
     assert re.fullmatch(r"[0-9a-f]{64}", cfg["models"]["cnn"]["sha256"])
-    assert {"python", "numpy", "opencv", "tensorflow", "keras"} <= set(cfg["versions"])
+    assert {"python", "numpy", "opencv", "tensorflow", "keras", "cpu"} <= set(cfg["versions"])
+    cpu = cfg["versions"]["cpu"]  # the machine behind the times, where /proc/cpuinfo names it
+    assert f"CPUs ({cpu or 'CPU model unknown'})" in text
     assert len(cfg["conditions"]) == len(conds) - 1 and cfg["image_counts"]["clean"] == 1
     assert not list(out.rglob("*.tmp"))  # atomic writes leave no temporaries
 
