@@ -55,6 +55,17 @@ def test_decode_pools_a_corner_split_between_four_cells():
     np.testing.assert_allclose(pts[0], [7.5, 7.5], atol=1e-5)
 
 
+def test_decode_ties_keep_the_cell_first_in_row_major_order_and_take_any_float_map():
+    m = np.zeros((3, 5, 3))  # float64 in: decoded as float32
+    m[1, 1] = [0.8, 0.9, 0.5]  # x = 4·1.9 − 0.5 = 7.1
+    m[1, 2] = [0.8, 0.2, 0.5]  # x = 8.3, 1.2 px away: close, not pooled, an equal weight
+    m[0, 4] = [0.6, 0.5, 0.5]  # on the map's edge: its missing neighbours count for nothing
+    pts, scores = decode_map(m, 0.5)
+    assert pts.dtype == np.float32 and scores.dtype == np.float32
+    np.testing.assert_allclose(pts, [[7.1, 5.5], [17.5, 1.5]], atol=1e-5)
+    np.testing.assert_allclose(scores, [0.8, 0.6])
+
+
 def test_decode_threshold_and_shape_check():
     m = np.zeros((2, 2, 3), np.float32)
     m[0, 0, 0] = 0.4
