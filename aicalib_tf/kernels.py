@@ -1,4 +1,4 @@
-"""Compiled inner loops of the subpixel fits (numba; pure numpy/OpenCV callers, no TensorFlow).
+"""Compiled inner loops of the detector (numba; pure numpy/OpenCV callers, no TensorFlow).
 
 Each refinement call fits only a handful of points, so as numpy array code its time went on
 per-call overhead: a grid or a partial board asks the fits about a few points at a time, hundreds
@@ -9,11 +9,13 @@ The grid seed search (:func:`seed_block`) is compiled for the same reason: grid 
 seed at every candidate, dozens per image, each a few dozen small array operations. So are the
 lattice sums of a partial board's growth (:func:`nearest_predict`, :func:`lattice_residuals_loop`,
 :func:`nearest_steps`): a board grown from a strip of corners asks them some forty times, with
-N × N distance tables and sorts each time.
+N × N distance tables and sorts each time. So is the corner map's decoding (:func:`decode_cells`):
+every image's map, some 20,000 cells of which about a hundred are looked at, took 0.28 ms as
+array code and takes 0.03 ms here.
 
 The maths is that of :func:`aicalib_tf.refine.refine_saddle`,
 :func:`aicalib_tf.robust_refine.refine_symmetric` (and its asymmetry measures),
-:func:`aicalib_tf.junctions.ring_symmetry`, :func:`aicalib_tf.lattice.predict_ids`,
+:func:`aicalib_tf.junctions.ring_symmetry`, :func:`aicalib_tf.corner_map.decode_map`, :func:`aicalib_tf.lattice.predict_ids`,
 :func:`aicalib_tf.lattice.lattice_residuals`, :func:`aicalib_tf.lattice.local_step` and
 :func:`aicalib_tf.grid._seed`, whose docstrings define it; these functions are their loops and take the fixed operators those modules build. Images are (H, W) float32; points
 are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0); samples outside the image take the
