@@ -11,7 +11,7 @@ Precision. On a CPU with native bfloat16 arithmetic (x86 ``avx512_bf16`` or ``am
 TensorFlow's oneDNN kernels on (the default), the corner map is computed in bfloat16: the model's
 layers but the last run under Keras's ``mixed_bfloat16`` policy while its graph is traced (the
 weights stay float32 and are read afresh on every call; the output stays float32). On this
-project's 2-core CPU a 640×480 map takes about 2.5–3 ms instead of 4–5 ms; corner weights differ
+project's 2-core CPUs a 640×480 map takes about 2.5–4 ms instead of 4–7 ms; corner weights differ
 from float32's by about 0.01 and subpixel offsets by under 0.07 px, before the refinement on the
 image, which does not use them. Elsewhere, where a bfloat16 run fails, and with the environment
 variable ``AICALIB_PRECISION=float32``, float32 is used (``bfloat16`` asks for it regardless).
