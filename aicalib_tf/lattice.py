@@ -70,8 +70,8 @@ def curved_residuals(ids: np.ndarray, pts: np.ndarray, k: int = 12) -> np.ndarra
     fitted to its k nearest other corners, so a lattice bent by a strong lens fits too.
 
     Under a 120° barrel lens the local homographies of a board's compressed edge miss its true
-    corners by up to 0.25 steps; the quadratic, by under 0.04 (docs/benchmark.md, wide-angle). Steps as
-    in :func:`lattice_residuals` without the lone-corner case. Needs N > k; else zeros.
+    corners by up to 0.25 steps; the quadratic, by under 0.04 (docs/benchmark.md, wide-angle).
+    Steps as in :func:`lattice_residuals` without the lone-corner case. Needs N > k; else zeros.
     """
     ids = np.asarray(ids, np.float64).reshape(-1, 2)
     pts = np.asarray(pts, np.float64).reshape(-1, 2)
