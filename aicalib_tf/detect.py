@@ -294,18 +294,24 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
         spacing = nearest_spacing(refined)
         amp, _ = ring_symmetry(smooth, refined.astype(np.float64), 0.3 * spacing)
         propose = proposer(smoothed, smooth, float(np.median(amp[: max(9, len(amp) // 2)])))
-    # grow one step past the pattern so that a bigger board shows itself and is rejected
-    limit = max(pattern_size) + 1 if pattern_size is not None else None
-    grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit)
     if pattern_size is None:
-        grids = _own_grids(grids)
-    for grid in grids:
-        board = full_board(grid, scores, pattern_size, smooth)
-        if board is not None:
-            corners, ids, sc, pattern = board
-            return Detection(corners, ids, sc, pattern, True, (w, h))
-    if pattern_size is None:
+        grids = _own_grids(assemble_grids(refined, scores, gray=smooth, propose=propose))
+        for grid in grids:
+            board = full_board(grid, scores, None, smooth)
+            if board is not None:
+                return Detection(*board, True, (w, h))
         return replace(empty, reason=NO_MATCH if grids else NO_GRID)
+    boards = []
+
+    def is_board(grid: Grid) -> bool:  # the first grid assembled that is the full board ends the assembly
+        boards.append(full_board(grid, scores, pattern_size, smooth))
+        return boards[-1] is not None
+
+    # grow one step past the pattern so that a bigger board shows itself and is rejected
+    limit = max(pattern_size) + 1
+    grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit, stop=is_board)
+    if boards and boards[-1] is not None:
+        return Detection(*boards[-1], True, (w, h))
     if not grids:  # no 3×3 block anywhere: strips 2 corners wide (between objects, say)
         grids = assemble_grids(refined, scores, gray=smooth, limit=limit, strips=True)
     look = second_look(grids[0], refined) if second_look is not None and grids else None

@@ -399,7 +399,7 @@ def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | 
 
 def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray: np.ndarray | None = None,
                    min_size: int = 9, neighbours: int = 12, propose=None, limit: int | None = None,
-                   strips: bool = False) -> list[Grid]:
+                   strips: bool = False, stop=None) -> list[Grid]:
     """Find lattices among candidate corner points.
 
     points : (N, 2) float (x, y) px. scores : (N,) or None; seeds are tried strongest first.
@@ -412,6 +412,11 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
     strips : seed with 3×2 blocks, not 3×3 (see :func:`_seed`). Such seeds also fit sheared
         lattices of a board whose 3×3 blocks are in view; :mod:`aicalib_tf.detect` uses them
         only where no 3×3 seed started a grid.
+    stop : None, or ``stop(grid) -> bool``, asked about each grid as it is assembled; when it
+        says True, no further seed is tried (the grids so far are returned). The detector stops at
+        the first grid that is the full board: later seeds could only give other grids, and of
+        the grids that are the full board the first assembled was returned anyway. On a photo
+        with clutter (a keyboard, a screen), seeds there cost more than the board itself.
     Returns grids, largest first; they share no point.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
@@ -445,5 +450,7 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
         ks = list(lat.cells.values())
         grids.append(Grid(index=np.array([k if k < n else -1 for k in ks]), ij=ij - ij.min(0),
                           points=np.array([lat.point(k) for k in ks])))
+        if stop is not None and stop(grids[-1]):
+            break
     grids.sort(key=len, reverse=True)
     return grids

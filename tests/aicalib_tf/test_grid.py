@@ -47,6 +47,21 @@ def test_clutter_points_and_missing_corners():
     assert _same_lattice(g.ij, np.stack([idx % 9, idx // 9], 1))
 
 
+def test_stop_ends_the_assembly_at_the_grid_it_accepts():
+    # two separate lattices: the stronger seeds first, so the first grid assembled is the left one
+    gx, gy = np.meshgrid(np.arange(5) * 20.0, np.arange(4) * 20.0)
+    left = np.stack([gx.ravel() + 50, gy.ravel() + 50], 1)
+    right = left + [300, 100]
+    pts = np.concatenate([left, right])
+    scores = np.r_[np.full(20, 0.9), np.full(20, 0.8)]
+    both = assemble_grids(pts, scores)
+    assert [len(g) for g in both] == [20, 20]
+    asked = []
+    first = assemble_grids(pts, scores, stop=lambda g: asked.append(len(g)) or True)
+    assert asked == [20] and len(first) == 1 and np.all(first[0].index < 20)
+    assert len(assemble_grids(pts, scores, stop=lambda g: False)) == 2
+
+
 def test_too_few_or_scattered_points_give_no_grid():
     assert assemble_grids(np.zeros((5, 2))) == []
     rng = np.random.default_rng(0)
