@@ -301,17 +301,18 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
             if board is not None:
                 return Detection(*board, True, (w, h))
         return replace(empty, reason=NO_MATCH if grids else NO_GRID)
-    boards = []
+    board = None
 
     def is_board(grid: Grid) -> bool:  # the first grid assembled that is the full board ends the assembly
-        boards.append(full_board(grid, scores, pattern_size, smooth))
-        return boards[-1] is not None
+        nonlocal board
+        board = full_board(grid, scores, pattern_size, smooth)
+        return board is not None
 
     # grow one step past the pattern so that a bigger board shows itself and is rejected
     limit = max(pattern_size) + 1
     grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit, stop=is_board)
-    if boards and boards[-1] is not None:
-        return Detection(*boards[-1], True, (w, h))
+    if board is not None:
+        return Detection(*board, True, (w, h))
     if not grids:  # no 3×3 block anywhere: strips 2 corners wide (between objects, say)
         grids = assemble_grids(refined, scores, gray=smooth, limit=limit, strips=True)
     look = second_look(grids[0], refined) if second_look is not None and grids else None
@@ -321,7 +322,7 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
         return replace(empty, reason=NO_MATCH if grids else NO_GRID)
     board, undecided = partial_board(grids, scores, pattern_size, smooth, (w, h), propose)
     if board is None:
-        det = replace(empty, reason=UNDECIDED if undecided else NO_MATCH if grids else NO_GRID)
+        det = replace(empty, reason=UNDECIDED if undecided else NO_MATCH)
     else:
         corners, ids, sc, complete = board
         det = Detection(corners, ids, sc, tuple(pattern_size), complete, (w, h))

@@ -134,9 +134,11 @@ def _map_fn(model, shape: tuple[int, int], precision: str):
     """The model (at ``precision``) as a concrete function for one (1, H, W, 1) float32 input size, kept on the model.
 
     Calling a concrete function skips ``tf.function``'s per-call dispatch (about 0.5 ms), and a
-    graph traced for a fixed size runs faster than one for any size (a 672×426 map: 4.0 ms
-    against 5.4 ms). A trace costs about 40 ms, so a size gets its own function on its second
-    use: a folder of photos of one size is traced once, and the one-off sizes of enlarged regions
+    graph traced for a fixed size runs up to 5% faster than one for any size once both have
+    seen that size (session 14: 4.14 against 4.15 ms at 640×480, 3.11 against 3.25 ms at
+    552×432); either pays 2–3 ms more on its first call at a size, while oneDNN sets up its
+    kernels. A trace costs about 40 ms, so a size gets its own function on its second use: a
+    folder of photos of one size is traced once, and the one-off sizes of enlarged regions
     (:mod:`aicalib_tf.zoom`) share the function for any size. Beyond ``MAX_MAP_SHAPES`` sizes per
     precision, that function serves the rest too (its outputs are the same).
     """
