@@ -18,7 +18,7 @@ demo: $(STAMP)
 	$(PY) -m aicalib_tf.evaluate
 
 test: $(STAMP)
-	$(PY) -m pytest -q; rc=$$?; if [ $$rc -eq 5 ]; then echo "pytest: no tests collected"; exit 0; fi; exit $$rc
+	$(PY) -m pytest -q
 
 bench: $(STAMP)
 	$(PY) -m aicalib_tf.evaluate --images tests/data/opencv_left --pattern 9x6 --degrade

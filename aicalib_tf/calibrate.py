@@ -6,7 +6,7 @@
 
 Every image goes through the detector (default: the CNN, which also returns partial boards;
 each counts as a view with its own pose). Zhang's calibration (``cv2.calibrateCameraExtended``)
-follows, with outlier views rejected one at a time (see :mod:`aicalib_tf.calibration`).
+follows, with outlier views rejected one at a time (see :mod:`aicalib_tf.calib.fit`).
 
 It prints a compact report (images used, skipped and rejected with reasons; RMS and worst view;
 K and distortion with ±1σ; field of view; warnings) and writes into --out, atomically:
@@ -24,246 +24,16 @@ found, fewer than 3 usable views, mixed sizes); nothing is written on failure.
 from __future__ import annotations
 
 import os
-import re
 import sys
-from collections import Counter
-from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
-from .calibration import Calibration, CalibrationError, View, calibrate_camera
-
-__all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "CalibrateConfig", "parse_square",
-           "make_detector", "run", "main", "undistort"]
-
-DETECTORS = ("cnn", "report", "opencv", "opencv-sb")
-RESIZE_POLICIES = ("error", "skip", "crop", "scale")
-_UNITS = {"mm": "mm", "cm": "cm", "m": "m", "in": "in", "inch": "in", "": ""}
-
-
-def undistort(image, calibration: Calibration, *, alpha: float = 0.0):
-    """Remove lens distortion (see :func:`aicalib_tf.calib_io.undistort`)."""
-    from .calib_io import undistort as _undistort
-
-    return _undistort(image, calibration, alpha=alpha)
-
-
-def parse_square(text: str) -> tuple[float, str]:
-    """``"25mm"`` -> (25.0, "mm"). Units: mm, cm, m, in; a bare number is unitless."""
-    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*([a-zA-Z]*)\s*", str(text))
-    if not m:
-        raise ValueError(f"--square must be a positive size such as 25mm, 2.5cm or 0.025m, got {text!r}")
-    value, unit = float(m.group(1)), m.group(2).lower()
-    if unit not in _UNITS:
-        raise ValueError(f"--square unit {m.group(2)!r} is not one of mm, cm, m, in (got {text!r})")
-    if not value > 0:
-        raise ValueError(f"--square must be positive, got {text!r}")
-    return value, _UNITS[unit]
-
-
-def make_detector(name: str, pattern_size: tuple[int, int], model: str = "default"):
-    """A function (H, W) grey image (float in [0, 1] or uint8) -> (corners (N, 2), ids (N, 2)) or None.
-
-    name : "cnn" (full or partial boards, with ``model``: default, report or a .keras path),
-    "report" (the same pipeline with the report's network), "opencv" (classic + cornerSubPix) or
-    "opencv-sb" (full boards only). The function's ``info`` attribute holds the model path and
-    sha256 for the CNN detectors; after a call that found nothing, its ``why`` attribute says why
-    where the detector tells (the CNN detectors), else "". The detectors are those of
-    :mod:`aicalib_tf.detectors`.
-    """
-    from data_gen.degrade import quantize
-
-    from .detectors import make_detectors
-
-    if name not in DETECTORS:
-        raise ValueError(f"unknown detector {name!r}; choose from {', '.join(DETECTORS)}")
-    detectors, info = make_detectors([name], tuple(pattern_size), model)
-    found_by = detectors[name]
-
-    def detect(gray):
-        g = np.asarray(gray)
-        found = found_by(g if g.dtype == np.uint8 else quantize(g))
-        detect.why = found.why
-        return (found.corners, found.ids) if len(found.corners) else None
-
-    detect.info, detect.why = info.get(name, {}), ""
-    return detect
-
-
-@dataclass(frozen=True)
-class CalibrateConfig:
-    """Everything one calibration run needs (the CLI's options)."""
-
-    images: tuple[str, ...]
-    pattern: tuple[int, int]
-    square: float = 1.0
-    square_unit: str = ""
-    out: str = "calib"
-    detector: str = "cnn"
-    model: str = "default"
-    fix_k3: bool = False
-    rational: bool = False
-    resize_policy: str = "error"
-    quiet: bool = False
-
-
-@dataclass
-class _Found:
-    label: str
-    file: str
-    size: tuple[int, int]
-    view: View | None
-    why: str = ""  # no view: why, where the detector says
-
-
-def _labels(files: list[str]) -> dict[str, str]:
-    """Short names for reports: the file name, or the path where two files share a name."""
-    counts = Counter(Path(f).name for f in files)
-    return {f: Path(f).name if counts[Path(f).name] == 1 else f for f in files}
-
-
-def _detect_all(files: list[str], labels: dict[str, str], detect, quiet: bool) -> tuple[list[_Found], dict[str, str]]:
-    from tqdm import tqdm
-
-    from .io import ImageError, load_image
-
-    found, skipped = [], {}
-    for f in tqdm(files, desc="detect", unit="img", disable=quiet):
-        try:
-            gray = load_image(f)
-        except ImageError as exc:
-            skipped[labels[f]] = str(exc).removeprefix(f"{f}: ")
-            continue
-        h, w = gray.shape
-        hit = detect(gray)
-        found.append(_Found(labels[f], f, (w, h), View(labels[f], *hit) if hit is not None else None,
-                            "" if hit is not None else detect.why))
-    return found, skipped
-
-
-def _apply_size_policy(found: list[_Found], policy: str, skipped: dict) -> tuple[list[_Found], tuple[int, int]]:
-    """Bring every image to the most common size, as the policy says; returns (found, size)."""
-    sizes = Counter(f.size for f in found)
-    size = sizes.most_common(1)[0][0]
-    odd = [f for f in found if f.size != size]
-    if not odd:
-        return found, size
-    if policy == "error":
-        names = ", ".join(f"{f.label} ({f.size[0]}x{f.size[1]})" for f in odd)
-        raise CalibrationError(f"images of different sizes: most are {size[0]}x{size[1]} but {names}; "
-                               "choose --resize-policy skip, crop or scale")
-    out = []
-    for f in found:
-        if f.size == size:
-            out.append(f)
-            continue
-        tag = f"{f.size[0]}x{f.size[1]}"
-        if policy == "skip":
-            skipped[f.label] = f"image is {tag}, not {size[0]}x{size[1]} (--resize-policy skip)"
-            continue
-        if policy == "crop" and (f.size[0] < size[0] or f.size[1] < size[1]):
-            skipped[f.label] = f"image is {tag}, smaller than {size[0]}x{size[1]}: cannot crop"
-            continue
-        view = f.view
-        if view is not None and policy == "crop":
-            inside = (view.corners[:, 0] <= size[0] - 0.5) & (view.corners[:, 1] <= size[1] - 0.5)
-            view = View(view.name, view.corners[inside], view.ids[inside])
-        elif view is not None:  # scale
-            s = np.array([size[0] / f.size[0], size[1] / f.size[1]])
-            view = View(view.name, (view.corners + 0.5) * s - 0.5, view.ids)
-        print(f"note: {f.label} is {tag}; {'cropped' if policy == 'crop' else 'scaled'} to {size[0]}x{size[1]}",
-              file=sys.stderr)
-        out.append(_Found(f.label, f.file, size, view, f.why))
-    return out, size
-
-
-def _preview(cal: Calibration, files: dict[str, str]) -> tuple[str, bytes] | None:
-    """(file name, PNG bytes) of the first used view's image of the calibration's size, undistorted.
-
-    Images that --resize-policy brought to that size are passed over, so the preview never
-    repeats the crop or scale that their corners went through.
-    """
-    import cv2
-
-    from .calib_io import undistort as _undistort
-
-    w, h = cal.image_size
-    for name in cal.views:
-        img = cv2.imread(files[name], cv2.IMREAD_COLOR)
-        if img is None or img.shape[:2] != (h, w):
-            continue
-        ok, png = cv2.imencode(".png", _undistort(img, cal))
-        if ok:
-            return f"undistorted_{Path(name).stem}.png", png.tobytes()
-    return None
-
-
-def _suggest_pattern(files: list[str], model_path: str) -> str:
-    """A hint naming the grid sizes the CNN sees in the first images, for a wrong --pattern."""
-    from .detect import detect_corners
-    from .io import ImageError
-    from .model import load_model
-
-    model = load_model(model_path)
-    seen = Counter()
-    for f in files[:3]:
-        try:
-            det = detect_corners(f, None, model=model)
-        except ImageError:
-            continue
-        if det.found and det.pattern_size:
-            c, r = det.pattern_size
-            seen[f"{max(c, r)}x{min(c, r)}"] += 1
-    if not seen:
-        return ""
-    return f" (the CNN sees {', '.join(f'{k} grids in {v} image(s)' for k, v in seen.items())}; is --pattern right?)"
-
-
-def run(cfg: CalibrateConfig) -> tuple[Calibration, str]:
-    """Detect, calibrate, write every output file; returns (calibration, printed report).
-
-    Raises ValueError / CalibrationError / FileNotFoundError for bad input, before writing anything.
-    """
-    from .calib_io import save_calibration
-    from .calib_report import format_report, report_figure
-    from .io import atomic_write_bytes, atomic_write_text, expand_images
-
-    files = expand_images(cfg.images)
-    if not files:
-        raise ValueError(f"no images match {' '.join(cfg.images)}")
-    if cfg.resize_policy not in RESIZE_POLICIES:
-        raise ValueError(f"--resize-policy must be one of {', '.join(RESIZE_POLICIES)}, got {cfg.resize_policy!r}")
-    detect = make_detector(cfg.detector, cfg.pattern, cfg.model)
-    labels = _labels(files)
-    found, skipped = _detect_all(files, labels, detect, cfg.quiet)
-    if not found:
-        raise CalibrationError(f"none of the {len(files)} images could be read")
-    found, size = _apply_size_policy(found, cfg.resize_policy, skipped)
-    for f in found:
-        if f.view is None:
-            skipped[f.label] = f"no {cfg.pattern[0]}x{cfg.pattern[1]} board found" + (f": {f.why}" if f.why else "")
-    views = [f.view for f in found if f.view is not None]
-    if not views:
-        hint = _suggest_pattern(files, detect.info["model"]) if "model" in detect.info else ""
-        raise CalibrationError(f"no {cfg.pattern[0]}x{cfg.pattern[1]} board found in any of the {len(files)} images{hint}")
-    meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
-            "rational": cfg.rational, "fix_k3": cfg.fix_k3, "resize_policy": cfg.resize_policy,
-            "images": len(files)}
-    cal = calibrate_camera(views, cfg.pattern, cfg.square, size, rational=cfg.rational, fix_k3=cfg.fix_k3,
-                           square_unit=cfg.square_unit, meta=meta)
-    by_name = {v.name: v for v in views}
-    used = [by_name[n] for n in cal.views]
-    report = format_report(cal, used, skipped=skipped, total=len(files))
-    figure = report_figure(cal, used)
-    preview = _preview(cal, {labels[f]: f for f in files})
-    out = Path(cfg.out)
-    save_calibration(cal, out)
-    atomic_write_bytes(out / "report.png", figure)
-    atomic_write_text(out / "report.txt", report + "\n")
-    if preview is not None:
-        atomic_write_bytes(out / preview[0], preview[1])
-    return cal, report
+from aicalib_tf.calib.workflow import (
+    DETECTORS,
+    RESIZE_POLICIES,
+    CalibrateConfig,
+    parse_square,
+    run,
+)
 
 
 def _parse_args(argv):
@@ -288,7 +58,7 @@ def _parse_args(argv):
 def main(argv: list[str] | None = None) -> int:
     """CLI entry: returns 0 on success, 2 on bad input (message on stderr, no files written)."""
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
-    from data_gen.board import check_pattern, parse_pattern
+    from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
 
     args = _parse_args(argv)
     try:

@@ -132,3 +132,10 @@ def atomic_write_bytes(path, data: bytes) -> Path:
 def atomic_write_text(path, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def quantize(img: np.ndarray) -> np.ndarray:
+    """Clip to [0, 1] and round to uint8, like a sensor's ADC. Returns (H, W) uint8."""
+    return np.clip(np.rint(img * 255.0), 0, 255).astype(np.uint8)
+
+

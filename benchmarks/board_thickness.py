@@ -2,7 +2,7 @@
 
     python benchmarks/board_thickness.py --results reports/DATE/results.csv [--condition barrel] [--show 25]
 
-For each image of an evaluate condition (``aicalib_tf.conditions``: the same renders), every
+For each image of an evaluate condition (``aicalib_tf.bench.conditions``: the same renders), every
 square of the true corner grid is measured as the quadrilateral of its four corners: its area over
 its longest side, i.e. its thickness in px across the longest side (a square seen face-on: its
 side; squeezed by a wide-angle lens or a steep tilt: much less). The board's thinnest square and
@@ -18,7 +18,7 @@ import sys
 import numpy as np
 import pandas as pd
 
-from aicalib_tf.conditions import PATTERN, condition_samples, select_conditions
+from aicalib_tf.bench.conditions import PATTERN, condition_samples, select_conditions
 
 
 def square_thickness(corners: np.ndarray, pattern=PATTERN) -> np.ndarray:

@@ -14,10 +14,10 @@ import sys
 
 import numpy as np
 
-from aicalib_tf.baselines import opencv_classic
-from aicalib_tf.metrics import align_to_truth, corner_error_stats
+from aicalib_tf.detect.opencv import opencv_classic
+from aicalib_tf.bench.metrics import align_to_truth, corner_error_stats
 from data_gen import make_sample
-from data_gen.board import parse_pattern
+from aicalib_tf.geometry.pattern import parse_pattern
 
 
 WRONG_PX = 2.0  # DESIGN.md: a board with a matched corner off by more than this is a wrong detection

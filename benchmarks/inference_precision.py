@@ -6,7 +6,7 @@ Scores ``corner_points(model, image, 0.5, precision=P)`` on the fixed validation
 ``python -m aicalib_tf.train`` (preset ``train``, seed 900001; a match is within 1 px) for
 P = float32 and bfloat16, and times network and decoding per image (median over images of the
 fastest of ``--repeats`` calls). bfloat16 is only fast on a CPU with native bfloat16 arithmetic
-(see :mod:`aicalib_tf.inference`); elsewhere its row shows the emulation's cost.
+(see :mod:`aicalib_tf.cnn.inference`); elsewhere its row shows the emulation's cost.
 """
 
 from __future__ import annotations
@@ -20,10 +20,10 @@ os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
 
 import numpy as np  # noqa: E402
 
-from aicalib_tf.inference import corner_points, native_bfloat16  # noqa: E402
-from aicalib_tf.metrics import point_detection_stats  # noqa: E402
-from aicalib_tf.model import load_model  # noqa: E402
-from aicalib_tf.train import validation_set  # noqa: E402
+from aicalib_tf.cnn.inference import corner_points, native_bfloat16  # noqa: E402
+from aicalib_tf.cnn.point_metrics import point_detection_stats  # noqa: E402
+from aicalib_tf.cnn.model import load_model  # noqa: E402
+from aicalib_tf.cnn.train import validation_set  # noqa: E402
 
 
 def main(argv=None) -> int:

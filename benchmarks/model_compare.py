@@ -8,7 +8,7 @@ within 1 px. This measures the networks alone, before refinement and grid assemb
 times the network step per image.
 
 ``--refine`` scores the detector's candidates instead: each model's points refined to the image's
-saddle point and merged within 1.5 px (:func:`aicalib_tf.detect.refined_points`), as detection
+saddle point and merged within 1.5 px (:func:`aicalib_tf.detect.pipeline.refined_points`), as detection
 does before grid assembly. Both models' points then get the same classical localisation (the
 report's raw points are the saddle detector's whole pixels, the default's the map's offsets).
 
@@ -28,11 +28,11 @@ os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
 
 import numpy as np  # noqa: E402
 
-from aicalib_tf.detect import refined_points  # noqa: E402
-from aicalib_tf.inference import corner_points  # noqa: E402
-from aicalib_tf.junctions import nearest_spacing  # noqa: E402
-from aicalib_tf.metrics import match_points, point_detection_stats  # noqa: E402
-from aicalib_tf.model import load_model  # noqa: E402
+from aicalib_tf.detect.pipeline import refined_points  # noqa: E402
+from aicalib_tf.cnn.inference import corner_points  # noqa: E402
+from aicalib_tf.detect.junctions import nearest_spacing  # noqa: E402
+from aicalib_tf.cnn.point_metrics import match_points, point_detection_stats  # noqa: E402
+from aicalib_tf.cnn.model import load_model  # noqa: E402
 from data_gen import make_sample  # noqa: E402
 
 CONDITIONS = ("clean", "noisy", "blur", "distorted", "occluded", "hard")

@@ -5,7 +5,7 @@
 
 A detector that must never return a wrong id can only name a visible corner when the image rules
 out every other way the board could lie. This script measures, on the evaluate benchmark's images
-(``aicalib_tf.conditions``: the same preset, seed, size and indices), the recall such a detector
+(``aicalib_tf.bench.conditions``: the same preset, seed, size and indices), the recall such a detector
 could reach at best, and compares it with the CNN detector's recall in an evaluate results.csv.
 
 Method, for each image:
@@ -57,7 +57,7 @@ import cv2
 import numpy as np
 import pandas as pd
 
-from aicalib_tf.conditions import PATTERN, Condition, condition_samples, select_conditions
+from aicalib_tf.bench.conditions import PATTERN, Condition, condition_samples, select_conditions
 from data_gen import draw_scene
 
 EVIDENCE_GREY = 8  # grey levels (4σ of the read noise) a pixel must differ by to count as evidence

@@ -42,9 +42,9 @@ os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
 
 import numpy as np  # noqa: E402
 
-from aicalib_tf.detect import detect_corners  # noqa: E402
-from aicalib_tf.metrics import partial_board_stats  # noqa: E402
-from aicalib_tf.model import load_model  # noqa: E402
+from aicalib_tf.detect.pipeline import detect_corners  # noqa: E402
+from aicalib_tf.bench.metrics import partial_board_stats  # noqa: E402
+from aicalib_tf.cnn.model import load_model  # noqa: E402
 from data_gen import make_sample  # noqa: E402
 
 PATTERN = (9, 6)  # --pattern changes it
@@ -59,7 +59,7 @@ def partial_stats(corners, ids, truth, visible, pattern, max_px=MAX_PX) -> dict:
 
 def _count_placements():
     """Wrap placement.place_cells to count grids whose ids the image left open (for the report only)."""
-    from aicalib_tf import placement
+    from aicalib_tf.detect import placement
 
     tally = {"tried": 0, "open": 0}
     place = placement.place_cells
@@ -174,7 +174,7 @@ SPEED = ["clean", "noisy", "blur", "distorted", "occluded", "partial", "clutter"
 
 
 def speed(model, repeats=3, n_per=5, seed=11):
-    from aicalib_tf.inference import corner_points
+    from aicalib_tf.cnn.inference import corner_points
     from aicalib_tf.io import load_image
 
     samples = [(p, make_sample(p, seed, i, pattern=PATTERN, size=(640, 480)).image) for p in SPEED for i in range(n_per)]

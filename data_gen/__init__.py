@@ -9,11 +9,14 @@ Quick use::
 Command line: ``python -m data_gen --out DIR --count N --preset NAME --seed S``.
 """
 
+from aicalib_tf.geometry.camera import Camera, distort_normalized, undistort_normalized
+from aicalib_tf.geometry.pose import project_points
+
 from .board import Board, sample_board
-from .camera import Camera, distort_normalized, sample_camera, undistort_normalized
+from .camera import sample_camera
 from .dataset import DatasetConfig, write_dataset
 from .degrade import DEGRADATIONS, apply_degradations
-from .pose import PoseConfig, project_points, sample_pose
+from .pose import PoseConfig, sample_pose
 from .presets import PRESETS, Preset, Rule, get_preset
 from .render import render_board
 from .sample import Sample, Scene, draw_scene, make_sample, make_sequence

@@ -13,7 +13,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from .board import check_pattern, parse_pattern
+from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
+
 from .dataset import DatasetConfig, check_output_dir, write_dataset
 from .presets import PRESETS
 

@@ -12,34 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Board", "sample_board", "parse_pattern", "check_pattern"]
+from aicalib_tf.geometry.pattern import board_points, check_pattern, pattern_ids
 
-MIN_PATTERN = (3, 3)
-MAX_PATTERN = (20, 15)
-
-
-def parse_pattern(text: str) -> tuple[int, int]:
-    """Parse ``"9x6"`` into ``(9, 6)`` = (cols, rows) of inner corners."""
-    parts = str(text).lower().replace("×", "x").split("x")
-    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
-        raise ValueError(f"pattern must look like COLSxROWS, e.g. 9x6, got {text!r}")
-    return int(parts[0]), int(parts[1])
-
-
-def check_pattern(pattern_size) -> tuple[int, int]:
-    """Validate ``(cols, rows)`` inner corners against the supported range; returns it as ints."""
-    try:
-        cols, rows = (int(v) for v in pattern_size)
-    except (TypeError, ValueError):
-        raise ValueError(f"pattern_size must be (cols, rows), got {pattern_size!r}") from None
-    lo_c, lo_r = MIN_PATTERN
-    hi_c, hi_r = MAX_PATTERN
-    # Accept either orientation of the largest pattern (20x15 or 15x20).
-    if min(cols, rows) < min(lo_c, lo_r) or max(cols, rows) > max(hi_c, hi_r) or min(cols, rows) > min(hi_c, hi_r):
-        raise ValueError(
-            f"pattern_size must be between {lo_c}x{lo_r} and {hi_c}x{hi_r} inner corners, got {cols}x{rows}"
-        )
-    return cols, rows
+__all__ = ["Board", "sample_board"]
 
 
 @dataclass(frozen=True)
@@ -79,9 +54,7 @@ class Board:
 
     def object_points(self) -> np.ndarray:
         """(cols·rows, 3) float64 inner-corner positions, OpenCV order (index = r·cols + c)."""
-        c, r = np.meshgrid(np.arange(self.cols), np.arange(self.rows))
-        pts = np.stack([c.ravel(), r.ravel(), np.zeros(c.size)], axis=1)
-        return pts.astype(np.float64) * self.square_size
+        return board_points(pattern_ids(self.pattern_size), self.square_size)
 
     def paper_bounds(self) -> tuple[float, float, float, float]:
         """(x0, y0, x1, y1) of the paper in board units."""

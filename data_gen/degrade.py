@@ -14,24 +14,9 @@ import math
 import cv2
 import numpy as np
 
-__all__ = [
-    "gaussian_noise",
-    "shot_noise",
-    "gaussian_blur",
-    "motion_blur",
-    "defocus",
-    "contrast",
-    "illumination_gradient",
-    "vignetting",
-    "shadow",
-    "exposure",
-    "jpeg",
-    "salt_pepper",
-    "quantize",
-    "apply_degradations",
-    "DEGRADATIONS",
-    "PIPELINE_ORDER",
-]
+from aicalib_tf.io import quantize
+
+__all__ = ["gaussian_noise", "shot_noise", "gaussian_blur", "motion_blur", "defocus", "contrast", "illumination_gradient", "vignetting", "shadow", "exposure", "jpeg", "salt_pepper", "apply_degradations", "DEGRADATIONS", "PIPELINE_ORDER"]
 
 
 def illumination_gradient(img: np.ndarray, rng: np.random.Generator, *, strength: float) -> np.ndarray:
@@ -138,11 +123,6 @@ def gaussian_noise(img: np.ndarray, rng: np.random.Generator, *, sigma: float) -
     """Additive white Gaussian read noise with standard deviation ``sigma`` grey levels (0–255)."""
     noise = rng.standard_normal(img.shape, dtype=np.float32) * np.float32(sigma / 255.0)
     return img + noise
-
-
-def quantize(img: np.ndarray) -> np.ndarray:
-    """Clip to [0, 1] and round to uint8, like a sensor's ADC. Returns (H, W) uint8."""
-    return np.clip(np.rint(img * 255.0), 0, 255).astype(np.uint8)
 
 
 def jpeg(img: np.ndarray, rng: np.random.Generator, *, quality: int) -> np.ndarray:

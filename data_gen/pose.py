@@ -12,10 +12,12 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .board import Board
-from .camera import Camera
+from aicalib_tf.geometry.camera import Camera
+from aicalib_tf.geometry.pose import in_frame, project_points
 
-__all__ = ["PoseConfig", "sample_pose", "project_points", "corner_visibility", "imaged_mask", "in_frame", "FRAMING"]
+from .board import Board
+
+__all__ = ["PoseConfig", "sample_pose", "corner_visibility", "imaged_mask", "FRAMING"]
 
 FRAMING = ("inside", "partial", "any")
 
@@ -43,36 +45,12 @@ class PoseConfig:
             raise ValueError(f"framing must be one of {FRAMING}, got {self.framing!r}")
 
 
-def project_points(points: np.ndarray, rvec, tvec, camera: Camera) -> np.ndarray:
-    """(N, 3) board points -> (N, 2) float64 pixels via ``cv2.projectPoints``."""
-    pts, _ = cv2.projectPoints(
-        np.asarray(points, dtype=np.float64).reshape(-1, 1, 3),
-        np.asarray(rvec, dtype=np.float64).reshape(3, 1),
-        np.asarray(tvec, dtype=np.float64).reshape(3, 1),
-        camera.K,
-        camera.dist,
-    )
-    return pts.reshape(-1, 2)
-
-
 def _rotation(tilt: float, tilt_axis: float, roll: float) -> np.ndarray:
     """Roll about the board normal, then tilt about an in-plane axis at angle ``tilt_axis``."""
     r_roll, _ = cv2.Rodrigues(np.array([0.0, 0.0, roll]))
     axis = np.array([math.cos(tilt_axis), math.sin(tilt_axis), 0.0])
     r_tilt, _ = cv2.Rodrigues(axis * tilt)
     return r_tilt @ r_roll
-
-
-def in_frame(uv: np.ndarray, size: tuple[int, int], border: float = 0.0) -> np.ndarray:
-    """(N,) bool: points (N, 2) px at least ``border`` px inside the image's outer edge.
-
-    The outer edge of a (w, h) image is x in [-0.5, w - 0.5], y in [-0.5, h - 0.5];
-    ``border=0.5`` keeps points within the hull of the pixel centres.
-    """
-    w, h = size
-    lo = -0.5 + border
-    with np.errstate(invalid="ignore"):
-        return (uv[:, 0] >= lo) & (uv[:, 0] <= w - 1 - lo) & (uv[:, 1] >= lo) & (uv[:, 1] <= h - 1 - lo)
 
 
 def imaged_mask(points_cam: np.ndarray, camera: Camera) -> np.ndarray:

@@ -18,8 +18,9 @@ import functools
 import cv2
 import numpy as np
 
+from aicalib_tf.geometry.camera import Camera
+
 from .board import Board
-from .camera import Camera
 
 __all__ = ["render_board", "fibonacci_lattice", "board_coordinates"]
 

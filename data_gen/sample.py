@@ -13,9 +13,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from aicalib_tf.geometry.camera import Camera
+
 from .background import make_background
 from .board import Board, sample_board
-from .camera import Camera, sample_camera
+from .camera import sample_camera
 from .degrade import apply_degradations
 from .occlude import draw_occluders, occluded, sample_occluders
 from .pose import corner_visibility, sample_pose

@@ -4,7 +4,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from aicalib_tf.conditions import condition_samples, select_conditions
+from aicalib_tf.bench.conditions import condition_samples, select_conditions
 
 _spec = importlib.util.spec_from_file_location(
     "partial_ambiguity", Path(__file__).parents[2] / "benchmarks" / "partial_ambiguity.py")

@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from data_gen.board import Board, parse_pattern, sample_board
+from data_gen.board import Board, sample_board
+from aicalib_tf.geometry.pattern import parse_pattern
 
 
 def test_object_points_follow_opencv_order():

@@ -4,7 +4,8 @@ import cv2
 import numpy as np
 import pytest
 
-from data_gen.camera import Camera, distort_normalized, monotonic_radius, sample_camera, undistort_normalized
+from aicalib_tf.geometry.camera import Camera, distort_normalized, monotonic_radius, undistort_normalized
+from data_gen.camera import sample_camera
 
 STRONGEST = np.array([-0.45, 0.55 * 0.45**2, 0.0012, -0.0012, -0.002])  # the sampler's extreme barrel
 

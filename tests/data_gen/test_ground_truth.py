@@ -5,8 +5,8 @@ import json
 import cv2
 import numpy as np
 
-from aicalib_tf.baselines import opencv_classic
-from aicalib_tf.metrics import align_to_truth, corner_error_stats
+from aicalib_tf.detect.opencv import opencv_classic
+from aicalib_tf.bench.metrics import align_to_truth, corner_error_stats
 from data_gen import make_sample, make_sequence
 from data_gen.dataset import DatasetConfig, write_dataset
 
@@ -53,7 +53,7 @@ def test_visible_flags_mean_inside_the_frame():
 
 
 def test_corners_beyond_the_lens_domain_or_behind_are_invisible():
-    from data_gen.camera import Camera
+    from aicalib_tf.geometry.camera import Camera
     from data_gen.pose import imaged_mask
 
     cam = Camera(np.array([[300.0, 0, 160], [0, 300.0, 120], [0, 0, 1]]), np.array([-0.45, 0.05, 0, 0, 0]), (320, 240))

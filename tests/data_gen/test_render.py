@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from data_gen.board import Board
-from data_gen.camera import Camera
-from data_gen.pose import project_points
+from aicalib_tf.geometry.camera import Camera
+from aicalib_tf.geometry.pose import project_points
 from data_gen.render import fibonacci_lattice, render_board
 
 from .brute_force import BACKGROUND, brute_force_render

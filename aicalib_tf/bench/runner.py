@@ -1,0 +1,278 @@
+"""The benchmark runner: the same images through every detector, scored, timed and calibrated.
+
+The command line is :mod:`aicalib_tf.evaluate`; its docstring says what a run measures and writes.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from aicalib_tf.bench.conditions import (
+    CALIB_CAMERAS,
+    PATTERN,
+    Condition,
+    board_tilt_deg,
+    calibration_sequences,
+    condition_samples,
+    select_conditions,
+    square_px,
+)
+from aicalib_tf.bench.detectors import DETECTORS, Found, make_detectors, score_detection
+from aicalib_tf.bench.metrics import calibration_errors
+from aicalib_tf.bench.timing import keep_slowest, retime_slowest, time_detector
+
+__all__ = ["DETECTORS", "EvalConfig", "Found", "make_detectors", "time_detector", "score_detection", "run_synthetic", "calibrate_sequences", "run"]
+
+FULL_COUNTS = {"named": 100, "sweep": 32, "hd": 30, "calib_views": 20}
+QUICK_COUNTS = {"named": 6, "sweep": 3, "hd": 2, "calib_views": 6}
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """One evaluation run (the CLI's options)."""
+
+    out: str
+    quick: bool = False
+    model: str = "default"
+    detectors: tuple[str, ...] = DETECTORS
+    conditions: str | None = None
+    limit: int | None = None
+    images: str | None = None
+    pattern: tuple[int, int] | None = None
+    degrade: bool = False
+    seed: int = 0
+    quiet: bool = False
+    command: str = ""
+
+    def counts(self) -> dict:
+        """Images per named condition, per sweep level, at 1920×1080, and views per calibration sequence."""
+        c = dict(QUICK_COUNTS if self.quick else FULL_COUNTS)
+        if self.limit is not None:
+            c = {k: (max(3, min(v, self.limit)) if k == "calib_views" else min(v, self.limit)) for k, v in c.items()}
+        return c
+
+
+def _difficulty(rows: list[dict]) -> float:
+    """How hard an image was: detectors that failed (wrong counts double), then the worst error."""
+    bad = sum(2 if r["outcome"] in ("wrong", "false_board") else 1 for r in rows
+              if r["outcome"] not in ("hit", "none"))
+    return bad + 0.01 * min(99.0, max([r["err_max"] for r in rows if np.isfinite(r["err_max"])] or [0.0]))
+
+
+def _warm_up(detectors: dict, size: tuple[int, int]) -> None:
+    """Run every detector, untimed, on a clean and an occluded board of ``size`` (W, H) px: the first
+    call at a new image size traces the network's graph for it (tens of ms), and the first call of
+    each compiled refinement loop loads it (:mod:`aicalib_tf.kernels`); no later call pays either."""
+    from data_gen import make_sample
+
+    for preset in ("clean", "occluded"):
+        img = make_sample(preset, 0, 0, size=tuple(size), pattern=PATTERN).image
+        for fn in detectors.values():
+            fn(img)
+
+
+def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *, with_calibration: bool = True,
+                  progress: bool = True) -> dict:
+    """Run every detector on every image of ``conditions`` (and the calibration sequences).
+
+    counts : see :meth:`EvalConfig.counts`. Returns {"rows": [dict per image × detector],
+    "errors": {(condition, detector): [(K,) px arrays]}, "examples": [hardest images],
+    "calibration": [dict per sequence × detector], "render_s": seconds spent rendering}.
+    Each detector's slowest images are timed again at the end (:func:`retime_slowest`).
+    """
+    from tqdm import tqdm
+
+    def n_for(c: Condition) -> int:
+        return counts["sweep"] if c.sweep else counts["hd"] if c.size[0] > 1000 else counts["named"]
+
+    total = sum(n_for(c) for c in conditions) + (len(CALIB_CAMERAS) * counts["calib_views"] if with_calibration else 0)
+    bar = tqdm(total=total, desc="evaluate", unit="img", disable=not progress)
+    rows, errors, hardest = [], {}, {}
+    render_s = 0.0
+    slowest = {}  # (detector, W, H) -> the slowest images so far, timed again at the end
+    warm = set()  # image sizes (W, H) the detectors have been warmed up at
+    for cond in conditions:
+        if tuple(cond.size) not in warm:
+            _warm_up(detectors, cond.size)
+            warm.add(tuple(cond.size))
+        # a condition's images are all rendered before any is timed: rendering between detections
+        # (large numpy and OpenCV passes) would leave caches and thread pools cold for the next one
+        t0 = time.perf_counter()
+        samples = list(condition_samples(cond, n_for(cond)))
+        render_s += time.perf_counter() - t0
+        for index, s in samples:
+            img_rows, found_by = _detect_sample(cond.name, cond, index, s, detectors, rows, errors)
+            keep_slowest(slowest, img_rows, s.image)
+            score = _difficulty(img_rows)
+            group = cond.sweep or cond.name  # one example per named condition or sweep
+            if score > 0 and score > hardest.get(group, (0,))[0]:
+                hardest[group] = (score, cond.name, index, s.image, s.corners if cond.has_board else None, found_by)
+            bar.update(1)
+    calib = []
+    if with_calibration:
+        t0 = time.perf_counter()
+        seqs = calibration_sequences(counts["calib_views"])
+        render_s += time.perf_counter() - t0
+        for size in {s.image.shape[::-1] for _, views in seqs for s in views} - warm:
+            _warm_up(detectors, size)
+        calib = calibrate_sequences(seqs, detectors, rows, errors, bar, slowest=slowest)
+    bar.close()
+    retime_slowest(slowest, detectors)
+    examples = sorted(hardest.values(), key=lambda h: -h[0])[:6]
+    return {"rows": rows, "errors": errors, "examples": examples, "calibration": calib, "render_s": render_s}
+
+
+def _detect_sample(name: str, cond: Condition | None, index: int, s, detectors: dict, rows: list, errors: dict):
+    lab = s.label
+    has_board = bool(lab.get("has_board", True)) and bool(lab["corners"])
+    truth = s.corners if has_board else None
+    visible = s.visible if has_board else None
+    h, w = s.image.shape
+    base = {"condition": name, "sweep": cond.sweep if cond else None, "level": cond.level if cond else np.nan,
+            "index": index, "seed": lab["seed"], "camera_id": lab["camera_id"], "width": w, "height": h,
+            "has_board": has_board, "tilt_deg": board_tilt_deg(lab), "square_px": square_px(lab),
+            "k1": float(lab["dist"][0])}
+    img_rows, found_by = [], {}
+    for det, fn in detectors.items():
+        found, ms = time_detector(fn, s.image)
+        row, e = score_detection(found, truth, visible, has_board, PATTERN)
+        row = {**base, "detector": det, **row, "time_ms": ms, "time_first_ms": ms, "time_runs": 1}
+        rows.append(row)
+        img_rows.append(row)
+        errors.setdefault((name, det), []).append(e)
+        found_by[det] = (found, row["outcome"])
+    return img_rows, found_by
+
+
+def calibrate_sequences(seqs, detectors: dict, rows: list, errors: dict, bar=None, *, slowest: dict | None = None) -> list[dict]:
+    """Detect every view of each calibration sequence, calibrate per detector, compare with the truth.
+
+    seqs : [(camera_id, [Sample])] (see :func:`aicalib_tf.bench.conditions.calibration_sequences`).
+    Detection rows go into ``rows``/``errors`` under condition ``calib``. Returns one dict per
+    sequence × detector: views, views_found (full boards), views_partial, views_used, rejected,
+    rms_px, fx_pct, fy_pct, pp_px, dist_field_mean_px, dist_field_max_px (over the whole image),
+    dist_field_seen_mean_px, dist_field_seen_max_px (inside the hull of all the sequence's visible
+    true corners: the area the boards covered), status. slowest : see :func:`keep_slowest`.
+    """
+    from aicalib_tf.calib.workflow import CalibrationError, View, calibrate_camera
+
+    out = []
+    for cam, samples in seqs:
+        views = {d: [] for d in detectors}
+        for s in samples:
+            img_rows, found_by = _detect_sample("calib", None, s.label["index"], s, detectors, rows, errors)
+            if slowest is not None:
+                keep_slowest(slowest, img_rows, s.image)
+            for d, (found, _) in found_by.items():
+                if len(found.corners):
+                    views[d].append(View(f"view{s.label['index']:03d}", found.corners, found.ids))
+            if bar is not None:
+                bar.update(1)
+        lab = samples[0].label
+        K_true, dist_true = np.asarray(lab["K"]), np.asarray(lab["dist"])
+        for d, vs in views.items():
+            rec = {"camera_id": cam, "lens": "strong barrel" if dist_true[0] < -0.2 else "mild",
+                   "k1_true": float(dist_true[0]), "fx_true": float(K_true[0, 0]), "detector": d,
+                   "views": len(samples), "views_found": sum(len(v.ids) == PATTERN[0] * PATTERN[1] for v in vs),
+                   "views_partial": sum(len(v.ids) < PATTERN[0] * PATTERN[1] for v in vs)}
+            try:
+                cal = calibrate_camera(vs, PATTERN, float(lab["square_size"]), tuple(lab["image_size"]))
+            except CalibrationError as exc:
+                rec.update(views_used=0, rejected=len(vs), status=f"failed: {exc}")
+                out.append(rec)
+                continue
+            seen = np.concatenate([s.corners[s.visible] for s in samples])
+            err = calibration_errors(cal.K, cal.dist, K_true, dist_true, tuple(lab["image_size"]), seen=seen)
+            rec.update(views_used=len(cal.views), rejected=len(cal.rejected), rms_px=float(cal.rms),
+                       fx_pct=err["fx_pct"], fy_pct=err["fy_pct"], pp_px=err["pp_px"],
+                       dist_field_mean_px=err["dist_field_mean_px"], dist_field_max_px=err["dist_field_max_px"],
+                       dist_field_seen_mean_px=err["dist_field_seen_mean_px"],
+                       dist_field_seen_max_px=err["dist_field_seen_max_px"], status="ok")
+            out.append(rec)
+    return out
+
+
+def _versions() -> dict:
+    import platform
+
+    import cv2
+
+    v = {"python": platform.python_version(), "numpy": np.__version__, "opencv": cv2.__version__,
+         "platform": platform.platform(), "cpu": _cpu_model(), "cpus": os.cpu_count()}
+    for mod in ("tensorflow", "keras", "pandas", "matplotlib"):
+        try:
+            v[mod] = __import__(mod).__version__
+        except ImportError:
+            v[mod] = None
+    v.update(_git_state())
+    return v
+
+
+def _cpu_model() -> str | None:
+    """The CPU's model name (Linux /proc/cpuinfo), or None: timings differ between machines of one kind."""
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip() or None
+    except OSError:
+        pass
+    return None
+
+
+def _git_state() -> dict:
+    """The code's commit and its uncommitted source files (empty when not in a git checkout)."""
+    import subprocess
+
+    root = Path(__file__).resolve().parents[2]
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
+                              timeout=10).stdout.strip()
+        status = subprocess.run(["git", "status", "--porcelain", "--", "aicalib_tf", "data_gen", "models"], cwd=root,
+                                capture_output=True, text=True, timeout=10).stdout.splitlines()
+    except (OSError, subprocess.SubprocessError):
+        return {}
+    return {"git_commit": head or None, "git_uncommitted": [ln[3:] for ln in status]} if head else {}
+
+
+def _split_calib(spec: str | None) -> tuple[str | None, bool]:
+    """(condition spec without ``calib``, whether to run the calibration sequences)."""
+    if spec is None or spec.strip() in ("", "all"):
+        return None, True
+    items = [s.strip() for s in spec.split(",") if s.strip()]
+    rest = [s for s in items if s != "calib"]
+    return (",".join(rest) if rest else ""), len(rest) < len(items)
+
+
+def run(cfg: EvalConfig, detectors: dict | None = None, info: dict | None = None, *,
+        started: float | None = None) -> Path:
+    """Run the evaluation described by ``cfg``; returns the output folder.
+
+    detectors, info : from :func:`make_detectors` (built from ``cfg`` when None).
+    started : time.perf_counter() at the start of the command, for the reported wall time.
+    """
+    from aicalib_tf.bench import report
+
+    out = Path(cfg.out)
+    t0 = time.perf_counter() if started is None else started
+    if detectors is None:
+        detectors, info = make_detectors(cfg.detectors, cfg.pattern or PATTERN, cfg.model)
+    if cfg.images is not None:
+        from aicalib_tf.bench.photos import run_photos
+
+        result = run_photos(Path(cfg.images), cfg.pattern, detectors, degrade=cfg.degrade, seed=cfg.seed,
+                            progress=not cfg.quiet)
+        result["wall_s"] = time.perf_counter() - t0
+        report.write_photo_report(out, cfg, result, info, _versions())
+        return out
+    spec, with_calib = _split_calib(cfg.conditions)
+    conds = select_conditions(spec) if spec != "" else []
+    result = run_synthetic(conds, detectors, cfg.counts(), with_calibration=with_calib, progress=not cfg.quiet)
+    result["wall_s"] = time.perf_counter() - t0
+    report.write_report(out, cfg, conds, result, info, _versions())
+    return out

@@ -1,0 +1,280 @@
+"""Training a corner CNN: a config in, a run folder with checkpoints, logs, the model and its metrics out.
+
+The command line is :mod:`aicalib_tf.train`; its docstring describes the run folder and determinism.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+__all__ = ["TrainConfig", "train", "VALIDATION_SEED"]
+
+VALIDATION_SEED = 900001
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Arguments of ``python -m aicalib_tf.train``."""
+
+    out: str
+    arch: str = "default"
+    epochs: int = 40
+    steps: int = 500
+    batch_size: int = 32
+    seed: int = 0
+    preset: str = "train"
+    pool_images: int = 4000
+    val_images: int = 64
+    learning_rate: float = 2e-3
+    workers: int = 2
+    threshold: float = 0.5
+    focal_gamma: float = 2.0
+    determinism: bool = True
+    squeeze: float = 0.0
+    shrink: float = 0.0
+
+    def check(self) -> None:
+        """Raise ``ValueError`` naming the first bad option."""
+        from aicalib_tf.cnn.model import ARCHITECTURES
+        from aicalib_tf.cnn.training_data import parse_mix
+
+        if self.arch not in ARCHITECTURES:
+            raise ValueError(f"--arch: unknown architecture {self.arch!r}; choose from: {', '.join(ARCHITECTURES)}")
+        try:
+            parse_mix(self.preset)
+        except ValueError as e:
+            raise ValueError(f"--preset: {e}") from None
+        for name in ("epochs", "steps", "batch_size", "pool_images", "val_images", "workers"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
+        if self.seed < 0:
+            raise ValueError(f"--seed must be >= 0, got {self.seed}")
+        if not 0.0 < self.learning_rate < 1.0:
+            raise ValueError(f"--learning-rate must be in (0, 1), got {self.learning_rate}")
+        if self.focal_gamma < 0:
+            raise ValueError(f"--focal-gamma must be >= 0, got {self.focal_gamma}")
+        for name in ("squeeze", "shrink"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"--{name} must be in [0, 1], got {getattr(self, name)}")
+        if not 0.0 < self.threshold < 1.0:
+            raise ValueError(f"--threshold must be in (0, 1), got {self.threshold}")
+
+
+def _write_json(path: Path, obj) -> None:
+    from aicalib_tf.io import atomic_write_text
+
+    atomic_write_text(path, json.dumps(obj, indent=2) + "\n")
+
+
+POOL_CACHE_ENV = "AICALIB_POOL_CACHE"
+
+
+def cached_pool(count: int, seed: int, *, preset: str, workers: int = 1, progress: bool = True):
+    """:func:`aicalib_tf.cnn.training_data.render_pool`, kept in the folder ``$AICALIB_POOL_CACHE`` when that is set.
+
+    For running several trainings on one machine: the pool of a (count, seed, preset) is rendered
+    once (saved atomically as .npz) and loaded by the other runs. The images are the same as
+    rendering them; without the variable nothing is cached.
+    """
+    import io
+    import zipfile
+
+    import numpy as np
+
+    from aicalib_tf.cnn.training_data import Pool, render_pool
+    from aicalib_tf.io import atomic_write_bytes
+    from data_gen.sample import GENERATOR_VERSION
+
+    folder = os.environ.get(POOL_CACHE_ENV)
+    if not folder:
+        return render_pool(count, seed, preset=preset, workers=workers, progress=progress)
+    name = f"pool-v{GENERATOR_VERSION}-{preset.replace(':', '_').replace(',', '+')}-{count}-{seed}.npz"
+    path = Path(folder) / name
+    if path.is_file():
+        try:
+            with np.load(path) as z:
+                images, flat, counts, mean, std = z["images"], z["corners"], z["counts"], z["mean"], z["std"]
+        except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
+            raise ValueError(f"{path}: not a readable pool cache ({exc}); delete it to render the pool again") from None
+        return Pool(images, np.split(flat, np.cumsum(counts)[:-1]), mean, std)
+    pool = render_pool(count, seed, preset=preset, workers=workers, progress=progress)
+    buf = io.BytesIO()
+    np.savez(buf, images=pool.images, corners=np.concatenate([c.reshape(-1, 2) for c in pool.corners]).astype(np.float32),
+             counts=np.array([len(c) for c in pool.corners], np.int64), mean=pool.mean, std=pool.std)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(path, buf.getvalue())
+    return pool
+
+
+def validation_set(preset: str, count: int, *, workers: int = 1, progress: bool = True):
+    """The fixed validation images: (images (N, 480, 640) uint8, corners list of (k, 2))."""
+    pool = cached_pool(count, VALIDATION_SEED, preset=preset, workers=workers, progress=progress)
+    return pool.images, pool.corners
+
+
+def evaluate_points(model, images, corners, threshold: float = 0.5) -> dict:
+    """Corner precision/recall/localisation of ``model`` on whole images (see metrics.point_detection_stats).
+
+    In float32 on every machine, so the figures are the same wherever training runs (inference
+    may use bfloat16, see aicalib_tf.cnn.inference)."""
+    import keras
+
+    from aicalib_tf.cnn.point_metrics import point_detection_stats
+
+    if keras.backend.backend() == "tensorflow":
+        from aicalib_tf.cnn.inference import corner_points
+
+        pairs = [(corner_points(model, img, threshold, precision="float32")[0], gt) for img, gt in zip(images, corners)]
+    else:  # aicalib_tf.cnn.inference needs TensorFlow; the same float32 map and decoding on any backend
+        pairs = [(_backend_corner_points(model, img, threshold), gt) for img, gt in zip(images, corners)]
+    return point_detection_stats(pairs, max_distance=1.0)
+
+
+def _backend_corner_points(model, gray, threshold: float):
+    """Corner points of a corner-map model on a non-TensorFlow Keras backend (e.g. JAX, for training
+    on a GPU machine without TensorFlow): as :func:`aicalib_tf.cnn.inference.corner_points` in float32."""
+    import numpy as np
+
+    from aicalib_tf.cnn.corner_map import decode_map, network_input
+    from aicalib_tf.cnn.model import model_kind
+
+    if model_kind(model) != "map":
+        raise ValueError("validation of patch classifiers needs the TensorFlow backend")
+    return decode_map(np.asarray(model.predict_on_batch(network_input(gray)))[0], threshold)[0]
+
+
+def _callbacks(cfg: TrainConfig, run: Path, val, initial_epoch: int, wall_before: float, t_start: float):
+    import keras
+
+    from aicalib_tf.cnn.model import save_model
+
+    class Validation(keras.callbacks.Callback):
+        """Adds val_precision, val_recall, val_f1 and val_loc_px to the epoch logs."""
+
+        def on_epoch_end(self, epoch, logs=None):
+            stats = evaluate_points(self.model, *val, cfg.threshold)
+            logs = logs if logs is not None else {}
+            logs.update(val_precision=stats["precision"], val_recall=stats["recall"],
+                        val_f1=stats["f1"], val_loc_px=stats["loc_median_px"])
+            print(f"\n  validation: precision {stats['precision']:.4f}  recall {stats['recall']:.4f}  "
+                  f"loc median {stats['loc_median_px']:.3f} px  ({stats['true']} corners)", flush=True)
+
+    class Checkpoint(keras.callbacks.Callback):
+        """Saves checkpoint-<epochs done>.keras (model and optimiser state), then state.json naming it,
+        then removes older checkpoints. A kill at any moment leaves a state.json whose checkpoint exists
+        and matches its epoch count."""
+
+        def on_epoch_end(self, epoch, logs=None):
+            name = f"checkpoint-{epoch + 1:04d}.keras"
+            save_model(self.model, run / name)
+            _write_json(run / "state.json", {"epochs_done": epoch + 1, "checkpoint": name,
+                                             "wall_s": round(wall_before + time.perf_counter() - t_start, 1)})
+            for old in run.glob("checkpoint-*.keras"):
+                if old.name != name:
+                    old.unlink(missing_ok=True)
+
+    try:  # Keras's TensorBoard callback writes through tf.summary: left out where TensorFlow is not installed
+        import tensorflow  # noqa: F401
+
+        tensorboard = [keras.callbacks.TensorBoard(str(run / "tensorboard"), write_graph=False, profile_batch=0)]
+    except ImportError:
+        tensorboard = []
+    return [
+        Validation(),  # first: it adds to the logs that the CSV logger writes
+        keras.callbacks.CSVLogger(str(run / "log.csv"), append=initial_epoch > 0),
+        *tensorboard,
+        Checkpoint(),
+    ]
+
+
+def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epochs_given: int | None = None) -> dict:
+    """Train as ``cfg`` says and write RUN_DIR; returns the final metrics dict.
+
+    resume : continue the run in ``cfg.out`` from its last checkpoint; its config.json wins over
+        ``cfg``, except that ``epochs_given`` (when not None) sets a new epoch count.
+    """
+
+
+    # size: a training run reads top to bottom: config, data, model, callbacks, fit, save (STYLE.md).
+    cfg.check()
+    run = Path(cfg.out)
+    if resume:
+        state = json.loads((run / "state.json").read_text()) if (run / "state.json").is_file() else {}
+        if not state.get("checkpoint") or not (run / state["checkpoint"]).is_file():
+            raise ValueError(f"--resume: {run} holds no checkpoint to resume from")
+        saved = json.loads((run / "config.json").read_text())
+        known = {f.name for f in fields(TrainConfig)}
+        epochs = saved["epochs"] if epochs_given is None else epochs_given
+        cfg = TrainConfig(**{**{k: v for k, v in saved.items() if k in known}, "epochs": epochs, "out": str(run)})
+        initial_epoch = int(state["epochs_done"])
+        wall_before = float(state.get("wall_s", 0.0))
+    else:
+        if (run / "state.json").exists() or (run / "model.keras").exists():
+            raise ValueError(f"--out {run}: already holds a run; use --resume or a new folder")
+        run.mkdir(parents=True, exist_ok=True)
+        initial_epoch = 0
+        wall_before = 0.0
+    _write_json(run / "config.json", asdict(cfg))
+
+    import keras
+
+    from aicalib_tf.cnn.model import (
+        build_model,
+        compile_model,
+        file_sha256,
+        load_model,
+        model_kind,
+        save_model,
+    )
+    from aicalib_tf.cnn.training_data import CornerMapBatches, PatchBatches, parse_mix
+
+    keras.utils.set_random_seed(cfg.seed)
+    if cfg.determinism and keras.backend.backend() == "tensorflow":
+        import tensorflow as tf
+
+        tf.config.experimental.enable_op_determinism()
+    t0 = time.perf_counter()
+    pool = cached_pool(cfg.pool_images, cfg.seed, preset=cfg.preset, workers=cfg.workers, progress=progress)
+    val_preset = parse_mix(cfg.preset)[0][0]  # a mix validates on its first preset
+    val = validation_set(val_preset, cfg.val_images, workers=cfg.workers, progress=progress)
+    if resume:
+        model = load_model(run / state["checkpoint"], compile=True)
+    else:
+        model = compile_model(build_model(cfg.arch), cfg.learning_rate, focal_gamma=cfg.focal_gamma)
+    batches_cls = CornerMapBatches if model_kind(model) == "map" else PatchBatches
+    extra = {"squeeze": cfg.squeeze, "shrink": cfg.shrink} if batches_cls is CornerMapBatches else {}
+    batches = batches_cls(pool, batch_size=cfg.batch_size, steps=cfg.steps, seed=cfg.seed, epoch=initial_epoch, **extra)
+    prep_s = time.perf_counter() - t0
+    if initial_epoch < cfg.epochs:
+        schedule = keras.callbacks.LearningRateScheduler(
+            lambda e, lr: cfg.learning_rate * 0.5 * (1 + math.cos(math.pi * e / cfg.epochs))
+        )
+        # shuffle=False: batches are already random per (seed, epoch, index); Keras's own shuffle
+        # draws from Python's global random, which a resumed process cannot replay
+        model.fit(batches, epochs=cfg.epochs, initial_epoch=initial_epoch, verbose=1 if progress else 2, shuffle=False,
+                  callbacks=[schedule, *_callbacks(cfg, run, val, initial_epoch, wall_before, t0)])
+    final = run / "model.keras"
+    save_model(model, final)
+    stats = evaluate_points(model, *val, cfg.threshold)
+    previous = json.loads((run / "metrics.json").read_text()) if resume and (run / "metrics.json").exists() else {}
+    metrics = {
+        **stats,
+        "arch": cfg.arch,
+        "params": int(model.count_params()),
+        "epochs": cfg.epochs,
+        "resumed_at_epoch": initial_epoch if resume else None,
+        "data_prep_s": round(prep_s, 1),
+        "wall_s_this_process": round(time.perf_counter() - t0, 1),
+        "wall_s_total": round(wall_before + time.perf_counter() - t0, 1),
+        "validation": {"preset": val_preset, "seed": VALIDATION_SEED, "images": cfg.val_images, "match_px": 1.0},
+        "sha256": file_sha256(final),
+        "size_bytes": final.stat().st_size,
+        **({"previous": previous} if previous else {}),
+    }
+    _write_json(run / "metrics.json", metrics)
+    return metrics

@@ -1,0 +1,16 @@
+"""Chessboard detection: image -> corner map -> candidates -> sub-pixel refinement -> junctions
+-> grid -> board order or partial board -> :class:`Detection`.
+
+:mod:`aicalib_tf.detect.pipeline` runs the stages; each stage has its module, and each numba
+kernel sits beside the module whose maths it implements (``*_kernels.py``). Never imports the
+benchmark. ``python -m aicalib_tf.detect`` is the command line.
+"""
+
+from aicalib_tf.detect.draw import draw_detection
+from aicalib_tf.detect.pipeline import (
+    Detection,
+    detect_corners,
+    find_chessboard_corners,
+)
+
+__all__ = ["Detection", "detect_corners", "draw_detection", "find_chessboard_corners"]

@@ -1,0 +1,440 @@
+"""Grid assembly: unordered corner points -> a lattice of (i, j) grid positions (pure numpy).
+
+A chessboard's inner corners form a lattice that perspective and lens distortion bend but keep
+locally regular: each corner's neighbours along a grid line sit about one step away, and the
+step changes slowly. :func:`assemble_grids` finds such lattices among the candidate points:
+
+1. Seed: a point, two of its near neighbours at an angle (steps u and v), and all 8 points of
+   the 3×3 lattice they predict, each found within a tolerance (with ``strips``: the 5 other
+   points of a 3×2 block, for boards of which only strips 2 corners wide are in view).
+2. Grow: extrapolate every grid line one step outwards (quadratically when three points are
+   known, so barrel distortion's curvature is followed), accept a new row or column when most
+   of its predictions find a point, and repeat in all four directions.
+3. Fill holes: predict missing inside cells from their neighbours.
+
+Grids are returned largest first, each point used by at most one grid. Which grid is the board,
+and the ids of its corners, is decided later (see :mod:`aicalib_tf.detect.pipeline`).
+"""
+
+# size: grid assembly is one algorithm (seed, grow side by side, fill holes) over one private
+# lattice state; split, that state and its helpers would have to become public across modules.
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from aicalib_tf.detect.grid_kernels import seed_block
+from aicalib_tf.detect.sampling import sample_bilinear
+
+MIN_CORNERS = 9  # fewest corners of a grid, and so of any board returned: a grid grows from a 3x3 seed
+
+__all__ = ["Grid", "assemble_grids", "edge_contrast", "full_subgrid"]
+
+TOLERANCE = 0.3  # of the local step: how far a predicted corner may be from the point it takes
+MAX_STEP_RATIO = 4.5  # a seed's two steps may differ in length this much (a board tilted 60°+ halves one)
+MAX_CELL_AREA = 1.5  # seed pairs spanning more than this of the smallest cell generate a sub-lattice
+MAX_SPAN_RATIO = 1.15  # seed pairs longer than this times the shortest (|u| + |v|) are not tried
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A lattice of points.
+
+    index : (K,) int, rows into the candidate points, or -1 for a point the ``propose`` callback
+    found. ij : (K, 2) int, (i, j) lattice positions with min 0 along each axis (i counts steps
+    along one grid direction, j along the other). points : (K, 2) float (x, y) px.
+    """
+
+    index: np.ndarray
+    ij: np.ndarray
+    points: np.ndarray
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(number of i positions, number of j positions)."""
+        return (int(self.ij[:, 0].max()) + 1, int(self.ij[:, 1].max()) + 1)
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+
+def full_subgrid(grid: Grid, min_side: int = 3) -> Grid | None:
+    """The largest sub-rectangle of a grid with a point at every (i, j), as a grid of its own.
+
+    A grid with every position of its extent filled is returned as it is. Otherwise, e.g. when a
+    line cut by the image frame kept only a few of its corners, the filled rectangle with the most
+    points (ties: the first with the smallest i, then j) is cut out and its ij shifted to start at
+    0. None when no filled rectangle has ``min_side`` positions along both axes.
+    """
+    a, b = grid.shape
+    if len(grid) == a * b:
+        return grid if min(a, b) >= min_side else None
+    filled = np.zeros((a, b), bool)
+    filled[grid.ij[:, 0], grid.ij[:, 1]] = True
+    best, best_n = None, 0
+    for i0 in range(a):
+        along = np.ones(b, bool)
+        for i1 in range(i0, a):
+            along &= filled[i1]
+            if i1 - i0 + 1 < min_side:
+                continue
+            run = 0
+            for j in range(b):  # the longest run of j filled for every i in [i0, i1]
+                run = run + 1 if along[j] else 0
+                if run >= min_side and run * (i1 - i0 + 1) > best_n:
+                    best, best_n = (i0, i1, j - run + 1, j), run * (i1 - i0 + 1)
+    if best is None:
+        return None
+    i0, i1, j0, j1 = best
+    sel = (grid.ij[:, 0] >= i0) & (grid.ij[:, 0] <= i1) & (grid.ij[:, 1] >= j0) & (grid.ij[:, 1] <= j1)
+    return Grid(index=grid.index[sel], ij=grid.ij[sel] - np.array([i0, j0]), points=grid.points[sel])
+
+
+class _Lattice:
+    """Mutable (i, j) -> point index map while a grid grows.
+
+    propose : optional callable (pred (M, 2), step (M,)) -> (M, 2) points with NaN rows where no
+    corner is there; asked for predictions that no free candidate point matches.
+    limit : the largest extent (number of i or j positions) a grid may reach.
+    """
+
+    def __init__(self, pts: np.ndarray, free: np.ndarray, propose=None, limit: int | None = None):
+        self.pts, self.free, self.n0 = pts, free, len(pts)
+        self.cells: dict[tuple[int, int], int] = {}
+        self.at: dict[tuple[int, int], np.ndarray] = {}  # the cells' points: (2,) float64 px
+        self.coords: tuple[set, set] = (set(), set())  # the i and the j positions taken
+        self.propose, self.limit = propose, limit
+        self.extra: list[np.ndarray] = []
+        self.version = 0  # counts cells taken: what was worked out at one version holds until the next
+        self.sides: dict = {}  # (axis, sign) -> (version, that side's next line), see _side
+        self.free_idx = (-1, None)  # (version, np.flatnonzero(free) at that version)
+
+    def point(self, k: int) -> np.ndarray:
+        return self.pts[k] if k < self.n0 else self.extra[k - self.n0]
+
+    def _nearest_free(self, pred: np.ndarray, tol: np.ndarray):
+        """(M,) index of the nearest free candidate within tol of each prediction, or -1; and the misses."""
+        # while a lattice grows only its take() changes free: the list holds until the next version
+        if self.free_idx[0] != self.version:
+            self.free_idx = (self.version, np.flatnonzero(self.free))
+        idx = self.free_idx[1]
+        if len(idx) == 0:
+            return np.full(len(pred), -1), np.arange(len(pred))
+        d2 = ((pred[:, None, :] - self.pts[None, idx, :]) ** 2).sum(-1)
+        best = np.argmin(d2, axis=1)
+        ok = d2[np.arange(len(pred)), best] <= tol**2
+        return np.where(ok, idx[best], -1), np.flatnonzero(~ok)
+
+    def ask_ahead(self, pred: np.ndarray, tol: np.ndarray) -> None:
+        """Ask ``propose`` in one batch about predictions that no free candidate matches.
+
+        Nothing is taken: a ``propose`` that remembers its answers then answers :meth:`find`'s
+        later asks for the same predictions at no cost.
+        """
+        _, miss = self._nearest_free(pred, tol)
+        if self.propose is not None and len(miss):
+            self.propose(pred[miss], tol[miss] / TOLERANCE)
+
+    def find(self, pred: np.ndarray, tol: np.ndarray, allow_propose: bool = True) -> np.ndarray:
+        """For predictions (M, 2) and tolerances (M,), a point index within tol, or -1."""
+        found, miss = self._nearest_free(pred, tol)
+        if self.propose is not None and allow_propose and len(miss):
+            got = self.propose(pred[miss], tol[miss] / TOLERANCE)
+            for m, q in zip(miss, got):
+                if np.all(np.isfinite(q)) and np.sum((q - pred[m]) ** 2) <= tol[m] ** 2:
+                    self.extra.append(np.asarray(q, np.float64))
+                    found[m] = self.n0 + len(self.extra) - 1
+        return found
+
+    def take(self, cell: tuple[int, int], k: int) -> None:
+        self.cells[cell] = int(k)
+        self.at[cell] = self.point(k)
+        self.coords[0].add(int(cell[0]))
+        self.coords[1].add(int(cell[1]))
+        self.version += 1
+        if k < self.n0:
+            self.free[k] = False
+
+    def p(self, cell) -> np.ndarray | None:
+        return self.at.get(cell)
+
+    def extent(self, axis: int) -> int:
+        return max(self.coords[axis]) - min(self.coords[axis]) + 1
+
+
+def _norm(d: np.ndarray) -> float:
+    """Length of one (2,) vector, as ``np.linalg.norm`` computes it, without its overhead."""
+    return float(np.sqrt(d.dot(d)))
+
+
+def _predict(lat: _Lattice, cell: tuple[int, int], back: tuple[int, int]) -> tuple[np.ndarray, float] | None:
+    """Predict the point at ``cell`` from the line of known points behind it (direction ``back``)."""
+    i, j = cell
+    di, dj = back
+    p1 = lat.p((i + di, j + dj))
+    p2 = lat.p((i + 2 * di, j + 2 * dj))
+    if p1 is None or p2 is None:
+        return None
+    p3 = lat.p((i + 3 * di, j + 3 * dj))
+    step = _norm(p1 - p2)
+    if p3 is None:
+        return 2 * p1 - p2, step
+    # quadratic extrapolation follows the curvature of distorted lines
+    return 3 * p1 - 3 * p2 + p3, step
+
+
+def _side(lat: _Lattice, axis: int, sign: int):
+    """The next line beyond one side: (cells, predictions (M, 2), tolerances (M,)), or None.
+
+    Each line ending on that side predicts its next point as :func:`_predict` does (all lines at
+    once). None when the grid has reached ``limit`` along ``axis`` or no line predicts a point.
+    Worked out once per lattice version (``_Lattice.sides``), so callers must not change the arrays.
+    """
+    cached = lat.sides.get((axis, sign))
+    if cached is None or cached[0] != lat.version:
+        cached = (lat.version, _work_out_side(lat, axis, sign))
+        lat.sides[(axis, sign)] = cached
+    return cached[1]
+
+
+def _work_out_side(lat: _Lattice, axis: int, sign: int):
+    """:func:`_side`, computed."""
+    if lat.limit is not None and lat.extent(axis) >= lat.limit:
+        return None
+    new = max(lat.coords[axis]) + 1 if sign > 0 else min(lat.coords[axis]) - 1
+    get = lat.at.get
+    b1, b2, b3 = new - sign, new - 2 * sign, new - 3 * sign
+    cells, l1, l2, l3, quad = [], [], [], [], []
+    for o in sorted(lat.coords[1 - axis]):
+        if axis == 0:
+            q1, q2, q3 = get((b1, o)), get((b2, o)), get((b3, o))
+        else:
+            q1, q2, q3 = get((o, b1)), get((o, b2)), get((o, b3))
+        if q1 is not None and q2 is not None:
+            cells.append((new, o) if axis == 0 else (o, new))
+            l1.append(q1)
+            l2.append(q2)
+            l3.append(q1 if q3 is None else q3)
+            quad.append(q3 is not None)
+    if not cells:
+        return None
+    p1, p2, p3 = np.array(l1), np.array(l2), np.array(l3)
+    quad = np.array(quad)[:, None]
+    preds = np.where(quad, 3 * p1 - 3 * p2 + p3, 2 * p1 - p2)  # quadratic where three points are known
+    d = p1 - p2
+    return cells, preds, TOLERANCE * np.sqrt((d * d).sum(axis=1))
+
+
+def _grow_side(lat: _Lattice, axis: int, sign: int, whole: bool = False) -> bool:
+    """Try to add one row/column beyond the current extent on one side (:func:`_side`). True if added.
+
+    The line is added when at least half its predictions (and 2) find a point; with ``whole``, only
+    when all of them find a candidate point (``propose`` is not asked).
+    """
+    side = _side(lat, axis, sign)
+    if side is None:
+        return False
+    cells, preds, tols = side
+    found = lat.find(preds, tols, allow_propose=lat.limit is not None and not whole)
+    hits = [(c, k) for c, k in zip(cells, found) if k >= 0]
+    if whole and len(hits) < len(cells):
+        return False
+    if len(hits) < max(2, 0.5 * len(cells)) or len({k for _, k in hits}) < len(hits):
+        return False
+    for c, k in hits:
+        lat.take(c, k)
+    return True
+
+
+def _grow(lat: _Lattice) -> None:
+    """Grow all four sides in turn until none grows. Where ``propose`` is asked (with ``limit``),
+    first by lines whose every point is a candidate, then by any line (``propose`` asked about the
+    points no candidate gives): a board's lines come from candidates, ``propose`` only looks where
+    they end or have gaps.
+
+    Each round of the second kind first asks ``propose`` about all four sides' next lines in one
+    batch (:meth:`_Lattice.ask_ahead`): a side that does not change before its turn is then answered
+    from ``propose``'s memory (:func:`aicalib_tf.detect.junctions.proposer`), one call instead of four.
+    """
+    asks = lat.propose is not None and lat.limit is not None
+    for whole in ((True, False) if asks else (False,)):
+        grown = True
+        while grown:
+            grown = False
+            if asks and not whole:
+                sides = [side for axis in (0, 1) for sign in (1, -1) if (side := _side(lat, axis, sign)) is not None]
+                if len(sides) > 1:
+                    lat.ask_ahead(np.concatenate([p for _, p, _ in sides]), np.concatenate([t for _, _, t in sides]))
+            for axis in (0, 1):
+                for sign in (1, -1):
+                    while _grow_side(lat, axis, sign, whole):
+                        grown = True
+
+
+def _parallelogram(lat: _Lattice, cell: tuple[int, int]) -> list[tuple[np.ndarray, float]]:
+    """Predictions of ``cell`` from three known neighbours forming a parallelogram with it."""
+    i, j = cell
+    out = []
+    for di in (-1, 1):
+        for dj in (-1, 1):
+            a, b, c = lat.p((i + di, j)), lat.p((i, j + dj)), lat.p((i + di, j + dj))
+            if a is not None and b is not None and c is not None:
+                out.append((a + b - c, min(_norm(a - c), _norm(b - c))))
+    return out
+
+
+def _hole(lat: _Lattice, cell: tuple[int, int]) -> tuple[np.ndarray, float] | None:
+    """A missing cell's predicted point and tolerance: the mean of its neighbours' predictions."""
+    preds = [got for back in ((-1, 0), (1, 0), (0, -1), (0, 1)) if (got := _predict(lat, cell, back)) is not None]
+    preds += _parallelogram(lat, cell)
+    if not preds:
+        return None
+    return np.mean([p for p, _ in preds], axis=0), TOLERANCE * min(s for _, s in preds)
+
+
+def _fill_holes(lat: _Lattice, passes: int = 10) -> None:
+    """Take points for missing cells inside the grid's extent, predicted from known neighbours.
+
+    Cells are filled one by one, each prediction using the cells filled before it. Each pass first
+    asks ``propose`` about all its holes in one batch (:meth:`_Lattice.ask_ahead`), so a hole whose
+    prediction did not change before its turn is answered from ``propose``'s memory.
+    """
+    keys = np.array(list(lat.cells.keys()))
+    (i0, j0), (i1, j1) = keys.min(0), keys.max(0)
+    for _ in range(passes):
+        holes = [(i, j) for i in range(i0, i1 + 1) for j in range(j0, j1 + 1) if (i, j) not in lat.cells]
+        ahead = [h for cell in holes if (h := _hole(lat, cell)) is not None] if lat.propose is not None else []
+        if len(ahead) > 1:
+            lat.ask_ahead(np.array([p for p, _ in ahead]), np.array([t for _, t in ahead]))
+        added = False
+        for cell in holes:
+            got = _hole(lat, cell)
+            if got is None:
+                continue
+            k = lat.find(got[0][None], np.array([got[1]]))[0]
+            if k >= 0:
+                lat.take(cell, k)
+                added = True
+        if not added:
+            break
+
+
+def edge_contrast(gray: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """How strongly the segments p→q look like an edge between two squares.
+
+    Between neighbouring corners along a grid line the board has a black square on one side and a
+    white one on the other; along a diagonal both sides are the same square. Samples at 35%, 50%
+    and 65% of the way, a quarter of the length to each side.
+    gray : (H, W) float32. p, q : (M, 2) px. Returns (M,) float32, |mean left − mean right|.
+    """
+    p = np.asarray(p, np.float64).reshape(-1, 2)
+    q = np.asarray(q, np.float64).reshape(-1, 2)
+    d = q - p
+    n = np.stack([-d[:, 1], d[:, 0]], axis=1) * 0.25
+    t = np.array([0.35, 0.5, 0.65])[None, :, None]
+    mid = p[:, None, :] + t * d[:, None, :]
+    left, right = mid + n[:, None, :], mid - n[:, None, :]
+    g = np.asarray(gray, np.float32)
+
+    def sample(xy):
+        return sample_bilinear(g, xy.reshape(-1, 2)).reshape(xy.shape[:-1])
+
+    return np.abs(sample(left).mean(axis=1) - sample(right).mean(axis=1)).astype(np.float32)
+
+
+_OFFS = np.array([(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)], np.float64)
+# a 3×2 block about the middle of its long side, on either side of it (``strips`` seeds)
+_STRIP_BLOCKS = np.array([[(di, dj) for di in (-1, 0, 1) for dj in (0, s) if (di, dj) != (0, 0)] for s in (1, -1)],
+                         np.float64)
+_NO_CONTRAST = np.zeros(0)  # seed_block's "no edge test"
+
+
+def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | None = None,
+          strips: bool = False) -> bool:
+    """Try to place a 3×3 lattice centred on point ``k``; True (and cells taken) on success.
+
+    strips : place a 3×2 block instead, ``k`` in the middle of a long side (either step along it,
+    the block on either side), for strips of a board 2 corners wide.
+
+    Any two independent lattice steps generate the same points, so a diagonal step would give a
+    sheared grid. With ``contrast`` (:func:`edge_contrast` of each step to a neighbour), only steps
+    along square edges are used, and a step with a near point halfway along it (a double step) is
+    not. Of the pairs of steps that are not nearly collinear, only these are tried, shortest
+    (|u| + |v|) first:
+
+    * pairs spanning a cell of at most ``MAX_CELL_AREA`` times the smallest pair's: a pair such as
+      (row, row − 2·col) generates only every other point, its cell twice the board's;
+    * pairs at most ``MAX_SPAN_RATIO`` times as long as the shortest such pair: of the pairs that
+      generate the whole lattice, the board's own edges are the shortest once diagonals are out.
+      A longer one such as (col, 2·col − row) is more orthogonal on a board tilted 60°, and it
+      seeds where the board's own 3×3 is incomplete, as a sheared grid.
+    """
+    blocks, orders = (_OFFS[None], 1) if not strips else (_STRIP_BLOCKS, 2)
+    b, _, _, found = seed_block(lat.pts, int(k), neighbours, _NO_CONTRAST if contrast is None else contrast, lat.free,
+                                blocks, orders, TOLERANCE, MAX_STEP_RATIO, MAX_CELL_AREA, MAX_SPAN_RATIO)
+    if b < 0:
+        return False
+    lat.take((0, 0), k)
+    for (di, dj), q in zip(blocks[b].astype(int).tolist(), found.tolist()):
+        lat.take((di, dj), q)
+    return True
+
+
+def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray: np.ndarray | None = None,
+                   min_size: int = MIN_CORNERS, neighbours: int = 12, propose=None, limit: int | None = None,
+                   strips: bool = False, stop=None) -> list[Grid]:
+    """Find lattices among candidate corner points.
+
+    points : (N, 2) float (x, y) px. scores : (N,) or None; seeds are tried strongest first.
+    gray : (H, W) float32 image, smoothed; lets seeds tell grid lines from diagonals. Without it,
+        a strongly skewed board can come out as a sheared lattice.
+    min_size : the fewest points a grid may have. neighbours : near points tried as seed steps.
+    propose : optional callable that looks for a corner where the lattice predicts one and no
+        candidate is (see ``_Lattice``); it fills holes, and with ``limit`` also extends edges.
+    limit : the largest number of positions along either grid axis (e.g. max(cols, rows)).
+    strips : seed with 3×2 blocks, not 3×3 (see :func:`_seed`). Such seeds also fit sheared
+        lattices of a board whose 3×3 blocks are in view; :mod:`aicalib_tf.detect.pipeline` uses them
+        only where no 3×3 seed started a grid.
+    stop : None, or ``stop(grid) -> bool``, asked about each grid as it is assembled; when it
+        says True, no further seed is tried (the grids so far are returned). The detector stops at
+        the first grid that is the full board: later seeds could only give other grids, and of
+        the grids that are the full board the first assembled was returned anyway. On a photo
+        with clutter (a keyboard, a screen), seeds there cost more than the board itself.
+    Returns grids, largest first; they share no point.
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    n = len(pts)
+    if n < MIN_CORNERS:
+        return []
+    order = np.argsort(-np.asarray(scores), kind="stable") if scores is not None else np.arange(n)
+    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
+    np.fill_diagonal(d2, np.inf)
+    near = np.argsort(d2, axis=1)[:, : min(neighbours, n - 1)]
+    contrast = None  # of every point's steps to its near points, in one go (seeds use them)
+    if gray is not None:
+        contrast = edge_contrast(gray, np.repeat(pts, near.shape[1], axis=0), pts[near.ravel()])
+        contrast = contrast.reshape(near.shape).astype(np.float64)  # seed_block's dtype, converted once
+    free = np.ones(n, bool)
+    grids = []
+    for k in order:
+        if not free[k]:
+            continue
+        lat = _Lattice(pts, free, propose, limit)
+        if not _seed(lat, int(k), near[k], None if contrast is None else contrast[k], strips):
+            continue
+        _grow(lat)
+        _fill_holes(lat)
+        if len(lat.cells) < min_size:
+            for kk in lat.cells.values():  # give the points back for other seeds
+                if kk < n:
+                    free[kk] = True
+            continue
+        ij = np.array(list(lat.cells.keys()))
+        ks = list(lat.cells.values())
+        grids.append(Grid(index=np.array([k if k < n else -1 for k in ks]), ij=ij - ij.min(0),
+                          points=np.array([lat.point(k) for k in ks])))
+        if stop is not None and stop(grids[-1]):
+            break
+    grids.sort(key=len, reverse=True)
+    return grids

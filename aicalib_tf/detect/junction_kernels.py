@@ -1,0 +1,39 @@
+"""Ring statistics about candidate corners, compiled (numba): the maths is :func:`aicalib_tf.detect.junctions.ring_symmetry`'s.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .sampling import _bilinear
+
+__all__ = ['ring_stats']
+
+
+@njit(cache=True, nogil=True)
+def ring_stats(img, pts, radius, ring):
+    """Amplitude and point asymmetry of the image on a ring about each point.
+
+    img (H, W) float32, pts (P, 2) float64 px, radius (P,) px, ring (R, 2) unit directions, R even,
+    the second half opposite the first. Returns (P, 2): mean |I − mean I| over the ring and mean
+    |I(θ) − I(θ + π)| over its R / 2 opposite pairs.
+    """
+    nr = ring.shape[0]
+    half = nr // 2
+    vals = np.empty(nr)
+    out = np.empty((pts.shape[0], 2))
+    for p in range(pts.shape[0]):
+        mean = 0.0
+        for k in range(nr):
+            vals[k] = _bilinear(img, pts[p, 0] + radius[p] * ring[k, 0], pts[p, 1] + radius[p] * ring[k, 1])
+            mean += vals[k]
+        mean /= nr
+        amp = asym = 0.0
+        for k in range(nr):
+            amp += abs(vals[k] - mean)
+        for k in range(half):
+            asym += abs(vals[k] - vals[k + half])
+        out[p, 0], out[p, 1] = amp / nr, asym / half
+    return out
+

@@ -1,0 +1,148 @@
+"""X-junction evidence where a corner is expected (numpy, numba).
+
+A chessboard's inner corner is an X-junction: point-symmetric, with two dark and two bright arcs
+on a ring around it. This module cleans the CNN's candidate points (:func:`nearest_spacing`,
+:func:`dedupe`), measures the ring evidence (:func:`ring_symmetry`) and builds the callback that
+grid assembly and partial boards use to look for a corner at a lattice prediction
+(:func:`proposer`: windowed saddle refinement, then the ring test).
+
+Coordinates are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from aicalib_tf.detect.junction_kernels import ring_stats
+from aicalib_tf.detect.refine import (
+    SHADOW_SIGMA,
+    Smoothed,
+    refine_windowed,
+    window_radius,
+)
+from aicalib_tf.detect.shadow import shadow_asymmetry
+
+__all__ = ["dedupe", "nearest_spacing", "proposer", "ring_symmetry"]
+
+
+def nearest_spacing(pts: np.ndarray) -> np.ndarray:
+    """(N,) distance from each point to its nearest other point (px); 8 when alone."""
+    if len(pts) < 2:
+        return np.full(len(pts), 8.0)
+    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
+    np.fill_diagonal(d2, np.inf)
+    return np.sqrt(d2.min(axis=1))
+
+
+def dedupe(pts: np.ndarray, scores: np.ndarray, min_distance: float = 1.5) -> np.ndarray:
+    """Indices of points to keep: of points closer than ``min_distance`` px, only the strongest."""
+    order = np.argsort(-scores, kind="stable")
+    d2 = ((pts[order, None, :] - pts[None, order, :]) ** 2).sum(-1)
+    close = d2 < min_distance**2
+    alive = np.ones(len(order), bool)
+    for a in range(len(order)):
+        if alive[a]:
+            close_after = close[a].copy()
+            close_after[: a + 1] = False
+            alive &= ~close_after
+    return order[alive]
+
+
+_RING = np.stack([np.cos(np.linspace(0, 2 * np.pi, 16, endpoint=False)),
+                  np.sin(np.linspace(0, 2 * np.pi, 16, endpoint=False))], 1)
+
+
+def ring_symmetry(gray: np.ndarray, pts: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """X-junction evidence on a ring around each point.
+
+    An X-junction is point-symmetric (I(p + d) = I(p − d)) and its ring alternates two dark and
+    two bright arcs. gray : (H, W) float32. pts : (M, 2) px. radius : (M,) px.
+    Returns amplitude (M,) (mean |I − mean| on the ring) and asymmetry (M,) (mean |I(θ) − I(θ + π)|).
+    """
+    pts = np.ascontiguousarray(np.asarray(pts, np.float64).reshape(-1, 2))
+    radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, np.float64), (len(pts),)))
+    out = ring_stats(np.ascontiguousarray(gray, np.float32), pts, radius, _RING)
+    return out[:, 0], out[:, 1]
+
+
+GATE = 0.15  # of the reference ring amplitude: below it at the saddle, no shadow-robust fit (see proposer)
+SHADOWED_X = 0.01  # most robust_refine.shadow_asymmetry of an X-junction under a shadow edge
+
+
+def _shadowed_x(smoothed: Smoothed, pts: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """(M,) bool: an X-junction whose ring test a shadow edge broke.
+
+    A shadow multiplies the image, so a corner it crosses is no longer point-symmetric; but the
+    odd part left is its even part times a profile across the edge, which
+    :func:`aicalib_tf.detect.shadow.shadow_asymmetry` allows for (on the image and window, one px
+    wider, of the shadow-robust refinement). True X-junctions that fail the ring test on evaluate
+    ``shading`` leave at most 0.0074 of it; T-junctions at board edges and corners by an object's
+    edge 0.01–0.3 (benchmarks of the proposer's asks on shading, occluded, partial and clutter).
+    pts : (M, 2) px. radius : (M,) int, the refinement window radius.
+    """
+    out = np.zeros(len(pts), bool)
+    img = smoothed.sigma(SHADOW_SIGMA)
+    for r in np.unique(radius):
+        sel = np.flatnonzero(radius == r)
+        out[sel] = shadow_asymmetry(img, pts[sel], int(r) + 1) <= SHADOWED_X
+    return out
+
+
+def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float):
+    """Look for a corner at each grid prediction: saddle refinement plus the ring test.
+
+    smoothed : the image for :func:`aicalib_tf.detect.refine.refine_windowed`. ring_image : (H, W)
+    float32, smoothed (σ = 1 px). ref_amp : the ring amplitude of a typical corner of the image.
+    Returns ``propose(pred (M, 2) px, step (M,) px) -> (M, 2)`` with NaN rows where no corner is:
+    a window fitted to the step, the corner within 0.3 step, a ring of 0.3 step. Its attribute
+    ``tight`` looks for a corner beside an object in front: the smallest fit window (2 px), the
+    corner within 0.1 step, a ring of 0.15 step (at least 2 px). Either needs a ring amplitude of
+    0.3·``ref_amp`` and asymmetry at most half the amplitude (a T-junction at a board edge has
+    asymmetry ≈ 1.3·amplitude), or, where a shadow edge crosses the ring (asymmetry up to ~1.5·amplitude
+    on evaluate ``shading``), the fit window point-symmetric once a straight shadow edge is allowed
+    for (:func:`_shadowed_x`). The shadow-robust refinement, the costly part, is only tried where the ring about
+    the saddle has at least ``GATE``·``ref_amp`` of amplitude: behind an object or on plain paper
+    the ring test (``0.3``·``ref_amp``) then fails either way (on evaluate's occluded, partial,
+    shading, clutter and tilt60 images the gate changed no answer). A point asked again (same prediction and step) is answered from
+    memory: each point's answer depends on that point alone (:func:`aicalib_tf.detect.refine.refine_saddle`).
+    """
+    h, w = ring_image.shape
+
+    def look(pred, step, margin, window, shift, ring, memo):
+        pred, step = np.asarray(pred, np.float64), np.asarray(step, np.float64)
+        keys = [p.tobytes() + s.tobytes() for p, s in zip(pred, step)]
+        todo = np.array([m for m, key in enumerate(keys) if key not in memo], int)
+        if len(todo):  # each point's answer depends on it alone: asked again, it is remembered
+            got = np.full((len(todo), 2), np.nan)
+            p, s = pred[todo], step[todo]
+            k = np.flatnonzero(np.all((p >= margin) & (p <= np.array([w - 1 - margin, h - 1 - margin])), axis=1))
+            if len(k):
+                radius = ring(s[k])
+
+                def ringed(idx, q):  # the shadow-robust fit only where the ring test could pass
+                    return ring_symmetry(ring_image, q.astype(np.float64), radius[idx])[0] >= GATE * ref_amp
+
+                # no restarts of the shadow fit: a prediction starts within a fraction of a step, and
+                # beside objects most windows are asymmetric (restarts doubled evaluate occluded's time)
+                q, ok = refine_windowed(smoothed, p[k], window(s[k]), max_shift=shift * s[k], restarts=False,
+                                        shadow_gate=ringed)
+                amp, asym = ring_symmetry(ring_image, q.astype(np.float64), radius)
+                ok &= amp >= 0.3 * ref_amp
+                odd = np.flatnonzero(ok & (asym > 0.5 * amp))  # a shadow edge across the ring, or no X-junction
+                if len(odd):
+                    ok[odd] = _shadowed_x(smoothed, q[odd], window_radius(window(s[k[odd]])))
+                got[k[ok]] = q[ok]
+            for m, g in zip(todo.tolist(), got):
+                memo[keys[m]] = g
+        return np.array([memo[key] for key in keys]).reshape(-1, 2)
+
+    memo_wide, memo_tight = {}, {}
+
+    def propose(pred: np.ndarray, step: np.ndarray) -> np.ndarray:
+        return look(pred, step, 1, lambda s: s, 0.3, lambda s: 0.3 * s, memo_wide)
+
+    def tight(pred: np.ndarray, step: np.ndarray) -> np.ndarray:
+        return look(pred, step, 3, lambda s: np.full(len(s), 4.0), 0.1, lambda s: np.maximum(2.0, 0.15 * s), memo_tight)
+
+    propose.tight = tight
+    return propose

@@ -1,0 +1,334 @@
+"""Chessboard detection with the CNN: image -> ordered board (the CLI is ``python -m aicalib_tf.detect``).
+
+Pipeline: CNN corner weights -> peaks (:mod:`aicalib_tf.cnn.inference`) -> saddle-point refinement
+on the original image (:mod:`aicalib_tf.detect.refine`, :mod:`aicalib_tf.detect.junctions`) -> grid assembly
+(:mod:`aicalib_tf.detect.grid`) -> ordered board (:mod:`aicalib_tf.detect.board_order`), or a partial board
+(:mod:`aicalib_tf.detect.partial`, placed by :mod:`aicalib_tf.detect.placement` on the lattice model of
+:mod:`aicalib_tf.detect.lattice`).
+
+Order of a full board (OpenCV's, row-major: index = r·cols + c). A board read from the front
+keeps its handedness, so only its rotations are ambiguous: 180°, and 90° too for a square
+pattern. They are resolved like ``cv2.findChessboardCorners`` (measured on data_gen boards):
+
+* cols + rows odd (e.g. 9x6): the board's colours tell 180° apart. Corner 0 is the one whose
+  outer diagonal square is black (the square beyond it, away from corners 1 and ``cols``). It is
+  decided by a vote of all inner squares, so it never samples outside the board.
+* otherwise (both even or both odd): the reading whose last row starts lowest in the image
+  relative to corner 0 (largest y[(rows−1)·cols] − y[0]). OpenCV reverses its order when that
+  difference is negative; the two agree whenever one reading has it positive and the other negative.
+* square patterns: of the four rotations, the one with the largest (x[cols−1] − x[0]) +
+  (y[(rows−1)·cols] − y[0]): rows run most nearly left to right and top to bottom.
+
+Partial boards (``pattern_size`` given, no full board found; ``complete=False``). A board cut by
+the frame or hidden in part by an object in front comes back with the corners that are seen, in
+row-major order of their ids, each id the corner's (col, row) on the full board, correct up to
+the board's symmetry as above. Ids are only returned when the image decides them; otherwise no
+board (a miss rather than a wrong id). The grid is first grown by partly visible lines and across
+gaps (corners found where the lattice predicts them, by saddle fit and ring test), then every
+placement of it on the pattern (a 90° turn keeping handedness, and a shift) is checked against
+three kinds of evidence:
+
+* extent: the grid fits inside the pattern; spanning all ``cols`` (or ``rows``) corners of an axis
+  fixes that axis;
+* borders: beyond the board's outermost corner line lies one more row of squares, then white
+  paper. A grid side whose next line, extrapolated, has alternating squares before it and white
+  paper just beyond it all along (and is not mostly hidden) is the pattern's outermost line on
+  that side;
+* colours: the grid's black squares must be the board's black squares (board square (c, r), the
+  one between corners (c−1, r−1) and (c, r), is black when c + r is even, as on a full board).
+  This settles 180° when cols + rows is odd, as for full boards; the colours must be readable then.
+
+The ids are returned when the placements left agree up to the board's symmetry; where that
+leaves a choice (cols + rows even), the reading whose rows run most nearly downwards (square
+patterns: rows right and columns down) is taken, the full-board geometric rule applied to the
+mean steps. The pattern's missing corners are then looked for where the placed ones predict them
+(a second time with a 2 px window and a small ring, for corners beside an object in front),
+corners off their neighbours' lattice by more than ``MAX_RESIDUAL`` of a step are dropped (at most
+a tenth of them, else no board), so are corners so near the frame that their refinement window
+leaves the image by more than 0.3 of its radius (pulled towards the frame), and a board with
+X-junctions one step outside the pattern is dropped. If every corner is found, the board is complete and ordered by the full-board rules.
+A view of one corner of a non-square board alone (two sides cut by the frame) cannot be placed:
+the visible sides could be the long or the short ones. When no 3×3 seed starts a grid at all,
+the candidates are assembled again from 3×2 seeds (:func:`aicalib_tf.detect.grid.assemble_grids` with
+``strips``, growing by candidates only; the partial board then grows as above): strips of a board
+2 corners wide, between objects or around one, hold no 3×3 block.
+
+Large images (longer side ≥ 1600 px) are searched coarse to fine (:mod:`aicalib_tf.detect.pyramid`):
+first at a reduced scale (block means, the longer side kept ≥ 800 px), the corners found there
+refined again on the full image (a board any of whose corners that refinement cannot place is
+not trusted); a finer scale is tried only when no complete board was found,
+and the partial board with the most corners over all scales is returned otherwise. Without
+``pattern_size`` every scale is searched and the largest grid wins (the coarsest of equal ones):
+at a coarse scale a tilted board's far squares can fall below the CNN's reach and leave a complete
+grid of its near rows only. A 1920×1080
+image costs about a quarter as much; a board whose squares are too small for the coarse scale is
+found at full size.
+
+Thin boards (``pattern_size`` given): at the edge of a wide-angle lens a board's squares can be
+2–4 px thick, and the CNN finds few of their corners. When the full-size search finds no full
+board but assembles a grid with corners under 6 px apart, the region the board could cover is
+enlarged 3× (at most 240,000 px enlarged) and searched again (:mod:`aicalib_tf.detect.zoom`). A complete
+board found there is returned, so is a partial one with more than half the pattern's corners;
+otherwise partial boards are looked for at full size too, and the one with more corners is
+returned.
+
+Without ``pattern_size``, the largest grid with every corner found is returned, complete, its
+size taken as the pattern (columns counted along the grid direction nearer the image's x axis,
+so a 9×6 board held landscape is (9, 6) and turned on its side (6, 9)); ids are relative to that
+grid, in the full-board order. A grid with
+positions missing (a line cut by the frame that kept a few corners, say) counts by its largest
+filled rectangle (:func:`aicalib_tf.detect.grid.full_subgrid`), so a few extra corners never hide it,
+after corners off their neighbours' lattice are dropped as for partial boards.
+:func:`find_chessboard_corners` reports full boards only, like OpenCV.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from functools import partial as bind
+
+import numpy as np
+
+from aicalib_tf.detect.board_order import full_board, order_full_board
+from aicalib_tf.detect.grid import MIN_CORNERS, Grid, assemble_grids, full_subgrid
+from aicalib_tf.detect.junctions import dedupe, nearest_spacing, proposer, ring_symmetry
+from aicalib_tf.detect.lattice import drop_outliers
+from aicalib_tf.detect.partial import partial_board
+from aicalib_tf.detect.pyramid import downscale, refine_full, scales, to_full
+from aicalib_tf.detect.refine import Smoothed, refine_windowed
+from aicalib_tf.detect.zoom import from_zoom, zoom_box, zoom_in
+from aicalib_tf.io import load_image
+
+__all__ = ["Detection", "detect_corners", "find_chessboard_corners", "order_full_board", "refined_points"]
+
+
+@dataclass(frozen=True)
+class Detection:
+    """A detected chessboard.
+
+    corners : (N, 2) float32 (x, y) px, in OpenCV order when ``complete``; a partial board's are
+        ordered by id (row-major), with the unseen corners left out.
+    ids : (N, 2) int32, (col, row) of each corner on the board (see the module docstring for a
+        partial board's).
+    scores : (N,) float32 CNN corner weights in [0, 1]; 0 for a corner the CNN missed that was
+        recovered where the grid predicts one (saddle fit and ring test on the image).
+    pattern_size : (cols, rows) inner corners (the found grid's size when none was given).
+    complete : every corner of ``pattern_size`` is present.
+    image_size : (width, height) px.
+    reason : why no board came back ("" when one did): one of ``REASONS``, the furthest the
+        search got on any scale.
+    """
+
+    corners: np.ndarray
+    ids: np.ndarray
+    scores: np.ndarray
+    pattern_size: tuple[int, int] | None
+    complete: bool
+    image_size: tuple[int, int]
+    reason: str = ""
+
+    @property
+    def found(self) -> bool:
+        return len(self.corners) > 0
+
+
+NO_CANDIDATES = f"fewer than {MIN_CORNERS} corner candidates"
+NO_GRID = "no grid of chessboard corners"
+NO_MATCH = "grids of corners, but none fits the pattern as a board"
+UNDECIDED = ("part of a board is in view, but the image leaves open where it lies on the pattern "
+             "(e.g. one corner of the board, its other two sides cut by the frame)")
+REASONS = (NO_CANDIDATES, NO_GRID, NO_MATCH, UNDECIDED)  # from the least to the furthest the search got
+
+
+_DEFAULT_MODEL = None
+
+
+MAX_CANDIDATES = 3000  # a 20x15 board has 300 corners; more candidates are clutter
+
+
+def _default_model():
+    global _DEFAULT_MODEL
+    if _DEFAULT_MODEL is None:
+        from aicalib_tf.cnn.model import load_model
+
+        _DEFAULT_MODEL = load_model("default")
+    return _DEFAULT_MODEL
+
+
+def _own_grids(grids: list[Grid]) -> list[Grid]:
+    """Without a pattern: each grid's filled part, largest first.
+
+    A grid with every position filled is kept as it is. In any other grid, corners off their
+    neighbours' lattice (:func:`aicalib_tf.detect.lattice.drop_outliers`, as for partial boards; a grid
+    that would lose more than a tenth of them is dropped) leave holes, then the largest filled rectangle is kept
+    (:func:`aicalib_tf.detect.grid.full_subgrid`): a line cut by the frame that kept a few corners never
+    hides the rest of the grid, and a corner pulled by an object in front does not come back with it.
+    """
+    out = []
+    for grid in grids:
+        a, b = grid.shape
+        if len(grid) == a * b:  # filled already
+            out.append(grid)
+            continue
+        kept = drop_outliers(grid.ij, grid.points, grid.index)
+        if kept is not None:
+            sub = full_subgrid(Grid(index=kept[2], ij=kept[0], points=kept[1]))
+            if sub is not None:
+                out.append(sub)
+    return sorted(out, key=len, reverse=True)
+
+
+def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=None,
+                   threshold: float = 0.5) -> Detection:
+    """Find a chessboard's inner corners.
+
+    image : path or array (see :func:`aicalib_tf.io.load_image`).
+    pattern_size : (cols, rows) inner corners; None returns the largest complete grid found, with
+        ids relative to it.
+    model : a loaded corner model (default: the shipped ``models/default.keras``).
+    threshold : CNN corner weight above which a peak is a candidate.
+    Returns a :class:`Detection`; ``found`` is False when no board is there. With ``pattern_size``,
+    a board partly out of frame or hidden is returned with ``complete=False`` when the image
+    decides its ids (module docstring), and not at all otherwise.
+    """
+    gray = load_image(image)
+    h, w = gray.shape
+    if pattern_size is not None:
+        from aicalib_tf.geometry.pattern import check_pattern
+
+        check_pattern(pattern_size)
+    model = model if model is not None else _default_model()
+    best, reason = None, REASONS[0]
+    for f in scales(w, h):
+        look = bind(_zoomed, gray, pattern_size, model, threshold) if f == 1 and pattern_size is not None else None
+        det = _detect_at(downscale(gray, f), pattern_size, model, threshold, second_look=look)
+        if det.found and f > 1:
+            corners, ok = refine_full(gray, to_full(det.corners, f))
+            if not ok.all():  # a corner left at its coarse place may be px off: try the finer scales
+                reason = max(reason, NO_MATCH, key=REASONS.index)
+                continue
+            det = replace(det, corners=corners, image_size=(w, h))
+        if det.complete and pattern_size is not None:
+            return det
+        if not det.found:
+            reason = max(reason, det.reason, key=REASONS.index)
+        # without a pattern every scale is searched: a coarse scale can miss a board's smallest
+        # squares and come back with a complete sub-grid of it
+        if best is None or len(det.corners) > len(best.corners):
+            best = det
+    return replace(best, image_size=(w, h), reason="" if best.found else reason)
+
+
+def _zoomed(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: float, seen: Grid,
+            others: np.ndarray | None = None) -> Detection | None:
+    """The search again on the region of a thin grid, enlarged (:mod:`aicalib_tf.detect.zoom`).
+
+    gray : (H, W) float32, full size. seen : the largest grid assembled on it. others : (M, 2) px,
+    the corner candidates found on it (they narrow the region, :func:`aicalib_tf.detect.zoom.zoom_box`).
+    Returns the detection in the enlarged region, in gray's coordinates, or None when the grid is
+    not thin, its region too large, or nothing is found there.
+    """
+    h, w = gray.shape
+    box = zoom_box(seen.ij, seen.points, pattern_size, (w, h), others)
+    if box is None:
+        return None
+    # a partial board is only looked for there when the enlarged grid outgrows the one seen (the
+    # partial search is the costly part, and a grid no larger adds nothing)
+    det = _detect_at(zoom_in(gray, box), pattern_size, model, threshold, partial_above=len(seen))
+    if not det.found:
+        return None
+    return replace(det, corners=from_zoom(det.corners, box), image_size=(w, h))
+
+
+def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed: Smoothed | None = None,
+                   min_points: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The detector's corner candidates: the CNN's points, refined on the image, duplicates merged.
+
+    gray : (H, W) float32 or uint8. The network's points (:func:`aicalib_tf.cnn.inference.corner_points`,
+    at most ``MAX_CANDIDATES``, strongest first) are moved to the saddle point of the image around
+    them (:func:`aicalib_tf.detect.refine.refine_windowed`, a window fitting the local spacing); points
+    whose fit fails are dropped, and of points that meet within 1.5 px the strongest stays.
+    smoothed : the image's :class:`~aicalib_tf.detect.refine.Smoothed` when the caller has it.
+    min_points : fewer network points than this give no candidates (nothing is refined).
+    Returns points (N, 2) float32 (x, y) px and weights (N,) float32, strongest first.
+    """
+    from aicalib_tf.cnn.inference import corner_points
+
+    pts, scores = corner_points(model, gray, threshold)
+    pts, scores = pts[:MAX_CANDIDATES], scores[:MAX_CANDIDATES]  # strongest first; bounds the N² steps
+    if len(pts) < max(min_points, 1):
+        return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
+    smoothed = Smoothed(np.asarray(gray, np.float32)) if smoothed is None else smoothed
+    refined, ok = refine_windowed(smoothed, pts, nearest_spacing(pts))
+    refined, scores = refined[ok], scores[ok]
+    keep = dedupe(refined, scores)
+    return refined[keep].astype(np.float32), scores[keep].astype(np.float32)
+
+
+def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, threshold: float,
+               second_look=None, partial_above: int = 0) -> Detection:
+    """:func:`detect_corners` on one scale: gray (H, W) float32, pattern already checked.
+
+    second_look : None, or ``look(grid, candidates) -> Detection | None``, asked with the largest
+    grid and the candidate points when no full board is found (:func:`_zoomed`, at full size). Its board is returned when complete or
+    with more than half the pattern's corners (the partial-board search here is the costly part
+    of a thin board's time); else the one with more corners of its board and this scale's partial
+    board. partial_above : partial boards are only looked for when the largest grid has more
+    corners than this.
+    """
+    h, w = gray.shape
+    empty = Detection(np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
+                      pattern_size, False, (w, h), NO_CANDIDATES)
+    if h < 8 or w < 8:
+        return empty
+    smoothed = Smoothed(gray)
+    refined, scores = refined_points(model, gray, threshold, smoothed=smoothed, min_points=MIN_CORNERS)
+    if len(refined) == 0:
+        return empty
+    smooth = smoothed.sigma(1.0)
+    propose = None
+    if len(refined) >= MIN_CORNERS:
+        spacing = nearest_spacing(refined)
+        amp, _ = ring_symmetry(smooth, refined.astype(np.float64), 0.3 * spacing)
+        propose = proposer(smoothed, smooth, float(np.median(amp[: max(MIN_CORNERS, len(amp) // 2)])))
+    if pattern_size is None:
+        grids = _own_grids(assemble_grids(refined, scores, gray=smooth, propose=propose))
+        for grid in grids:
+            board = full_board(grid, scores, None, smooth)
+            if board is not None:
+                return Detection(*board, True, (w, h))
+        return replace(empty, reason=NO_MATCH if grids else NO_GRID)
+    board = None
+
+    def is_board(grid: Grid) -> bool:  # the first grid assembled that is the full board ends the assembly
+        nonlocal board
+        board = full_board(grid, scores, pattern_size, smooth)
+        return board is not None
+
+    # grow one step past the pattern so that a bigger board shows itself and is rejected
+    limit = max(pattern_size) + 1
+    grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit, stop=is_board)
+    if board is not None:
+        return Detection(*board, True, (w, h))
+    if not grids:  # no 3×3 block anywhere: strips 2 corners wide (between objects, say)
+        grids = assemble_grids(refined, scores, gray=smooth, limit=limit, strips=True)
+    look = second_look(grids[0], refined) if second_look is not None and grids else None
+    if look is not None and (look.complete or 2 * len(look.corners) > pattern_size[0] * pattern_size[1]):
+        return look
+    if not grids or len(grids[0]) <= partial_above:
+        return replace(empty, reason=NO_MATCH if grids else NO_GRID)
+    board, undecided = partial_board(grids, scores, pattern_size, smooth, (w, h), propose)
+    if board is None:
+        det = replace(empty, reason=UNDECIDED if undecided else NO_MATCH)
+    else:
+        corners, ids, sc, complete = board
+        det = Detection(corners, ids, sc, tuple(pattern_size), complete, (w, h))
+    return look if look is not None and len(look.corners) > len(det.corners) else det
+
+
+def find_chessboard_corners(image, pattern_size: tuple[int, int], *, model=None) -> tuple[bool, np.ndarray | None]:
+    """Drop-in for ``cv2.findChessboardCorners``: (found, corners (cols·rows, 1, 2) float32 or None)."""
+    det = detect_corners(image, pattern_size, model=model)
+    if not det.complete:
+        return False, None
+    return True, det.corners.reshape(-1, 1, 2).copy()

@@ -1,0 +1,86 @@
+"""Coarse-to-fine detection on large images: which scales to try, and the way back to full size.
+
+A board in a large photo usually has large squares, and the CNN finds X-junctions with squares
+down to about 6 px. So a large image is first searched at a reduced scale (each pixel the mean of
+an f×f block), where the network, refinement and grid assembly cost about 1/f² as much, and the
+corners found are then refined once more on the full image. Only when that finds no complete
+board is the next finer scale tried, down to full size (see :func:`aicalib_tf.detect.pipeline.detect_corners`).
+
+Coordinates are (x, y) px, OpenCV's convention: the centre of pixel (0, 0) is at (0.0, 0.0). Block
+(i, j) of factor f covers full pixels f·i … f·i + f − 1, so its centre is at f·i + (f − 1)/2.
+Pure numpy/OpenCV.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from aicalib_tf.detect.junctions import nearest_spacing
+from aicalib_tf.detect.refine import Smoothed, refine_windowed, window_radius
+from aicalib_tf.geometry.pose import in_frame
+
+__all__ = ["MIN_SIDE", "scales", "downscale", "to_full", "refine_full"]
+
+MIN_SIDE = 800  # px: a reduced scale keeps at least this many pixels along the image's longer side
+
+
+def scales(width: int, height: int, min_side: int = MIN_SIDE) -> list[int]:
+    """Reduction factors to try, coarsest first, ending with 1 (full size).
+
+    The coarsest is the largest power of two that leaves ``min_side`` px along the longer side:
+    [1] up to 1599 px, [2, 1] for 1920×1080, [8, 4, 2, 1] for 8000×6000.
+    """
+    f = 1
+    while max(int(width), int(height)) // (2 * f) >= min_side:
+        f *= 2
+    out = []
+    while f >= 1:
+        out.append(f)
+        f //= 2
+    return out
+
+
+def downscale(gray: np.ndarray, factor: int) -> np.ndarray:
+    """Each f×f block's mean: (H // f, W // f) float32 (the last H % f rows and W % f columns are dropped).
+
+    Empty where a side is shorter than f (an 8000×1 image at f = 8: (0, 1000)).
+    """
+    f = int(factor)
+    g = np.asarray(gray, np.float32)
+    if f == 1:
+        return g
+    h, w = g.shape[0] // f, g.shape[1] // f
+    if h == 0 or w == 0:  # cv2.resize refuses an empty size
+        return np.zeros((h, w), np.float32)
+    # INTER_AREA at an integer factor is the block mean
+    return cv2.resize(g[: h * f, : w * f], (w, h), interpolation=cv2.INTER_AREA)
+
+
+def to_full(points: np.ndarray, factor: int) -> np.ndarray:
+    """Points (N, 2) (x, y) px on a :func:`downscale`\\ d image -> the same places on the full image."""
+    f = float(factor)
+    return (np.asarray(points, np.float64) * f + (f - 1.0) / 2.0).astype(np.float32)
+
+
+def refine_full(gray: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Refine corners found at a reduced scale on the full image (saddle fit, :mod:`aicalib_tf.detect.refine`).
+
+    gray : (H, W) full image. points : (N, 2) px on it (from :func:`to_full`), N ≥ 2, of one board.
+    Only the board's bounding box (plus the largest window) is smoothed. Returns refined (N, 2)
+    float32 and ok (N,) bool; a point whose refinement fails, moves more than 2 px or would leave
+    the image keeps its given position, with ok False (at a factor f that position is only good
+    to a fraction of f px, so the caller should not trust the board).
+    """
+    pts = np.asarray(points, np.float32).reshape(-1, 2)
+    h, w = gray.shape
+    spacing = nearest_spacing(pts)
+    margin = int(window_radius(spacing).max()) + 8
+    x0, y0 = np.maximum(np.floor(pts.min(axis=0)).astype(int) - margin, 0)
+    x1, y1 = np.minimum(np.ceil(pts.max(axis=0)).astype(int) + margin + 1, [w, h])
+    crop = np.ascontiguousarray(gray[y0:y1, x0:x1], dtype=np.float32)
+    offset = np.array([x0, y0], np.float32)
+    refined, ok = refine_windowed(Smoothed(crop), pts - offset, spacing, max_shift=np.full(len(pts), 2.0))
+    refined = refined + offset
+    ok &= in_frame(refined, (w, h))
+    return np.where(ok[:, None], refined, pts).astype(np.float32), ok

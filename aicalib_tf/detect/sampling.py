@@ -1,0 +1,81 @@
+"""Exact bilinear image samples inside compiled loops (numba), shared by the refinement kernels.
+
+Images are (H, W) float32; points are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0);
+samples outside the image take the nearest edge pixel (OpenCV's BORDER_REPLICATE). ``cv2.remap``
+rounds a sample position to 1/32 px, which is why the fits sample here instead.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+from numba import njit
+
+__all__ = ['sample_bilinear', 'sample_windows']
+
+
+@njit(cache=True, nogil=True)
+def _lerp(img, r0, r1, c0, c1, fx, fy):
+    """Bilinear value between pixels (r0, c0), (r0, c1), (r1, c0), (r1, c1) at fractions fx, fy."""
+    top = img[r0, c0] + fx * (img[r0, c1] - img[r0, c0])
+    bot = img[r1, c0] + fx * (img[r1, c1] - img[r1, c0])
+    return top + fy * (bot - top)
+
+
+@njit(cache=True, nogil=True)
+def _sample_grid(img, x, y, lo, side, out):
+    """Bilinear samples at (x + i, y + j) for i, j in lo .. lo + side − 1, row-major into out (side²,)."""
+    h, w = img.shape
+    x0, y0 = math.floor(x), math.floor(y)
+    fx, fy = x - x0, y - y0
+    k = 0
+    for j in range(side):
+        r0 = min(max(y0 + lo + j, 0), h - 1)
+        r1 = min(max(y0 + lo + j + 1, 0), h - 1)
+        for i in range(side):
+            c0 = min(max(x0 + lo + i, 0), w - 1)
+            c1 = min(max(x0 + lo + i + 1, 0), w - 1)
+            out[k] = _lerp(img, r0, r1, c0, c1, fx, fy)
+            k += 1
+
+
+@njit(cache=True, nogil=True)
+def sample_windows(img, pts, radius):
+    """(P, (2r+1)²) float64: bilinear samples of img about each point, offsets row-major (dy outer)."""
+    side = 2 * radius + 1
+    out = np.empty((pts.shape[0], side * side))
+    for p in range(pts.shape[0]):
+        _sample_grid(img, pts[p, 0], pts[p, 1], -radius, side, out[p])
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _bilinear(img, x, y):
+    """The image at (x, y) px, bilinear, the nearest edge pixel outside."""
+    h, w = img.shape
+    x0, y0 = math.floor(x), math.floor(y)
+    fx, fy = x - x0, y - y0
+    c0, c1 = min(max(x0, 0), w - 1), min(max(x0 + 1, 0), w - 1)
+    r0, r1 = min(max(y0, 0), h - 1), min(max(y0 + 1, 0), h - 1)
+    return _lerp(img, r0, r1, c0, c1, fx, fy)
+
+
+_REMAP_COLS = 4096  # cv2.remap needs maps of fewer than 32767 rows and columns
+
+
+def sample_bilinear(g: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Bilinear grey values (M,) float32 of g (H, W) float32 at xy (M, 2) px, border replicated, any M.
+
+    The points go to cv2.remap as rows of ``_REMAP_COLS``: assemble_grids asks for 3 samples of
+    ``MAX_CANDIDATES`` · 12 segments on each side, more than 32767 rows of one map.
+    """
+    m = len(xy)
+    if m == 0:
+        return np.zeros(0, np.float32)
+    rows = -(-m // _REMAP_COLS)
+    flat = np.zeros((rows * _REMAP_COLS, 2), np.float32)
+    flat[:m] = xy
+    flat = flat.reshape(rows, _REMAP_COLS, 2)
+    return cv2.remap(g, flat[..., 0], flat[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()[:m]

@@ -1,0 +1,147 @@
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("keras")
+
+from aicalib_tf.train import main  # noqa: E402
+
+TINY = ["--steps", "3", "--batch-size", "4", "--pool-images", "4", "--val-images", "2", "--workers", "1", "--quiet"]
+
+
+def _cli(*args, timeout=240):
+    env = {**os.environ, "TF_CPP_MIN_LOG_LEVEL": "3"}
+    return subprocess.Popen([sys.executable, "-m", "aicalib_tf.train", *args], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("arch", ["default", "report"])
+def test_tiny_run_writes_every_file(tmp_path, arch):
+    run = tmp_path / "run"
+    assert main(["--arch", arch, "--out", str(run), "--epochs", "2", *TINY]) == 0
+    for name in ["config.json", "checkpoint-0002.keras", "state.json", "log.csv", "model.keras", "metrics.json"]:
+        assert (run / name).is_file(), name
+    assert len(list(run.glob("checkpoint-*.keras"))) == 1  # older checkpoints are removed
+    assert (run / "tensorboard").is_dir()
+    assert not list(run.glob("*partial*"))
+    lines = (run / "log.csv").read_text().splitlines()
+    assert lines[0].split(",")[0] == "epoch" and "val_recall" in lines[0] and len(lines) == 3
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["arch"] == arch and metrics["params"] > 0 and len(metrics["sha256"]) == 64
+    assert json.loads((run / "config.json").read_text())["arch"] == arch
+
+
+@pytest.mark.slow
+def test_killed_run_resumes_from_its_last_checkpoint_and_ends_like_an_uninterrupted_run(tmp_path):
+    import numpy as np
+
+    from aicalib_tf.cnn.model import load_model
+
+    epochs = 6
+    run = tmp_path / "run"
+    proc = _cli("--out", str(run), "--epochs", str(epochs), "--seed", "3", *TINY)
+    state = run / "state.json"
+    deadline = time.time() + 180
+    while time.time() < deadline and proc.poll() is None:
+        if state.is_file() and json.loads(state.read_text())["epochs_done"] >= 2:
+            break
+        time.sleep(0.05)
+    assert proc.poll() is None, proc.stdout.read()
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    done = json.loads(state.read_text())["epochs_done"]
+    assert 2 <= done < epochs and not (run / "model.keras").exists()
+    resumed = _cli("--out", str(run), "--resume")  # the run's own --epochs is kept
+    out, _ = resumed.communicate(timeout=240)
+    assert resumed.returncode == 0, out
+    assert json.loads(state.read_text())["epochs_done"] == epochs
+    logged = [int(line.split(",")[0]) for line in (run / "log.csv").read_text().splitlines()[1:]]
+    assert logged[-1] == epochs - 1 and set(range(epochs)) <= set(logged)
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["resumed_at_epoch"] == done
+    # the same seed without a kill gives the same weights: resuming replays the data exactly
+    assert main(["--out", str(tmp_path / "straight"), "--epochs", str(epochs), "--seed", "3", *TINY]) == 0
+    a = load_model(run / "model.keras").get_weights()
+    b = load_model(tmp_path / "straight" / "model.keras").get_weights()
+    for wa, wb in zip(a, b):
+        np.testing.assert_allclose(wa, wb, rtol=0, atol=1e-6)
+
+
+def test_same_seed_gives_the_same_weights(tmp_path):
+    import numpy as np
+
+    from aicalib_tf.cnn.model import load_model
+
+    weights = []
+    for name in ("a", "b"):
+        assert main(["--out", str(tmp_path / name), "--epochs", "1", "--seed", "4", *TINY]) == 0
+        weights.append(load_model(tmp_path / name / "model.keras").get_weights())
+    for wa, wb in zip(*weights):
+        np.testing.assert_array_equal(wa, wb)
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--arch", "resnet"], "unknown architecture"),
+        (["--preset", "nope"], "unknown preset"),
+        (["--epochs", "0"], "--epochs must be >= 1"),
+        (["--squeeze", "1.5"], "--squeeze must be in [0, 1]"),
+        (["--shrink", "-0.1"], "--shrink must be in [0, 1]"),
+        (["--resume"], "holds no checkpoint"),
+    ],
+)
+def test_bad_options_exit_2_with_a_clear_message(tmp_path, capsys, args, message):
+    assert main(["--out", str(tmp_path / "run"), *args]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_refuses_to_overwrite_a_run(tmp_path, capsys):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "model.keras").write_bytes(b"x")
+    assert main(["--out", str(run), *TINY]) == 2
+    assert "already holds a run" in capsys.readouterr().err
+
+
+def test_validation_without_tensorflow_decodes_the_same_points():
+    # the path other Keras backends take (no aicalib_tf.cnn.inference): the same float32 map and decoding
+    import numpy as np
+
+    from aicalib_tf.cnn.inference import corner_points
+    from aicalib_tf.cnn.model import load_model
+    from aicalib_tf.cnn.train import _backend_corner_points
+    from data_gen import make_sample
+
+    model = load_model("default")
+    for i in range(2):
+        img = make_sample("distorted", 3, i, size=(322, 241)).image  # not a multiple of 4: padded
+        want = corner_points(model, img, 0.5, precision="float32")[0]
+        got = _backend_corner_points(model, img, 0.5)
+        assert len(want) > 0
+        np.testing.assert_allclose(got, want, atol=1e-4)
+
+
+def test_a_pool_cache_renders_a_pool_once(tmp_path, monkeypatch):
+    import numpy as np
+
+    from aicalib_tf.cnn import train
+
+    monkeypatch.setenv(train.POOL_CACHE_ENV, str(tmp_path))
+    first = train.cached_pool(3, 5, preset="train", progress=False)
+    files = list(tmp_path.glob("pool-*.npz"))
+    assert len(files) == 1
+    second = train.cached_pool(3, 5, preset="train", progress=False)
+    assert np.array_equal(first.images, second.images)
+    assert np.array_equal(first.mean, second.mean) and np.array_equal(first.std, second.std)
+    assert all(np.array_equal(a, b) for a, b in zip(first.corners, second.corners, strict=True))
+    files[0].write_bytes(b"not an npz")
+    with pytest.raises(ValueError, match="pool-.*not a readable pool cache"):
+        train.cached_pool(3, 5, preset="train", progress=False)

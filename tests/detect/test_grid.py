@@ -1,0 +1,152 @@
+import cv2
+import numpy as np
+import pytest
+
+from aicalib_tf.detect.grid import assemble_grids, edge_contrast
+from data_gen import make_sample
+from data_gen.presets import get_preset
+
+
+def _same_lattice(ij: np.ndarray, truth_cr: np.ndarray) -> bool:
+    """True if grid positions ij equal the true (col, row) up to a flip/transposition and shift."""
+    for m in (np.array([[1, 0], [0, 1]]), np.array([[0, 1], [1, 0]])):
+        for s in ([1, 1], [1, -1], [-1, 1], [-1, -1]):
+            t = (truth_cr @ m) * np.array(s)
+            t = t - t.min(0)
+            if np.array_equal(t, ij):
+                return True
+    return False
+
+
+@pytest.mark.parametrize("preset, seed", [("clean", 0), ("distorted", 1), ("distorted", 2), ("clean", 3), ("distorted", 4), ("distorted", 5)])
+def test_true_corners_assemble_into_one_full_lattice(preset, seed):
+    s = make_sample(preset, seed, 0, pattern=(9, 6))
+    rng = np.random.default_rng(seed)
+    pts = s.corners + rng.normal(0, 0.2, s.corners.shape)
+    gray = cv2.GaussianBlur(s.image.astype(np.float32), (0, 0), 1.0)
+    grids = assemble_grids(pts, gray=gray)
+    assert len(grids) == 1
+    g = grids[0]
+    assert len(g) == 54 and sorted(g.shape) == [6, 9]
+    cr = np.stack([g.index % 9, g.index // 9], 1)
+    assert _same_lattice(g.ij, cr)
+
+
+def test_clutter_points_and_missing_corners():
+    s = make_sample("clean", 5, 0, pattern=(9, 6))
+    rng = np.random.default_rng(5)
+    keep = np.ones(54, bool)
+    keep[[10, 11, 30, 44]] = False  # holes inside the board
+    clutter = rng.uniform([0, 0], [640, 480], (80, 2))
+    pts = np.concatenate([s.corners[keep], clutter])
+    grids = assemble_grids(pts, gray=s.image.astype(np.float32))
+    g = grids[0]
+    board = g.index[g.index < keep.sum()]
+    assert len(board) == 50 and len(g) == 50  # every true corner, no clutter point
+    idx = np.flatnonzero(keep)[g.index]
+    assert _same_lattice(g.ij, np.stack([idx % 9, idx // 9], 1))
+
+
+def test_stop_ends_the_assembly_at_the_grid_it_accepts():
+    # two separate lattices: the stronger seeds first, so the first grid assembled is the left one
+    gx, gy = np.meshgrid(np.arange(5) * 20.0, np.arange(4) * 20.0)
+    left = np.stack([gx.ravel() + 50, gy.ravel() + 50], 1)
+    right = left + [300, 100]
+    pts = np.concatenate([left, right])
+    scores = np.r_[np.full(20, 0.9), np.full(20, 0.8)]
+    both = assemble_grids(pts, scores)
+    assert [len(g) for g in both] == [20, 20]
+    asked = []
+    first = assemble_grids(pts, scores, stop=lambda g: asked.append(len(g)) or True)
+    assert asked == [20] and len(first) == 1 and np.all(first[0].index < 20)
+    assert len(assemble_grids(pts, scores, stop=lambda g: False)) == 2
+
+
+def test_too_few_or_scattered_points_give_no_grid():
+    assert assemble_grids(np.zeros((5, 2))) == []
+    rng = np.random.default_rng(0)
+    assert all(len(g) < 20 for g in assemble_grids(rng.uniform(0, 640, (300, 2))))
+
+
+def test_full_subgrid_cuts_the_largest_filled_rectangle():
+    from aicalib_tf.detect.grid import Grid, full_subgrid
+
+    ii, jj = np.meshgrid(np.arange(8), np.arange(6), indexing="ij")
+    ij = np.stack([ii.ravel(), jj.ravel()], 1)
+    keep = ~((ij[:, 0] == 7) & (ij[:, 1] < 4))  # a last column cut by the frame: 2 of its 6 corners
+    g = Grid(index=np.flatnonzero(keep), ij=ij[keep], points=ij[keep] * 30.0 + 5.0)
+    sub = full_subgrid(g)
+    assert sub.shape == (7, 6) and len(sub) == 42 and np.array_equal(sub.ij.min(0), [0, 0])
+    assert np.array_equal(sub.points, sub.ij * 30.0 + 5.0)  # points stay with their positions
+    full = Grid(index=np.arange(48), ij=ij, points=ij * 1.0)
+    assert full_subgrid(full) is full
+    hole = ~((ij[:, 0] == 3) & (ij[:, 1] == 2))  # a hole inside: the 8x3 below it (24) beats 4x6 (24, found later)
+    sub = full_subgrid(Grid(index=np.flatnonzero(hole), ij=ij[hole], points=ij[hole] * 1.0))
+    assert len(sub) == 24 and sub.shape == (8, 3) and np.array_equal(sub.points.min(0), [0, 3])
+    thin = ij[:, 1] < 2  # 8x2: no 3x3 inside
+    assert full_subgrid(Grid(index=np.flatnonzero(thin), ij=ij[thin], points=ij[thin] * 1.0)) is None
+
+
+def test_a_side_is_worked_out_again_only_after_a_cell_is_taken():
+    from aicalib_tf.detect.grid import _Lattice, _side, _work_out_side
+
+    ii, jj = np.meshgrid(np.arange(4), np.arange(3), indexing="ij")
+    pts = np.stack([10.0 + 8 * jj.ravel() + 0.1 * ii.ravel() ** 2, 20.0 + 8 * ii.ravel()], axis=1)
+    lat = _Lattice(pts, np.ones(len(pts), bool))
+    for k, (i, j) in enumerate(zip(ii.ravel(), jj.ravel())):
+        if (i, j) != (0, 2):
+            lat.take((int(i), int(j)), k)
+    first = _side(lat, 0, 1)
+    assert _side(lat, 0, 1) is first  # remembered while nothing changes
+    cells, preds, tols = first
+    assert cells == [(4, 0), (4, 1), (4, 2)]
+    np.testing.assert_array_equal(preds[0], 3 * pts[9] - 3 * pts[6] + pts[3])  # three known: quadratic
+    lat.take((0, 2), 2)
+    again = _side(lat, 0, -1)
+    fresh = _work_out_side(lat, 0, -1)
+    assert again[0] == fresh[0] == [(-1, 0), (-1, 1), (-1, 2)]
+    np.testing.assert_array_equal(again[1], fresh[1])
+    assert list(lat._nearest_free(preds, tols)[0]) == [-1, -1, -1]
+
+
+@pytest.mark.parametrize("index", [69, 91, 274])
+def test_a_board_tilted_60_degrees_assembles_unsheared(index):
+    # evaluate's tilt60 scenes: one step about 2-4x the other, and a knight's step (2·col − row)
+    # more orthogonal to col than row is; these were missed (no grid) before seeds took the
+    # shortest pairs of steps, up to 4.5x apart, and left out multiple steps
+    from aicalib_tf.bench.conditions import select_conditions
+
+    cond = select_conditions("tilt60")[0]
+    s = make_sample(cond.preset, cond.seed, index, size=cond.size, pattern=(9, 6))
+    gray = cv2.GaussianBlur(s.image, (0, 0), 1.0)
+    grids = assemble_grids(s.corners, gray=gray)
+    assert len(grids) == 1 and len(grids[0]) == 54
+    cr = np.stack(np.meshgrid(np.arange(9), np.arange(6)), -1).reshape(-1, 2)
+    order = np.argmin(np.linalg.norm(grids[0].points[:, None] - s.corners[None], axis=2), axis=1)
+    assert _same_lattice(grids[0].ij, cr[order])
+
+
+def test_edge_contrast_takes_more_segments_than_one_remap_map_holds():
+    # assemble_grids asks for MAX_CANDIDATES (3000) x 12 neighbours = 36000 segments; cv2.remap
+    # refused maps of 32767 rows or more (a checker-like clutter image at 1983x453 crashed)
+    rng = np.random.default_rng(0)
+    gray = rng.random((60, 80)).astype(np.float32)
+    p = rng.uniform(0, 79, (36000, 2))
+    q = p + rng.uniform(-6, 6, (36000, 2))
+    got = edge_contrast(gray, p, q)
+    assert got.shape == (36000,)
+    np.testing.assert_array_equal(got[-500:], edge_contrast(gray, p[-500:], q[-500:]))
+    assert edge_contrast(gray, p[:0], q[:0]).shape == (0,)
+
+
+def test_strip_seeds_assemble_a_strip_two_corners_wide():
+    # two whole columns of a board (a bar in front hides the rest): no corner has all 8 neighbours,
+    # so no 3×3 seed starts; a 3×2 seed does, with the board's own lattice
+    s = make_sample("clean", 5, 0, pattern=(9, 6))
+    keep = np.flatnonzero(np.arange(54) % 9 < 2)
+    gray = s.image.astype(np.float32)
+    assert assemble_grids(s.corners[keep], gray=gray) == []
+    grids = assemble_grids(s.corners[keep], gray=gray, strips=True)
+    assert len(grids) == 1 and len(grids[0]) == 12
+    idx = keep[grids[0].index]
+    assert _same_lattice(grids[0].ij, np.stack([idx % 9, idx // 9], 1))
