@@ -1,0 +1,385 @@
+"""Is a calibration good? Projection uncertainty, half-vs-half difference, coverage, one verdict.
+
+* :func:`projection_uncertainty`: the 1σ projection uncertainty (px) over the image, propagated
+  from the covariance of the intrinsics (``cal.covariance``, poses marginalised).
+* :func:`half_difference`: calibrate two disjoint halves of the views and measure how far apart
+  their projections are after the best rotation of the camera frame (mrcal's ``projection_diff``).
+* :func:`predicted_half_difference`: what the two halves' covariances predict for that number.
+* :func:`verdict` and :func:`assess`: one line for the user and the dict kept in ``cal.quality``.
+
+Rotation compensation. A monocular calibration cannot see a rotation of its own camera frame:
+a shift of (cx, cy) or a change of distortion that looks like a small rotation is absorbed by the
+board poses. Two calibrations are therefore compared after the rotation R that best maps one
+onto the other, and the uncertainty map removes, to first order, the part of each intrinsics
+perturbation that such a rotation explains (fit over the same pixels). mrcal instead moves the
+frame with the perturbed board poses, which needs the joint covariance of intrinsics and poses;
+the :class:`~aicalib_tf.calib.fit.Calibration` keeps only the marginal intrinsics block, so the
+best-fit rotation stands in for it (slightly optimistic: a best fit removes at least as much as
+the frame motion the poses imply).
+
+Pure numpy/scipy/OpenCV; never TensorFlow.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from aicalib_tf.geometry import lens as L
+from aicalib_tf.geometry.pattern import board_points
+
+__all__ = ["lens_of", "grid_points", "coverage_counts", "uncovered_regions", "projection_uncertainty",
+           "rotation_compensated_diff", "half_difference", "intrinsics_covariance", "default_fit", "predicted_half_difference", "verdict", "assess",
+           "SIGMA_LADDER_PX"]
+
+SIGMA_LADDER_PX = (0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0)  # the verdict's "good to X px" rungs
+_DEFAULT_MODEL = {5: "plumb_bob", 4: "plumb_bob", 8: "rational_polynomial", 12: "thin_prism"}
+
+
+def lens_of(cal) -> L.Lens:
+    """The :class:`~aicalib_tf.geometry.lens.Lens` of a calibration (its ``model``, K, dist, size).
+
+    Calibrations without a ``model`` attribute (older files) get it from the coefficient count.
+    """
+    model = getattr(cal, "model", None) or _DEFAULT_MODEL.get(len(np.ravel(cal.dist)), "plumb_bob")
+    return L.Lens(model, cal.K, cal.dist, tuple(cal.image_size))
+
+
+def grid_points(image_size, grid=(32, 24)) -> np.ndarray:
+    """(gy·gx, 2) float64 px: the centres of a gx × gy grid of cells over the image, row-major."""
+    w, h = (int(v) for v in image_size)
+    gx, gy = (int(v) for v in grid)
+    xs = (np.arange(gx) + 0.5) * w / gx - 0.5
+    ys = (np.arange(gy) + 0.5) * h / gy - 0.5
+    X, Y = np.meshgrid(xs, ys)
+    return np.stack([X.ravel(), Y.ravel()], axis=1)
+
+
+def coverage_counts(views, image_size, cells=(16, 12)) -> np.ndarray:
+    """(cells_y, cells_x) int64: how many detected corners of ``views`` fall in each image cell."""
+    w, h = (int(v) for v in image_size)
+    pts = np.concatenate([np.asarray(v.corners, np.float64).reshape(-1, 2) for v in views]) if len(views) else np.zeros((0, 2))
+    counts, _, _ = np.histogram2d(pts[:, 1], pts[:, 0], bins=(int(cells[1]), int(cells[0])),
+                                  range=((-0.5, h - 0.5), (-0.5, w - 0.5)))
+    return counts.astype(np.int64)
+
+
+_REGIONS = {"top-left": (0, 0), "top": (0, 1), "top-right": (0, 2), "left": (1, 0), "centre": (1, 1),
+            "right": (1, 2), "bottom-left": (2, 0), "bottom": (2, 1), "bottom-right": (2, 2)}
+
+
+def uncovered_regions(views, image_size) -> list[str]:
+    """Names of the image's nine regions (a 4 × 4 split: corners are the corner cells, "top" the two
+    top middle cells, "centre" the middle four, ...) that no detected corner falls in."""
+    c = coverage_counts(views, image_size, (4, 4))
+    spans = (slice(0, 1), slice(1, 3), slice(3, 4))
+    return [name for name, (r, k) in _REGIONS.items() if c[spans[r], spans[k]].sum() == 0]
+
+
+def _covered_mask(views, image_size, grid) -> np.ndarray:
+    """(M,) bool over :func:`grid_points`: the grid cells with at least one detected corner."""
+    return coverage_counts(views, image_size, grid).ravel() > 0
+
+
+def _rotation_basis(lens: L.Lens, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(J_intr (M, 2, n), A (M, 2, 3)): pixel derivatives w.r.t. the intrinsics and a small rotation
+    ω of the camera frame (the ray v goes to v + ω × v), at the rays ``rays`` (M, 3)."""
+    _, Jp, Ji = lens.projection_jacobian(rays)
+    skew = np.zeros((len(rays), 3, 3))
+    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = rays[:, 2], -rays[:, 1], rays[:, 0]
+    skew[:, 1, 0], skew[:, 2, 0], skew[:, 2, 1] = -rays[:, 2], rays[:, 1], -rays[:, 0]
+    return Ji, Jp @ skew  # d(ω × v)/dω = -[v]x = skew
+
+
+def _compensated_jacobian(lens: L.Lens, pixels: np.ndarray, fit_mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """(G (M, 2, n), ok (M,)): d(pixel)/d(intrinsics) with, to first order, the best rotation of the
+    camera frame over the ``fit_mask`` pixels removed (G = J − A·(A⁺J) with A⁺ fitted on the mask)."""
+    rays = lens.unproject(pixels)
+    ok = np.all(np.isfinite(rays), axis=1)
+    safe = np.where(ok[:, None], rays, [0.0, 0.0, 1.0])
+    Ji, A = _rotation_basis(lens, safe)
+    ok &= np.all(np.isfinite(Ji), axis=(1, 2)) & np.all(np.isfinite(A), axis=(1, 2))
+    fit = ok if fit_mask is None else ok & fit_mask
+    if fit.sum() < 3:
+        fit = ok
+    Af, Jf = A[fit].reshape(-1, 3), Ji[fit].reshape(-1, Ji.shape[2])
+    W = np.linalg.lstsq(Af, Jf, rcond=None)[0]  # (3, n): the rotation that explains each parameter
+    G = np.where(ok[:, None, None], Ji - A @ W, np.nan)
+    return G, ok
+
+
+def projection_uncertainty(cal, grid=(32, 24), distance=None, *, covariance=None, fit_mask=None,
+                           compensate: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """1σ projection uncertainty over the image, px.
+
+    For each grid cell centre q (:func:`grid_points`), the mean lens unprojects q to a ray v, a
+    camera-frame point P = distance·v is held fixed, and the 2×2 covariance of its projection is
+    C = G Σ Gᵀ with Σ = ``covariance`` (default ``cal.covariance``, (4+n)×(4+n) over
+    [fx, fy, cx, cy, *dist], poses marginalised) and G = d(project(P))/d(intrinsics). σ is the
+    square root of C's largest eigenvalue (the worst direction, as mrcal reports).
+
+    compensate : remove, to first order, what a rotation of the camera frame fitted over
+        ``fit_mask`` (M,) bool (default every imaged cell) explains (module docstring). Without
+        it σ is that of a point fixed in the camera frame, which overstates what a monocular
+        calibration can mean by "the camera frame".
+    distance : accepted for mrcal's signature; with a fixed point and a rotation-only frame
+        correction the projection is scale-free, so σ does not depend on it (None or any > 0).
+
+    Returns (points (M, 2) px, sigma (M,) px; NaN where the pixel has no ray).
+    Raises ValueError when no covariance is available.
+    """
+    if distance is not None and not (float(distance) > 0):
+        raise ValueError(f"distance must be > 0 (or None for infinity), got {distance!r}")
+    cov = getattr(cal, "covariance", None) if covariance is None else covariance
+    if cov is None:
+        raise ValueError("the calibration has no covariance of its intrinsics (cal.covariance is None)")
+    lens = lens_of(cal)
+    cov = np.asarray(cov, np.float64)
+    n = 4 + lens.dist.size
+    if cov.shape != (n, n):
+        raise ValueError(f"covariance must be {n}x{n} for {lens.model!r}, got {cov.shape}")
+    pts = grid_points(lens.image_size, grid)
+    if compensate:
+        G, ok = _compensated_jacobian(lens, pts, fit_mask)
+    else:
+        rays = lens.unproject(pts)
+        ok = np.all(np.isfinite(rays), axis=1)
+        G = lens.projection_jacobian(np.where(ok[:, None], rays, [0.0, 0.0, 1.0]))[2]
+    C = np.einsum("mij,jk,mlk->mil", np.nan_to_num(G), cov, np.nan_to_num(G))
+    sigma = np.sqrt(np.maximum(np.linalg.eigvalsh(C)[:, -1], 0.0))
+    return pts, np.where(ok & np.all(np.isfinite(G), axis=(1, 2)), sigma, np.nan)
+
+
+def rotation_compensated_diff(lens_a: L.Lens, lens_b: L.Lens, pixels, fit_mask=None) -> tuple[np.ndarray, np.ndarray]:
+    """mrcal-style projection difference of two lenses, px.
+
+    Each pixel q (M, 2) is unprojected with ``lens_a`` to a ray v; the rotation R minimising
+    Σ |project_b(R·v) − q|² over the ``fit_mask`` pixels (default all) is found from R = I
+    (scipy least_squares on a rotation vector). Returns (diff (M,) px = |project_b(R·v) − q|,
+    NaN where either lens has no ray; R (3, 3)).
+    """
+    q = np.asarray(pixels, np.float64).reshape(-1, 2)
+    v = lens_a.unproject(q)
+    ok = np.all(np.isfinite(v), axis=1) & np.all(np.isfinite(lens_b.project(v)), axis=1)
+    fit = ok if fit_mask is None else ok & np.asarray(fit_mask, bool)
+    if fit.sum() < 3:
+        raise ValueError(f"only {int(fit.sum())} pixels are imaged by both lenses; cannot compare them")
+    vf, qf = v[fit], q[fit]
+
+    def residual(w):
+        r = lens_b.project(vf @ Rotation.from_rotvec(w).as_matrix().T) - qf
+        return np.nan_to_num(r, nan=1e3).ravel()
+
+    sol = least_squares(residual, np.zeros(3), x_scale=1e-3, xtol=1e-12, ftol=1e-12)
+    R = Rotation.from_rotvec(sol.x).as_matrix()
+    d = np.full(len(q), np.nan)
+    d[ok] = np.linalg.norm(lens_b.project(v[ok] @ R.T) - q[ok], axis=1)
+    return d, R
+
+
+def _split(views, split: str) -> tuple[list, list]:
+    views = list(views)
+    if split == "evenodd":
+        return views[0::2], views[1::2]
+    if split == "halves":
+        k = (len(views) + 1) // 2
+        return views[:k], views[k:]
+    raise ValueError(f"split must be 'evenodd' or 'halves', got {split!r}")
+
+
+def _stats(d: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
+    x = d[mask & np.isfinite(d)]
+    return (float(np.median(x)), float(np.mean(x))) if x.size else (float("nan"), float("nan"))
+
+
+def half_difference(views, fit, pattern_size, square_size, image_size, model, split="evenodd", *,
+                    grid=(32, 24)) -> dict:
+    """Calibrate two disjoint halves of ``views`` and compare them (rotation-compensated), px.
+
+    fit : callable(views, pattern_size, square_size, image_size, model) -> Calibration, e.g.
+        :func:`aicalib_tf.calib.fit.fit_views` (no outlier rejection or model choice).
+    split : "evenodd" (views 0, 2, 4, ... against 1, 3, 5, ...) or "halves" (first against second).
+    The rotation is fitted over the grid cells that hold a detected corner ("covered").
+
+    Returns {"split", "n_a", "n_b", "median_covered", "mean_covered", "median_all", "mean_all"
+    (px), "rotation_deg", "points" (M, 2) px, "diff" (M,) px, "covered" (M,) bool, "grid",
+    "cal_a", "cal_b", "views_a", "views_b"}. Raises ValueError with fewer than 3 views in a half.
+    """
+    a, b = _split(views, split)
+    if min(len(a), len(b)) < 3:
+        raise ValueError(f"half_difference needs at least 3 views in each half, got {len(a)} and {len(b)}")
+    cal_a = fit(a, pattern_size, square_size, image_size, model)
+    cal_b = fit(b, pattern_size, square_size, image_size, model)
+    pts = grid_points(image_size, grid)
+    covered = _covered_mask(views, image_size, grid)
+    diff, R = rotation_compensated_diff(lens_of(cal_a), lens_of(cal_b), pts, covered)
+    med_c, mean_c = _stats(diff, covered)
+    med_a, mean_a = _stats(diff, np.ones_like(covered))
+    return {"split": split, "n_a": len(a), "n_b": len(b), "median_covered": med_c, "mean_covered": mean_c,
+            "median_all": med_a, "mean_all": mean_a,
+            "rotation_deg": float(np.degrees(Rotation.from_matrix(R).magnitude())),
+            "points": pts, "diff": diff, "covered": covered, "grid": tuple(grid), "cal_a": cal_a, "cal_b": cal_b,
+            "views_a": a, "views_b": b}
+
+
+def predicted_half_difference(cal_a, cal_b, covered=None, *, grid=(32, 24), samples: int = 400, seed: int = 0,
+                              covariances=None) -> dict:
+    """What the halves' covariances predict for :func:`half_difference`'s numbers, px.
+
+    Linearised Monte Carlo: the difference of two independent estimates is δ ~ N(0, Σ_a + Σ_b)
+    in the intrinsics; each sample's pixel difference is G·δ with G the rotation-compensated
+    Jacobian of ``cal_a``'s lens (the rotation fitted over ``covered`` (M,) bool, as measured),
+    and its median over the covered cells (and over the whole image) is taken; the mean of those
+    medians over ``samples`` draws is returned as {"median_covered", "median_all"}.
+    covariances : (Σ_a, Σ_b) to use instead of the halves' ``covariance`` attributes.
+    Raises ValueError when a half has no covariance.
+    """
+    covs = list(covariances) if covariances is not None else [getattr(c, "covariance", None) for c in (cal_a, cal_b)]
+    if any(c is None for c in covs):
+        raise ValueError("both halves need a covariance of their intrinsics to predict their difference")
+    lens = lens_of(cal_a)
+    pts = grid_points(lens.image_size, grid)
+    mask = np.ones(len(pts), bool) if covered is None else np.asarray(covered, bool)
+    G, ok = _compensated_jacobian(lens, pts, mask)
+    S = np.asarray(covs[0], np.float64) + np.asarray(covs[1], np.float64)
+    w, V = np.linalg.eigh(S)
+    root = V * np.sqrt(np.maximum(w, 0.0))  # S = root·rootᵀ
+    delta = np.random.default_rng(seed).standard_normal((int(samples), S.shape[0])) @ root.T
+    d = np.linalg.norm(np.einsum("mij,sj->smi", G[ok], delta), axis=2)  # (samples, m_ok)
+    m = mask[ok]
+    out = {"median_all": float(np.mean(np.median(d, axis=1)))}
+    out["median_covered"] = float(np.mean(np.median(d[:, m], axis=1))) if m.any() else float("nan")
+    return out
+
+
+def intrinsics_covariance(cal, views) -> np.ndarray:
+    """(4+n, 4+n) covariance of [fx, fy, cx, cy, *dist] with the board poses marginalised.
+
+    For calibrations that carry none (files from before the covariance was kept): Gauss–Newton
+    at the solution, J over the intrinsics and each used view's pose (a small rotation ω and a
+    translation of the board in the camera frame), the Schur complement of the pose blocks,
+    scaled by the residual variance Σr² / (2N − n_params). ``views`` must hold the used views
+    (matched by name to ``cal.views``). Raises ValueError when a used view is missing.
+    """
+    lens = lens_of(cal)
+    by_name = {v.name: v for v in views}
+    missing = [n for n in cal.views if n not in by_name]
+    if missing:
+        raise ValueError(f"views missing for the covariance: {missing[:5]}")
+    n = 4 + lens.dist.size
+    H = np.zeros((n, n))
+    sq, dof = 0.0, -n
+    for name, r, t in zip(cal.views, cal.rvecs, cal.tvecs):
+        v = by_name[name]
+        P = board_points(v.ids, cal.square_size) @ Rotation.from_rotvec(r).as_matrix().T + t
+        uv, Jp, Ji = lens.projection_jacobian(P)
+        ok = np.all(np.isfinite(uv), axis=1)
+        Ji, Jp, P = Ji[ok], Jp[ok], P[ok]
+        skew = np.zeros((len(P), 3, 3))
+        skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = P[:, 2], -P[:, 1], P[:, 0]
+        skew[:, 1, 0], skew[:, 2, 0], skew[:, 2, 1] = -P[:, 2], P[:, 1], -P[:, 0]
+        Jpose = np.concatenate([Jp @ skew, Jp], axis=2).reshape(-1, 6)
+        Jin = Ji.reshape(-1, n)
+        Hpp_inv = np.linalg.pinv(Jpose.T @ Jpose)
+        Hip = Jin.T @ Jpose
+        H += Jin.T @ Jin - Hip @ Hpp_inv @ Hip.T
+        sq += float(np.sum((uv[ok] - v.corners[ok]) ** 2))
+        dof += 2 * len(P) - 6
+    return np.linalg.pinv(H) * (sq / max(dof, 1))
+
+
+def _covariance(cal, views) -> np.ndarray:
+    """``cal.covariance``, or :func:`intrinsics_covariance` from ``views`` when it has none."""
+    cov = getattr(cal, "covariance", None)
+    return intrinsics_covariance(cal, views) if cov is None else np.asarray(cov, np.float64)
+
+
+def default_fit():
+    """The fit :func:`half_difference` uses by default: ``fit.fit_views`` where it exists, else
+    ``calibrate_camera`` without outlier rejection (rational for 8 coefficients)."""
+    from aicalib_tf.calib import fit as F
+
+    if hasattr(F, "fit_views"):
+        return F.fit_views
+
+    def fit(views, pattern_size, square_size, image_size, model):
+        if model not in ("plumb_bob", "rational_polynomial"):
+            raise ValueError(f"this build's fit handles plumb_bob and rational_polynomial, not {model!r}")
+        return F.calibrate_camera(views, pattern_size, square_size, image_size, reject_outliers=False,
+                                  rational=model == "rational_polynomial")
+    return fit
+
+
+def _ladder(x: float) -> float:
+    """The smallest rung of :data:`SIGMA_LADDER_PX` at or above x (the last rung if none)."""
+    return next((r for r in SIGMA_LADDER_PX if x <= r), SIGMA_LADDER_PX[-1])
+
+
+def verdict(cal, views, *, sigma=None, half=None, grid=(32, 24)) -> str:
+    """One line: "good to X px (1σ) over Y% of the image; ...".
+
+    X is the smallest rung of :data:`SIGMA_LADDER_PX` (0.05, 0.1, 0.2, 0.5, 1, 2, 5 px) at or above
+    the 90th percentile of σ (:func:`projection_uncertainty`, ``sigma`` (M,) if given) over the
+    cells the boards covered; Y% is the share of the image's grid cells with σ ≤ X (cells with
+    no ray count as not good). Then the uncovered regions (:func:`uncovered_regions`) and, when
+    ``half`` (:func:`half_difference`'s dict) is given, how far the two halves disagree.
+    """
+    parts = []
+    if sigma is None and getattr(cal, "covariance", None) is not None:
+        sigma = projection_uncertainty(cal, grid)[1]
+    if sigma is not None:
+        covered = _covered_mask(views, cal.image_size, grid)
+        s_cov = sigma[covered & np.isfinite(sigma)]
+        if s_cov.size:
+            x = _ladder(float(np.percentile(s_cov, 90)))
+            good = float(np.mean(np.nan_to_num(sigma, nan=np.inf) <= x))
+            parts.append(f"good to {x:g} px (1σ) over {100 * good:.0f}% of the image")
+    else:
+        parts.append("uncertainty unknown (no covariance)")
+    empty = uncovered_regions(views, cal.image_size)
+    if empty:
+        parts.append(f"no board has covered the {', '.join(empty)} "
+                     + ("corner" if len(empty) == 1 and "-" in empty[0] else "regions" if len(empty) > 1 else "region"))
+    if half is not None:
+        parts.append(f"two halves of the views ({half['split']}) disagree by {half['median_covered']:.2f} px "
+                     "(median, covered area)")
+    return "; ".join(parts)
+
+
+def assess(cal, views, *, fit=None, split="evenodd", grid=(32, 24)) -> dict:
+    """Everything :mod:`~aicalib_tf.calib.quality` knows about ``cal``, for ``cal.quality``.
+
+    views : the views (used ones matter; others are ignored by name). fit : as in
+    :func:`half_difference`; None skips the half-vs-half comparison (it costs two fits).
+    Returns {"sigma_px": {"median_covered", "max_covered", "median_all", "max_all"} (or None
+    without a covariance), "covered_fraction", "uncovered": [region names], "half": {"split",
+    "median_covered", "mean_covered", "median_all", "mean_all", "predicted_median_covered"} or
+    None, "verdict": str}. Grids and arrays are left out so the dict is JSON-able.
+    """
+    used = [v for v in views if v.name in set(cal.views)] or list(views)
+    covered = _covered_mask(used, cal.image_size, grid)
+    try:
+        cov = _covariance(cal, used)
+    except (ValueError, np.linalg.LinAlgError):
+        cov = None
+    sigma, sig = None, None
+    if cov is not None:
+        sigma = projection_uncertainty(cal, grid, covariance=cov, fit_mask=covered)[1]
+        fin = np.isfinite(sigma)
+        sig = {"median_covered": float(np.median(sigma[covered & fin])), "max_covered": float(np.max(sigma[covered & fin])),
+               "median_all": float(np.median(sigma[fin])), "max_all": float(np.max(sigma[fin]))}
+    half = None
+    if fit is not None and len(used) >= 6:
+        h = half_difference(used, fit, cal.pattern_size, cal.square_size, cal.image_size, lens_of(cal).model, split,
+                            grid=grid)
+        half = {k: h[k] for k in ("split", "n_a", "n_b", "median_covered", "mean_covered", "median_all", "mean_all")}
+        try:
+            covs = [_covariance(h[f"cal_{k}"], h[f"views_{k}"]) for k in "ab"]
+            half["predicted_median_covered"] = predicted_half_difference(
+                h["cal_a"], h["cal_b"], h["covered"], grid=grid, covariances=covs)["median_covered"]
+        except (ValueError, np.linalg.LinAlgError):
+            half["predicted_median_covered"] = None
+    return {"sigma_px": sig, "covered_fraction": float(np.mean(covered)),
+            "uncovered": uncovered_regions(used, cal.image_size), "half": half,
+            "verdict": verdict(cal, used, sigma=sigma, half=half, grid=grid)}
