@@ -1,23 +1,30 @@
-"""Calibration files: OpenCV FileStorage YAML, a JSON twin, and ROS ``camera_info`` YAML.
+"""Calibration files: OpenCV FileStorage YAML, a JSON twin, and ROS ``camera_info`` YAML; undistortion.
 
 ``camera.yaml`` (read it with ``cv2.FileStorage(path, cv2.FILE_STORAGE_READ)``):
-``camera_matrix`` (3×3), ``distortion_coefficients`` (1×5 or 1×8), ``image_width``,
-``image_height``, ``avg_reprojection_error`` (px), ``per_view_reprojection_errors`` (V×1 px),
+``camera_matrix`` (3×3), ``distortion_model`` (ROS's name: ``plumb_bob``, ``rational_polynomial``
+or ``equidistant``; the thin prism is ``rational_polynomial`` with OpenCV's 12 coefficients),
+``distortion_coefficients`` (1×n in OpenCV order), ``image_width``, ``image_height``,
+``avg_reprojection_error`` (px), ``per_view_reprojection_errors`` (V×1 px),
 ``extrinsic_parameters`` (V×6: rvec, tvec per used view), the board (``board_width``,
 ``board_height`` inner corners, ``square_size``) and ``calibration_time``.
 
-``camera.json`` holds the same plus what is needed to rerun diagnostics: view names, per-view
-corner counts, standard deviations, rejected views with reasons, the square unit and the
-provenance in ``meta`` (detector, model sha256, flags). :func:`load_calibration` reads it back
-exactly (floats are written with full precision).
+``camera.json`` holds the same plus what is needed to rerun diagnostics: our model name
+(``model``: plumb_bob, rational_polynomial, thin_prism or equidistant), the intrinsics covariance,
+the model-choice table, the quality summary, view names, per-view corner counts, standard
+deviations, rejected views with reasons, the square unit and the provenance in ``meta``.
+:func:`load_calibration` reads it back exactly (floats are written with full precision); it also
+reads ``camera.yaml`` (without view names, covariance or table).
 
-``camera_info.yaml`` follows ROS's ``sensor_msgs/CameraInfo`` calibration file layout
-(``plumb_bob`` for 5 coefficients, ``rational_polynomial`` for 8). Its projection matrix is
-``cv2.getOptimalNewCameraMatrix(K, dist, size, alpha=0)``, as ROS's monocular calibrator writes.
+``camera_info.yaml`` follows ROS's ``sensor_msgs/CameraInfo`` calibration file layout with the same
+``distortion_model``. Its projection matrix P is the new camera matrix of :func:`undistort` with
+alpha = 0: for the pinhole models ``cv2.getOptimalNewCameraMatrix(K, dist, size, alpha=0)`` as
+ROS's monocular calibrator writes; for ``equidistant`` a pinhole with K's focal lengths centred on
+the image (the central magnification kept, the periphery cropped).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -26,15 +33,20 @@ import cv2
 import numpy as np
 
 from aicalib_tf.calib.fit import Calibration
+from aicalib_tf.calib.quality import lens_of
+from aicalib_tf.geometry import lens as L
 from aicalib_tf.io import atomic_write_text
 
-__all__ = ["save_calibration", "load_calibration", "to_opencv_yaml", "to_json", "to_camera_info_yaml", "undistort"]
+__all__ = ["save_calibration", "load_calibration", "to_opencv_yaml", "to_json", "to_camera_info_yaml", "undistort",
+           "undistort_camera_matrix"]
 
 FILES = ("camera.yaml", "camera.json", "camera_info.yaml")
+MAX_FISHEYE_HALF_ANGLE_DEG = 75.0  # the widest half-angle a rectified pinhole of equidistant shows (alpha = 1)
 
 
 def to_opencv_yaml(cal: Calibration) -> str:
     """The calibration as OpenCV FileStorage YAML text."""
+    lens = lens_of(cal)
     fs = cv2.FileStorage("camera.yaml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
     fs.write("calibration_time", time.strftime("%Y-%m-%d %H:%M:%S"))
     fs.write("image_width", int(cal.image_size[0]))
@@ -44,19 +56,39 @@ def to_opencv_yaml(cal: Calibration) -> str:
     fs.write("square_size", float(cal.square_size))
     fs.write("nr_of_frames", len(cal.views))
     fs.write("camera_matrix", np.asarray(cal.K, np.float64))
+    fs.write("distortion_model", L.ROS_NAMES[lens.model])
     fs.write("distortion_coefficients", np.asarray(cal.dist, np.float64).reshape(1, -1))
     fs.write("avg_reprojection_error", float(cal.rms))
     fs.write("per_view_reprojection_errors", np.asarray(cal.per_view_rms, np.float64).reshape(-1, 1))
-    fs.write("extrinsic_parameters", np.concatenate([cal.rvecs, cal.tvecs], axis=1).astype(np.float64))
+    fs.write("extrinsic_parameters", np.concatenate([cal.rvecs, cal.tvecs], axis=1).astype(np.float64).reshape(-1, 6))
     return fs.releaseAndGetString()
 
 
+def _jsonable(x):
+    """Nested dicts/lists/tuples with numpy scalars and arrays -> plain JSON types."""
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, np.generic):
+        return x.item()
+    return x
+
+
 def _as_dict(cal: Calibration) -> dict:
+    lens = lens_of(cal)
+    cov = getattr(cal, "covariance", None)
     return {
         "image_width": int(cal.image_size[0]), "image_height": int(cal.image_size[1]),
+        "model": lens.model, "distortion_model": L.ROS_NAMES[lens.model],
         "camera_matrix": np.asarray(cal.K).tolist(), "distortion_coefficients": np.asarray(cal.dist).tolist(),
         "avg_reprojection_error": float(cal.rms),
         "std": {k: float(v) for k, v in cal.std.items()},
+        "covariance": None if cov is None else np.asarray(cov, np.float64).tolist(),
+        "model_table": _jsonable(list(getattr(cal, "model_table", ()) or ())),
+        "quality": _jsonable(dict(getattr(cal, "quality", {}) or {})),
         "board": {"pattern_size": list(cal.pattern_size), "square_size": float(cal.square_size),
                   "square_unit": cal.square_unit},
         "views": [
@@ -80,13 +112,14 @@ def _ros_matrix(name: str, m: np.ndarray) -> str:
 
 
 def to_camera_info_yaml(cal: Calibration, camera_name: str = "camera") -> str:
-    """The calibration in ROS's camera_info YAML layout (monocular: identity rectification)."""
+    """The calibration in ROS's camera_info YAML layout (monocular: identity rectification).
+
+    P is :func:`undistort_camera_matrix` with alpha = 0 (module docstring)."""
     w, h = cal.image_size
-    P, _ = cv2.getOptimalNewCameraMatrix(cal.K, cal.dist, (w, h), 0.0)
-    model = "rational_polynomial" if len(cal.dist) == 8 else "plumb_bob"
+    P = undistort_camera_matrix(cal, 0.0)
     return (f"image_width: {w}\nimage_height: {h}\ncamera_name: {camera_name}\n"
             + _ros_matrix("camera_matrix", cal.K)
-            + f"distortion_model: {model}\n"
+            + f"distortion_model: {L.ROS_NAMES[lens_of(cal).model]}\n"
             + _ros_matrix("distortion_coefficients", np.asarray(cal.dist).reshape(1, -1))
             + _ros_matrix("rectification_matrix", np.eye(3))
             + _ros_matrix("projection_matrix", np.concatenate([P, np.zeros((3, 1))], axis=1)))
@@ -105,46 +138,118 @@ def save_calibration(cal: Calibration, folder) -> Path:
     return folder
 
 
+def _build(fields: dict, extra: dict) -> Calibration:
+    """A Calibration from its fields plus the newer ones (model, covariance, model_table, quality)
+    that this build's Calibration knows; a non-default model it cannot hold is an error."""
+    known = {f.name for f in dataclasses.fields(Calibration)}
+    fields.update({k: v for k, v in extra.items() if k in known})
+    cal = Calibration(**fields)
+    if "model" in extra and lens_of(cal).model != extra["model"]:
+        raise ValueError(f"this build's Calibration cannot hold a {extra['model']!r} lens")
+    return cal
+
+
+def _load_json(path: Path) -> Calibration:
+    d = json.loads(path.read_text(encoding="utf-8"))
+    views, board = d["views"], d["board"]
+    dist = np.asarray(d["distortion_coefficients"], np.float64).ravel()
+    model = d.get("model") or L.model_from_ros(d.get("distortion_model", "plumb_bob"), dist.size)
+    L.check_model(model, dist)
+    cov = d.get("covariance")
+    extra = {"model": model, "covariance": None if cov is None else np.asarray(cov, np.float64),
+             "model_table": tuple(d.get("model_table") or ()), "quality": dict(d.get("quality") or {})}
+    return _build(dict(
+        K=np.asarray(d["camera_matrix"], np.float64).reshape(3, 3), dist=dist,
+        image_size=(int(d["image_width"]), int(d["image_height"])),
+        pattern_size=tuple(int(v) for v in board["pattern_size"]),
+        square_size=float(board["square_size"]), square_unit=str(board.get("square_unit", "")),
+        rms=float(d["avg_reprojection_error"]), views=tuple(str(v["name"]) for v in views),
+        rvecs=np.asarray([v["rvec"] for v in views], np.float64).reshape(-1, 3),
+        tvecs=np.asarray([v["tvec"] for v in views], np.float64).reshape(-1, 3),
+        per_view_rms=np.asarray([v["rms"] for v in views], np.float64),
+        corner_counts=np.asarray([v["corners"] for v in views], np.int64),
+        std={str(k): float(v) for k, v in d.get("std", {}).items()},
+        rejected={str(k): str(v) for k, v in d.get("rejected", {}).items()}, meta=dict(d.get("meta", {}))), extra)
+
+
+def _load_opencv_yaml(path: Path) -> Calibration:
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    try:
+        K, dist = fs.getNode("camera_matrix").mat(), fs.getNode("distortion_coefficients").mat()
+        if K is None or dist is None:
+            raise ValueError("no camera_matrix or distortion_coefficients matrix")
+        dist = dist.astype(np.float64).ravel()
+        node = fs.getNode("distortion_model")
+        model = L.model_from_ros(node.string() if not node.empty() else "plumb_bob", dist.size)
+        ext = fs.getNode("extrinsic_parameters").mat()
+        ext = np.zeros((0, 6)) if ext is None else ext.reshape(-1, 6).astype(np.float64)
+        errs = fs.getNode("per_view_reprojection_errors").mat()
+        errs = np.zeros(len(ext)) if errs is None else errs.astype(np.float64).ravel()
+        fields = dict(K=K.astype(np.float64), dist=L.check_model(model, dist)[1],
+                      image_size=(int(fs.getNode("image_width").real()), int(fs.getNode("image_height").real())),
+                      pattern_size=(int(fs.getNode("board_width").real()), int(fs.getNode("board_height").real())),
+                      square_size=float(fs.getNode("square_size").real()), rms=float(fs.getNode("avg_reprojection_error").real()),
+                      views=tuple(f"view{k}" for k in range(len(ext))), rvecs=ext[:, :3], tvecs=ext[:, 3:],
+                      per_view_rms=errs, corner_counts=np.zeros(len(ext), np.int64), std={})
+    finally:
+        fs.release()
+    return _build(fields, {"model": model})
+
+
 def load_calibration(path) -> Calibration:
-    """Read ``camera.json`` (or a folder holding it). Raises ValueError naming the file if it is bad."""
+    """Read ``camera.json`` (or a folder holding it) or an OpenCV ``camera.yaml``.
+
+    The lens model comes from ``model`` (JSON) or ``distortion_model`` with the coefficient
+    count (:func:`~aicalib_tf.geometry.lens.model_from_ros`; plumb_bob when absent, as in older
+    files). Raises FileNotFoundError, or ValueError naming the file if it is bad.
+    """
     path = Path(path)
     if path.is_dir():
         path = path / "camera.json"
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such calibration file")
     try:
-        d = json.loads(path.read_text(encoding="utf-8"))
-        views = d["views"]
-        board = d["board"]
-        return Calibration(
-            K=np.asarray(d["camera_matrix"], np.float64).reshape(3, 3),
-            dist=np.asarray(d["distortion_coefficients"], np.float64).ravel(),
-            image_size=(int(d["image_width"]), int(d["image_height"])),
-            pattern_size=tuple(int(v) for v in board["pattern_size"]),
-            square_size=float(board["square_size"]), square_unit=str(board.get("square_unit", "")),
-            rms=float(d["avg_reprojection_error"]),
-            views=tuple(str(v["name"]) for v in views),
-            rvecs=np.asarray([v["rvec"] for v in views], np.float64).reshape(-1, 3),
-            tvecs=np.asarray([v["tvec"] for v in views], np.float64).reshape(-1, 3),
-            per_view_rms=np.asarray([v["rms"] for v in views], np.float64),
-            corner_counts=np.asarray([v["corners"] for v in views], np.int64),
-            std={str(k): float(v) for k, v in d.get("std", {}).items()},
-            rejected={str(k): str(v) for k, v in d.get("rejected", {}).items()},
-            meta=dict(d.get("meta", {})),
-        )
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+        return _load_opencv_yaml(path) if path.suffix.lower() in (".yaml", ".yml") else _load_json(path)
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError, cv2.error) as exc:
         raise ValueError(f"{path}: not a valid aicalib_tf calibration file ({type(exc).__name__}: {exc})") from None
 
 
+def undistort_camera_matrix(cal: Calibration, alpha: float = 0.0) -> np.ndarray:
+    """(3, 3) camera matrix of the ideal pinhole image :func:`undistort` produces.
+
+    Pinhole models: ``cv2.getOptimalNewCameraMatrix`` (alpha 0 keeps only valid pixels, 1 keeps
+    every source pixel). ``equidistant`` (a pinhole cannot show 180°): the principal point at the
+    image centre and a focal f = (1 − alpha)·fx + alpha·f₁ (likewise for y), where f₁ makes the
+    output's left/right edges see the lens's horizontal half-field, capped at 75°
+    (:data:`MAX_FISHEYE_HALF_ANGLE_DEG`): alpha 0 keeps the central magnification and crops the
+    periphery, alpha 1 shows as much of the horizontal field as a pinhole reasonably can.
+    """
+    a = float(alpha)
+    if not 0.0 <= a <= 1.0:
+        raise ValueError(f"alpha must be in [0, 1], got {alpha!r}")
+    lens = lens_of(cal)
+    w, h = lens.image_size
+    if lens.model != "equidistant":
+        new_K, _ = cv2.getOptimalNewCameraMatrix(lens.K, lens.dist, (w, h), a)
+        return np.asarray(new_K, np.float64)
+    half = np.nanmin(np.radians(lens.field_of_view()["horizontal"]) / 2)
+    half = min(float(half) if np.isfinite(half) else np.pi, np.radians(MAX_FISHEYE_HALF_ANGLE_DEG))
+    f1 = 0.5 * w / np.tan(half)
+    fx, fy = (1 - a) * lens.fx + a * f1, (1 - a) * lens.fy + a * f1 * lens.fy / lens.fx
+    return np.array([[fx, 0.0, (w - 1) / 2], [0.0, fy, (h - 1) / 2], [0.0, 0.0, 1.0]])
+
+
 def undistort(image: np.ndarray, cal: Calibration, *, alpha: float = 0.0) -> np.ndarray:
-    """Remove lens distortion from an image taken by the calibrated camera.
+    """Remove lens distortion from an image taken by the calibrated camera (any lens model).
 
     image : (H, W) or (H, W, C) array of the calibration's image size.
-    alpha : 0 keeps only valid pixels (crops the curved border); 1 keeps every source pixel.
-    Returns an array of the same shape and dtype.
+    alpha : in [0, 1], the new camera matrix's trade-off (:func:`undistort_camera_matrix`).
+    Returns an array of the same shape and dtype (black where the output pixel has no source:
+    bilinear ``cv2.remap`` through :func:`~aicalib_tf.geometry.lens.undistort_maps`).
     """
     h, w = image.shape[:2]
     if (w, h) != tuple(cal.image_size):
         raise ValueError(f"image is {w}x{h} but the calibration is for {cal.image_size[0]}x{cal.image_size[1]}")
-    new_K, _ = cv2.getOptimalNewCameraMatrix(cal.K, cal.dist, (w, h), float(alpha))
-    return cv2.undistort(image, cal.K, cal.dist, None, new_K)
+    lens = lens_of(cal)
+    map_x, map_y = lens.undistort_maps(new_K=undistort_camera_matrix(cal, alpha))
+    return cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)

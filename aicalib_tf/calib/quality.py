@@ -42,6 +42,9 @@ def lens_of(cal) -> L.Lens:
 
     Calibrations without a ``model`` attribute (older files) get it from the coefficient count.
     """
+    lens = getattr(cal, "lens", None)
+    if isinstance(lens, L.Lens):
+        return lens
     model = getattr(cal, "model", None) or _DEFAULT_MODEL.get(len(np.ravel(cal.dist)), "plumb_bob")
     return L.Lens(model, cal.K, cal.dist, tuple(cal.image_size))
 
