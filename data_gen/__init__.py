@@ -13,7 +13,7 @@ from aicalib_tf.geometry.camera import Camera, distort_normalized, undistort_nor
 from aicalib_tf.geometry.pose import project_points
 
 from .board import Board, sample_board
-from .camera import sample_camera
+from .camera import sample_camera, sample_fisheye
 from .dataset import DatasetConfig, write_dataset
 from .degrade import DEGRADATIONS, apply_degradations
 from .pose import PoseConfig, sample_pose
@@ -42,6 +42,7 @@ __all__ = [
     "render_board",
     "sample_board",
     "sample_camera",
+    "sample_fisheye",
     "sample_pose",
     "undistort_normalized",
     "write_dataset",

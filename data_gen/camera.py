@@ -1,6 +1,7 @@
-"""Sampling realistic cameras (the lens model itself is :class:`aicalib_tf.geometry.camera.Camera`).
+"""Sampling realistic cameras: pinhole lenses with OpenCV's 5 coefficients, and equidistant fisheyes.
 
-The camera model, its conventions and its exact inverse live in :mod:`aicalib_tf.geometry.camera`.
+The lens maths lives in :mod:`aicalib_tf.geometry.lens`; :class:`aicalib_tf.geometry.camera.Camera`
+wraps it with the image circle the renderer needs.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import numpy as np
 
 from aicalib_tf.geometry.camera import Camera
 
-__all__ = ["sample_camera", "DISTORTION_LEVELS"]
+__all__ = ["sample_camera", "sample_fisheye", "DISTORTION_LEVELS"]
 
 DISTORTION_LEVELS = ("none", "mild", "strong", "pincushion")
 
@@ -85,3 +86,67 @@ def sample_camera(
             continue
         return cam
     raise RuntimeError(f"could not sample a monotonic camera for size {image_size} in {max_tries} tries")
+
+
+def _sample_kb(rng: np.random.Generator) -> np.ndarray:
+    """Small Kannala–Brandt coefficients [k1, k2, k3, k4] of the size real fisheye fits give."""
+    return np.array([rng.uniform(-0.04, 0.04), rng.uniform(-0.01, 0.01), rng.uniform(-0.003, 0.003),
+                     rng.uniform(-0.001, 0.001)])
+
+
+def sample_fisheye(
+    rng: np.random.Generator,
+    image_size: tuple[int, int],
+    *,
+    fov_deg: tuple[float, float] = (150.0, 200.0),
+    circular_from_deg: float = 175.0,
+    max_tries: int = 100,
+) -> Camera:
+    """Draw an equidistant (Kannala–Brandt) fisheye for an image of ``image_size`` = (w, h) px.
+
+    The lens' full field of view is drawn from ``fov_deg`` (degrees; up to 200°, i.e. 100°
+    off-axis, beyond the pinhole's 90°). Below ``circular_from_deg`` the lens is full-frame: the
+    image diagonal sees exactly that angle and the image circle passes just outside the
+    corners. From it on the lens is circular: the whole image circle (radius 0.90–0.97 of half
+    the shorter side) lies inside the frame and pixels outside it see nothing. k1..k4 are small
+    (:func:`_sample_kb`); the model is monotonic to 1.05x the circle's angle.
+    Returns a :class:`Camera` with ``model="equidistant"`` and ``max_theta`` = half the FOV.
+    """
+    w, h = (int(v) for v in image_size)
+    lo, hi = fov_deg
+    if not 0.0 < lo <= hi <= 360.0:
+        raise ValueError(f"fov_deg must be (lo, hi) with 0 < lo <= hi <= 360, got {fov_deg}")
+    for _ in range(max_tries):
+        fov = rng.uniform(lo, hi)
+        theta_max = math.radians(fov) / 2.0
+        k = _sample_kb(rng)
+        lim = Camera(np.eye(3), k, (w, h), model="equidistant").r_mono
+        if min(lim, math.pi) < 1.05 * theta_max and lim < math.pi:
+            continue
+        td = theta_max * (1.0 + sum(k[i] * theta_max ** (2 * i + 2) for i in range(4)))
+        cx = (w - 1) / 2.0 + rng.normal(0.0, 0.003 * w)
+        cy = (h - 1) / 2.0 + rng.normal(0.0, 0.003 * h)
+        if fov >= circular_from_deg:
+            radius = rng.uniform(0.90, 0.97) * (min(w, h) / 2.0)
+        else:
+            radius = math.hypot(w / 2.0, h / 2.0)
+        if td <= 0:
+            continue
+        fx = radius / td
+        fy = fx * (1.0 + rng.normal(0.0, 0.002))
+        K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+        if fov >= circular_from_deg:
+            if not (cx - fx * td >= -0.5 and cx + fx * td <= w - 0.5 and cy - fy * td >= -0.5 and cy + fy * td <= h - 0.5):
+                continue
+            return Camera(K, k, (w, h), model="equidistant", max_theta=theta_max)
+        # Full frame: the circle just clears the (off-centre) image corners.
+        cam = Camera(K, k, (w, h), model="equidistant")
+        corners = np.array([[-0.5, -0.5], [w - 0.5, -0.5], [-0.5, h - 0.5], [w - 0.5, h - 0.5]])
+        rays = cam.lens.unproject(corners)
+        if not np.all(np.isfinite(rays)):
+            continue
+        edge = float(np.max(np.arctan2(np.hypot(rays[:, 0], rays[:, 1]), rays[:, 2]))) + 1e-3
+        if edge >= min(lim, math.pi):
+            continue
+        return Camera(K, k, (w, h), model="equidistant", max_theta=edge)
+    raise RuntimeError(f"could not sample a fisheye for size {image_size} and fov {fov_deg} in {max_tries} tries")

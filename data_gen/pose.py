@@ -54,19 +54,17 @@ def _rotation(tilt: float, tilt_axis: float, roll: float) -> np.ndarray:
 
 
 def imaged_mask(points_cam: np.ndarray, camera: Camera) -> np.ndarray:
-    """(N,) bool: points in front of the camera and inside the distortion model's monotonic domain."""
-    z = points_cam[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r = np.hypot(points_cam[:, 0] / z, points_cam[:, 1] / z)
-    return (z > 0) & (r < camera.r_mono)
+    """(N,) bool: points (N, 3) the lens images: in front of it (for a fisheye: within its
+    ``max_theta``, which may exceed 90°), inside the model's monotonic domain and the image circle."""
+    return camera.imaged(points_cam)
 
 
 def corner_visibility(board: Board, rvec, tvec, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     """Project the inner corners and flag those a detector could see, occluders aside.
 
-    Returns (corners (cols·rows, 2) float64 px from ``cv2.projectPoints``, visible (cols·rows,)
-    bool): in front of the camera, inside the lens model's monotonic domain, and within the hull
-    of the pixel centres. The pose sampler and the labels both use this one rule.
+    Returns (corners (cols·rows, 2) float64 px from :func:`aicalib_tf.geometry.pose.project_points`,
+    visible (cols·rows,) bool): imaged by the lens (:func:`imaged_mask`: in front, in the
+    monotonic domain, inside a fisheye's image circle) and within the hull of the pixel centres. The pose sampler and the labels both use this one rule.
     """
     obj = board.object_points()
     R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
@@ -75,11 +73,25 @@ def corner_visibility(board: Board, rvec, tvec, camera: Camera) -> tuple[np.ndar
     return corners, imaged & in_frame(corners, camera.image_size, border=0.5)
 
 
-def _acceptable(camera: Camera, board: Board, R: np.ndarray, t: np.ndarray, cfg: PoseConfig) -> bool:
+def _paper_outline(board: Board, fisheye: bool) -> np.ndarray:
+    """(M, 3) board-frame points of the paper's outline: its 4 corners, plus 7 points along each
+    edge for a fisheye, whose straight edges bow out of the corners' hull."""
     x0, y0, x1, y1 = board.paper_bounds()
-    paper = np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0]], dtype=np.float64)
+    corners = np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0]], dtype=np.float64)
+    if not fisheye:
+        return corners
+    s = np.linspace(0.0, 1.0, 9)[1:-1, None]
+    edges = [a + s * (b - a) for a, b in zip(corners, np.roll(corners, -1, axis=0))]
+    return np.concatenate([corners] + edges)
+
+
+def _acceptable(camera: Camera, board: Board, R: np.ndarray, t: np.ndarray, cfg: PoseConfig) -> bool:
+    paper = _paper_outline(board, camera.fisheye)
     paper_cam = paper @ R.T + t
-    if np.any(paper_cam[:, 2] <= 0):
+    if camera.fisheye:
+        if not np.all(camera.imaged(paper_cam)):
+            return False
+    elif np.any(paper_cam[:, 2] <= 0):
         return False
     # The camera must see the printed side, at a bounded grazing angle everywhere.
     normal = R[:, 2]
@@ -121,16 +133,19 @@ def sample_pose(
         tilt_axis = rng.uniform(0.0, 2.0 * math.pi)
         roll = math.radians(rng.uniform(*cfg.roll_deg))
         R = _rotation(tilt, tilt_axis, roll)
-        if cfg.framing == "partial":
+        if camera.fisheye:
+            target = _fisheye_target(rng, camera, cfg.framing == "partial")
+        elif cfg.framing == "partial":
             target = np.array([rng.uniform(-0.3, 1.3) * w, rng.uniform(-0.3, 1.3) * h])
         else:
             target = np.array([rng.uniform(0.0, w - 1.0), rng.uniform(0.0, h - 1.0)])
-        ray = camera.pixel_to_normalized(target)
+        ray = camera.pixel_to_ray(target)
         if not np.all(np.isfinite(ray)):
             continue
         # Distance from the apparent size; distortion and tilt change it a little, which is fine.
+        # Pinhole rays are (x/z, y/z, 1), so this is depth; fisheye rays are unit: range.
         z = f * paper_diag / (fill * diag_px)
-        centre_cam = z * np.array([ray[0], ray[1], 1.0])
+        centre_cam = z * ray
         t = centre_cam - R @ board.centre()
         if _acceptable(camera, board, R, t, cfg):
             return cv2.Rodrigues(R)[0].ravel(), t
@@ -138,3 +153,23 @@ def sample_pose(
         f"no acceptable pose for a {board.cols}x{board.rows} board with framing={cfg.framing!r} "
         f"after {max_tries} tries; widen PoseConfig.fill or tilt"
     )
+
+
+def _fisheye_target(rng: np.random.Generator, camera: Camera, partial: bool) -> np.ndarray:
+    """(2,) px where a fisheye view aims the board centre: uniform over the imaged part of the
+    frame, and a third of the time in the outer ring of the image circle (0.7–1.0 of its
+    radius; 0.85–1.0 for partial framing, whose boards then run past the rim), so boards reach the
+    rim where the lens bends most."""
+    w, h = camera.image_size
+    rho = camera.circle_radius()
+    for _ in range(50):
+        if rng.random() < 1.0 / 3.0:
+            a = rng.uniform(0.0, 2.0 * math.pi)
+            s = rng.uniform(0.85, 1.0) if partial else rng.uniform(0.7, 1.0)
+            uv = np.array([camera.cx + s * rho * camera.fx * math.cos(a), camera.cy + s * rho * camera.fy * math.sin(a)])
+        else:
+            lo, hi = (-0.3, 1.3) if partial else (0.0, 1.0)
+            uv = np.array([rng.uniform(lo, hi) * (w - 1.0), rng.uniform(lo, hi) * (h - 1.0)])
+        if partial or (camera.inside_circle(uv) and 0 <= uv[0] <= w - 1 and 0 <= uv[1] <= h - 1):
+            return uv
+    return np.array([camera.cx, camera.cy])

@@ -11,10 +11,11 @@ from dataclasses import asdict, dataclass, field, replace
 
 from .pose import PoseConfig
 
-__all__ = ["Rule", "Preset", "PRESETS", "get_preset", "COMMON_SIZES"]
+__all__ = ["Rule", "Preset", "PRESETS", "get_preset", "COMMON_SIZES", "LENSES"]
 
 COMMON_SIZES = ((640, 480), (800, 600), (1024, 768), (1280, 720), (1280, 960), (1920, 1080))
 INT_PARAMS = {"quality"}
+LENSES = ("pinhole", "fisheye")
 
 
 @dataclass(frozen=True)
@@ -32,7 +33,12 @@ class Rule:
 
 @dataclass(frozen=True)
 class Preset:
-    """A scene recipe. Ranges are ``(lo, hi)``, drawn uniformly."""
+    """A scene recipe. Ranges are ``(lo, hi)``, drawn uniformly.
+
+    lens : "pinhole" (OpenCV's 5 coefficients; ``hfov_deg`` and ``distortion`` apply) or
+    "fisheye" (equidistant Kannala–Brandt with full FOV from ``fisheye_fov_deg``, see
+    :func:`data_gen.camera.sample_fisheye`).
+    """
 
     name: str
     description: str
@@ -51,6 +57,12 @@ class Preset:
     occlusion_severity: tuple[float, float] = (0.1, 0.3)
     rules: tuple[Rule, ...] = ()
     views_per_camera: int = 1
+    lens: str = "pinhole"
+    fisheye_fov_deg: tuple[float, float] = (150.0, 200.0)
+
+    def __post_init__(self):
+        if self.lens not in LENSES:
+            raise ValueError(f"preset {self.name!r}: lens must be one of {LENSES}, got {self.lens!r}")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -183,6 +195,28 @@ _add(Preset(
     pattern=(9, 6),
     pose=PoseConfig(tilt_max_deg=50.0, fill=(0.3, 0.8)),
     rules=(_OPTICS, Rule.of("gaussian_noise", sigma=10.0)),
+    views_per_camera=20,
+))
+_add(Preset(
+    name="fisheye",
+    description="Fisheye lenses (equidistant, 150–200° diagonal; circular images from 175°), boards up to the rim.",
+    sizes=((640, 480), (1280, 960)),
+    lens="fisheye",
+    fisheye_fov_deg=(150.0, 200.0),
+    pose=PoseConfig(tilt_max_deg=50.0, fill=(0.2, 0.6)),
+    partial_probability=0.15,
+    clutter=(0.0, 1.0),
+    rules=(_OPTICS, Rule.of("gaussian_noise", sigma=2.0)),
+))
+_add(Preset(
+    name="calib_fisheye",
+    description="Fisheye calibration sequences: 20 views per camera, 150–200° lenses, 1280×960, noise σ=2.",
+    sizes=((1280, 960),),
+    lens="fisheye",
+    fisheye_fov_deg=(150.0, 200.0),
+    pattern=(9, 6),
+    pose=PoseConfig(tilt_max_deg=50.0, fill=(0.25, 0.6)),
+    rules=(_OPTICS, Rule.of("gaussian_noise", sigma=2.0)),
     views_per_camera=20,
 ))
 

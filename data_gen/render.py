@@ -1,8 +1,9 @@
 """Render a chessboard into an image by inverse mapping with exact distortion inversion.
 
-For every pixel *corner* (the grid of points (u ± 0.5, v ± 0.5)) we undistort exactly
-(:func:`data_gen.camera.undistort_normalized`) and intersect the ray with the board plane
-through the board homography. A pixel whose four corners fall in one class (black square,
+For every pixel *corner* (the grid of points (u ± 0.5, v ± 0.5)) we unproject exactly
+(:meth:`aicalib_tf.geometry.camera.Camera.pixel_to_ray`, i.e. :func:`aicalib_tf.geometry.lens.unproject`)
+and intersect the 3-D ray with the board plane through the board homography, so fisheye rays
+beyond 90° off-axis work; pixels outside a fisheye's image circle have no ray. A pixel whose four corners fall in one class (black square,
 white paper, off the paper) and one square/paper cell is filled directly. Pixels that straddle
 an edge are supersampled: the undistorted ray is interpolated bilinearly inside the pixel (the
 distortion is smooth on a 1-px scale, error < 1e-4 px) and each sample goes through the exact
@@ -22,7 +23,7 @@ from aicalib_tf.geometry.camera import Camera
 
 from .board import Board
 
-__all__ = ["render_board", "fibonacci_lattice", "board_coordinates"]
+__all__ = ["render_board", "fibonacci_lattice", "board_coordinates", "plane_homogeneous", "lens_coverage"]
 
 _FIB = {13: 8, 21: 13, 34: 21, 55: 34, 89: 55, 144: 89, 233: 144}
 
@@ -44,13 +45,31 @@ def fibonacci_lattice(n: int = 89) -> np.ndarray:
 
 
 def _corner_rays(camera: Camera, box: tuple[int, int, int, int]) -> np.ndarray:
-    """Undistorted rays at the pixel corners of ``box`` = (x0, y0, x1, y1), pixels x0..x1-1.
+    """Rays at the pixel corners of ``box`` = (x0, y0, x1, y1), pixels x0..x1-1.
 
-    Returns (y1-y0+1, x1-x0+1, 2) float64, NaN where not imaged.
+    Returns (y1-y0+1, x1-x0+1, 3) float64 (:meth:`Camera.pixel_to_ray`), NaN where not imaged.
     """
     x0, y0, x1, y1 = box
     uu, vv = np.meshgrid(np.arange(x0, x1 + 1) - 0.5, np.arange(y0, y1 + 1) - 0.5)
-    return camera.pixel_to_normalized(np.stack([uu, vv], axis=-1))
+    return camera.pixel_to_ray(np.stack([uu, vv], axis=-1))
+
+
+def lens_coverage(camera: Camera, samples_per_axis: int = 4) -> np.ndarray | None:
+    """(H, W) float32 fraction of each pixel inside the image circle; None when all of it is inside.
+
+    ``samples_per_axis``² point samples per pixel; a pinhole camera (no circle) gives None.
+    """
+    if not camera.fisheye:
+        return None
+    w, h = camera.image_size
+    offs = (np.arange(samples_per_axis) + 0.5) / samples_per_axis - 0.5
+    uu, vv = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    acc = np.zeros((h, w), np.float32)
+    for dy in offs:
+        for dx in offs:
+            acc += camera.inside_circle(np.stack([uu + dx, vv + dy], axis=-1))
+    acc /= samples_per_axis ** 2
+    return None if acc.min() >= 1.0 else acc
 
 
 def _pixel_corners(a: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -75,7 +94,7 @@ def _active_box(camera: Camera, board: Board, rvec, tvec, step: int = 16):
     us = np.append(np.arange(0, w, step), w) - 0.5
     vs = np.append(np.arange(0, h, step), h) - 0.5
     uu, vv = np.meshgrid(us, vs)
-    X, Y = board_coordinates(camera.pixel_to_normalized(np.stack([uu, vv], axis=-1)), rvec, tvec)
+    X, Y = board_coordinates(camera.pixel_to_ray(np.stack([uu, vv], axis=-1)), rvec, tvec)
     nan = np.stack(_pixel_corners(np.isnan(X) | np.isnan(Y)))  # X and Y are NaN together
     all_nan = nan.all(axis=0)
     # NaN-ignoring ranges over each cell's corners (NaN only where all four are NaN).
@@ -99,13 +118,19 @@ def _active_box(camera: Camera, board: Board, rvec, tvec, step: int = 16):
 def plane_homogeneous(rays: np.ndarray, rvec, tvec) -> np.ndarray:
     """Board-plane point of each normalized ray in homogeneous form.
 
-    rays : (..., 2) undistorted normalized (x, y). Returns (..., 3) q with board
-    (X, Y) = (q0 / q2, q1 / q2); q2 > 0 exactly when the plane is in front of the camera.
-    q is linear in the ray, so it may be interpolated wherever the rays may.
+    rays : (..., 3) camera-frame rays (any scale, any direction, e.g. unit fisheye rays past
+    90°) or (..., 2) undistorted normalized (x, y), meaning (x, y, 1). Returns (..., 3) q with
+    board (X, Y) = (q0 / q2, q1 / q2); q2 > 0 exactly when the plane is hit in front along the
+    ray. q is linear in the ray, so it may be interpolated wherever the rays may.
     """
     R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
     Hi = np.linalg.inv(np.column_stack([R[:, 0], R[:, 1], np.asarray(tvec, dtype=np.float64).ravel()]))
-    return rays @ Hi[:, :2].T + Hi[:, 2]
+    rays = np.asarray(rays, dtype=np.float64)
+    if rays.shape[-1] == 2:
+        return rays @ Hi[:, :2].T + Hi[:, 2]
+    if rays.shape[-1] != 3:
+        raise ValueError(f"rays must have shape (..., 2) or (..., 3), got {rays.shape}")
+    return rays[..., :2] @ Hi[:, :2].T + rays[..., 2:3] * Hi[:, 2]  # z = 1 multiplies exactly
 
 
 def _dehomogenize(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -117,7 +142,7 @@ def _dehomogenize(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def board_coordinates(rays: np.ndarray, rvec, tvec) -> tuple[np.ndarray, np.ndarray]:
-    """Intersect normalized rays (..., 2) with the board plane; returns board X, Y (NaN behind)."""
+    """Intersect rays ((..., 3), or normalized (..., 2)) with the board plane; returns board X, Y (NaN behind)."""
     return _dehomogenize(plane_homogeneous(rays, rvec, tvec))
 
 
@@ -172,9 +197,32 @@ def render_board(
 
     on_paper = uniform & (c00 != 2)
     crop[on_paper] = np.array([board.black, board.white], dtype=np.float32)[c00[on_paper]]
-    _supersample(crop, bg, q, board, ~uniform & ~junction, samples)
-    _supersample(crop, bg, q, board, junction, junction_samples)
+    # Pixels that the lens' domain (a fisheye's image circle) cuts: interpolating q from their
+    # corners would lose the imaged part, so their samples are unprojected one by one.
+    rim = _corner_span(np.isnan(q[..., 2]))
+    _supersample(crop, bg, q, board, ~uniform & ~junction & ~rim, samples)
+    _supersample(crop, bg, q, board, junction & ~rim, junction_samples)
+    _supersample_exact(crop, bg, camera, board, rvec, tvec, (bx0, by0), rim, samples)
     return out
+
+
+def _supersample_exact(crop, bg, camera: Camera, board: Board, rvec, tvec, origin: tuple[int, int],
+                       mask: np.ndarray, samples: int) -> None:
+    """Fill the pixels of ``mask`` in ``crop`` from ``samples`` lattice points each, every point
+    unprojected exactly (no interpolation): for pixels the lens' domain cuts. origin : the
+    crop's (x0, y0) px in the image."""
+    rows, cols = np.nonzero(mask)
+    if not rows.size:
+        return
+    lat = fibonacci_lattice(samples)
+    u = (cols + origin[0] - 0.5)[:, None] + lat[None, :, 0]
+    v = (rows + origin[1] - 0.5)[:, None] + lat[None, :, 1]
+    X, Y = board_coordinates(camera.pixel_to_ray(np.stack([u, v], axis=-1)), rvec, tvec)
+    scls = board.classify(X, Y)  # (E, n); NaN (not imaged) is off the paper
+    frac_black = np.count_nonzero(scls == 0, axis=1) / float(samples)
+    frac_white = np.count_nonzero(scls == 1, axis=1) / float(samples)
+    frac_off = 1.0 - frac_black - frac_white
+    crop[rows, cols] = (frac_black * board.black + frac_white * board.white + frac_off * bg[rows, cols]).astype(np.float32)
 
 
 def _corner_range_meets(A: np.ndarray, lo: float, hi: float) -> np.ndarray:

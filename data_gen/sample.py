@@ -17,16 +17,17 @@ from aicalib_tf.geometry.camera import Camera
 
 from .background import make_background
 from .board import Board, sample_board
-from .camera import sample_camera
+from .camera import sample_camera, sample_fisheye
 from .degrade import apply_degradations
 from .occlude import draw_occluders, occluded, sample_occluders
 from .pose import corner_visibility, sample_pose
 from .presets import INT_PARAMS, Preset, Rule, get_preset
-from .render import render_board
+from .render import lens_coverage, render_board
 
 __all__ = ["Sample", "Scene", "draw_scene", "make_sample", "make_sequence", "draw_steps", "scene_for"]
 
-GENERATOR_VERSION = "1.0"
+GENERATOR_VERSION = "1.0"  # pinhole renders are bit-for-bit those of 1.0 (training pools stay valid); fisheye presets are new
+OUTSIDE_CIRCLE = 0.03  # grey level (0..1) outside a fisheye's image circle, before noise
 
 
 @dataclass(frozen=True)
@@ -75,7 +76,10 @@ def scene_for(preset: Preset, seed: int, camera_id: int, size=None, pattern=None
     rng = np.random.default_rng([seed, camera_id, 0])
     if size is None:
         size = preset.sizes[int(rng.integers(len(preset.sizes)))]
-    cam = sample_camera(rng, size, hfov_deg=preset.hfov_deg, distortion=preset.distortion)
+    if preset.lens == "fisheye":
+        cam = sample_fisheye(rng, size, fov_deg=preset.fisheye_fov_deg)
+    else:
+        cam = sample_camera(rng, size, hfov_deg=preset.hfov_deg, distortion=preset.distortion)
     board = sample_board(
         rng,
         pattern_size=pattern or preset.pattern,
@@ -162,6 +166,9 @@ def draw_scene(
     background = make_background(
         rng, (w, h), clutter=_draw(rng, p.clutter), checker_distractors=_draw(rng, p.checker_distractors)
     )
+    coverage = lens_coverage(cam)
+    if coverage is not None:  # a fisheye's image circle: nothing is imaged outside it
+        background = (background * coverage + OUTSIDE_CIRCLE * (1.0 - coverage)).astype(np.float32)
     framing = rvec = tvec = None
     polys: list[np.ndarray] = []
     levels: list[float] = []
@@ -200,7 +207,9 @@ def make_sample(
         "pattern_size": list(board.pattern_size),
         "square_size": board.square_size,
         "K": cam.K.tolist(),
+        "distortion_model": cam.model,
         "dist": cam.dist.tolist(),
+        "max_theta_deg": cam.to_dict()["max_theta_deg"],
         "rvec": None,
         "tvec": None,
         "corners": [],

@@ -13,15 +13,22 @@ from aicalib_tf.geometry.camera import Camera
 __all__ = ["project_points", "in_frame"]
 
 def project_points(points: np.ndarray, rvec, tvec, camera: Camera) -> np.ndarray:
-    """(N, 3) board points -> (N, 2) float64 pixels via ``cv2.projectPoints``."""
-    pts, _ = cv2.projectPoints(
-        np.asarray(points, dtype=np.float64).reshape(-1, 1, 3),
-        np.asarray(rvec, dtype=np.float64).reshape(3, 1),
-        np.asarray(tvec, dtype=np.float64).reshape(3, 1),
-        camera.K,
-        camera.dist,
-    )
-    return pts.reshape(-1, 2)
+    """(N, 3) board points -> (N, 2) float64 pixels.
+
+    Pinhole models go through ``cv2.projectPoints`` (finite even where the lens does not image
+    the point, as today's labels have it); ``equidistant`` through
+    :func:`aicalib_tf.geometry.lens.project`, valid past 90° off-axis, with points the model
+    cannot project (beyond its monotonic range) at -1e6 px, far outside any image.
+    """
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    rvec = np.asarray(rvec, dtype=np.float64).reshape(3, 1)
+    tvec = np.asarray(tvec, dtype=np.float64).reshape(3, 1)
+    if camera.model != "equidistant":
+        pts, _ = cv2.projectPoints(P.reshape(-1, 1, 3), rvec, tvec, camera.K, camera.dist)
+        return pts.reshape(-1, 2)
+    R, _ = cv2.Rodrigues(rvec)
+    uv = camera.lens.project(P @ R.T + tvec.ravel())
+    return np.where(np.isfinite(uv), uv, -1e6)
 
 
 def in_frame(uv: np.ndarray, size: tuple[int, int], border: float = 0.0) -> np.ndarray:

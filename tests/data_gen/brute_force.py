@@ -17,7 +17,7 @@ def brute_force_render(camera, board, rvec, tvec, samples_per_axis: int) -> np.n
     acc = np.zeros((h, w))
     for dy in offs:
         for dx in offs:
-            rays = camera.pixel_to_normalized(np.stack([uu + dx, vv + dy], axis=-1))
+            rays = camera.pixel_to_ray(np.stack([uu + dx, vv + dy], axis=-1))
             cls = board.classify(*board_coordinates(rays, rvec, tvec))
             acc += np.choose(cls, [board.black, board.white, BACKGROUND])
     return acc / S**2

@@ -79,6 +79,6 @@ def test_strong_barrel_reaches_k1_minus_045():
 
 def test_camera_validates_inputs():
     with pytest.raises(ValueError, match="5 coefficients"):
-        Camera(np.eye(3), np.zeros(4), (640, 480))
+        Camera(np.eye(3), np.zeros(6), (640, 480))
     with pytest.raises(ValueError, match="image_size"):
         Camera(np.eye(3), np.zeros(5), (0, 0))
