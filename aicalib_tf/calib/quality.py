@@ -30,7 +30,7 @@ from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.pattern import board_points
 
 __all__ = ["lens_of", "grid_points", "coverage_counts", "uncovered_regions", "projection_uncertainty",
-           "rotation_compensated_diff", "half_difference", "intrinsics_covariance", "default_fit", "predicted_half_difference", "verdict", "assess",
+           "rotation_compensated_diff", "half_difference", "intrinsics_covariance", "covariance_of", "default_fit", "predicted_half_difference", "verdict", "assess",
            "SIGMA_LADDER_PX"]
 
 SIGMA_LADDER_PX = (0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0)  # the verdict's "good to X px" rungs
@@ -292,7 +292,7 @@ def intrinsics_covariance(cal, views) -> np.ndarray:
     return np.linalg.pinv(H) * (sq / max(dof, 1))
 
 
-def _covariance(cal, views) -> np.ndarray:
+def covariance_of(cal, views) -> np.ndarray:
     """``cal.covariance``, or :func:`intrinsics_covariance` from ``views`` when it has none."""
     cov = getattr(cal, "covariance", None)
     return intrinsics_covariance(cal, views) if cov is None else np.asarray(cov, np.float64)
@@ -342,8 +342,8 @@ def verdict(cal, views, *, sigma=None, half=None, grid=(32, 24)) -> str:
         parts.append("uncertainty unknown (no covariance)")
     empty = uncovered_regions(views, cal.image_size)
     if empty:
-        parts.append(f"no board has covered the {', '.join(empty)} "
-                     + ("corner" if len(empty) == 1 and "-" in empty[0] else "regions" if len(empty) > 1 else "region"))
+        noun = "corner" if all("-" in e for e in empty) else "region"
+        parts.append(f"no board has covered the {', '.join(empty)} {noun}{'s' if len(empty) > 1 else ''}")
     if half is not None:
         parts.append(f"two halves of the views ({half['split']}) disagree by {half['median_covered']:.2f} px "
                      "(median, covered area)")
@@ -363,7 +363,7 @@ def assess(cal, views, *, fit=None, split="evenodd", grid=(32, 24)) -> dict:
     used = [v for v in views if v.name in set(cal.views)] or list(views)
     covered = _covered_mask(used, cal.image_size, grid)
     try:
-        cov = _covariance(cal, used)
+        cov = covariance_of(cal, used)
     except (ValueError, np.linalg.LinAlgError):
         cov = None
     sigma, sig = None, None
@@ -378,7 +378,7 @@ def assess(cal, views, *, fit=None, split="evenodd", grid=(32, 24)) -> dict:
                             grid=grid)
         half = {k: h[k] for k in ("split", "n_a", "n_b", "median_covered", "mean_covered", "median_all", "mean_all")}
         try:
-            covs = [_covariance(h[f"cal_{k}"], h[f"views_{k}"]) for k in "ab"]
+            covs = [covariance_of(h[f"cal_{k}"], h[f"views_{k}"]) for k in "ab"]
             half["predicted_median_covered"] = predicted_half_difference(
                 h["cal_a"], h["cal_b"], h["covered"], grid=grid, covariances=covs)["median_covered"]
         except (ValueError, np.linalg.LinAlgError):

@@ -18,27 +18,20 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from aicalib_tf.calib import quality as Q
 from aicalib_tf.calib.fit import Calibration, View, view_rms
-from aicalib_tf.geometry.camera import normalized_rays
+from aicalib_tf.calib.quality import coverage_counts
+from aicalib_tf.geometry import lens as L
 
-__all__ = ["field_of_view", "view_tilts_deg", "coverage_counts", "calibration_warnings", "format_report", "report_figure"]
+__all__ = ["field_of_view", "view_tilts_deg", "coverage_counts", "calibration_warnings", "format_report", "report_figure",
+           "uncertainty_map"]
+
 
 def field_of_view(cal: Calibration) -> tuple[float, float]:
-    """(horizontal, vertical) field of view in degrees, through the lens model.
-
-    The rays of the left/right (top/bottom) edge midpoints, undistorted. Falls back to the
-    pinhole value 2·atan(w / 2f) where the inverse distortion does not converge.
-    """
-    w, h = cal.image_size
-    pts = np.array([[0.0, cal.cy], [w - 1.0, cal.cy], [cal.cx, 0.0], [cal.cx, h - 1.0]])
-    norm, ok = normalized_rays(pts, cal.K, cal.dist, tol_px=1e-2)
-    if ok.all():
-        hfov = np.degrees(np.arctan(norm[1, 0]) - np.arctan(norm[0, 0]))
-        vfov = np.degrees(np.arctan(norm[3, 1]) - np.arctan(norm[2, 1]))
-    else:
-        hfov = 2 * np.degrees(np.arctan(w / (2 * cal.fx)))
-        vfov = 2 * np.degrees(np.arctan(h / (2 * cal.fy)))
-    return float(hfov), float(vfov)
+    """(horizontal, vertical) field of view in degrees through the lens model
+    (:func:`aicalib_tf.geometry.lens.field_of_view`; NaN where an edge pixel has no ray)."""
+    fov = Q.lens_of(cal).field_of_view()
+    return fov["horizontal"], fov["vertical"]
 
 
 def view_tilts_deg(cal: Calibration) -> np.ndarray:
@@ -48,14 +41,6 @@ def view_tilts_deg(cal: Calibration) -> np.ndarray:
         R, _ = cv2.Rodrigues(np.asarray(r, np.float64))
         out.append(np.degrees(np.arccos(min(1.0, abs(R[2, 2])))))
     return np.asarray(out)
-
-
-def coverage_counts(views: list[View], image_size: tuple[int, int], cells: tuple[int, int] = (16, 12)) -> np.ndarray:
-    """(cells_y, cells_x) int: how many detected corners fall in each cell of the image."""
-    w, h = image_size
-    pts = np.concatenate([v.corners for v in views]) if views else np.zeros((0, 2))
-    counts, _, _ = np.histogram2d(pts[:, 1], pts[:, 0], bins=(cells[1], cells[0]), range=((-0.5, h - 0.5), (-0.5, w - 0.5)))
-    return counts.astype(np.int64)
 
 
 def calibration_warnings(cal: Calibration, views: list[View]) -> list[str]:
@@ -87,6 +72,7 @@ def format_report(cal: Calibration, views: list[View], *, skipped: dict | None =
     total : how many images were given.
     """
     skipped = skipped or {}
+    model = Q.lens_of(cal).model
     total = total if total is not None else len(cal.views) + len(cal.rejected) + len(skipped)
     lines = [f"{total} images: {len(cal.views)} used, {len(skipped)} skipped, {len(cal.rejected)} rejected"]
     for name, why in skipped.items():
@@ -98,28 +84,60 @@ def format_report(cal: Calibration, views: list[View], *, skipped: dict | None =
     lines.append(f"RMS reprojection error {cal.rms:.3f} px (worst view {worst}: {worst_rms:.3f} px)"
                  + (f"; {partial} partial board{'s' if partial != 1 else ''}" if partial else ""))
     s = cal.std
-    lines.append(f"image {cal.image_size[0]}x{cal.image_size[1]} px")
+    lines.append(f"image {cal.image_size[0]}x{cal.image_size[1]} px, lens model {model} (ROS {L.ROS_NAMES[model]})")
+    lines.extend(_model_table_lines(getattr(cal, "model_table", ()) or ()))
     lines.append(f"fx = {cal.fx:.2f} ± {s.get('fx', 0):.2f}   fy = {cal.fy:.2f} ± {s.get('fy', 0):.2f}   (px)")
     lines.append(f"cx = {cal.cx:.2f} ± {s.get('cx', 0):.2f}   cy = {cal.cy:.2f} ± {s.get('cy', 0):.2f}   (px)")
-    names = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")[: len(cal.dist)]
+    names = L.COEFF_NAMES[Q.lens_of(cal).model]
     lines.append("dist: " + "  ".join(f"{n} = {v:+.5f} ± {s.get(n, 0):.5f}" for n, v in zip(names, cal.dist)))
     hfov, vfov = field_of_view(cal)
     lines.append(f"field of view {hfov:.1f}° x {vfov:.1f}° (horizontal x vertical)")
     for w in calibration_warnings(cal, views):
         lines.append(f"warning: {w}")
+    quality = getattr(cal, "quality", None) or Q.assess(cal, views)
+    lines.append(f"verdict: {quality['verdict']}")
     return "\n".join(lines)
 
 
+def _model_table_lines(table) -> list[str]:
+    """The model-choice table (rows {"model", "n_params", "rms", "cv_rms", "cv_se", "chosen", "note"}) as text."""
+    if not table:
+        return []
+    out = ["model choice (held-out views):", f"  {'model':<20s} {'params':>6s} {'RMS':>7s} {'CV RMS':>14s}"]
+    for row in table:
+        cv = row.get("cv_rms")
+        cv_txt = "-" if cv is None or not np.isfinite(cv) else f"{cv:.3f} ± {row.get('cv_se', float('nan')):.3f}"
+        rms = row.get("rms")
+        rms_txt = "-" if rms is None or not np.isfinite(rms) else f"{rms:.3f}"
+        out.append(f"{'*' if row.get('chosen') else ' '} {row.get('model', '?'):<20s} {row.get('n_params', 0):>6d} "
+                   f"{rms_txt:>7s} {cv_txt:>14s}" + (f"  {row['note']}" if row.get("note") else ""))
+    return out
+
+
+def uncertainty_map(cal: Calibration, views: list[View], grid=(32, 24)) -> tuple[np.ndarray, np.ndarray] | None:
+    """(points (gy·gx, 2) px, sigma (gy, gx) px 1σ) of :func:`~aicalib_tf.calib.quality.projection_uncertainty`
+    with ``cal.covariance`` (or one computed from ``views``), the rotation fitted over the covered cells;
+    None when no covariance can be had."""
+    try:
+        cov = Q.covariance_of(cal, views)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    covered = coverage_counts(views, cal.image_size, grid).ravel() > 0
+    pts, sigma = Q.projection_uncertainty(cal, grid, covariance=cov, fit_mask=covered)
+    return pts, sigma.reshape(grid[1], grid[0])
+
+
 def report_figure(cal: Calibration, views: list[View]) -> bytes:
-    """``report.png`` as PNG bytes: per-view RMS bars, residual vectors, corner coverage.
+    """``report.png`` as PNG bytes: per-view RMS bars, residual vectors, corner coverage and the
+    projection uncertainty map (px, 1σ, :func:`uncertainty_map`; an empty panel without one).
 
     views : the used views, in ``cal.views`` order.
     """
     from aicalib_tf.plotting import new_figure, png_bytes
 
     w, h = cal.image_size
-    fig = new_figure((17, 4.8))
-    axes = fig.subplots(1, 3, gridspec_kw={"width_ratios": [1.1, 1, 1]})
+    fig = new_figure((22, 4.8))
+    axes = fig.subplots(1, 4, gridspec_kw={"width_ratios": [1.1, 1, 1, 1]})
     ax = axes[0]
     order = np.arange(len(cal.views))
     ax.bar(order, cal.per_view_rms, color="tab:blue")
@@ -150,5 +168,29 @@ def report_figure(cal: Calibration, views: list[View]) -> bytes:
     im = ax.imshow(cov, extent=(-0.5, w - 0.5, h - 0.5, -0.5), cmap="magma", interpolation="nearest")
     fig.colorbar(im, ax=ax, fraction=0.04, label="corners per cell")
     ax.set_title(f"corner coverage ({100 * np.mean(cov > 0):.0f}% of cells)")
+    _draw_uncertainty(fig, axes[3], cal, views)
     fig.tight_layout()
     return png_bytes(fig, tight=False)
+
+
+def _draw_uncertainty(fig, ax, cal: Calibration, views: list[View]) -> None:
+    """The 1σ projection uncertainty (px) as an image with a colour bar and labelled contours."""
+    w, h = cal.image_size
+    found = uncertainty_map(cal, views)
+    if found is None:
+        ax.text(0.5, 0.5, "no covariance: uncertainty unknown", ha="center", va="center", transform=ax.transAxes)
+        ax.set_axis_off()
+        return
+    pts, sigma = found
+    im = ax.imshow(sigma, extent=(-0.5, w - 0.5, h - 0.5, -0.5), cmap="viridis", interpolation="bilinear")
+    fig.colorbar(im, ax=ax, fraction=0.04, label="projection uncertainty, px (1σ)")
+    finite = sigma[np.isfinite(sigma)]
+    if finite.size and finite.max() > finite.min():
+        levels = np.unique(np.quantile(finite, [0.25, 0.5, 0.75, 0.95]))
+        xs, ys = pts[:, 0].reshape(sigma.shape), pts[:, 1].reshape(sigma.shape)
+        cs = ax.contour(xs, ys, sigma, levels=levels, colors="w", linewidths=0.8)
+        ax.clabel(cs, fmt="%.2g", fontsize=7)
+    ax.set_xlim(-0.5, w - 0.5)
+    ax.set_ylim(h - 0.5, -0.5)
+    ax.set_aspect("equal")
+    ax.set_title(f"projection uncertainty (median {np.nanmedian(sigma):.3g} px)")

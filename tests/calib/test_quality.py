@@ -89,3 +89,17 @@ def test_verdict_names_the_uncovered_corner():
     assert a["verdict"].startswith("good to ") and "no board has covered the top-left" in a["verdict"]
     assert a["sigma_px"]["max_all"] >= a["sigma_px"]["median_covered"] > 0
     assert a["half"] is None
+
+
+def test_report_prints_model_and_verdict_and_draws_the_map():
+    from aicalib_tf.calib.report import field_of_view, format_report, report_figure, uncertainty_map
+
+    views = synthetic_views(LENS, 8, 0.2, seed=6)
+    cal = _fit(views)
+    text = format_report(cal, views)
+    assert "lens model plumb_bob (ROS plumb_bob)" in text and "\nverdict: good to " in text
+    assert field_of_view(cal) == pytest.approx((LENS.field_of_view()["horizontal"], LENS.field_of_view()["vertical"]),
+                                               abs=1.0)
+    pts, sigma = uncertainty_map(cal, views)
+    assert sigma.shape == (24, 32) and np.all(sigma > 0)
+    assert report_figure(cal, views)[:8] == b"\x89PNG\r\n\x1a\n"
