@@ -85,29 +85,35 @@ def _covered_mask(views, image_size, grid) -> np.ndarray:
     return coverage_counts(views, image_size, grid).ravel() > 0
 
 
-def _rotation_basis(lens: L.Lens, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(J_intr (M, 2, n), A (M, 2, 3)): pixel derivatives w.r.t. the intrinsics and a small rotation
-    ω of the camera frame (the ray v goes to v + ω × v), at the rays ``rays`` (M, 3)."""
-    _, Jp, Ji = lens.projection_jacobian(rays)
-    skew = np.zeros((len(rays), 3, 3))
-    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = rays[:, 2], -rays[:, 1], rays[:, 0]
-    skew[:, 1, 0], skew[:, 2, 0], skew[:, 2, 1] = -rays[:, 2], rays[:, 1], -rays[:, 0]
-    return Ji, Jp @ skew  # d(ω × v)/dω = -[v]x = skew
+def _frame_basis(lens: L.Lens, rays: np.ndarray, distance=None) -> tuple[np.ndarray, np.ndarray]:
+    """(J_intr (M, 2, n), A (M, 2, k)) at the camera-frame points P = distance·ray (the ray itself for
+    ``distance`` None, i.e. infinity): pixel derivatives w.r.t. the intrinsics and a small motion of
+    the camera frame: a rotation ω (P -> P + ω × P; k = 3) and, at a finite distance, a translation
+    too (k = 6)."""
+    P = rays if distance is None else rays * float(distance)
+    _, Jp, Ji = lens.projection_jacobian(P)
+    skew = np.zeros((len(P), 3, 3))  # d(ω × P)/dω = -[P]x
+    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = P[:, 2], -P[:, 1], P[:, 0]
+    skew[:, 1, 0], skew[:, 2, 0], skew[:, 2, 1] = -P[:, 2], P[:, 1], -P[:, 0]
+    A = Jp @ skew
+    return Ji, A if distance is None else np.concatenate([A, Jp], axis=2)
 
 
-def _compensated_jacobian(lens: L.Lens, pixels: np.ndarray, fit_mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """(G (M, 2, n), ok (M,)): d(pixel)/d(intrinsics) with, to first order, the best rotation of the
-    camera frame over the ``fit_mask`` pixels removed (G = J − A·(A⁺J) with A⁺ fitted on the mask)."""
+def _compensated_jacobian(lens: L.Lens, pixels: np.ndarray, fit_mask: np.ndarray | None,
+                          distance=None) -> tuple[np.ndarray, np.ndarray]:
+    """(G (M, 2, n), ok (M,)): d(pixel)/d(intrinsics) with, to first order, the best motion of the
+    camera frame (:func:`_frame_basis`) over the ``fit_mask`` pixels removed (G = J − A·(A⁺J), A⁺
+    fitted on the mask)."""
     rays = lens.unproject(pixels)
     ok = np.all(np.isfinite(rays), axis=1)
     safe = np.where(ok[:, None], rays, [0.0, 0.0, 1.0])
-    Ji, A = _rotation_basis(lens, safe)
+    Ji, A = _frame_basis(lens, safe, distance)
     ok &= np.all(np.isfinite(Ji), axis=(1, 2)) & np.all(np.isfinite(A), axis=(1, 2))
     fit = ok if fit_mask is None else ok & fit_mask
     if fit.sum() < 3:
         fit = ok
-    Af, Jf = A[fit].reshape(-1, 3), Ji[fit].reshape(-1, Ji.shape[2])
-    W = np.linalg.lstsq(Af, Jf, rcond=None)[0]  # (3, n): the rotation that explains each parameter
+    Af, Jf = A[fit].reshape(-1, A.shape[2]), Ji[fit].reshape(-1, Ji.shape[2])
+    W = np.linalg.lstsq(Af, Jf, rcond=None)[0]  # (k, n): the frame motion that explains each parameter
     G = np.where(ok[:, None, None], Ji - A @ W, np.nan)
     return G, ok
 
@@ -122,12 +128,15 @@ def projection_uncertainty(cal, grid=(32, 24), distance=None, *, covariance=None
     [fx, fy, cx, cy, *dist], poses marginalised) and G = d(project(P))/d(intrinsics). σ is the
     square root of C's largest eigenvalue (the worst direction, as mrcal reports).
 
-    compensate : remove, to first order, what a rotation of the camera frame fitted over
+    compensate : remove, to first order, what a motion of the camera frame fitted over
         ``fit_mask`` (M,) bool (default every imaged cell) explains (module docstring). Without
         it σ is that of a point fixed in the camera frame, which overstates what a monocular
         calibration can mean by "the camera frame".
-    distance : accepted for mrcal's signature; with a fixed point and a rotation-only frame
-        correction the projection is scale-free, so σ does not depend on it (None or any > 0).
+    distance : None (default): points at infinity, and the frame correction is a rotation (the
+        projection of a fixed ray is scale-free, so nothing else matters). A distance > 0 (in
+        the unit of ``cal.tvecs``, e.g. the median board distance): points at that range, and the
+        correction is a rotation and a translation, as mrcal's frame moves with the boards; σ then
+        drops near the distance the boards were seen at.
 
     Returns (points (M, 2) px, sigma (M,) px; NaN where the pixel has no ray).
     Raises ValueError when no covariance is available.
@@ -144,7 +153,7 @@ def projection_uncertainty(cal, grid=(32, 24), distance=None, *, covariance=None
         raise ValueError(f"covariance must be {n}x{n} for {lens.model!r}, got {cov.shape}")
     pts = grid_points(lens.image_size, grid)
     if compensate:
-        G, ok = _compensated_jacobian(lens, pts, fit_mask)
+        G, ok = _compensated_jacobian(lens, pts, fit_mask, distance)
     else:
         rays = lens.unproject(pts)
         ok = np.all(np.isfinite(rays), axis=1)

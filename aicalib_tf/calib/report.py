@@ -19,9 +19,10 @@ import cv2
 import numpy as np
 
 from aicalib_tf.calib import quality as Q
-from aicalib_tf.calib.fit import Calibration, View, view_rms
+from aicalib_tf.calib.fit import Calibration, View
 from aicalib_tf.calib.quality import coverage_counts
 from aicalib_tf.geometry import lens as L
+from aicalib_tf.geometry.pattern import board_points
 
 __all__ = ["field_of_view", "view_tilts_deg", "coverage_counts", "calibration_warnings", "format_report", "report_figure",
            "uncertainty_map"]
@@ -147,21 +148,7 @@ def report_figure(cal: Calibration, views: list[View]) -> bytes:
     ax.set_title(f"per-view error ({len(cal.views)} used, {len(cal.rejected)} rejected)")
     ax.legend(fontsize=8)
 
-    ax = axes[1]
-    pts, res = [], []
-    for v, r, t in zip(views, cal.rvecs, cal.tvecs):
-        _, d = view_rms(v, cal.K, cal.dist, r, t, cal.square_size)
-        pts.append(v.corners)
-        res.append(d)
-    pts, res = np.concatenate(pts), np.concatenate(res)
-    mag = np.linalg.norm(res, axis=1)
-    scale = 0.05 * max(w, h) / max(float(np.percentile(mag, 95)), 1e-6)
-    ax.quiver(pts[:, 0], pts[:, 1], res[:, 0] * scale, res[:, 1] * scale, mag, angles="xy", scale_units="xy",
-              scale=1, cmap="viridis", width=0.003)
-    ax.set_xlim(0, w)
-    ax.set_ylim(h, 0)
-    ax.set_aspect("equal")
-    ax.set_title(f"residuals (detected − projected), ×{scale:.0f}")
+    _draw_residuals(fig, axes[1], cal, views)
 
     ax = axes[2]
     cov = coverage_counts(views, cal.image_size)
@@ -194,3 +181,25 @@ def _draw_uncertainty(fig, ax, cal: Calibration, views: list[View]) -> None:
     ax.set_ylim(h - 0.5, -0.5)
     ax.set_aspect("equal")
     ax.set_title(f"projection uncertainty (median {np.nanmedian(sigma):.3g} px)")
+
+
+def _draw_residuals(fig, ax, cal: Calibration, views: list[View]) -> None:
+    """Residual vectors (detected − projected, scaled up) of every used corner, coloured by length (px)."""
+    w, h = cal.image_size
+    lens = Q.lens_of(cal)
+    pts, res = [], []
+    for v, r, t in zip(views, cal.rvecs, cal.tvecs):
+        R, _ = cv2.Rodrigues(np.asarray(r, np.float64).reshape(3, 1))
+        pts.append(v.corners)
+        res.append(v.corners - lens.project(board_points(v.ids, cal.square_size) @ R.T + np.ravel(t)))
+    pts, res = np.concatenate(pts), np.concatenate(res)
+    keep = np.all(np.isfinite(res), axis=1)
+    pts, res = pts[keep], res[keep]
+    mag = np.linalg.norm(res, axis=1)
+    scale = 0.05 * max(w, h) / max(float(np.percentile(mag, 95)), 1e-6)
+    ax.quiver(pts[:, 0], pts[:, 1], res[:, 0] * scale, res[:, 1] * scale, mag, angles="xy", scale_units="xy",
+              scale=1, cmap="viridis", width=0.003)
+    ax.set_xlim(0, w)
+    ax.set_ylim(h, 0)
+    ax.set_aspect("equal")
+    ax.set_title(f"residuals (detected − projected), ×{scale:.0f}")

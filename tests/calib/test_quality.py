@@ -37,6 +37,9 @@ def test_uncertainty_positive_and_larger_where_no_board_was():
     corner = (pts[:, 0] < 160) & (pts[:, 1] < 120)
     covered = (pts[:, 0] > 320) & (pts[:, 1] > 240)
     assert np.median(sigma[corner]) > 1.2 * np.median(sigma[covered])
+    d = float(np.median(np.linalg.norm(cal.tvecs, axis=1)))
+    _, near = Q.projection_uncertainty(cal, distance=d, covariance=Q.intrinsics_covariance(cal, views))
+    assert np.all(np.isfinite(near)) and np.median(near) < np.median(sigma)  # a frame translation absorbs more
     with pytest.raises(ValueError, match="covariance"):
         Q.projection_uncertainty(cal, covariance=np.eye(3))
 
