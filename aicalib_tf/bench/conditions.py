@@ -25,6 +25,7 @@ from data_gen.sample import Sample, make_sample
 __all__ = [
     "PATTERN", "Condition", "named_conditions", "sweep_conditions", "all_conditions", "select_conditions",
     "condition_samples", "calibration_sequences", "board_tilt_deg", "square_px", "CALIB_SEED", "CALIB_CAMERAS",
+    "FISHEYE_SEQUENCES", "fisheye_preset",
 ]
 
 PATTERN = (9, 6)
@@ -32,6 +33,9 @@ VGA = (640, 480)
 HD = (1920, 1080)
 CALIB_SEED = 11  # cameras 0, 1 get mild lenses (k1 -0.03, +0.03), cameras 2, 3 strong barrel (k1 -0.33, -0.31)
 CALIB_CAMERAS = (0, 1, 2, 3)
+# Fisheye calibration sequences (data_gen ``calib_fisheye``, 1280×960, noise σ 2, seed CALIB_SEED):
+# name -> (full field of view in degrees, camera id). 185°: circular image, the circle inside the frame.
+FISHEYE_SEQUENCES = {"fisheye185": (185.0, 100), "fisheye150": (150.0, 101)}
 
 _OPTICS = Rule.of("gaussian_blur", sigma=0.6)  # the mild blur of every real lens, as data_gen's presets
 _READ_NOISE = Rule.of("gaussian_noise", sigma=2.0)
@@ -70,6 +74,17 @@ def _clean_with(rules: tuple[Rule, ...], name: str, **overrides) -> Preset:
     return replace(get_preset("clean"), name=name, rules=rules, **overrides)
 
 
+def fisheye_preset(fov_deg: float, base: str = "fisheye", **overrides) -> Preset:
+    """data_gen's ``base`` fisheye preset with one fixed field of view (degrees) and no partial boards.
+
+    The name becomes ``f"{base}{fov:g}"``; ``overrides`` replace further fields.
+    """
+    fields = dict(name=f"{base}{fov_deg:g}", fisheye_fov_deg=(fov_deg, fov_deg), partial_probability=0.0)
+    if base == "fisheye":
+        fields.update(sizes=(VGA,), clutter=(0.0, 0.5))
+    return replace(get_preset(base), **{**fields, **overrides})
+
+
 def named_conditions() -> list[Condition]:
     """The detection issue's conditions at 640×480 (plus one 1920×1080 set), 9×6 boards."""
     wide = dict(hfov_deg=(90.0, 120.0), distortion=("strong",))
@@ -96,6 +111,9 @@ def named_conditions() -> list[Condition]:
                   description="5 % salt-and-pepper pixels"),
         Condition("barrel", _clean_with((_OPTICS, _READ_NOISE), "barrel", **wide),
                   description="wide lens (HFOV 90–120°), strong barrel k1 −0.45…−0.25"),
+        Condition("fisheye150", fisheye_preset(150.0), description="full-frame fisheye, 150° diagonal (equidistant)"),
+        Condition("fisheye185", fisheye_preset(185.0),
+                  description="circular fisheye, 185°: the image circle inside the frame, dark outside it"),
         Condition("tilt60", _clean_with((_OPTICS, _READ_NOISE), "tilt60", pose=PoseConfig(tilt_max_deg=62.0, fill=(0.4, 0.9))),
                   min_tilt_deg=50.0, description="steep tilt: 50–62° between board normal and optical axis"),
         Condition("small", _clean_with((_OPTICS, _READ_NOISE), "small", pose=PoseConfig(tilt_max_deg=30.0, fill=(0.12, 0.16))),
@@ -211,12 +229,23 @@ def condition_samples(cond: Condition, count: int, *, max_tries: int = 20):
         raise RuntimeError(f"condition {cond.name}: only {kept} of {count} images passed its filter")
 
 
-def calibration_sequences(views: int, cameras=CALIB_CAMERAS, seed: int = CALIB_SEED) -> list[tuple[int, list[Sample]]]:
-    """The calibration sequences: ``[(camera_id, [Sample] * views)]`` from data_gen's ``calib`` preset.
+def calibration_sequences(views: int, cameras=CALIB_CAMERAS, seed: int = CALIB_SEED, *,
+                          fisheye: tuple[str, ...] = ()) -> list[tuple[int, list[Sample]]]:
+    """The calibration sequences with their truth: ``[(camera_id, [Sample] * views)]``.
 
     views : 3–20 views per camera (the first ones of each 20-view sequence).
+    cameras : data_gen ``calib`` cameras (640×480; 0, 1 mild lenses, 2, 3 strong barrel).
+    fisheye : names from :data:`FISHEYE_SEQUENCES` to add (``calib_fisheye``, 1280×960, σ 2).
     """
     if not 3 <= views <= 20:
         raise ValueError(f"views per calibration sequence must be 3..20, got {views}")
+    unknown = [f for f in fisheye if f not in FISHEYE_SEQUENCES]
+    if unknown:
+        raise ValueError(f"unknown fisheye sequence(s) {unknown}; choose from {sorted(FISHEYE_SEQUENCES)}")
     n = get_preset("calib").views_per_camera
-    return [(cam, [make_sample("calib", seed, cam * n + v) for v in range(views)]) for cam in cameras]
+    out = [(cam, [make_sample("calib", seed, cam * n + v) for v in range(views)]) for cam in cameras]
+    for name in fisheye:
+        fov, cam = FISHEYE_SEQUENCES[name]
+        preset = fisheye_preset(fov, "calib_fisheye")
+        out.append((cam, [make_sample(preset, seed, cam * n + v) for v in range(views)]))
+    return out

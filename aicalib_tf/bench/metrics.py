@@ -8,7 +8,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from aicalib_tf.geometry.camera import distortion_field
+from aicalib_tf.geometry.camera import model_for_dist
+from aicalib_tf.geometry.lens import Lens
 from aicalib_tf.geometry.pattern import board_symmetries
 
 __all__ = ["WRONG_PX", "align_to_truth", "corner_error_stats", "calibration_errors", "board_detection_outcome", "partial_board_stats", "detection_agreement", "OUTCOMES"]
@@ -46,47 +47,81 @@ def corner_error_stats(errors: np.ndarray) -> dict:
     }
 
 
-def calibration_errors(K: np.ndarray, dist: np.ndarray, K_true: np.ndarray, dist_true: np.ndarray,
-                       image_size: tuple[int, int], *, grid: tuple[int, int] = (32, 24),
-                       seen: np.ndarray | None = None) -> dict:
-    """An estimated camera against the true one (DESIGN.md's calibration metrics).
-
-    K, K_true : (3, 3). dist, dist_true : OpenCV coefficients (5 or more).
-    image_size : (width, height) px. grid : (nx, ny) sample points spread over the whole image.
-    Returns fx_pct, fy_pct (signed relative focal errors, %), pp_px (principal-point distance, px),
-    and dist_field_mean_px / dist_field_max_px: how far apart the two models' undistortion fields
-    are over the image (points where either inverse fails are left out; ``dist_field_points``
-    counts the rest).
-    seen : optional (M, 2) px, e.g. every true corner of every view. Adds dist_field_seen_mean_px
-    and dist_field_seen_max_px over the grid points inside their convex hull: the area the
-    calibration saw, without the extrapolation to image corners the board never reached.
-    """
-    K = np.asarray(K, dtype=np.float64)
-    Kt = np.asarray(K_true, dtype=np.float64)
+def _field_points(image_size, grid, lens_true: Lens, max_theta_true: float | None) -> np.ndarray:
+    """(N, 2) grid pixels over the image where the true lens is defined (inside its circle)."""
     w, h = image_size
     gx, gy = np.meshgrid(np.linspace(0, w - 1, grid[0]), np.linspace(0, h - 1, grid[1]))
     pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
-    f_est, ok_est = distortion_field(pts, K, dist)
-    f_true, ok_true = distortion_field(pts, Kt, dist_true)
-    ok = ok_est & ok_true
-    d_all = np.linalg.norm(f_est - f_true, axis=1)
-    d = d_all[ok]
-    extra = {}
-    if seen is not None:
-        hull = cv2.convexHull(np.asarray(seen, np.float32).reshape(-1, 1, 2))
-        inside = np.array([cv2.pointPolygonTest(hull, (float(x), float(y)), False) >= 0 for x, y in pts])
-        ds = d_all[ok & inside]
-        extra = {"dist_field_seen_mean_px": float(ds.mean()) if ds.size else float("nan"),
-                 "dist_field_seen_max_px": float(ds.max()) if ds.size else float("nan")}
-    return {
+    rays = lens_true.unproject(pts)
+    ok = np.all(np.isfinite(rays), axis=1)
+    if max_theta_true is not None:
+        with np.errstate(invalid="ignore"):
+            ok &= np.arctan2(np.hypot(rays[:, 0], rays[:, 1]), rays[:, 2]) <= max_theta_true
+    return pts[ok]
+
+
+def _hull_mask(pts: np.ndarray, seen) -> np.ndarray:
+    hull = cv2.convexHull(np.asarray(seen, np.float32).reshape(-1, 1, 2))
+    return np.array([cv2.pointPolygonTest(hull, (float(x), float(y)), False) >= 0 for x, y in pts], dtype=bool)
+
+
+def _stats(prefix: str, d: np.ndarray) -> dict:
+    return {f"{prefix}_mean_px": float(d.mean()) if d.size else float("nan"),
+            f"{prefix}_max_px": float(d.max()) if d.size else float("nan")}
+
+
+def calibration_errors(K: np.ndarray, dist: np.ndarray, K_true: np.ndarray, dist_true: np.ndarray,
+                       image_size: tuple[int, int], *, model: str | None = None, model_true: str | None = None,
+                       max_theta_true: float | None = None, grid: tuple[int, int] = (32, 24),
+                       seen: np.ndarray | None = None) -> dict:
+    """An estimated camera against the true one (DESIGN.md's calibration metrics).
+
+    K, K_true : (3, 3). dist, dist_true : coefficients of ``model`` / ``model_true`` (lens
+    model names of :mod:`aicalib_tf.geometry.lens`; None: the pinhole model of that length, so
+    the two sides may be different models). image_size : (width, height) px. grid : (nx, ny)
+    sample pixels spread over the image; max_theta_true : the true lens' image circle (radians
+    off-axis; None: wherever the true model is defined). Returns:
+
+    * fx_pct, fy_pct (signed relative focal errors, %), pp_px (principal-point distance, px);
+    * proj_err_mean_px / proj_err_max_px: the projection error field, |project_est(unproject_true(p)) - p|
+      over the grid pixels the true lens images (for a circular fisheye: the image circle);
+      proj_err_points counts them, proj_err_fail_frac is the fraction the estimate cannot project
+      at all (e.g. rays past 90° for a pinhole estimate; left out of the mean and max);
+    * dist_field_mean_px / dist_field_max_px: how far apart the two models' undistortion fields are
+      (only where both give a ray in front of the 90° plane);
+    * with ``seen`` ((M, 2) px, e.g. every visible true corner of every view) the same over the grid
+      points inside their convex hull, the area the boards covered: proj_err_seen_mean_px,
+      proj_err_seen_max_px, dist_field_seen_mean_px, dist_field_seen_max_px.
+    """
+    K = np.asarray(K, dtype=np.float64)
+    Kt = np.asarray(K_true, dtype=np.float64)
+    model = model or model_for_dist(dist)
+    model_true = model_true or model_for_dist(dist_true)
+    est = Lens(model, K, dist, image_size)
+    true = Lens(model_true, Kt, dist_true, image_size)
+    pts = _field_points(image_size, grid, true, max_theta_true)
+    back = est.project(true.unproject(pts))
+    proj_ok = np.all(np.isfinite(back), axis=1)
+    proj = np.linalg.norm(back - pts, axis=1)
+    f_est, ok_est = est.distortion_field(pts)
+    f_true, ok_true = true.distortion_field(pts)
+    field_ok = ok_est & ok_true
+    dfield = np.linalg.norm(f_est - f_true, axis=1)
+    out = {
         "fx_pct": float(100.0 * (K[0, 0] - Kt[0, 0]) / Kt[0, 0]),
         "fy_pct": float(100.0 * (K[1, 1] - Kt[1, 1]) / Kt[1, 1]),
         "pp_px": float(np.hypot(K[0, 2] - Kt[0, 2], K[1, 2] - Kt[1, 2])),
-        "dist_field_mean_px": float(d.mean()) if d.size else float("nan"),
-        "dist_field_max_px": float(d.max()) if d.size else float("nan"),
-        "dist_field_points": int(d.size),
-        **extra,
+        **_stats("proj_err", proj[proj_ok]),
+        "proj_err_points": int(len(pts)),
+        "proj_err_fail_frac": float(1.0 - proj_ok.mean()) if len(pts) else float("nan"),
+        **_stats("dist_field", dfield[field_ok]),
+        "dist_field_points": int(field_ok.sum()),
     }
+    if seen is not None:
+        inside = _hull_mask(pts, seen)
+        out.update(_stats("proj_err_seen", proj[proj_ok & inside]))
+        out.update(_stats("dist_field_seen", dfield[field_ok & inside]))
+    return out
 
 
 # --- detection outcomes (issue 6) -------------------------------------------------------------

@@ -246,7 +246,7 @@ def write_report(out: Path, cfg, conds, result: dict, info: dict, versions: dict
 
 
     # size: the page section by section, in reading order; each section is a few lines of markdown.
-    from aicalib_tf.bench.conditions import CALIB_CAMERAS, CALIB_SEED
+    from aicalib_tf.bench.conditions import CALIB_CAMERAS, CALIB_SEED, FISHEYE_SEQUENCES
     from aicalib_tf.bench.timing import RETIME_RUNS, RETIME_SLOWEST
 
     out = Path(out)
@@ -263,7 +263,7 @@ def write_report(out: Path, cfg, conds, result: dict, info: dict, versions: dict
         p = fig_dir / f"sweep_{sweep}.png"
         _sweep_figure(summary, sweep, p)
         figures.append((f"Sweep: {sweep}", p))
-    named = {c.name for c in conds if not c.sweep} | {"calib"}
+    named = {c.name for c in conds if not c.sweep} | {"calib"} | {f"calib_{f}" for f in FISHEYE_SEQUENCES}
     if len(results):
         _error_hist(result["errors"], named, fig_dir / "error_histogram.png")
         figures.append(("Corner error histogram", fig_dir / "error_histogram.png"))
@@ -314,21 +314,25 @@ def write_report(out: Path, cfg, conds, result: dict, info: dict, versions: dict
             md += [f"\n### {sweep}\n", _md_table(piv, {piv.columns[0]: ".3g"}), f"\n![{sweep}](figures/sweep_{sweep}.png)\n"]
     if len(calib):
         md += ["\n## Calibration against the true camera\n",
-               f"{len(calib['camera_id'].unique())} sequences (data_gen `calib`, seed {CALIB_SEED}, cameras "
-               f"{', '.join(map(str, CALIB_CAMERAS[:len(calib['camera_id'].unique())]))}), "
-               f"{int(calib['views'].iloc[0])} views each, 640×480. Each detector's boards (partial ones too) go through "
-               "`aicalib_tf.calib.workflow.calibrate_camera` (outlier views rejected). fx %: signed focal error; pp: principal "
-               "point error; dist field: mean/max px difference between the estimated and true undistortion over the whole "
-               "image; dist field seen: the same inside the area the boards covered (hull of all true corners).\n"]
-        ccols = [c for c in ["camera_id", "lens", "detector", "views", "views_found", "views_partial", "views_used",
-                             "rejected", "rms_px", "fx_pct", "fy_pct", "pp_px", "dist_field_mean_px", "dist_field_max_px",
-                             "dist_field_seen_mean_px", "dist_field_seen_max_px", "status"] if c in calib.columns]
-        md.append(_md_table(calib[ccols], {"rms_px": ".3f", "fx_pct": "+.3f", "fy_pct": "+.3f", "pp_px": ".2f",
-                                            "dist_field_mean_px": ".3f", "dist_field_max_px": ".2f",
-                                            "dist_field_seen_mean_px": ".3f", "dist_field_seen_max_px": ".2f"}))
+               f"{len(calib['camera_id'].unique())} sequences (data_gen `calib`, 640×480, seed {CALIB_SEED}, cameras "
+               f"{', '.join(map(str, CALIB_CAMERAS))}: mild and strong barrel; `calib_fisheye` 185° and 150°, 1280×960, σ 2, "
+               f"in full runs), {int(calib['views'].iloc[0])} views each. Each detector's boards (partial ones too) go through "
+               "`calibrate_camera` (outlier views rejected; model: the lens model it chose). fx %: signed focal error; pp: "
+               "principal point error; proj err: the projection error field (unproject a pixel grid with the true lens, project "
+               "with the estimate), px, over the area the boards covered (seen: hull of all true corners) and over the whole "
+               "image or image circle (mean, max; fail: share of it the estimate cannot project); dist field: the same "
+               "comparison of the undistortion fields (pinhole-plane, so only rays in front of 90°).\n"]
+        ccols = [c for c in ["camera_id", "lens", "detector", "model", "views", "views_found", "views_partial", "views_used",
+                             "rejected", "rms_px", "fx_pct", "pp_px", "proj_err_seen_mean_px", "proj_err_mean_px",
+                             "proj_err_max_px", "proj_err_fail_frac", "dist_field_mean_px", "dist_field_seen_mean_px",
+                             "status"] if c in calib.columns]
+        md.append(_md_table(calib[ccols], {"rms_px": ".3f", "fx_pct": "+.3f", "pp_px": ".2f", "proj_err_seen_mean_px": ".3f",
+                                            "proj_err_mean_px": ".3f", "proj_err_max_px": ".2f", "proj_err_fail_frac": ".0%",
+                                            "dist_field_mean_px": ".3f", "dist_field_seen_mean_px": ".3f"}))
         if "fx_pct" in calib.columns:
             agg = calib[calib["status"] == "ok"].assign(abs_fx=lambda d: d["fx_pct"].abs()).groupby("detector", sort=False).agg(
                 sequences=("camera_id", "count"), mean_abs_fx_pct=("abs_fx", "mean"), mean_pp_px=("pp_px", "mean"),
+                mean_proj_err_seen_px=("proj_err_seen_mean_px", "mean"), mean_proj_err_px=("proj_err_mean_px", "mean"),
                 mean_dist_field_px=("dist_field_mean_px", "mean"), mean_dist_field_seen_px=("dist_field_seen_mean_px", "mean"),
                 mean_rms_px=("rms_px", "mean")).reset_index()
             md += ["\nPer detector, over the calibrated sequences:\n", _md_table(agg, {"mean_abs_fx_pct": ".3f"})]

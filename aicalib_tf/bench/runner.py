@@ -14,6 +14,7 @@ import numpy as np
 
 from aicalib_tf.bench.conditions import (
     CALIB_CAMERAS,
+    FISHEYE_SEQUENCES,
     PATTERN,
     Condition,
     board_tilt_deg,
@@ -28,8 +29,8 @@ from aicalib_tf.bench.timing import keep_slowest, retime_slowest, time_detector
 
 __all__ = ["DETECTORS", "EvalConfig", "Found", "make_detectors", "time_detector", "score_detection", "run_synthetic", "calibrate_sequences", "run"]
 
-FULL_COUNTS = {"named": 100, "sweep": 32, "hd": 30, "calib_views": 20}
-QUICK_COUNTS = {"named": 6, "sweep": 3, "hd": 2, "calib_views": 6}
+FULL_COUNTS = {"named": 100, "sweep": 32, "hd": 30, "fisheye": 100, "calib_views": 20, "fisheye_sequences": 1}
+QUICK_COUNTS = {"named": 6, "sweep": 3, "hd": 2, "fisheye": 2, "calib_views": 6, "fisheye_sequences": 0}
 
 
 @dataclass(frozen=True)
@@ -50,7 +51,8 @@ class EvalConfig:
     command: str = ""
 
     def counts(self) -> dict:
-        """Images per named condition, per sweep level, at 1920×1080, and views per calibration sequence."""
+        """Images per named condition, per sweep level, at 1920×1080, per fisheye condition, views per
+        calibration sequence, and whether (1) or not (0) the fisheye calibration sequences run."""
         c = dict(QUICK_COUNTS if self.quick else FULL_COUNTS)
         if self.limit is not None:
             c = {k: (max(3, min(v, self.limit)) if k == "calib_views" else min(v, self.limit)) for k, v in c.items()}
@@ -88,9 +90,13 @@ def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *,
     from tqdm import tqdm
 
     def n_for(c: Condition) -> int:
+        if c.preset.lens == "fisheye":
+            return counts.get("fisheye", counts["named"])
         return counts["sweep"] if c.sweep else counts["hd"] if c.size[0] > 1000 else counts["named"]
 
-    total = sum(n_for(c) for c in conditions) + (len(CALIB_CAMERAS) * counts["calib_views"] if with_calibration else 0)
+    fisheye_seqs = tuple(FISHEYE_SEQUENCES) if counts.get("fisheye_sequences", 0) else ()
+    n_seqs = len(CALIB_CAMERAS) + len(fisheye_seqs)
+    total = sum(n_for(c) for c in conditions) + (n_seqs * counts["calib_views"] if with_calibration else 0)
     bar = tqdm(total=total, desc="evaluate", unit="img", disable=not progress)
     rows, errors, hardest = [], {}, {}
     render_s = 0.0
@@ -116,7 +122,7 @@ def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *,
     calib = []
     if with_calibration:
         t0 = time.perf_counter()
-        seqs = calibration_sequences(counts["calib_views"])
+        seqs = calibration_sequences(counts["calib_views"], fisheye=fisheye_seqs)
         render_s += time.perf_counter() - t0
         for size in {s.image.shape[::-1] for _, views in seqs for s in views} - warm:
             _warm_up(detectors, size)
@@ -136,7 +142,7 @@ def _detect_sample(name: str, cond: Condition | None, index: int, s, detectors: 
     base = {"condition": name, "sweep": cond.sweep if cond else None, "level": cond.level if cond else np.nan,
             "index": index, "seed": lab["seed"], "camera_id": lab["camera_id"], "width": w, "height": h,
             "has_board": has_board, "tilt_deg": board_tilt_deg(lab), "square_px": square_px(lab),
-            "k1": float(lab["dist"][0])}
+            "k1": float(lab["dist"][0]), "distortion_model": lab.get("distortion_model", "plumb_bob")}
     img_rows, found_by = [], {}
     for det, fn in detectors.items():
         found, ms = time_detector(fn, s.image)
@@ -153,11 +159,15 @@ def calibrate_sequences(seqs, detectors: dict, rows: list, errors: dict, bar=Non
     """Detect every view of each calibration sequence, calibrate per detector, compare with the truth.
 
     seqs : [(camera_id, [Sample])] (see :func:`aicalib_tf.bench.conditions.calibration_sequences`).
-    Detection rows go into ``rows``/``errors`` under condition ``calib``. Returns one dict per
-    sequence × detector: views, views_found (full boards), views_partial, views_used, rejected,
-    rms_px, fx_pct, fy_pct, pp_px, dist_field_mean_px, dist_field_max_px (over the whole image),
-    dist_field_seen_mean_px, dist_field_seen_max_px (inside the hull of all the sequence's visible
-    true corners: the area the boards covered), status. slowest : see :func:`keep_slowest`.
+    Detection rows go into ``rows``/``errors`` under condition ``calib`` (pinhole sequences) or
+    the fisheye sequence's name (``calib_fisheye185``). Returns one dict per sequence × detector:
+    camera_id, sequence, lens, true_model, model (the calibration's chosen lens model), views,
+    views_found (full boards), views_partial, views_used, rejected, rms_px, fx_pct, fy_pct, pp_px,
+    the projection error field (unproject with the true lens, project with the estimate; px):
+    proj_err_seen_mean_px over the area the boards covered (hull of the sequence's visible true
+    corners), proj_err_mean_px / proj_err_max_px over the whole image (a fisheye's image circle),
+    proj_err_fail_frac (share of it the estimate cannot project), the undistortion-field
+    differences dist_field_* (whole image and _seen_), and status. slowest : see :func:`keep_slowest`.
     """
     from aicalib_tf.calib.workflow import CalibrationError, View, calibrate_camera
 
@@ -165,7 +175,8 @@ def calibrate_sequences(seqs, detectors: dict, rows: list, errors: dict, bar=Non
     for cam, samples in seqs:
         views = {d: [] for d in detectors}
         for s in samples:
-            img_rows, found_by = _detect_sample("calib", None, s.label["index"], s, detectors, rows, errors)
+            name = "calib" if s.label.get("distortion_model", "plumb_bob") != "equidistant" else s.label["condition"]
+            img_rows, found_by = _detect_sample(name, None, s.label["index"], s, detectors, rows, errors)
             if slowest is not None:
                 keep_slowest(slowest, img_rows, s.image)
             for d, (found, _) in found_by.items():
@@ -173,28 +184,48 @@ def calibrate_sequences(seqs, detectors: dict, rows: list, errors: dict, bar=Non
                     views[d].append(View(f"view{s.label['index']:03d}", found.corners, found.ids))
             if bar is not None:
                 bar.update(1)
-        lab = samples[0].label
-        K_true, dist_true = np.asarray(lab["K"]), np.asarray(lab["dist"])
         for d, vs in views.items():
-            rec = {"camera_id": cam, "lens": "strong barrel" if dist_true[0] < -0.2 else "mild",
-                   "k1_true": float(dist_true[0]), "fx_true": float(K_true[0, 0]), "detector": d,
-                   "views": len(samples), "views_found": sum(len(v.ids) == PATTERN[0] * PATTERN[1] for v in vs),
-                   "views_partial": sum(len(v.ids) < PATTERN[0] * PATTERN[1] for v in vs)}
-            try:
-                cal = calibrate_camera(vs, PATTERN, float(lab["square_size"]), tuple(lab["image_size"]))
-            except CalibrationError as exc:
-                rec.update(views_used=0, rejected=len(vs), status=f"failed: {exc}")
-                out.append(rec)
-                continue
-            seen = np.concatenate([s.corners[s.visible] for s in samples])
-            err = calibration_errors(cal.K, cal.dist, K_true, dist_true, tuple(lab["image_size"]), seen=seen)
-            rec.update(views_used=len(cal.views), rejected=len(cal.rejected), rms_px=float(cal.rms),
-                       fx_pct=err["fx_pct"], fy_pct=err["fy_pct"], pp_px=err["pp_px"],
-                       dist_field_mean_px=err["dist_field_mean_px"], dist_field_max_px=err["dist_field_max_px"],
-                       dist_field_seen_mean_px=err["dist_field_seen_mean_px"],
-                       dist_field_seen_max_px=err["dist_field_seen_max_px"], status="ok")
-            out.append(rec)
+            out.append(_calibrate_one(cam, samples, d, vs, calibrate_camera, CalibrationError))
     return out
+
+
+def _lens_name(lab: dict) -> str:
+    """A sequence's lens in words: "fisheye 185°", "strong barrel" or "mild"."""
+    if lab.get("distortion_model", "plumb_bob") == "equidistant":
+        return f"fisheye {2 * lab['max_theta_deg']:.0f}°" if lab.get("max_theta_deg") else "fisheye"
+    return "strong barrel" if lab["dist"][0] < -0.2 else "mild"
+
+
+def _calibrate_one(cam: int, samples: list, detector: str, vs: list, calibrate_camera, error_type) -> dict:
+    """Calibrate one detector's views of one sequence and score it against the truth (one calibration.csv row)."""
+    from aicalib_tf.geometry.camera import model_for_dist
+
+    lab = samples[0].label
+    K_true, dist_true = np.asarray(lab["K"]), np.asarray(lab["dist"])
+    true_model = lab.get("distortion_model", "plumb_bob")
+    max_theta = np.radians(lab["max_theta_deg"]) if lab.get("max_theta_deg") else None
+    n = PATTERN[0] * PATTERN[1]
+    rec = {"camera_id": cam, "sequence": lab["condition"], "lens": _lens_name(lab), "true_model": true_model,
+           "k1_true": float(dist_true[0]), "fx_true": float(K_true[0, 0]), "detector": detector,
+           "views": len(samples), "views_found": sum(len(v.ids) == n for v in vs),
+           "views_partial": sum(len(v.ids) < n for v in vs)}
+    try:
+        cal = calibrate_camera(vs, PATTERN, float(lab["square_size"]), tuple(lab["image_size"]))
+    except error_type as exc:
+        rec.update(views_used=0, rejected=len(vs), status=f"failed: {exc}")
+        return rec
+    model = getattr(cal, "model", None) or model_for_dist(cal.dist)  # calib's model="auto" names its choice
+    seen = np.concatenate([s.corners[s.visible] for s in samples])
+    err = calibration_errors(cal.K, cal.dist, K_true, dist_true, tuple(lab["image_size"]), model=model,
+                             model_true=true_model, max_theta_true=max_theta, seen=seen)
+    rec.update(model=model, views_used=len(cal.views), rejected=len(cal.rejected), rms_px=float(cal.rms),
+               **{k: err[k] for k in CALIB_ERROR_COLUMNS}, status="ok")
+    return rec
+
+
+CALIB_ERROR_COLUMNS = ("fx_pct", "fy_pct", "pp_px", "proj_err_seen_mean_px", "proj_err_mean_px", "proj_err_max_px",
+                       "proj_err_fail_frac", "dist_field_mean_px", "dist_field_max_px", "dist_field_seen_mean_px",
+                       "dist_field_seen_max_px")
 
 
 def _versions() -> dict:

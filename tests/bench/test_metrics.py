@@ -78,6 +78,39 @@ def test_distortion_field_matches_projection_and_grows_with_k1():
     assert 0 < small < big
 
 
+def test_projection_error_field_across_models():
+    import math
+
+    from aicalib_tf.bench.metrics import calibration_errors
+    from aicalib_tf.geometry import lens
+
+    K = np.array([[150.0, 0, 319.5], [0, 150.0, 239.5], [0, 0, 1]])
+    kb = np.array([0.02, -0.004, 0.001, 0.0])
+    theta = math.radians(92.5)
+    same = calibration_errors(K, kb, K, kb, (640, 480), model="equidistant", model_true="equidistant",
+                              max_theta_true=theta, seen=[[200, 150], [440, 150], [440, 330], [200, 330]])
+    assert same["proj_err_max_px"] < 1e-6 and same["proj_err_fail_frac"] == 0.0
+    assert same["proj_err_seen_mean_px"] < 1e-6
+    # Only the circle counts: the corners of this 185° circular image see nothing.
+    r = 150.0 * theta * (1 + sum(kb[i] * theta ** (2 * i + 2) for i in range(4)))
+    assert same["proj_err_points"] < 32 * 24 * math.pi * r * r / (640 * 480) * 1.1
+    # A 1 % focal error of the same model: the error grows with the radius, at most 1 % of it.
+    K2 = K.copy()
+    K2[0, 0] = K2[1, 1] = 151.5
+    e = calibration_errors(K2, kb, K, kb, (640, 480), model="equidistant", model_true="equidistant",
+                           max_theta_true=theta)
+    assert 0 < e["proj_err_mean_px"] < e["proj_err_max_px"] <= 0.01 * r + 1e-6
+    # A pinhole estimate cannot project the rays at and past 90°.
+    pin = calibration_errors(K, np.zeros(5), K, kb, (640, 480), model_true="equidistant", max_theta_true=theta)
+    assert pin["proj_err_fail_frac"] > 0.05 and pin["proj_err_mean_px"] > 1.0
+    # The other way round: a fisheye estimate of a plumb_bob lens.
+    d = np.array([-0.2, 0.03, 0, 0, 0])
+    ray = lens.unproject([[600.0, 400.0]], "plumb_bob", K, d)
+    assert np.isfinite(ray).all()
+    mixed = calibration_errors(K, kb, K, d, (640, 480), model="equidistant")
+    assert mixed["proj_err_fail_frac"] == 0.0 and mixed["proj_err_mean_px"] > 1.0
+
+
 # --- detection outcomes, partial boards, agreement (issue 6) ---------------------------------
 
 def _ids(cols, rows):
