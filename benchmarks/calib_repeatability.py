@@ -65,7 +65,7 @@ def main(argv=None) -> int:
         p = Q.predicted_half_difference(h["cal_a"], h["cal_b"], h["covered"], covariances=covs)
         print(f"{split:8s} ({h['n_a']}+{h['n_b']} views): covered area median {h['median_covered']:.3f} mean "
               f"{h['mean_covered']:.3f} px | whole image median {h['median_all']:.3f} mean {h['mean_all']:.3f} px | "
-              f"predicted median covered {p['median_covered']:.3f} px, whole {p['median_all']:.3f} px | "
+              f"predicted median covered {p['median_covered']:.3f} px (10-90% {p['p10_covered']:.3f}-{p['p90_covered']:.3f}), whole {p['median_all']:.3f} px | "
               f"rotation {h['rotation_deg']:.3f} deg | {time.perf_counter() - t:.2f} s")
     t = time.perf_counter()
     a = Q.assess(cal, views, fit=fit)

@@ -15,12 +15,12 @@ perturbation that such a rotation explains (fit over the same pixels). mrcal ins
 frame with the perturbed board poses, which needs the joint covariance of intrinsics and poses;
 the :class:`~aicalib_tf.calib.fit.Calibration` keeps only the marginal intrinsics block, so the
 best-fit rotation stands in for it (slightly optimistic: a best fit removes at least as much as
-the frame motion the poses imply).
-
-Pure numpy/scipy/OpenCV; never TensorFlow.
+the frame motion the poses imply). Pure numpy/scipy/OpenCV; never TensorFlow.
 """
 
 from __future__ import annotations
+
+import inspect
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -29,9 +29,9 @@ from scipy.spatial.transform import Rotation
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.pattern import board_points
 
-__all__ = ["lens_of", "grid_points", "coverage_counts", "uncovered_regions", "projection_uncertainty",
-           "rotation_compensated_diff", "half_difference", "intrinsics_covariance", "covariance_of", "default_fit", "predicted_half_difference", "verdict", "assess",
-           "SIGMA_LADDER_PX"]
+__all__ = ["lens_of", "grid_points", "coverage_counts", "uncovered_regions", "projection_uncertainty", "verdict",
+           "rotation_compensated_diff", "half_difference", "predicted_half_difference", "intrinsics_covariance",
+           "covariance_of", "default_fit", "assess", "SIGMA_LADDER_PX"]
 
 SIGMA_LADDER_PX = (0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0)  # the verdict's "good to X px" rungs
 _DEFAULT_MODEL = {5: "plumb_bob", 4: "plumb_bob", 8: "rational_polynomial", 12: "thin_prism"}
@@ -200,18 +200,19 @@ def _split(views, split: str) -> tuple[list, list]:
     raise ValueError(f"split must be 'evenodd' or 'halves', got {split!r}")
 
 
-def _stats(d: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
+def _stats(d: np.ndarray, mask: np.ndarray) -> tuple[float, float]:  # (median, mean) of the finite d[mask]
     x = d[mask & np.isfinite(d)]
     return (float(np.median(x)), float(np.mean(x))) if x.size else (float("nan"), float("nan"))
 
 
 def half_difference(views, fit, pattern_size, square_size, image_size, model, split="evenodd", *,
-                    grid=(32, 24)) -> dict:
+                    grid=(32, 24), start=None) -> dict:
     """Calibrate two disjoint halves of ``views`` and compare them (rotation-compensated), px.
 
     fit : callable(views, pattern_size, square_size, image_size, model) -> Calibration, e.g.
         :func:`aicalib_tf.calib.fit.fit_views` (no outlier rejection or model choice).
     split : "evenodd" (views 0, 2, 4, ... against 1, 3, 5, ...) or "halves" (first against second).
+    start : passed to ``fit`` as ``start=`` when given (e.g. the full calibration: a warm start).
     The rotation is fitted over the grid cells that hold a detected corner ("covered").
 
     Returns {"split", "n_a", "n_b", "median_covered", "mean_covered", "median_all", "mean_all"
@@ -221,8 +222,9 @@ def half_difference(views, fit, pattern_size, square_size, image_size, model, sp
     a, b = _split(views, split)
     if min(len(a), len(b)) < 3:
         raise ValueError(f"half_difference needs at least 3 views in each half, got {len(a)} and {len(b)}")
-    cal_a = fit(a, pattern_size, square_size, image_size, model)
-    cal_b = fit(b, pattern_size, square_size, image_size, model)
+    kw = {} if start is None else {"start": start}
+    cal_a = fit(a, pattern_size, square_size, image_size, model, **kw)
+    cal_b = fit(b, pattern_size, square_size, image_size, model, **kw)
     pts = grid_points(image_size, grid)
     covered = _covered_mask(views, image_size, grid)
     diff, R = rotation_compensated_diff(lens_of(cal_a), lens_of(cal_b), pts, covered)
@@ -243,7 +245,10 @@ def predicted_half_difference(cal_a, cal_b, covered=None, *, grid=(32, 24), samp
     in the intrinsics; each sample's pixel difference is G·δ with G the rotation-compensated
     Jacobian of ``cal_a``'s lens (the rotation fitted over ``covered`` (M,) bool, as measured),
     and its median over the covered cells (and over the whole image) is taken; the mean of those
-    medians over ``samples`` draws is returned as {"median_covered", "median_all"}.
+    medians over ``samples`` draws is returned as {"median_covered", "median_all"}, with the 10th
+    and 90th percentiles of the covered medians ("p10_covered", "p90_covered"): one pair of halves
+    is one draw, so a measured value anywhere in that band is as predicted (on 20 synthetic sets of
+    20 views, σ 0.3 px: mean measured 0.47 px, mean predicted 0.48 px; single sets 0.3-1.8×).
     covariances : (Σ_a, Σ_b) to use instead of the halves' ``covariance`` attributes.
     Raises ValueError when a half has no covariance.
     """
@@ -260,9 +265,9 @@ def predicted_half_difference(cal_a, cal_b, covered=None, *, grid=(32, 24), samp
     delta = np.random.default_rng(seed).standard_normal((int(samples), S.shape[0])) @ root.T
     d = np.linalg.norm(np.einsum("mij,sj->smi", G[ok], delta), axis=2)  # (samples, m_ok)
     m = mask[ok]
-    out = {"median_all": float(np.mean(np.median(d, axis=1)))}
-    out["median_covered"] = float(np.mean(np.median(d[:, m], axis=1))) if m.any() else float("nan")
-    return out
+    med = np.median(d[:, m], axis=1) if m.any() else np.full(len(d), np.nan)
+    return {"median_all": float(np.mean(np.median(d, axis=1))), "median_covered": float(np.mean(med)),
+            "p10_covered": float(np.percentile(med, 10)), "p90_covered": float(np.percentile(med, 90))}
 
 
 def intrinsics_covariance(cal, views) -> np.ndarray:
@@ -285,19 +290,15 @@ def intrinsics_covariance(cal, views) -> np.ndarray:
     for name, r, t in zip(cal.views, cal.rvecs, cal.tvecs):
         v = by_name[name]
         P = board_points(v.ids, cal.square_size) @ Rotation.from_rotvec(r).as_matrix().T + t
-        uv, Jp, Ji = lens.projection_jacobian(P)
+        uv = lens.project(P)
         ok = np.all(np.isfinite(uv), axis=1)
-        Ji, Jp, P = Ji[ok], Jp[ok], P[ok]
-        skew = np.zeros((len(P), 3, 3))
-        skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = P[:, 2], -P[:, 1], P[:, 0]
-        skew[:, 1, 0], skew[:, 2, 0], skew[:, 2, 1] = -P[:, 2], P[:, 1], -P[:, 0]
-        Jpose = np.concatenate([Jp @ skew, Jp], axis=2).reshape(-1, 6)
-        Jin = Ji.reshape(-1, n)
+        Ji, Jpose = _frame_basis(lens, P[ok], 1.0)  # the board moves in the camera frame: rotation + translation
+        Jin, Jpose = Ji.reshape(-1, n), Jpose.reshape(-1, 6)
         Hpp_inv = np.linalg.pinv(Jpose.T @ Jpose)
         Hip = Jin.T @ Jpose
         H += Jin.T @ Jin - Hip @ Hpp_inv @ Hip.T
         sq += float(np.sum((uv[ok] - v.corners[ok]) ** 2))
-        dof += 2 * len(P) - 6
+        dof += 2 * int(ok.sum()) - 6
     return np.linalg.pinv(H) * (sq / max(dof, 1))
 
 
@@ -383,8 +384,9 @@ def assess(cal, views, *, fit=None, split="evenodd", grid=(32, 24)) -> dict:
                "median_all": float(np.median(sigma[fin])), "max_all": float(np.max(sigma[fin]))}
     half = None
     if fit is not None and len(used) >= 6:
+        warm = lens_of(cal) if "start" in inspect.signature(fit).parameters else None
         h = half_difference(used, fit, cal.pattern_size, cal.square_size, cal.image_size, lens_of(cal).model, split,
-                            grid=grid)
+                            grid=grid, start=warm)
         half = {k: h[k] for k in ("split", "n_a", "n_b", "median_covered", "mean_covered", "median_all", "mean_all")}
         try:
             covs = [covariance_of(h[f"cal_{k}"], h[f"views_{k}"]) for k in "ab"]
