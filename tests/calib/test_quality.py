@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -106,3 +108,26 @@ def test_report_prints_model_and_verdict_and_draws_the_map():
     pts, sigma = uncertainty_map(cal, views)
     assert sigma.shape == (24, 32) and np.all(sigma > 0)
     assert report_figure(cal, views)[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_fisheye_uncertainty_is_nan_outside_the_image_circle():
+    """An equidistant lens whose radial map peaks at θ = 2.58 rad (r = 140·1.72 px): no ray beyond."""
+    fisheye = L.Lens("equidistant", [[140.0, 0, 319.5], [0, 140.0, 239.5], [0, 0, 1]], [-0.05, 0.0, 0.0, 0.0], SIZE)
+    cal = SimpleNamespace(model="equidistant", K=fisheye.K, dist=fisheye.dist, image_size=SIZE,
+                          covariance=np.diag([0.5, 0.5, 0.3, 0.3, 1e-4, 1e-5, 1e-6, 1e-7]))
+    pts, sigma = Q.projection_uncertainty(cal, (32, 24))
+    r = np.hypot(pts[:, 0] - 319.5, pts[:, 1] - 239.5)
+    rim = 140.0 * 2.582 * (1 - 0.05 * 2.582**2)
+    inside, outside = r < rim - 2, r > rim + 2
+    assert outside.sum() > 20
+    assert np.all(np.isfinite(sigma[inside]) & (sigma[inside] > 0)) and np.all(np.isnan(sigma[outside]))
+    views = synthetic_views(fisheye, 6, 0.0, seed=1, distance=(0.15, 0.3))
+    share = float(verdict_share(Q.verdict(cal, views, sigma=sigma)))
+    assert 0 < share <= 100 * np.mean(np.isfinite(sigma)) + 0.5
+    d, _ = Q.rotation_compensated_diff(fisheye, fisheye, pts)
+    assert np.all(np.isnan(d[outside])) and np.nanmax(d) < 1e-6
+
+
+def verdict_share(text: str) -> float:
+    """The Y of "good to X px (1σ) over Y% of the image"."""
+    return float(text.split(" over ")[1].split("%")[0])
