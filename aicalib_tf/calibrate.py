@@ -1,12 +1,17 @@
 """Calibrate a camera from a folder of chessboard photos.
 
     python -m aicalib_tf.calibrate "photos/*.jpg" --pattern 9x6 --square 25mm [--out calib/]
-        [--detector cnn|report|opencv|opencv-sb] [--model PATH] [--fix-k3] [--rational]
+        [--model auto|plumb_bob|rational_polynomial|thin_prism|equidistant] [--rational] [--fix-k3]
+        [--detector cnn|report|opencv|opencv-sb] [--network default|report|PATH.keras]
         [--resize-policy error|skip|crop|scale]
 
 Every image goes through the detector (default: the CNN, which also returns partial boards;
-each counts as a view with its own pose). Zhang's calibration (``cv2.calibrateCameraExtended``)
-follows, with outlier views rejected one at a time (see :mod:`aicalib_tf.calib.fit`).
+each counts as a view with its own pose). One least-squares fit of the lens model over all views
+follows, with outlier views rejected one at a time (see :mod:`aicalib_tf.calib.fit`). With
+``--model auto`` (the default) every lens model is fitted and cross-validated on held-out views,
+and the simplest one within one standard error of the best is kept; the report prints the table.
+``--rational`` is ``--model rational_polynomial``. ``--model`` used to name the CNN's network: a
+value ending in .keras, or "default"/"report", still does (with a note), else use ``--network``.
 
 It prints a compact report (images used, skipped and rejected with reasons; RMS and worst view;
 K and distortion with ±1σ; field of view; warnings) and writes into --out, atomically:
@@ -34,6 +39,7 @@ from aicalib_tf.calib.workflow import (
     parse_square,
     run,
 )
+from aicalib_tf.geometry.lens import MODELS
 
 
 def _parse_args(argv):
@@ -46,9 +52,11 @@ def _parse_args(argv):
     ap.add_argument("--square", default="1", help="square size with unit, e.g. 25mm (default: 1, unitless)")
     ap.add_argument("--out", default="calib", help="output folder (default: %(default)s)")
     ap.add_argument("--detector", default="cnn", choices=DETECTORS, help="corner detector (default: %(default)s)")
-    ap.add_argument("--model", default="default", help="the cnn detector's network: default, report, or a .keras path (default: %(default)s)")
-    ap.add_argument("--fix-k3", action="store_true", help="hold k3 at 0 (narrow lenses, few views)")
-    ap.add_argument("--rational", action="store_true", help="8-coefficient rational distortion model (fisheye-like lenses)")
+    ap.add_argument("--model", default="auto",
+                    help=f"lens model: auto (chosen on held-out views) or one of {', '.join(MODELS)} (default: %(default)s)")
+    ap.add_argument("--network", default="default", help="the cnn detector's network: default, report, or a .keras path (default: %(default)s)")
+    ap.add_argument("--fix-k3", action="store_true", help="hold k3 at 0 (pinhole models; narrow lenses, few views)")
+    ap.add_argument("--rational", action="store_true", help="the same as --model rational_polynomial")
     ap.add_argument("--resize-policy", default="error", choices=RESIZE_POLICIES,
                     help="images whose size differs from the most common one (default: %(default)s)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -61,11 +69,22 @@ def main(argv: list[str] | None = None) -> int:
     from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
 
     args = _parse_args(argv)
+    if args.model.endswith(".keras") or args.model in ("default", "report"):  # the old meaning of --model
+        print(f"note: --model {args.model} names a network; use --network {args.model} (the lens model stays auto)",
+              file=sys.stderr)
+        args.network, args.model = args.model, "auto"
+    if args.rational and args.model not in ("auto", "rational_polynomial"):
+        print(f"error: --rational means --model rational_polynomial, but --model is {args.model}", file=sys.stderr)
+        return 2
+    if args.model != "auto" and args.model not in MODELS:
+        print(f"error: unknown --model {args.model!r}; choose auto or one of {', '.join(MODELS)}", file=sys.stderr)
+        return 2
     try:
         pattern = check_pattern(parse_pattern(args.pattern))
         square, unit = parse_square(args.square)
         cfg = CalibrateConfig(images=tuple(args.images), pattern=pattern, square=square, square_unit=unit,
-                              out=args.out, detector=args.detector, model=args.model, fix_k3=args.fix_k3,
+                              out=args.out, detector=args.detector, network=args.network,
+                              model="rational_polynomial" if args.rational else args.model, fix_k3=args.fix_k3,
                               rational=args.rational, resize_policy=args.resize_policy, quiet=args.quiet)
         cal, report = run(cfg)
     except (ValueError, FileNotFoundError) as exc:

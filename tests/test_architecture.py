@@ -120,7 +120,8 @@ def test_no_import_cycles():
 
 def test_the_cycle_finder_finds_a_cycle(monkeypatch):
     monkeypatch.setitem(GRAPH, "aicalib_tf.geometry.pattern", GRAPH["aicalib_tf.geometry.pattern"] | {"aicalib_tf.calib.fit"})
-    assert ["aicalib_tf.calib.fit", "aicalib_tf.geometry.pattern"] in _cycles()
+    cycles = _cycles()
+    assert any({"aicalib_tf.calib.fit", "aicalib_tf.geometry.pattern"} <= set(c) for c in cycles), cycles
 
 
 @pytest.mark.parametrize("room", ["aicalib_tf.geometry", "aicalib_tf.calib"])

@@ -1,4 +1,4 @@
-"""Zhang calibration from detected boards: views -> :class:`Calibration` (pure numpy/OpenCV).
+"""Calibration from detected boards: views -> :class:`Calibration` for any lens model (numpy/OpenCV/scipy).
 
 A view is one image's detected corners with their board ids (col, row). Full and partial boards
 are equal citizens: each view has its own pose, so a board cut by the frame still constrains the
@@ -11,9 +11,14 @@ recalibrated. A misordered board sits tens of px off; corners pulled a few px by
 ``cornerSubPix`` does under strong distortion) bend the fit for every view, which is why only the
 worst view goes at a time. At most a third of the views are rejected, never below ``min_views``.
 
-Camera parameter standard deviations come from ``cv2.calibrateCameraExtended`` (the diagonal of
-the Levenberg–Marquardt covariance scaled by the residual variance): they describe the noise the
-data leaves, not systematic errors.
+The fit is one least-squares bundle over all views (:mod:`aicalib_tf.calib.bundle`). Starts: the
+pinhole models from OpenCV's multi-start plumb_bob fit; ``equidistant`` from a grid of focal lengths
+(:func:`~aicalib_tf.calib.bundle.fisheye_start`), so fisheye lenses need no guess. ``model="auto"``
+picks the model by cross-validation over views (:mod:`aicalib_tf.calib.select`).
+
+Parameter standard deviations and the covariance are σ²·(JᵀJ)⁻¹ at the minimum: they describe the
+noise the data leaves, not systematic errors. A forced model whose fit is rank-deficient still
+returns (pseudo-inverse covariance; ``meta["fit_note"]`` says so); under ``auto`` it gets a table row.
 """
 
 from __future__ import annotations
@@ -23,17 +28,18 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from aicalib_tf.calib.bundle import (BundleResult, CalibrationError, bundle_adjust, convert_start, fisheye_start,
+                                     param_names, poses_from_rays)
+from aicalib_tf.calib.select import select_model
+from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens, project
 from aicalib_tf.geometry.pattern import board_points, check_pattern
 
-__all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "view_rms", "INTRINSIC_NAMES", "MIN_VIEW_CORNERS", "outlier_threshold"]
+__all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "fit_views", "view_rms", "INTRINSIC_NAMES",
+           "MIN_VIEW_CORNERS", "outlier_threshold"]
 
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
 MIN_VIEW_CORNERS = 6  # and spanning ≥ 2 rows and ≥ 2 columns: a homography needs a 2-D spread
 _CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
-
-
-class CalibrationError(ValueError):
-    """The views cannot give a calibration (too few usable views, bad sizes, ...)."""
 
 
 @dataclass(frozen=True)
@@ -62,13 +68,17 @@ class View:
 class Calibration:
     """A calibrated camera and how well the views support it.
 
-    K : (3, 3) float64 camera matrix, px. dist : (5,) or (8,) OpenCV distortion coefficients.
+    model : the lens model, a :data:`~aicalib_tf.geometry.lens.MODELS` name.
+    K : (3, 3) float64 camera matrix, px. dist : (n,) the model's coefficients (5, 8, 12 or 4), OpenCV order.
     image_size : (width, height) px. pattern_size : (cols, rows). square_size, square_unit: the
     board's square and its unit ("mm", "m", ... or "" when unitless); tvecs are in that unit.
     rms : overall RMS reprojection error, px (over all corners of the used views).
     views : names of the used views, in order; rvecs, tvecs (V, 3) float64 board-to-camera poses
     (``T_cam_board``); per_view_rms (V,) px; corner_counts (V,).
-    std : {parameter name: standard deviation} for fx, fy, cx, cy and the distortion terms.
+    std : {parameter name: standard deviation} for fx, fy, cx, cy and the distortion terms (names of
+    ``lens.COEFF_NAMES``). covariance : (4 + n, 4 + n) covariance of [fx, fy, cx, cy, *dist] (σ²·(JᵀJ)⁻¹
+    restricted to the intrinsics; None when unknown). model_table : the model choice, one dict per model
+    {"model", "n_params", "rms", "cv_rms", "cv_se", "chosen", "note"}. quality : filled by calib.quality.
     rejected : {view name: reason} for views given but not used.
     meta : free-form provenance (detector, model sha256, flags) kept in the JSON file.
     """
@@ -88,6 +98,15 @@ class Calibration:
     rejected: dict = field(default_factory=dict)
     square_unit: str = ""
     meta: dict = field(default_factory=dict)
+    model: str = "plumb_bob"
+    covariance: np.ndarray | None = None
+    model_table: tuple = ()
+    quality: dict = field(default_factory=dict)
+
+    @property
+    def lens(self) -> Lens:
+        """The camera as a :class:`~aicalib_tf.geometry.lens.Lens` (model, K, dist, image_size)."""
+        return Lens(self.model, self.K, self.dist, self.image_size)
 
     @property
     def fx(self) -> float:
@@ -115,11 +134,19 @@ class Calibration:
         return self.views[k], float(self.per_view_rms[k])
 
 
-def view_rms(view: View, K, dist, rvec, tvec, square_size: float) -> tuple[float, np.ndarray]:
-    """(RMS px, residuals (N, 2) px = detected − projected) of one view under a camera and pose."""
-    proj, _ = cv2.projectPoints(board_points(view.ids, square_size), np.asarray(rvec, np.float64),
-                                np.asarray(tvec, np.float64), np.asarray(K, np.float64), np.asarray(dist, np.float64))
-    res = view.corners - proj.reshape(-1, 2)
+_MODEL_OF_LENGTH = {4: "plumb_bob", 5: "plumb_bob", 8: "rational_polynomial", 12: "thin_prism"}
+
+
+def view_rms(view: View, K, dist, rvec, tvec, square_size: float, model: str | None = None) -> tuple[float, np.ndarray]:
+    """(RMS px, residuals (N, 2) px = detected − projected) of one view under a camera and pose.
+
+    model : the lens model of ``dist``; None guesses a pinhole model from its length (4 means
+    plumb_bob here: pass "equidistant" for a fisheye). Unprojectable corners give NaN.
+    """
+    model = _MODEL_OF_LENGTH.get(np.asarray(dist).size, "plumb_bob") if model is None else model
+    R, _ = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))
+    pts = board_points(view.ids, square_size) @ R.T + np.asarray(tvec, np.float64).ravel()
+    res = view.corners - project(pts, model, K, dist)
     return float(np.sqrt(np.mean(np.sum(res * res, axis=1)))), res
 
 
@@ -139,18 +166,6 @@ def _usable(view: View, pattern_size: tuple[int, int]) -> str | None:
     return None
 
 
-def _n_dist(flags: int) -> int:
-    """How many distortion coefficients a fit with these OpenCV flags estimates."""
-    return 8 if flags & cv2.CALIB_RATIONAL_MODEL else 5
-
-
-def _flags(rational: bool, fix_k3: bool) -> int:
-    flags = cv2.CALIB_RATIONAL_MODEL if rational else 0
-    if fix_k3:
-        flags |= cv2.CALIB_FIX_K3
-    return flags
-
-
 def _starts(image_size, warm) -> list:
     """Initial (K, dist) guesses: OpenCV's own (None), a warm start, and three pinhole fields of view.
 
@@ -167,12 +182,12 @@ def _starts(image_size, warm) -> list:
 
 
 def _run(views: list[View], square_size: float, image_size, flags: int, warm=None):
-    """Calibrate from several starts; returns the lowest-RMS fit and the per-view RMS."""
+    """plumb_bob by OpenCV from several starts (flags 0 or CALIB_FIX_K3); returns the lowest-RMS fit and the per-view RMS."""
     obj = [board_points(v.ids, square_size).astype(np.float32) for v in views]
     img = [v.corners.astype(np.float32).reshape(-1, 1, 2) for v in views]
     size = tuple(int(s) for s in image_size)
     best, last_error = None, None
-    n_dist = _n_dist(flags)
+    n_dist = 5
     for start in _starts(image_size, warm):
         try:
             if start is None:
@@ -219,20 +234,7 @@ def _sort_views(views, pattern_size: tuple[int, int]) -> tuple[list[View], dict[
     return usable, rejected
 
 
-def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 1.0,
-                     image_size: tuple[int, int] | None = None, *, rational: bool = False, fix_k3: bool = False,
-                     reject_outliers: bool = True, min_views: int = 3, square_unit: str = "",
-                     meta: dict | None = None) -> Calibration:
-    """Calibrate a camera from detected boards (Zhang's method, ``cv2.calibrateCameraExtended``).
-
-    views : sequence of :class:`View` (or objects with ``corners``, ``ids`` and ``name``).
-    pattern_size : (cols, rows) inner corners. square_size : > 0, in ``square_unit``.
-    image_size : (width, height) px; required.
-    rational : fit OpenCV's 8-coefficient rational model. fix_k3 : hold k3 at 0.
-    reject_outliers : drop views by the rule in the module docstring and recalibrate.
-    Raises :class:`CalibrationError` with fewer than ``min_views`` usable views, and ``ValueError``
-    for bad arguments (two views of one name among them).
-    """
+def _check_args(pattern_size, square_size, image_size, min_views) -> tuple[int, int]:
     pattern_size = check_pattern(pattern_size)
     if not np.isfinite(square_size) or square_size <= 0:
         raise ValueError(f"square_size must be a positive number, got {square_size!r}")
@@ -240,33 +242,135 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
         raise ValueError(f"image_size must be (width, height) px, got {image_size!r}")
     if min_views < 3:
         raise ValueError(f"min_views must be at least 3, got {min_views}")
+    return pattern_size
+
+
+def _usable_views(views, pattern_size, min_views) -> tuple[list[View], dict[str, str]]:
     usable, rejected = _sort_views(views, pattern_size)
     if len(usable) < min_views:
         raise CalibrationError(f"{len(usable)} usable views; need at least {min_views}"
                                + (f" ({len(rejected)} unusable: " + "; ".join(f"{n}: {r}" for n, r in rejected.items()) + ")"
                                   if rejected else ""))
-    flags = _flags(rational, fix_k3)
+    return usable, rejected
+
+
+def _fit_model(model: str, views: list[View], square_size: float, image_size, start=None,
+               fix_k3: bool = False, rank_strict: bool = True) -> BundleResult:
+    """One bundle fit of ``model`` to the views, from ``start`` (a Lens or Calibration) or from scratch.
+
+    From scratch, the pinhole models start from OpenCV's multi-start plumb_bob fit (extra
+    coefficients 0) and ``equidistant`` from :func:`_fisheye_start`. ``fix_k3`` holds k3 at 0
+    (pinhole models). Raises CalibrationError naming the model when it cannot be fitted (a
+    rank-deficient fit only when ``rank_strict``).
+    """
+    obj = [board_points(v.ids, square_size) for v in views]
+    px = [v.corners for v in views]
+    free = np.ones(4 + N_COEFFS[model], bool)
+    if fix_k3 and model != "equidistant":
+        free[4] = False
+    if start is not None:
+        lens0 = start.lens if isinstance(start, Calibration) else start
+        intr = convert_start(lens0, model)
+        poses = poses_from_rays(lens0, obj, px)
+        if poses is None:
+            raise CalibrationError(f"{model}: the start lens sees no board in front of it in some view")
+    elif model == "equidistant":
+        intr, poses = fisheye_start(obj, px, image_size, free)
+    else:
+        _, K, dist, rvecs, tvecs, _, _ = _run(views, square_size, image_size, cv2.CALIB_FIX_K3 if fix_k3 else 0)
+        intr = np.zeros(4 + N_COEFFS[model])
+        intr[:4], intr[4:9] = (K[0, 0], K[1, 1], K[0, 2], K[1, 2]), dist[:5]
+        poses = (rvecs, tvecs)
+    intr = np.where(free, intr, 0.0)
+    return bundle_adjust(model, obj, px, intr, *poses, free=free, rank_strict=rank_strict)
+
+
+def _calibration(fit: BundleResult, views, pattern_size, square_size, image_size, rejected, square_unit,
+                 meta, table=()) -> Calibration:
+    std = dict(zip(param_names(fit.model), np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))))
+    K = np.array([[fit.intrinsics[0], 0, fit.intrinsics[2]], [0, fit.intrinsics[1], fit.intrinsics[3]], [0, 0, 1.0]])
+    return Calibration(
+        K=K, dist=fit.intrinsics[4:].copy(), image_size=(int(image_size[0]), int(image_size[1])),
+        pattern_size=pattern_size, square_size=float(square_size), rms=fit.rms, views=tuple(v.name for v in views),
+        rvecs=fit.rvecs, tvecs=fit.tvecs, per_view_rms=fit.per_view_rms,
+        corner_counts=np.array([len(v.ids) for v in views]), std={k: float(v) for k, v in std.items()},
+        rejected=dict(rejected), square_unit=square_unit, meta=dict(meta or {}, **({"fit_note": fit.note} if fit.note else {})), model=fit.model,
+        covariance=fit.covariance, model_table=tuple(table))
+
+
+def fit_views(views, pattern_size: tuple[int, int], square_size: float, image_size: tuple[int, int], model: str,
+              *, start=None, fix_k3: bool = False, square_unit: str = "", meta: dict | None = None) -> Calibration:
+    """One fit of one lens model to the views: no outlier rejection, no model choice.
+
+    views : sequence of :class:`View` (at least 3 usable; unusable ones land in ``rejected``).
+    model : a :data:`~aicalib_tf.geometry.lens.MODELS` name. start : optional Lens or Calibration to
+    start from (any model; its K and, within the pinhole family, its coefficients). Raises
+    :class:`CalibrationError` naming the model when it cannot be fitted, ValueError for bad arguments.
+    """
+    pattern_size = _check_args(pattern_size, square_size, image_size, 3)
+    if model not in MODELS:
+        raise ValueError(f"unknown lens model {model!r}; choose from {', '.join(MODELS)}")
+    usable, rejected = _usable_views(views, pattern_size, 3)
+    fit = _fit_model(model, usable, square_size, image_size, start, fix_k3, rank_strict=False)
+    return _calibration(fit, usable, pattern_size, square_size, image_size, rejected, square_unit, meta)
+
+
+def _resolve_model(model: str, rational: bool) -> str:
+    if rational:
+        if model not in ("auto", "rational_polynomial"):
+            raise ValueError(f"rational=True asks for rational_polynomial but model={model!r}")
+        return "rational_polynomial"
+    if model != "auto" and model not in MODELS:
+        raise ValueError(f"unknown lens model {model!r}; choose from auto, {', '.join(MODELS)}")
+    return model
+
+
+def _refit(model, usable, square_size, image_size, warm: BundleResult, fix_k3) -> BundleResult:
+    """Refit after a view was dropped: from the last fit, and from scratch for the pinhole models; the lower cost wins."""
+    fits = [_fit_model(model, usable, square_size, image_size, Lens.from_intrinsics(model, warm.intrinsics, image_size),
+                       fix_k3, rank_strict=False)]
+    if model != "equidistant":
+        try:
+            fits.append(_fit_model(model, usable, square_size, image_size, None, fix_k3, rank_strict=False))
+        except CalibrationError:
+            pass
+    return min(fits, key=lambda f: f.cost)
+
+
+def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 1.0,
+                     image_size: tuple[int, int] | None = None, *, model: str = "auto", rational: bool = False,
+                     fix_k3: bool = False, reject_outliers: bool = True, min_views: int = 3, square_unit: str = "",
+                     meta: dict | None = None) -> Calibration:
+    """Calibrate a camera from detected boards: a bundle fit of the lens model over all views.
+
+    views : sequence of :class:`View` (or objects with ``corners``, ``ids`` and ``name``).
+    pattern_size : (cols, rows) inner corners. square_size : > 0, in ``square_unit``.
+    image_size : (width, height) px; required.
+    model : "auto" (k-fold cross-validation over views picks the simplest model within one standard
+    error of the best, see :mod:`aicalib_tf.calib.select`) or a lens model name to force it.
+    rational : the same as model="rational_polynomial". fix_k3 : hold k3 at 0 (pinhole models).
+    reject_outliers : drop views by the rule in the module docstring and refit.
+    Raises :class:`CalibrationError` with fewer than ``min_views`` usable views or when the model
+    cannot be fitted, and ``ValueError`` for bad arguments (two views of one name among them).
+    """
+    pattern_size = _check_args(pattern_size, square_size, image_size, min_views)
+    model = _resolve_model(model, rational)
+    usable, rejected = _usable_views(views, pattern_size, min_views)
+    if model == "auto":
+        table, model, fit = select_model(
+            usable, square_size, lambda vs, m, start: _fit_model(m, vs, square_size, image_size, start, fix_k3))
+    else:
+        fit = _fit_model(model, usable, square_size, image_size, None, fix_k3, rank_strict=False)
+        table = ({"model": model, "n_params": fit.intrinsics.size, "rms": fit.rms, "cv_rms": float("nan"),
+                  "cv_se": float("nan"), "chosen": True, "note": "forced"},)
     max_drop = len(usable) // 3
-    warm = None
-    while True:
-        rms, K, dist, rvecs, tvecs, std_in, per_view = _run(usable, square_size, image_size, flags, warm)
-        warm = (K, dist)
-        if not reject_outliers or len(usable) <= min_views or max_drop == 0:
+    while reject_outliers and len(usable) > min_views and max_drop > 0:
+        thr = outlier_threshold(fit.per_view_rms)
+        worst = int(np.argmax(fit.per_view_rms))
+        if fit.per_view_rms[worst] <= thr:
             break
-        thr = outlier_threshold(per_view)
-        worst = int(np.argmax(per_view))
-        if per_view[worst] <= thr:
-            break
-        rejected[usable[worst].name] = f"outlier: RMS {per_view[worst]:.2f} px > {thr:.2f} px"
+        rejected[usable[worst].name] = f"outlier: RMS {fit.per_view_rms[worst]:.2f} px > {thr:.2f} px"
         usable.pop(worst)
         max_drop -= 1
-    n_dist = _n_dist(flags)
-    names = INTRINSIC_NAMES[: 4 + n_dist]
-    std = {n: float(s) for n, s in zip(names, std_in[: len(names)])}
-    return Calibration(
-        K=np.asarray(K, np.float64), dist=np.asarray(dist[:n_dist], np.float64),
-        image_size=(int(image_size[0]), int(image_size[1])), pattern_size=pattern_size,
-        square_size=float(square_size), rms=rms, views=tuple(v.name for v in usable), rvecs=rvecs, tvecs=tvecs,
-        per_view_rms=per_view, corner_counts=np.array([len(v.ids) for v in usable]), std=std, rejected=rejected,
-        square_unit=square_unit, meta=dict(meta or {}),
-    )
+        fit = _refit(model, usable, square_size, image_size, fit, fix_k3)
+    return _calibration(fit, usable, pattern_size, square_size, image_size, rejected, square_unit, meta, table)

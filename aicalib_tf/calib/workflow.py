@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from aicalib_tf.calib.fit import Calibration, CalibrationError, View, calibrate_camera
+from aicalib_tf.geometry.lens import MODELS as LENS_MODELS
 
 __all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "CalibrateConfig", "parse_square", "make_detector", "run", "undistort"]
 
@@ -80,7 +81,8 @@ class CalibrateConfig:
     square_unit: str = ""
     out: str = "calib"
     detector: str = "cnn"
-    model: str = "default"
+    network: str = "default"  # the cnn detector's network: default, report or a .keras path
+    model: str = "auto"  # the lens model: auto or a geometry.lens.MODELS name
     fix_k3: bool = False
     rational: bool = False
     resize_policy: str = "error"
@@ -213,7 +215,9 @@ def run(cfg: CalibrateConfig) -> tuple[Calibration, str]:
         raise ValueError(f"no images match {' '.join(cfg.images)}")
     if cfg.resize_policy not in RESIZE_POLICIES:
         raise ValueError(f"--resize-policy must be one of {', '.join(RESIZE_POLICIES)}, got {cfg.resize_policy!r}")
-    detect = make_detector(cfg.detector, cfg.pattern, cfg.model)
+    if cfg.model != "auto" and cfg.model not in LENS_MODELS:
+        raise ValueError(f"--model must be auto or one of {', '.join(LENS_MODELS)}, got {cfg.model!r}")
+    detect = make_detector(cfg.detector, cfg.pattern, cfg.network)
     labels = _labels(files)
     found, skipped = _detect_all(files, labels, detect, cfg.quiet)
     if not found:
@@ -227,10 +231,10 @@ def run(cfg: CalibrateConfig) -> tuple[Calibration, str]:
         hint = _suggest_pattern(files, detect.info["model"]) if "model" in detect.info else ""
         raise CalibrationError(f"no {cfg.pattern[0]}x{cfg.pattern[1]} board found in any of the {len(files)} images{hint}")
     meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
-            "rational": cfg.rational, "fix_k3": cfg.fix_k3, "resize_policy": cfg.resize_policy,
+            "rational": cfg.rational, "lens_model": cfg.model, "fix_k3": cfg.fix_k3, "resize_policy": cfg.resize_policy,
             "images": len(files)}
-    cal = calibrate_camera(views, cfg.pattern, cfg.square, size, rational=cfg.rational, fix_k3=cfg.fix_k3,
-                           square_unit=cfg.square_unit, meta=meta)
+    cal = calibrate_camera(views, cfg.pattern, cfg.square, size, model=cfg.model, rational=cfg.rational,
+                           fix_k3=cfg.fix_k3, square_unit=cfg.square_unit, meta=meta)
     by_name = {v.name: v for v in views}
     used = [by_name[n] for n in cal.views]
     report = format_report(cal, used, skipped=skipped, total=len(files))

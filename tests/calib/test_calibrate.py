@@ -52,7 +52,7 @@ def test_calibration_recovers_the_true_camera(camera_id, detector):
     detect = make_detector(detector, (9, 6))
     views = [View(f"v{i}", *hit) for i, s in enumerate(seq) if (hit := detect(load_image(s.image))) is not None]
     size = tuple(label["image_size"])
-    cal = calibrate_camera(views, (9, 6), label["square_size"], size)
+    cal = calibrate_camera(views, (9, 6), label["square_size"], size, model="plumb_bob")  # the truth's model
     e = calibration_errors(cal.K, cal.dist, label["K"], label["dist"], size, seen=np.concatenate([s.corners for s in seq]))
     assert len(cal.views) >= 15
     assert abs(e["fx_pct"]) < 0.3 and abs(e["fy_pct"]) < 0.3
@@ -75,7 +75,8 @@ def test_multistart_escapes_the_wrong_minimum_opencv_init_finds():
     label = seq[0].label
     views = [View(f"v{i}", s.corners, np.stack(np.meshgrid(np.arange(9), np.arange(6)), -1).reshape(-1, 2))
              for i, s in enumerate(seq[:8])]
-    cal = calibrate_camera(views, (9, 6), label["square_size"], tuple(label["image_size"]), reject_outliers=False)
+    cal = calibrate_camera(views, (9, 6), label["square_size"], tuple(label["image_size"]), model="plumb_bob",
+                           reject_outliers=False)
     assert cal.rms < 1e-3  # exact corners: the model fits exactly at the true minimum
     assert abs(cal.fx / label["K"][0][0] - 1) < 1e-4
 
@@ -197,7 +198,7 @@ def test_cli_on_opencv_left_matches_the_reference(tmp_path, capsys):
 @pytest.mark.slow
 def test_cli_on_udacity_handles_every_image(tmp_path, capsys):
     rc, out, err = _run_cli(capsys, str(UDACITY / "*.jpg"), "--pattern", "9x6", "--square", "25mm",
-                            "--out", tmp_path / "u", "--resize-policy", "crop")
+                            "--out", tmp_path / "u", "--resize-policy", "crop", "--model", "plumb_bob")
     assert rc == 0, err
     assert "calibration7.jpg is 1281x721; cropped to 1280x720" in err and "calibration15.jpg is 1281x721" in err
     cal = load_calibration(tmp_path / "u")
@@ -206,7 +207,7 @@ def test_cli_on_udacity_handles_every_image(tmp_path, capsys):
     assert accounted == {f.name for f in UDACITY.glob("*.jpg")}
     assert len(cal.views) >= 17
     assert cal.rms <= 0.90  # the classic pipeline's RMS on its 15 views
-    assert abs(cal.fx / 1159.3 - 1) < 0.01
+    assert cal.model == "plumb_bob" and abs(cal.fx / 1159.3 - 1) < 0.01  # the same model as the classic fit
 
 
 def test_cli_mixed_sizes_is_an_error_naming_the_odd_files(tmp_path, capsys):
@@ -254,6 +255,10 @@ def test_cli_says_why_an_image_gave_no_board(tmp_path, capsys):
     (["{left}/left0[1-2].jpg", "--pattern", "9x6"], "2 usable views; need at least 3"),
     (["{left}/left0[1-3].jpg", "--pattern", "7x5"], "no 7x5 board found in any of the 3 images (the CNN sees 9x6"),
     (["{left}/left0[1-3].jpg", "--pattern", "9x6", "--model", "{tmp}/missing.keras"], "missing.keras"),
+    (["{left}/left0[1-3].jpg", "--pattern", "9x6", "--network", "{tmp}/missing.keras"], "missing.keras"),
+    (["{left}/left0[1-3].jpg", "--pattern", "9x6", "--model", "fisheye"],
+     "unknown --model 'fisheye'; choose auto or one of plumb_bob, rational_polynomial, thin_prism, equidistant"),
+    (["{left}/left0[1-3].jpg", "--pattern", "9x6", "--model", "equidistant", "--rational"], "--rational means"),
 ])
 def test_cli_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, args, message):
     argv = [a.format(tmp=tmp_path, left=LEFT) for a in args] + ["--out", str(tmp_path / "c")]

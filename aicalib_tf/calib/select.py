@@ -1,0 +1,98 @@
+"""Lens-model choice by k-fold cross-validation over views.
+
+For each model of :data:`~aicalib_tf.geometry.lens.MODELS`: fit all views (the in-sample RMS),
+then split the views into k = min(5, V) folds (view i in fold i mod k); for each fold, fit the
+other views (starting from the all-views fit), and with those intrinsics held fixed solve only
+each held-out view's pose and measure its reprojection error. A fold's score is the RMS over its
+held-out corners, px; a model's ``cv_rms`` is the mean over folds and ``cv_se`` its standard error
+(sample standard deviation / √k). The choice is the simplest model (fewest parameters, ties by the
+order of MODELS) whose ``cv_rms`` is within one standard error of the best (best cv_rms + its cv_se).
+
+A model that cannot be fitted (too few corners for its parameters, a rank-deficient or diverging
+fit, a held-out view it cannot pose) gets a row whose note says why, and the choice moves on.
+With fewer than ``MIN_CV_VIEWS`` views there is no cross-validation: the first model of MODELS that
+fits all views is kept (plumb_bob, the classic default, when it fits) and the notes say so.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from aicalib_tf.calib.bundle import CalibrationError, solve_pose
+from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens
+from aicalib_tf.geometry.pattern import board_points
+
+__all__ = ["select_model", "cross_validate", "choose"]
+
+MAX_FOLDS = 5
+MIN_CV_VIEWS = 4  # every fold then leaves at least 3 views to fit
+
+
+def cross_validate(views, square_size: float, fit, model: str, full) -> tuple[float, float]:
+    """(cv_rms px, cv_se px) of one model; ``full`` is its all-views fit (a BundleResult), the folds' start.
+
+    views : list of View; fit(views, model, start) -> BundleResult. Raises CalibrationError when a
+    fold cannot be fitted or a held-out view cannot be posed.
+    """
+    k = min(MAX_FOLDS, len(views))
+    if k < 2:
+        raise CalibrationError(f"{model}: cross-validation needs at least 2 views, got {len(views)}")
+    start = Lens.from_intrinsics(model, full.intrinsics, (1, 1))
+    scores = []
+    for f in range(k):
+        train = [v for i, v in enumerate(views) if i % k != f]
+        held = [v for i, v in enumerate(views) if i % k == f]
+        if len(train) < 3:
+            raise CalibrationError(f"{model}: a fold leaves {len(train)} views to fit (need 3)")
+        lens = Lens.from_intrinsics(model, fit(train, model, start).intrinsics, (1, 1))
+        sq, n = 0.0, 0
+        for v in held:
+            pose = solve_pose(lens, board_points(v.ids, square_size), v.corners)
+            if pose is None or not np.isfinite(pose[2]):
+                raise CalibrationError(f"{model}: held-out view {v.name} cannot be posed with the fold's intrinsics")
+            sq, n = sq + pose[2] ** 2 * len(v.ids), n + len(v.ids)
+        scores.append(np.sqrt(sq / n))
+    scores = np.array(scores)
+    return float(scores.mean()), float(scores.std(ddof=1) / np.sqrt(k))
+
+
+def choose(rows: list[dict]) -> str | None:
+    """The simplest model within one standard error of the best cv_rms (rows as in :func:`select_model`)."""
+    ok = [r for r in rows if np.isfinite(r["cv_rms"])]
+    if not ok:
+        return None
+    best = min(ok, key=lambda r: r["cv_rms"])
+    near = [r for r in ok if r["cv_rms"] <= best["cv_rms"] + best["cv_se"]]
+    return min(near, key=lambda r: (r["n_params"], MODELS.index(r["model"])))["model"]
+
+
+def select_model(views, square_size: float, fit, models=MODELS):
+    """Cross-validate each model and choose one: returns (table, chosen model, its all-views fit).
+
+    views : list of View (all usable). fit(views, model, start) -> BundleResult, start a Lens or
+    None (from scratch). table : tuple of dicts {"model", "n_params", "rms" (in-sample px), "cv_rms",
+    "cv_se" (px), "chosen", "note"}. Raises CalibrationError when no model can be fitted.
+    """
+    rows, fits = [], {}
+    for model in models:
+        row = {"model": model, "n_params": 4 + N_COEFFS[model], "rms": float("nan"), "cv_rms": float("nan"),
+               "cv_se": float("nan"), "chosen": False, "note": ""}
+        start = None
+        if model in ("rational_polynomial", "thin_prism") and "plumb_bob" in fits:  # one OpenCV start for the family
+            start = Lens.from_intrinsics("plumb_bob", fits["plumb_bob"].intrinsics, (1, 1))
+        try:
+            fits[model] = fit(views, model, start)
+            row["rms"] = fits[model].rms
+            if len(views) >= MIN_CV_VIEWS:
+                row["cv_rms"], row["cv_se"] = cross_validate(views, square_size, fit, model, fits[model])
+            else:
+                row["note"] = f"{len(views)} views: too few to cross-validate (need {MIN_CV_VIEWS})"
+        except CalibrationError as exc:
+            row["note"] = str(exc)
+        rows.append(row)
+    chosen = choose(rows) if len(views) >= MIN_CV_VIEWS else next((m for m in models if m in fits), None)
+    if chosen is None:
+        raise CalibrationError("no lens model could be fitted: " + "; ".join(f"{r['note']}" for r in rows))
+    for r in rows:
+        r["chosen"] = r["model"] == chosen
+    return tuple(rows), chosen, fits[chosen]
