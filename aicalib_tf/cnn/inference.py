@@ -1,4 +1,4 @@
-"""Run a corner CNN on a whole image: image -> corner points with weights (Keras).
+"""Run a corner CNN on a whole image: image -> corner points with weights (LiteRT runtime or Keras).
 
 Both model kinds give the same thing, points (N, 2) float32 (x, y) px and weights (N,) in [0, 1]:
 
@@ -21,32 +21,15 @@ from __future__ import annotations
 
 import functools
 import os
-import threading
 
 import cv2
-import keras
 import numpy as np
-import tensorflow as tf
 
 from aicalib_tf.cnn.corner_map import decode_map, network_input, standardize
-from aicalib_tf.cnn.model import PATCH_SIZE, model_kind
+from aicalib_tf.cnn.spec import PATCH_SIZE, model_kind
 from aicalib_tf.detect.candidates import saddle_points
 
 __all__ = ["corner_map", "corner_points", "patch_weights", "extract_patches", "native_bfloat16", "resolve_precision"]
-
-_FN_ATTR = "_aicalib_predict_fn"
-_MAP_FNS_ATTR = "_aicalib_map_fns"
-MAX_MAP_SHAPES = 16  # concrete corner-map functions kept per model, one per input size
-
-
-def _predict_fn(model):
-    """A traced inference function kept on the model (one trace serves every image size)."""
-    fn = getattr(model, _FN_ATTR, None)
-    if fn is None:
-        fn = tf.function(lambda x: model(x, training=False), reduce_retracing=True)
-        setattr(model, _FN_ATTR, fn)
-    return fn
-
 
 PRECISION_ENV = "AICALIB_PRECISION"
 
@@ -84,102 +67,24 @@ def resolve_precision(precision: str | None = None) -> str:
     return want
 
 
-_TRACE_LOCK = threading.Lock()  # a bfloat16 trace changes the model's layer policies for a moment
-
-
-def _trace(model, dims, precision: str):
-    """A concrete function of ``model`` for (1, *dims, 1) float32 input, computing in ``precision``.
-
-    For bfloat16, every layer but the last is switched to Keras's ``mixed_bfloat16`` policy
-    (bfloat16 arithmetic on float32 weights) while the function is traced, then switched back:
-    the graph reads the model's own weights, so it follows any later change to them, and the
-    model itself is left as it was. The last layer keeps its policy, so the output stays float32.
-    """
-    traced = tf.function(lambda x: model(x, training=False))
-    spec = tf.TensorSpec((1, *dims, 1), tf.float32)
-    if precision == "float32":
-        return traced.get_concrete_function(spec)
-    with _TRACE_LOCK:
-        layers = [layer for layer in model.layers[:-1] if hasattr(layer, "dtype_policy")]
-        saved = [layer.dtype_policy for layer in layers]
-        try:
-            for layer in layers:
-                layer.dtype_policy = keras.DTypePolicy("mixed_bfloat16")
-            return traced.get_concrete_function(spec)
-        finally:
-            for layer, policy in zip(layers, saved):
-                layer.dtype_policy = policy
-
-
-class _MapFns:
-    """What a model keeps for corner maps: concrete functions by (precision, (H, W)), or
-    (precision, (None, None)) for any size; the (precision, (H, W)) asked for once so far; and
-    whether bfloat16 failed to run (float32 then)."""
-
-    def __init__(self):
-        self.fns: dict = {}
-        self.asked: set = set()
-        self.no_bfloat16 = False
-
-
-def _holder(model) -> _MapFns:
-    holder = getattr(model, _MAP_FNS_ATTR, None)
-    if holder is None:  # not a dict or a layer: Keras would track it as part of the model
-        holder = _MapFns()
-        setattr(model, _MAP_FNS_ATTR, holder)
-    return holder
-
-
-def _map_fn(model, shape: tuple[int, int], precision: str):
-    """The model (at ``precision``) as a concrete function for one (1, H, W, 1) float32 input size, kept on the model.
-
-    Calling a concrete function skips ``tf.function``'s per-call dispatch (about 0.5 ms), and a
-    graph traced for a fixed size runs up to 5% faster than one for any size once both have
-    seen that size (session 14: 4.14 against 4.15 ms at 640×480, 3.11 against 3.25 ms at
-    552×432); either pays 2–3 ms more on its first call at a size, while oneDNN sets up its
-    kernels. A trace costs about 40 ms, so a size gets its own function on its second use: a
-    folder of photos of one size is traced once, and the one-off sizes of enlarged regions
-    (:mod:`aicalib_tf.detect.zoom`) share the function for any size. Beyond ``MAX_MAP_SHAPES`` sizes per
-    precision, that function serves the rest too (its outputs are the same).
-    """
-    holder = _holder(model)
-    fns = holder.fns
-    fn = fns.get((precision, shape))
-    if fn is None:
-        again = (precision, shape) in holder.asked
-        holder.asked.add((precision, shape))
-        sized = sum(1 for p, d in fns if p == precision and d != (None, None))
-        dims = shape if again and sized < MAX_MAP_SHAPES else (None, None)
-        fn = fns.get((precision, dims))
-        if fn is None:
-            fn = _trace(model, dims, precision)
-            fns[(precision, dims)] = fn
-    return fn
-
-
-def _run_map(model, x, shape: tuple[int, int], precision: str):
-    """The map of standardised input ``x``; a bfloat16 run that fails (oneDNN limited to an ISA
-    without bfloat16, say) falls back to float32 for this model from then on."""
-    holder = _holder(model)
-    if precision == "bfloat16" and not holder.no_bfloat16:
-        try:
-            return _map_fn(model, shape, "bfloat16")(x)
-        except (tf.errors.OpError, ValueError, TypeError):
-            holder.no_bfloat16 = True
-    return _map_fn(model, shape, "float32")(x)
+def _is_keras(model) -> bool:
+    return hasattr(model, "input_shape")  # a keras.Model; a RuntimeModel has none
 
 
 def corner_map(model, gray: np.ndarray, *, precision: str | None = None) -> np.ndarray:
     """The corner map of a grey image.
 
     gray : (H, W) float or uint8. The standardised image is padded (edge-replicated) at the
-    bottom and right to multiples of 4. precision : ``"float32"``, ``"bfloat16"`` or ``"auto"``
-    (default: ``AICALIB_PRECISION``, else auto; see the module docstring).
-    Returns (ceil(H/4), ceil(W/4), 3) float32.
+    bottom and right to multiples of 4. precision (Keras models only; the runtime is float32):
+    ``"float32"``, ``"bfloat16"`` or ``"auto"`` (default: ``AICALIB_PRECISION``, else auto; see
+    the module docstring). Returns (ceil(H/4), ceil(W/4), 3) float32.
     """
     x = network_input(gray)
-    out = _run_map(model, tf.constant(x), tuple(x.shape[1:3]), resolve_precision(precision))
-    return out.numpy()[0]
+    if not _is_keras(model):
+        return model(x)[0]
+    from aicalib_tf.cnn.keras_inference import run_map
+
+    return run_map(model, x, resolve_precision(precision))
 
 
 def extract_patches(image: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -201,11 +106,15 @@ def patch_weights(model, gray: np.ndarray, points: np.ndarray, batch_size: int =
     g = standardize(gray)
     if len(points) == 0:
         return np.zeros(0, np.float32)
-    fn = _predict_fn(model)
+    if _is_keras(model):
+        from aicalib_tf.cnn.keras_inference import run_patches
+    else:
+        def run_patches(m, p):
+            return m(p)[:, 0]
     out = []
     for start in range(0, len(points), batch_size):
         patches = extract_patches(g, points[start : start + batch_size])
-        out.append(np.asarray(fn(tf.constant(patches[..., None])))[:, 0])
+        out.append(run_patches(model, patches[..., None]))
     return np.concatenate(out).astype(np.float32)
 
 

@@ -23,14 +23,10 @@ Loading always uses ``safe_mode=True``: a model file can hold weights and a laye
 
 from __future__ import annotations
 
-import hashlib
 import os
-import tempfile
-import zipfile
 from pathlib import Path
 
-import keras
-from keras import layers, ops
+from aicalib_tf.cnn.spec import ARCHITECTURES, MODELS_DIR, PATCH_SIZE, SHIPPED, file_sha256, model_kind
 
 __all__ = [
     "ARCHITECTURES",
@@ -46,195 +42,55 @@ __all__ = [
     "MODELS_DIR",
 ]
 
-ARCHITECTURES = ("default", "report", "default_v1", "default_c12", "default_c16", "default_pre")
-PATCH_SIZE = 32
-MODELS_DIR = Path(os.environ.get("AICALIB_MODELS", Path(__file__).resolve().parents[2] / "models"))
-POSITIVE_WEIGHT = 2.0  # corners fill ~1% of cells; up-weight them in the loss
-OFFSET_WEIGHT = 4.0
+_KERAS_NAMES = ("build_model", "compile_model", "corner_map_loss", "CornerMapLoss", "save_model",
+                "POSITIVE_WEIGHT", "OFFSET_WEIGHT")
+KERAS_HINT = "TensorFlow/Keras is needed to load a .keras model: pip install 'tensorflow-cpu>=2.16' 'keras>=3'"
 
 
-def _report() -> keras.Sequential:
-    conv = dict(kernel_size=3, padding="same", activation="relu")
-    return keras.Sequential(
-        [
-            keras.Input((PATCH_SIZE, PATCH_SIZE, 1), name="patch"),
-            layers.Conv2D(16, name="conv1", **conv),
-            layers.MaxPooling2D(2, name="pool1"),
-            layers.Conv2D(32, name="conv2", **conv),
-            layers.MaxPooling2D(2, name="pool2"),
-            layers.Conv2D(64, name="conv3", **conv),
-            layers.MaxPooling2D(2, name="pool3"),
-            layers.Conv2D(128, name="conv4", **conv),
-            layers.MaxPooling2D(2, name="pool4"),
-            layers.Flatten(name="flatten"),
-            layers.Dense(64, activation="relu", name="dense1"),
-            layers.Dense(1, activation="sigmoid", name="corner_weight"),
-        ],
-        name="report",
-    )
+def __getattr__(name: str):
+    """The Keras-side names (:mod:`aicalib_tf.cnn.keras_model`), imported on first use."""
+    if name in _KERAS_NAMES:
+        from aicalib_tf.cnn import keras_model
+
+        return getattr(keras_model, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def _default(conv1: int = 8, pre: int = 4, strided: bool = True, name: str = "default") -> keras.Sequential:
-    """A corner-map network: ``conv1`` filters in the second 3×3 conv, and, when ``pre`` > 0, a 3×3
-    conv of ``pre`` filters at full resolution before it. ``strided``: ``conv1`` computes at half
-    resolution (stride 2) in place of conv + 2×2 max-pooling. The defaults build ``default``."""
-    conv = dict(kernel_size=3, padding="same", activation="relu")
-    extra = [layers.Conv2D(pre, name="conv0", **conv)] if pre else []
-    first = ([layers.Conv2D(conv1, strides=2, name="conv1", **conv)] if strided
-             else [layers.Conv2D(conv1, name="conv1", **conv), layers.MaxPooling2D(2, name="pool1")])
-    return keras.Sequential(
-        [
-            keras.Input((None, None, 1), name="image"),
-            *extra,
-            *first,
-            layers.Conv2D(16, name="conv2", **conv),
-            layers.MaxPooling2D(2, name="pool2"),
-            layers.Conv2D(32, name="conv3", **conv),
-            layers.Conv2D(32, name="conv4", **conv),
-            layers.Conv2D(32, name="conv5", **conv),
-            layers.Conv2D(3, 1, activation="sigmoid", name="corner_map"),
-        ],
-        name=name,
-    )
-
-
-def build_model(name: str = "default") -> keras.Sequential:
-    """A fresh, untrained model: ``"default"`` or ``"report"`` (see the module docstring)."""
-    builders = {
-        "default": _default,
-        "report": _report,
-        # experimental variants of default, same corner-map output. default_v1: the default shipped
-        # until session 12 (no full-resolution layer, conv1 + max-pooling); c12/c16: a wider conv1
-        "default_v1": lambda: _default(pre=0, strided=False, name="default_v1"),
-        "default_c12": lambda: _default(conv1=12, pre=0, strided=False, name="default_c12"),
-        "default_c16": lambda: _default(conv1=16, pre=0, strided=False, name="default_c16"),
-        "default_pre": lambda: _default(strided=False, name="default_pre"),
-    }
-    if name not in builders:
-        raise ValueError(f"unknown architecture {name!r}; choose from: {', '.join(ARCHITECTURES)}")
-    return builders[name]()
-
-
-@keras.saving.register_keras_serializable(package="aicalib_tf")
-class CornerMapLoss(keras.losses.Loss):
-    """Loss for the corner map: a loss on the corner weight + L1 on the in-cell position.
-
-    y_true, y_pred : (B, h, w, 3). The position term counts only cells that hold a corner.
-    gamma > 0 : focal loss on the weight (easy cells count little), summed and divided by the
-        number of corners. gamma = 0 : cross-entropy with positives weighted ``positive_weight``,
-        averaged over cells.
-    """
-
-    def __init__(self, gamma: float = 2.0, positive_weight: float = POSITIVE_WEIGHT,
-                 offset_weight: float = OFFSET_WEIGHT, name: str = "corner_map_loss", **kwargs):
-        super().__init__(name=name, **kwargs)
-        self.gamma, self.positive_weight, self.offset_weight = float(gamma), float(positive_weight), float(offset_weight)
-
-    def call(self, y_true, y_pred):
-        eps = 1e-6
-        t, p = y_true[..., 0], ops.clip(y_pred[..., 0], eps, 1.0 - eps)
-        l1 = ops.sum(ops.abs(y_true[..., 1:] - y_pred[..., 1:]), axis=-1)
-        pos = ops.maximum(ops.sum(t), 1.0)
-        offset = self.offset_weight * ops.sum(t * l1) / pos
-        if self.gamma > 0:
-            g = self.gamma
-            focal = -(t * (1.0 - p) ** g * ops.log(p) + (1.0 - t) * p**g * ops.log(1.0 - p))
-            return ops.sum(focal) / pos + offset
-        bce = -(self.positive_weight * t * ops.log(p) + (1.0 - t) * ops.log(1.0 - p))
-        return ops.mean(bce) + offset
-
-    def get_config(self) -> dict:
-        return {"name": self.name, "gamma": self.gamma, "positive_weight": self.positive_weight,
-                "offset_weight": self.offset_weight}
-
-
-def corner_map_loss(y_true, y_pred, gamma: float = 2.0):
-    """Functional form of :class:`CornerMapLoss` (one scalar for the batch)."""
-    return CornerMapLoss(gamma=gamma).call(y_true, y_pred)
-
-
-def compile_model(model: keras.Model, learning_rate: float = 2e-3, *, focal_gamma: float = 2.0) -> keras.Model:
-    """Attach the optimiser and the loss that suit the model's kind (see :class:`CornerMapLoss`)."""
-    opt = keras.optimizers.Adam(learning_rate)
-    if model_kind(model) == "map":
-        model.compile(optimizer=opt, loss=CornerMapLoss(gamma=focal_gamma))
-    else:
-        model.compile(optimizer=opt, loss="binary_crossentropy", metrics=["accuracy"])
-    return model
-
-
-def model_kind(model: keras.Model) -> str:
-    """``"map"`` for a fully convolutional corner-map model, ``"patch"`` for a patch classifier.
-
-    Raises ``ValueError`` for a model with neither interface.
-    """
-    shape_in = tuple(model.input_shape)
-    shape_out = tuple(model.output_shape)
-    if len(shape_in) == 4 and shape_in[3] == 1 and shape_in[1] is None and shape_out[1:] == (None, None, 3):
-        return "map"
-    if shape_in[1:] == (PATCH_SIZE, PATCH_SIZE, 1) and shape_out[1:] == (1,):
-        return "patch"
-    raise ValueError(
-        f"model {model.name!r} has input {shape_in} and output {shape_out}; expected a corner-map model "
-        f"(None, None, None, 1) -> (None, None, None, 3) or a patch classifier (None, {PATCH_SIZE}, {PATCH_SIZE}, 1) -> (None, 1)"
-    )
-
-
-def _resolve(weights: str | os.PathLike) -> Path:
+def _resolve(weights, backend: str) -> Path:
     if isinstance(weights, str) and weights in ARCHITECTURES:
-        return MODELS_DIR / f"{weights}.keras"
+        suffix = ".tflite" if backend == "runtime" and weights in SHIPPED else ".keras"
+        return MODELS_DIR / f"{weights}{suffix}"
     return Path(weights)
 
 
-def load_model(weights: str | os.PathLike = "default", *, compile: bool = False) -> keras.Model:
+def load_model(weights: str | os.PathLike = "default", *, compile: bool = False, backend: str = "auto"):
     """Load a trained corner model.
 
     weights : ``"default"`` or ``"report"`` (the models shipped in ``models/``), or a path to a
-        ``.keras`` file. Loaded with ``safe_mode=True``.
-    Raises ``FileNotFoundError`` for a missing file and ``ValueError`` for a corrupt or
-    incompatible one; both name the path.
+        ``.tflite`` or ``.keras`` file.
+    backend : ``"auto"`` (a name loads the shipped ``.tflite`` on the LiteRT runtime, a path by
+        its suffix), ``"runtime"`` or ``"keras"`` (a name loads ``models/<name>.keras``; for
+        training and tests). ``.tflite`` files are checked against their recorded sha256
+        (``<file>.sha256``); ``.keras`` files load with ``safe_mode=True`` and import TensorFlow.
+    Returns a :class:`aicalib_tf.cnn.runtime.RuntimeModel` or a ``keras.Model``, either with
+    ``aicalib_path``. Raises ``FileNotFoundError`` for a missing file and ``ValueError`` for a
+    corrupt or incompatible one, in one line naming the path (and the expected sha256), and
+    ``ImportError`` naming what to install for a ``.keras`` model without TensorFlow.
     """
-    path = _resolve(weights)
+    if backend not in ("auto", "runtime", "keras"):
+        raise ValueError(f"backend must be auto, runtime or keras, got {backend!r}")
+    path = _resolve(weights, "keras" if backend == "keras" or compile else "runtime")
+    if path.suffix == ".tflite":
+        if compile:
+            raise ValueError(f"compile=True needs a .keras model, got {path}")
+        from aicalib_tf.cnn.runtime import load_runtime
+
+        return load_runtime(path)
     if not path.is_file():
-        hint = "" if path.suffix == ".keras" else " (expected a .keras file)"
+        hint = "" if path.suffix == ".keras" else " (expected a .tflite or .keras file)"
         raise FileNotFoundError(f"model file not found: {path}{hint}")
-    if not zipfile.is_zipfile(path):
-        raise ValueError(f"cannot load model {path}: not a Keras 3 .keras archive (corrupt or wrong format)")
     try:
-        model = keras.saving.load_model(path, compile=compile, safe_mode=True)
-    except Exception as exc:  # Keras raises many types for damaged archives
-        raise ValueError(f"cannot load model {path}: {type(exc).__name__}: {exc}") from None
-    if not isinstance(model, keras.Model):
-        raise ValueError(f"cannot load model {path}: it holds a {type(model).__name__}, not a Keras model")
-    try:
-        model_kind(model)
-    except ValueError as exc:
-        raise ValueError(f"incompatible model {path}: {exc}") from None
-    model.aicalib_path = str(path)  # where it came from, for reports and hashes
-    return model
-
-
-def save_model(model: keras.Model, path: str | os.PathLike) -> Path:
-    """Save ``model`` to ``path`` (.keras) atomically: a temporary file, then a rename."""
-    path = Path(path)
-    if path.suffix != ".keras":
-        raise ValueError(f"model path must end in .keras, got {path}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.partial-", suffix=".keras", dir=path.parent)
-    os.close(fd)
-    try:
-        model.save(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
-
-
-def file_sha256(path: str | os.PathLike) -> str:
-    """Hex sha256 of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+        from aicalib_tf.cnn.keras_model import load_keras
+    except ImportError as exc:
+        raise ImportError(f"cannot load {path}: {KERAS_HINT} ({exc})") from None
+    return load_keras(path, compile=compile)

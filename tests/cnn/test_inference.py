@@ -5,7 +5,7 @@ pytest.importorskip("keras")
 
 import tensorflow as tf  # noqa: E402
 
-from aicalib_tf.cnn import inference  # noqa: E402
+from aicalib_tf.cnn import inference, keras_inference  # noqa: E402
 from aicalib_tf.cnn.corner_map import standardize  # noqa: E402
 from aicalib_tf.cnn.model import build_model  # noqa: E402
 
@@ -24,7 +24,7 @@ def test_corner_map_matches_a_plain_keras_call_at_each_size():
         out = inference.corner_map(m, gray, precision="float32")
         assert out.shape == (h // 4, w // 4, 3) and out.dtype == np.float32
         np.testing.assert_array_equal(out, _keras_map(m, gray))
-        fns.append(set(getattr(m, inference._MAP_FNS_ATTR).fns))
+        fns.append(set(getattr(m, keras_inference._MAP_FNS_ATTR).fns))
     # a size asked once runs the function for any size; asked again, it gets its own, then reuses it
     anysize, sized = ("float32", (None, None)), ("float32", (32, 48))
     assert fns == [{anysize}, {anysize}, {anysize, sized}, {anysize, sized}]
@@ -37,7 +37,7 @@ def test_corner_map_pads_to_multiples_of_4():
 
 
 def test_sizes_beyond_the_cache_share_one_function_with_the_same_output(monkeypatch):
-    monkeypatch.setattr(inference, "MAX_MAP_SHAPES", 1)
+    monkeypatch.setattr(keras_inference, "MAX_MAP_SHAPES", 1)
     m = build_model("default")
     rng = np.random.default_rng(2)
     for _ in range(2):  # asked twice: its own function
@@ -45,7 +45,7 @@ def test_sizes_beyond_the_cache_share_one_function_with_the_same_output(monkeypa
     for h, w in ((24, 20), (20, 28), (24, 20)):
         gray = rng.random((h, w)).astype(np.float32)
         np.testing.assert_array_equal(inference.corner_map(m, gray, precision="float32"), _keras_map(m, gray))
-    assert set(getattr(m, inference._MAP_FNS_ATTR).fns) == {("float32", (16, 16)), ("float32", (None, None))}
+    assert set(getattr(m, keras_inference._MAP_FNS_ATTR).fns) == {("float32", (16, 16)), ("float32", (None, None))}
 
 
 def test_precision_comes_from_the_argument_then_the_environment(monkeypatch):
@@ -68,7 +68,7 @@ def test_bfloat16_gives_the_shipped_models_corner_map_closely_and_follows_its_we
     from aicalib_tf.cnn.model import load_model
     from data_gen import make_sample
 
-    m = load_model("default")
+    m = load_model("default", backend="keras")
     gray = make_sample("clean", 3, 0, size=(160, 120), pattern=(5, 4)).image
     exact = inference.corner_map(m, gray, precision="float32")
     half = inference.corner_map(m, gray, precision="bfloat16")
@@ -89,7 +89,7 @@ def test_bfloat16_gives_the_shipped_models_corner_map_closely_and_follows_its_we
 def test_a_bfloat16_run_that_fails_falls_back_to_float32(monkeypatch):
     m = build_model("default")
     gray = np.random.default_rng(4).random((32, 32)).astype(np.float32)
-    real = inference._trace
+    real = keras_inference._trace
 
     def broken(model, dims, precision):
         fn = real(model, dims, precision)
@@ -100,7 +100,7 @@ def test_a_bfloat16_run_that_fails_falls_back_to_float32(monkeypatch):
             raise tf.errors.InternalError(None, None, "could not create a primitive descriptor")
         return fail
 
-    monkeypatch.setattr(inference, "_trace", broken)
+    monkeypatch.setattr(keras_inference, "_trace", broken)
     out = inference.corner_map(m, gray, precision="bfloat16")
     np.testing.assert_array_equal(out, inference.corner_map(m, gray, precision="float32"))
-    assert getattr(m, inference._MAP_FNS_ATTR).no_bfloat16
+    assert getattr(m, keras_inference._MAP_FNS_ATTR).no_bfloat16

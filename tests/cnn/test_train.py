@@ -120,7 +120,7 @@ def test_validation_without_tensorflow_decodes_the_same_points():
     from aicalib_tf.cnn.train import _backend_corner_points
     from data_gen import make_sample
 
-    model = load_model("default")
+    model = load_model("default", backend="keras")
     for i in range(2):
         img = make_sample("distorted", 3, i, size=(322, 241)).image  # not a multiple of 4: padded
         want = corner_points(model, img, 0.5, precision="float32")[0]

@@ -1,0 +1,15 @@
+"""The warm-up views reach the full-board and the partial-board paths of the pipeline."""
+
+from aicalib_tf.detect.pipeline import detect_corners
+from aicalib_tf.detect.warm import synthetic_board, warm
+
+
+def test_warm_views_give_a_full_and_a_partial_board():
+    full = detect_corners(synthetic_board(), (9, 6))
+    cut = detect_corners(synthetic_board(shift=(230.0, 0.0)), (9, 6))
+    assert full.complete and len(full.corners) == 54
+    assert not cut.complete and 9 <= len(cut.corners) < 54
+
+
+def test_warm_returns_its_time():
+    assert warm() > 0.0

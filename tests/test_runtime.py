@@ -1,0 +1,81 @@
+"""The shipped LiteRT models: detection without TensorFlow, same corners as Keras, clear errors."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+LEFT = ROOT / "tests" / "data" / "opencv_left"
+
+
+def test_detection_leaves_tensorflow_and_keras_unloaded():
+    code = (
+        "import json, sys\n"
+        "import aicalib_tf\n"
+        "from aicalib_tf import detect_corners, load_image\n"
+        f"d = detect_corners(load_image({str(LEFT / 'left01.jpg')!r}), (9, 6))\n"
+        "print(json.dumps({'complete': bool(d.complete), 'n': len(d.corners),\n"
+        "    'tf': 'tensorflow' in sys.modules, 'keras': 'keras' in sys.modules}))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    res = json.loads(out.stdout.strip().splitlines()[-1])
+    assert res == {"complete": True, "n": 54, "tf": False, "keras": False}
+
+
+@pytest.mark.parametrize("name", ["left01.jpg", "left07.jpg", "left12.jpg"])
+def test_runtime_and_keras_give_the_same_corners(name):
+    from aicalib_tf.cnn.model import load_model
+    from aicalib_tf.detect.pipeline import detect_corners
+    from aicalib_tf.io import load_image
+
+    gray = load_image(LEFT / name)
+    rt = detect_corners(gray, (9, 6), model=load_model("default"))
+    ks = detect_corners(gray, (9, 6), model=load_model("default", backend="keras"))
+    assert rt.complete and ks.complete
+    np.testing.assert_array_equal(rt.ids, ks.ids)
+    assert np.abs(rt.corners - ks.corners).max() <= 1e-3
+
+
+def test_runtime_map_matches_keras_float32():
+    from aicalib_tf.cnn.inference import corner_map, patch_weights
+    from aicalib_tf.cnn.model import load_model
+    from aicalib_tf.io import load_image
+
+    gray = load_image(LEFT / "left01.jpg")[:301, :403]  # an odd size: padded to multiples of 4
+    a = corner_map(load_model("default"), gray)
+    b = corner_map(load_model("default", backend="keras"), gray, precision="float32")
+    assert a.shape == b.shape and np.abs(a - b).max() < 1e-4
+    pts = np.array([[100, 100], [200, 150], [5, 5]])
+    wa = patch_weights(load_model("report"), gray, pts)
+    wb = patch_weights(load_model("report", backend="keras"), gray, pts)
+    assert np.abs(wa - wb).max() < 1e-4
+
+
+def test_missing_or_corrupt_tflite_names_the_file_and_the_sha256(tmp_path):
+    from aicalib_tf.cnn.model import MODELS_DIR, load_model
+    from aicalib_tf.cnn.runtime import expected_sha256
+
+    want = expected_sha256(MODELS_DIR / "default.tflite")
+    assert want and len(want) == 64
+    bad = tmp_path / "default.tflite"
+    bad.write_bytes((MODELS_DIR / "default.tflite").read_bytes()[:-10] + b"0123456789")
+    (tmp_path / "default.tflite.sha256").write_text(f"{want}  default.tflite\n")
+    with pytest.raises(ValueError, match=f"corrupt model file {bad}.*expected {want}"):
+        load_model(bad)
+    bad.unlink()
+    with pytest.raises(FileNotFoundError, match=f"{bad}.*expected sha256 {want}"):
+        load_model(bad)
+
+
+def test_shipped_tflite_matches_its_recorded_sha256():
+    from aicalib_tf.cnn.model import MODELS_DIR, file_sha256
+    from aicalib_tf.cnn.runtime import expected_sha256
+
+    for name in ("default", "report"):
+        path = MODELS_DIR / f"{name}.tflite"
+        assert file_sha256(path) == expected_sha256(path)
