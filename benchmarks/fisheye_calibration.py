@@ -43,26 +43,27 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from aicalib_tf.bench.conditions import CALIB_CAMERAS, PATTERN, calibration_sequences  # noqa: E402
 from aicalib_tf.bench.detectors import make_detectors  # noqa: E402
 from aicalib_tf.bench.metrics import calibration_errors  # noqa: E402
+from aicalib_tf.geometry.pattern import board_points  # noqa: E402
 
 _CRIT = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-10)
 
 
-def _object_points(ids: np.ndarray, square: float) -> np.ndarray:
-    """(N, 2) int (col, row) ids -> (N, 3) float64 board points (c·s, r·s, 0)."""
-    return np.column_stack([ids[:, 0] * square, ids[:, 1] * square, np.zeros(len(ids))]).astype(np.float64)
+def _fisheye_flag(name: str) -> int:
+    """A cv2.fisheye flag: OpenCV 4 keeps them in cv2.fisheye, OpenCV 5 in cv2 (shared with calibrateCamera)."""
+    return getattr(cv2.fisheye, name, None) or getattr(cv2, name)
 
 
 def _opencv_pinhole(views, square, size):
-    obj = [_object_points(i, square).astype(np.float32) for _, c, i in views]
+    obj = [board_points(i, square).astype(np.float32) for _, c, i in views]
     img = [c.astype(np.float32).reshape(-1, 1, 2) for _, c, i in views]
     rms, K, dist, _, _ = cv2.calibrateCamera(obj, img, size, None, None, flags=0, criteria=_CRIT)
     return {"model": "plumb_bob", "K": K, "dist": dist.ravel()[:5], "rms": rms, "note": ""}
 
 
 def _opencv_fisheye(views, square, size):
-    obj = [_object_points(i, square).reshape(1, -1, 3) for _, c, i in views]
+    obj = [board_points(i, square).reshape(1, -1, 3) for _, c, i in views]
     img = [c.astype(np.float64).reshape(1, -1, 2) for _, c, i in views]
-    flags = cv2.fisheye.CALIB_RECOMPUTE_EXTRINSIC | cv2.fisheye.CALIB_FIX_SKEW
+    flags = _fisheye_flag("CALIB_RECOMPUTE_EXTRINSIC") | _fisheye_flag("CALIB_FIX_SKEW")
     try:
         rms, K, D, _, _ = cv2.fisheye.calibrate(obj, img, size, None, None, flags=flags, criteria=_CRIT)
         note = "no guess"
@@ -71,7 +72,7 @@ def _opencv_fisheye(views, square, size):
         f0 = min(w, h) / math.pi
         K0 = np.array([[f0, 0.0, (w - 1) / 2.0], [0.0, f0, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
         rms, K, D, _, _ = cv2.fisheye.calibrate(obj, img, size, K0, np.zeros(4), criteria=_CRIT,
-                                                flags=flags | cv2.fisheye.CALIB_USE_INTRINSIC_GUESS)
+                                                flags=flags | _fisheye_flag("CALIB_USE_INTRINSIC_GUESS"))
         note = f"needed K guess f0={f0:.0f} (no guess: {str(exc).strip().splitlines()[-1][:60]})"
     return {"model": "equidistant", "K": K, "dist": D.ravel(), "rms": rms, "note": note}
 

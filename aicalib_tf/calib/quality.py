@@ -309,19 +309,11 @@ def covariance_of(cal, views) -> np.ndarray:
 
 
 def default_fit():
-    """The fit :func:`half_difference` uses by default: ``fit.fit_views`` where it exists, else
-    ``calibrate_camera`` without outlier rejection (rational for 8 coefficients)."""
-    from aicalib_tf.calib import fit as F
+    """The fit :func:`half_difference` uses by default: :func:`aicalib_tf.calib.fit.fit_views`
+    (one fit of the given model, no outlier rejection, no model choice)."""
+    from aicalib_tf.calib.fit import fit_views
 
-    if hasattr(F, "fit_views"):
-        return F.fit_views
-
-    def fit(views, pattern_size, square_size, image_size, model):
-        if model not in ("plumb_bob", "rational_polynomial"):
-            raise ValueError(f"this build's fit handles plumb_bob and rational_polynomial, not {model!r}")
-        return F.calibrate_camera(views, pattern_size, square_size, image_size, reject_outliers=False,
-                                  rational=model == "rational_polynomial")
-    return fit
+    return fit_views
 
 
 def _ladder(x: float) -> float:

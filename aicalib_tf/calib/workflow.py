@@ -8,12 +8,14 @@ from __future__ import annotations
 import re
 import sys
 from collections import Counter
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from aicalib_tf.calib.fit import Calibration, CalibrationError, View, calibrate_camera
+from aicalib_tf.calib.fit import Calibration, CalibrationError, View, calibrate_camera, fit_views
+from aicalib_tf.calib.quality import assess
 from aicalib_tf.geometry.lens import MODELS as LENS_MODELS
 
 __all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "CalibrateConfig", "parse_square", "make_detector", "run", "undistort"]
@@ -237,6 +239,7 @@ def run(cfg: CalibrateConfig) -> tuple[Calibration, str]:
                            fix_k3=cfg.fix_k3, square_unit=cfg.square_unit, meta=meta)
     by_name = {v.name: v for v in views}
     used = [by_name[n] for n in cal.views]
+    cal = dataclasses.replace(cal, quality=assess(cal, used, fit=fit_views))
     report = format_report(cal, used, skipped=skipped, total=len(files))
     figure = report_figure(cal, used)
     preview = _preview(cal, {labels[f]: f for f in files})

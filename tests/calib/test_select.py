@@ -1,0 +1,64 @@
+"""calib.select: the lens model chosen by cross-validation over views, and the table it prints."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from aicalib_tf.calib.fit import calibrate_camera
+from aicalib_tf.calib.select import COMPLEXITY, choose
+from aicalib_tf.geometry import lens as L
+from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views
+
+FISHEYE = L.Lens("equidistant", [[288.0, 0, 641.5], [0, 287.4, 478.2], [0, 0, 1]], [0.02, -0.01, 0.004, -0.001],
+                 (1280, 960))
+MILD = L.Lens("plumb_bob", [[620.0, 0, 322], [0, 621.0, 238], [0, 0, 1]], [-0.08, 0.01, 4e-4, -3e-4, 0.0], (640, 480))
+
+
+def _row(model, cv, se):
+    return {"model": model, "n_params": 4 + L.N_COEFFS[model], "cv_rms": cv, "cv_se": se}
+
+
+def test_choose_takes_the_simplest_model_within_one_standard_error():
+    rows = [_row("plumb_bob", 0.105, 0.01), _row("rational_polynomial", 0.100, 0.01), _row("equidistant", 0.101, 0.01)]
+    assert choose(rows) == "plumb_bob"  # equidistant has fewer parameters, but plumb_bob ranks simpler
+    rows[0]["cv_rms"] = 0.2
+    assert choose(rows) == "equidistant"
+    rows[2]["cv_rms"] = 0.2
+    assert choose(rows) == "rational_polynomial"
+    assert choose([_row("plumb_bob", float("nan"), float("nan"))]) is None
+    assert set(COMPLEXITY) == set(L.MODELS)
+
+
+def test_auto_picks_equidistant_for_a_185_degree_fisheye():
+    views = synthetic_views(FISHEYE, 12, 0.1, seed=3, distance=(0.15, 0.4))
+    cal = calibrate_camera(views, PATTERN, SQUARE, FISHEYE.image_size)
+    assert cal.model == "equidistant"
+    table = {r["model"]: r for r in cal.model_table}
+    assert set(table) == set(L.MODELS) and table["equidistant"]["chosen"]
+    assert table["equidistant"]["cv_rms"] < 0.2
+    assert abs(cal.fx / FISHEYE.fx - 1) < 1e-3
+
+
+def test_auto_picks_plumb_bob_for_a_mild_lens():
+    views = synthetic_views(MILD, 15, 0.1, seed=4)
+    cal = calibrate_camera(views, PATTERN, SQUARE, MILD.image_size)
+    assert cal.model == "plumb_bob", cal.model_table
+    assert all(np.isfinite(r["cv_rms"]) or r["note"] for r in cal.model_table)
+
+
+def test_a_model_that_cannot_be_fitted_gets_a_note_and_auto_goes_on():
+    views = synthetic_views(MILD, 4, 0.1, seed=6, distance=(0.55, 0.6))
+    cal = calibrate_camera(views, PATTERN, SQUARE, MILD.image_size, reject_outliers=False)
+    table = {r["model"]: r for r in cal.model_table}
+    assert table["thin_prism"]["note"].startswith("thin_prism: ") and not table["thin_prism"]["chosen"]
+    assert cal.model in ("plumb_bob", "equidistant")
+
+
+def test_forced_model_and_bad_model_name():
+    views = synthetic_views(MILD, 6, 0.1, seed=7)
+    cal = calibrate_camera(views, PATTERN, SQUARE, MILD.image_size, model="rational_polynomial")
+    assert cal.model == "rational_polynomial" and cal.dist.size == 8
+    assert [r["note"] for r in cal.model_table] == ["forced"]
+    with pytest.raises(ValueError, match="unknown lens model 'fisheye'"):
+        calibrate_camera(views, PATTERN, SQUARE, MILD.image_size, model="fisheye")
