@@ -29,21 +29,26 @@ class Found(NamedTuple):
     corners : (N, 2) float64 (x, y) px (N = 0 when nothing was found).
     ids : (N, 2) int (col, row). complete : a full board (N = cols·rows).
     why : when nothing was found, why, if the detector says (the CNN's ``Detection.reason``).
+    relative : the ids are relative to the visible grid (``make_detectors(..., relative=True)``).
     """
 
     corners: np.ndarray
     ids: np.ndarray
     complete: bool
     why: str = ""
+    relative: bool = False
 
 
 _NOTHING = Found(np.zeros((0, 2)), np.zeros((0, 2), np.int64), False)
 
 
-def make_detectors(names, pattern: tuple[int, int], model: str = "default") -> tuple[dict[str, Callable], dict]:
+def make_detectors(names, pattern: tuple[int, int], model: str = "default", *,
+                   relative: bool = False) -> tuple[dict[str, Callable], dict]:
     """Build the detectors: ``{name: f(uint8 (H, W) image) -> Found}`` and their provenance.
 
     names : subset of :data:`DETECTORS`. model : the cnn detector's weights (name or .keras path).
+    relative : the CNN detectors also return grids with ids relative to them (for calibration;
+    :func:`aicalib_tf.detect.pipeline.detect_corners`).
     Returns (detectors, info) where info maps a CNN detector to its model path and sha256.
     Raises ValueError for an unknown name, FileNotFoundError/ValueError for a bad model.
     """
@@ -59,10 +64,10 @@ def make_detectors(names, pattern: tuple[int, int], model: str = "default") -> t
         from aicalib_tf.detect.pipeline import detect_corners
 
         def f(img):
-            d = detect_corners(img, pattern, model=m)
+            d = detect_corners(img, pattern, model=m, relative=relative)
             if not d.found:
                 return _NOTHING._replace(why=d.reason)
-            return Found(d.corners.astype(np.float64), d.ids.astype(np.int64), bool(d.complete))
+            return Found(d.corners.astype(np.float64), d.ids.astype(np.int64), bool(d.complete), relative=d.relative)
         return f
 
     def cv(fn):

@@ -49,11 +49,14 @@ class View:
     name : label for reports (usually the file name).
     corners : (N, 2) float (x, y) px.
     ids : (N, 2) int (col, row) of each corner on the board.
+    relative : the ids are relative to the visible part (a board larger than the frame): they keep
+        the lattice but not the place on the board, which a view's own pose absorbs.
     """
 
     name: str
     corners: np.ndarray
     ids: np.ndarray
+    relative: bool = False
 
     def __post_init__(self):
         c = np.asarray(self.corners, dtype=np.float64).reshape(-1, 2)

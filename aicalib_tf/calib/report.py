@@ -82,8 +82,10 @@ def format_report(cal: Calibration, views: list[View], *, skipped: dict | None =
         lines.append(f"  rejected {name}: {why}")
     worst, worst_rms = cal.worst_view()
     partial = int(np.sum(cal.corner_counts < cal.pattern_size[0] * cal.pattern_size[1]))
+    relative = sum(1 for v in views if getattr(v, "relative", False) and v.name in set(cal.views))
     lines.append(f"RMS reprojection error {cal.rms:.3f} px (worst view {worst}: {worst_rms:.3f} px)"
-                 + (f"; {partial} partial board{'s' if partial != 1 else ''}" if partial else ""))
+                 + (f"; {partial} partial board{'s' if partial != 1 else ''}" if partial else "")
+                 + (f" ({relative} larger than the frame, ids relative to what is seen)" if relative else ""))
     s = cal.std
     lines.append(f"image {cal.image_size[0]}x{cal.image_size[1]} px, lens model {model} (ROS {L.ROS_NAMES[model]})")
     lines.extend(_model_table_lines(getattr(cal, "model_table", ()) or ()))

@@ -52,24 +52,25 @@ def make_detector(name: str, pattern_size: tuple[int, int], model: str = "defaul
     "report" (the same pipeline with the report's network), "opencv" (classic + cornerSubPix) or
     "opencv-sb" (full boards only). The function's ``info`` attribute holds the model path and
     sha256 for the CNN detectors; after a call that found nothing, its ``why`` attribute says why
-    where the detector tells (the CNN detectors), else "". The detectors are those of
-    :mod:`aicalib_tf.bench.detectors`.
+    where the detector tells (the CNN detectors), else "". After each call its ``relative``
+    attribute says whether the ids are relative to the visible grid (the CNN detectors return a
+    board larger than the frame that way). The detectors are those of :mod:`aicalib_tf.bench.detectors`.
     """
     from aicalib_tf.bench.detectors import make_detectors
     from aicalib_tf.io import quantize
 
     if name not in DETECTORS:
         raise ValueError(f"unknown detector {name!r}; choose from {', '.join(DETECTORS)}")
-    detectors, info = make_detectors([name], tuple(pattern_size), model)
+    detectors, info = make_detectors([name], tuple(pattern_size), model, relative=True)
     found_by = detectors[name]
 
     def detect(gray):
         g = np.asarray(gray)
         found = found_by(g if g.dtype == np.uint8 else quantize(g))
-        detect.why = found.why
+        detect.why, detect.relative = found.why, found.relative
         return (found.corners, found.ids) if len(found.corners) else None
 
-    detect.info, detect.why = info.get(name, {}), ""
+    detect.info, detect.why, detect.relative = info.get(name, {}), "", False
     return detect
 
 
@@ -120,7 +121,7 @@ def _detect_all(files: list[str], labels: dict[str, str], detect, quiet: bool) -
             continue
         h, w = gray.shape
         hit = detect(gray)
-        found.append(_Found(labels[f], f, (w, h), View(labels[f], *hit) if hit is not None else None,
+        found.append(_Found(labels[f], f, (w, h), View(labels[f], *hit, relative=detect.relative) if hit is not None else None,
                             "" if hit is not None else detect.why))
     return found, skipped
 
@@ -151,10 +152,10 @@ def _apply_size_policy(found: list[_Found], policy: str, skipped: dict) -> tuple
         view = f.view
         if view is not None and policy == "crop":
             inside = (view.corners[:, 0] <= size[0] - 0.5) & (view.corners[:, 1] <= size[1] - 0.5)
-            view = View(view.name, view.corners[inside], view.ids[inside])
+            view = View(view.name, view.corners[inside], view.ids[inside], view.relative)
         elif view is not None:  # scale
             s = np.array([size[0] / f.size[0], size[1] / f.size[1]])
-            view = View(view.name, (view.corners + 0.5) * s - 0.5, view.ids)
+            view = View(view.name, (view.corners + 0.5) * s - 0.5, view.ids, view.relative)
         print(f"note: {f.label} is {tag}; {'cropped' if policy == 'crop' else 'scaled'} to {size[0]}x{size[1]}",
               file=sys.stderr)
         out.append(_Found(f.label, f.file, size, view, f.why))

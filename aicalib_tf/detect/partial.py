@@ -29,7 +29,7 @@ from aicalib_tf.detect.lattice import (
 )
 from aicalib_tf.detect.refine import window_radius
 
-__all__ = ["partial_board"]
+__all__ = ["partial_board", "relative_board"]
 MATCH_STEP = 0.3  # of a step: how far a corner found may lie from where the lattice predicts it
 
 
@@ -336,3 +336,50 @@ def partial_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int
             return (pts[perm], ids, sc[perm], True), undecided
         return (pts, ids, sc, False), undecided
     return None, undecided
+
+
+def _fit_pattern(ij: np.ndarray, pattern_size) -> np.ndarray | None:
+    """Lattice positions (K, 2) shifted to start at 0 and, if they only fit the pattern turned,
+    turned by 90° (handedness kept): ids within (cols, rows), or None when they fit neither way."""
+    cols, rows = pattern_size
+    ij = ij - ij.min(axis=0)
+    span = ij.max(axis=0) + 1
+    if span[0] <= cols and span[1] <= rows:
+        return ij
+    if span[1] <= cols and span[0] <= rows:  # (i, j) -> (span_j - 1 - j, i): a quarter turn
+        return np.stack([span[1] - 1 - ij[:, 1], ij[:, 0]], axis=1)
+    return None
+
+
+def relative_board(grid: Grid, scores: np.ndarray, pattern_size: tuple[int, int], size: tuple[int, int], propose):
+    """A grid whose place on the pattern the image leaves open, with ids relative to it.
+
+    For calibration, where each view has its own pose: a board larger than the frame, no edge in
+    view, still gives a consistent lattice. The grid is grown by partly visible lines, its corners
+    off their neighbours' lattice and those too near the frame are dropped (as for a placed partial
+    board), and its lattice positions become ids, shifted to start at 0 and turned a quarter when
+    only that fits the pattern, handedness kept (x right, y down, as a board seen from the front).
+    Returns (corners (K, 2) float32 px, ids (K, 2) int32, scores (K,) float32) in row-major order
+    of the ids, or None (too few corners left, or a grid larger than the pattern).
+    """
+    if propose is None or len(grid) < MIN_CORNERS:
+        return None
+    ij = handed(grid.ij, grid.points)
+    sc = np.where(grid.index >= 0, scores[np.maximum(grid.index, 0)], 0.0)
+    cells = {(int(i), int(j)): (np.asarray(p, np.float64), float(s)) for (i, j), p, s in zip(ij, grid.points, sc)}
+    _grow_cut_lines(cells, propose, max(pattern_size) + 1, size)
+    ids = _fit_pattern(np.array(list(cells.keys())), pattern_size)
+    if ids is None:
+        return None
+    pts = np.array([v[0] for v in cells.values()])
+    sc = np.array([v[1] for v in cells.values()], np.float32)
+    kept = drop_outliers(ids, pts, sc)
+    if kept is None:
+        return None
+    ids, pts, sc = kept
+    keep = _room(pts, size) >= EDGE_WINDOW * window_radius(nearest_spacing(pts))
+    if keep.sum() < MIN_CORNERS:
+        return None
+    ids = ids[keep] - ids[keep].min(axis=0)
+    order = np.argsort(ids[:, 1] * pattern_size[0] + ids[:, 0], kind="stable")
+    return pts[keep][order].astype(np.float32), ids[order].astype(np.int32), sc[keep][order].astype(np.float32)

@@ -93,7 +93,7 @@ from aicalib_tf.detect.board_order import full_board, order_full_board
 from aicalib_tf.detect.grid import MIN_CORNERS, Grid, assemble_grids, full_subgrid
 from aicalib_tf.detect.junctions import dedupe, nearest_spacing, proposer, ring_symmetry
 from aicalib_tf.detect.lattice import drop_outliers
-from aicalib_tf.detect.partial import partial_board
+from aicalib_tf.detect.partial import partial_board, relative_board
 from aicalib_tf.detect.pyramid import downscale, refine_full, scales, to_full
 from aicalib_tf.detect.refine import Smoothed, refine_windowed
 from aicalib_tf.detect.zoom import from_zoom, zoom_box, zoom_in
@@ -117,6 +117,8 @@ class Detection:
     image_size : (width, height) px.
     reason : why no board came back ("" when one did): one of ``REASONS``, the furthest the
         search got on any scale.
+    relative : the ids are relative to the visible grid, not fixed on the pattern (asked for with
+        ``detect_corners(..., relative=True)``; a board larger than the frame, say).
     """
 
     corners: np.ndarray
@@ -126,6 +128,7 @@ class Detection:
     complete: bool
     image_size: tuple[int, int]
     reason: str = ""
+    relative: bool = False
 
     @property
     def found(self) -> bool:
@@ -179,7 +182,7 @@ def _own_grids(grids: list[Grid]) -> list[Grid]:
 
 
 def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=None,
-                   threshold: float = 0.5) -> Detection:
+                   threshold: float = 0.5, relative: bool = False) -> Detection:
     """Find a chessboard's inner corners.
 
     image : path or array (see :func:`aicalib_tf.io.load_image`).
@@ -187,9 +190,13 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
         ids relative to it.
     model : a loaded corner model (default: the shipped ``models/default.keras``).
     threshold : CNN corner weight above which a peak is a candidate.
+    relative : with ``pattern_size``, a grid whose place on the pattern the image leaves open (a
+        board larger than the frame, no edge in view) comes back with ids relative to it and
+        ``relative=True`` (:func:`aicalib_tf.detect.partial.relative_board`), rather than not at all.
+        Enough for calibration, where each view has its own pose; not a detection of the pattern.
     Returns a :class:`Detection`; ``found`` is False when no board is there. With ``pattern_size``,
     a board partly out of frame or hidden is returned with ``complete=False`` when the image
-    decides its ids (module docstring), and not at all otherwise.
+    decides its ids (module docstring), and not at all otherwise (unless ``relative``).
     """
     gray = load_image(image)
     h, w = gray.shape
@@ -201,7 +208,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     best, reason = None, REASONS[0]
     for f in scales(w, h):
         look = bind(_zoomed, gray, pattern_size, model, threshold) if f == 1 and pattern_size is not None else None
-        det = _detect_at(downscale(gray, f), pattern_size, model, threshold, second_look=look)
+        det = _detect_at(downscale(gray, f), pattern_size, model, threshold, second_look=look, relative=relative)
         if det.found and f > 1:
             corners, ok = refine_full(gray, to_full(det.corners, f))
             if not ok.all():  # a corner left at its coarse place may be px off: try the finer scales
@@ -214,8 +221,9 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
             reason = max(reason, det.reason, key=REASONS.index)
         # without a pattern every scale is searched: a coarse scale can miss a board's smallest
         # squares and come back with a complete sub-grid of it
-        if best is None or len(det.corners) > len(best.corners):
-            best = det
+        if best is None or (best.relative and not det.relative and det.found) or (
+                det.relative <= best.relative and len(det.corners) > len(best.corners)):
+            best = det  # a board with fixed ids beats one with relative ids
     return replace(best, image_size=(w, h), reason="" if best.found else reason)
 
 
@@ -266,7 +274,7 @@ def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed:
 
 
 def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, threshold: float,
-               second_look=None, partial_above: int = 0) -> Detection:
+               second_look=None, partial_above: int = 0, relative: bool = False) -> Detection:
     """:func:`detect_corners` on one scale: gray (H, W) float32, pattern already checked.
 
     second_look : None, or ``look(grid, candidates) -> Detection | None``, asked with the largest
@@ -274,7 +282,7 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     with more than half the pattern's corners (the partial-board search here is the costly part
     of a thin board's time); else the one with more corners of its board and this scale's partial
     board. partial_above : partial boards are only looked for when the largest grid has more
-    corners than this.
+    corners than this. relative : as :func:`detect_corners`.
     """
     h, w = gray.shape
     empty = Detection(np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
@@ -318,7 +326,10 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     if not grids or len(grids[0]) <= partial_above:
         return replace(empty, reason=NO_MATCH if grids else NO_GRID)
     board, undecided = partial_board(grids, scores, pattern_size, smooth, (w, h), propose)
-    if board is None:
+    rel = relative_board(grids[0], scores, pattern_size, (w, h), propose) if board is None and undecided and relative else None
+    if rel is not None:
+        det = Detection(*rel, tuple(pattern_size), False, (w, h), relative=True)
+    elif board is None:
         det = replace(empty, reason=UNDECIDED if undecided else NO_MATCH)
     else:
         corners, ids, sc, complete = board

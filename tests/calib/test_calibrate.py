@@ -245,7 +245,11 @@ def test_cli_says_why_an_image_gave_no_board(tmp_path, capsys):
                             "--resize-policy", "skip")
     assert rc == 0, err
     assert "skipped  blank.png: no 9x6 board found: fewer than 9 corner candidates" in out
-    assert "skipped  corner.png: no 9x6 board found: part of a board is in view, but the image leaves open" in out
+    # the detector cannot place that corner on the pattern, but calibration takes it with relative
+    # ids; from another camera (a render) than left01-03, it is then rejected as an outlier
+    assert "skipped  corner.png" not in out
+    cal = load_calibration(tmp_path / "c")
+    assert "corner.png" in set(cal.views) | set(cal.rejected)
 
 
 @pytest.mark.parametrize("args,message", [

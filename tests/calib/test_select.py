@@ -62,3 +62,21 @@ def test_forced_model_and_bad_model_name():
     assert [r["note"] for r in cal.model_table] == ["forced"]
     with pytest.raises(ValueError, match="unknown lens model 'fisheye'"):
         calibrate_camera(views, PATTERN, SQUARE, MILD.image_size, model="fisheye")
+
+
+def test_relative_ids_calibrate_as_the_true_ids_do():
+    """Each view has its own pose: ids shifted or turned a quarter (handedness kept) change the
+    poses only, so a board larger than the frame counts as a view."""
+    from aicalib_tf.calib.fit import View
+
+    views = synthetic_views(MILD, 8, 0.1, seed=9)
+    rel = []
+    for k, v in enumerate(views):
+        ids = v.ids - v.ids.min(axis=0)
+        if k % 2:  # (c, r) -> (span_r - 1 - r, c): a quarter turn
+            ids = np.stack([ids[:, 1].max() - ids[:, 1], ids[:, 0]], axis=1)
+        rel.append(View(v.name, v.corners, ids, relative=True))
+    a = calibrate_camera(views, PATTERN, SQUARE, MILD.image_size, model="plumb_bob")
+    b = calibrate_camera(rel, (9, 9), SQUARE, MILD.image_size, model="plumb_bob")
+    np.testing.assert_allclose(b.K, a.K, rtol=1e-7)
+    np.testing.assert_allclose(b.dist, a.dist, atol=1e-7)
