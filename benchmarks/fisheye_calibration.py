@@ -25,6 +25,7 @@ as the mean over the area the boards covered ("seen") and over the whole image o
 the share of it the estimate cannot project ("fail"), the focal error (%), and the RMS (px).
 
     python benchmarks/fisheye_calibration.py [--views 20] [--out fisheye_calibration.csv] [--only fisheye]
+        [--seeds N] [--pipelines cnn+auto,classic+fisheye]
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from aicalib_tf.bench.conditions import CALIB_CAMERAS, PATTERN, calibration_sequences  # noqa: E402
+from aicalib_tf.bench.conditions import CALIB_CAMERAS, CALIB_SEED, PATTERN, calibration_sequences  # noqa: E402
 from aicalib_tf.bench.detectors import make_detectors  # noqa: E402
 from aicalib_tf.bench.metrics import calibration_errors  # noqa: E402
 from aicalib_tf.geometry.pattern import board_points  # noqa: E402
@@ -98,19 +99,19 @@ PIPELINES = {
 }
 
 
-def sequences(views: int, only: str | None):
-    """[(name, [Sample])]: the two fisheye sequences, then the mild and barrel ones."""
+def sequences(views: int, only: str | None, seed: int = CALIB_SEED):
+    """[(name, [Sample])]: the two fisheye sequences, then the mild and barrel ones (cameras and poses from ``seed``)."""
     out = []
     if only in (None, "fisheye"):
         out += [(n, s) for n, (_, s) in zip(("fisheye185", "fisheye150"),
-                                             calibration_sequences(views, (), fisheye=("fisheye185", "fisheye150")))]
+                                             calibration_sequences(views, (), seed, fisheye=("fisheye185", "fisheye150")))]
     if only in (None, "pinhole"):
-        for cam, s in calibration_sequences(views, CALIB_CAMERAS):
+        for cam, s in calibration_sequences(views, CALIB_CAMERAS, seed):
             out.append((f"{'barrel' if s[0].label['dist'][0] < -0.2 else 'mild'}-{cam}", s))
     return out
 
 
-def evaluate_sequence(name, samples, detectors) -> list[dict]:
+def evaluate_sequence(name, samples, detectors, pipelines=tuple(PIPELINES)) -> list[dict]:
     """Detect with every detector, calibrate with every pipeline, score against the truth."""
     lab = samples[0].label
     size = tuple(lab["image_size"])
@@ -124,8 +125,8 @@ def evaluate_sequence(name, samples, detectors) -> list[dict]:
     seen = np.concatenate([s.corners[s.visible] for s in samples])
     theta = math.radians(lab["max_theta_deg"]) if lab.get("max_theta_deg") else None
     rows = []
-    for pipe, (det, fn) in PIPELINES.items():
-        row = {"sequence": name, "true_model": lab.get("distortion_model", "plumb_bob"), "pipeline": pipe,
+    for pipe, (det, fn) in ((p, PIPELINES[p]) for p in pipelines):
+        row = {"sequence": name, "seed": samples[0].label["seed"], "true_model": lab.get("distortion_model", "plumb_bob"), "pipeline": pipe,
                "views": len(samples), "views_found": len(found[det])}
         t0 = time.perf_counter()
         try:
@@ -162,13 +163,27 @@ def main(argv=None) -> int:
     ap.add_argument("--views", type=int, default=20)
     ap.add_argument("--only", choices=("fisheye", "pinhole"), default=None)
     ap.add_argument("--out", default=None, help="CSV path for the rows")
+    ap.add_argument("--seeds", type=int, default=1, help="run the sequences of this many seeds (CALIB_SEED, +1, ...)")
+    ap.add_argument("--pipelines", default=",".join(PIPELINES), help="comma-separated subset of the pipelines")
     a = ap.parse_args(argv)
-    detectors, _ = make_detectors(("cnn", "opencv", "opencv-sb"), PATTERN)
+    pipes = tuple(p for p in a.pipelines.split(",") if p)
+    unknown = [p for p in pipes if p not in PIPELINES]
+    if unknown:
+        ap.error(f"unknown pipeline(s) {unknown}; choose from {', '.join(PIPELINES)}")
+    detectors, _ = make_detectors(sorted({PIPELINES[p][0] for p in pipes}), PATTERN)
     rows = []
-    for name, samples in sequences(a.views, a.only):
-        rows += evaluate_sequence(name, samples, detectors)
-        print(f"{name}: done", file=sys.stderr, flush=True)
+    for k in range(a.seeds):
+        for name, samples in sequences(a.views, a.only, CALIB_SEED + k):
+            rows += evaluate_sequence(name, samples, detectors, pipes)
+            print(f"{name} seed {CALIB_SEED + k}: done", file=sys.stderr, flush=True)
     print(_fmt(rows))
+    if a.seeds > 1:
+        import pandas as pd
+
+        ok = pd.DataFrame([r for r in rows if r["model"] != "failed"])
+        print("\nmean over seeds (px):")
+        print(ok.groupby(["sequence", "pipeline"], sort=False)[["seen_px", "image_px"]].agg(["mean", "max", "count"])
+              .round(3).to_string())
     if a.out:
         import pandas as pd
 
