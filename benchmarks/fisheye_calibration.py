@@ -22,7 +22,9 @@ All with ~20 views of a 9×6 board; the fisheye ones with noise σ 2 grey levels
 Columns: the chosen model, projection error field against the true lens (unproject a pixel grid
 with the true lens, project with the estimate; :func:`aicalib_tf.bench.metrics.calibration_errors`)
 as the mean over the area the boards covered ("seen") and over the whole image or image circle,
-the share of it the estimate cannot project ("fail"), the focal error (%), and the RMS (px).
+the share of it the estimate cannot project ("fail"), the focal error (%), the RMS (px), and for our
+pipelines the predicted projection uncertainty ("σ px": the 1σ map of
+:func:`aicalib_tf.calib.quality.assess`, median over the covered area), to set beside "seen px".
 
     python benchmarks/fisheye_calibration.py [--views 20] [--out fisheye_calibration.csv] [--only fisheye]
         [--seeds N] [--pipelines cnn+auto,classic+fisheye]
@@ -83,10 +85,12 @@ def _ours(views, square, size, model="auto"):
 
     vs = [View(n, c, i) for n, c, i in views]
     kw = {} if model == "auto" else {"model": model}
+    from aicalib_tf.calib.quality import assess
+
     cal = calibrate_camera(vs, PATTERN, square, size, **kw)
-    chosen = getattr(cal, "model", None) or ("plumb_bob" if np.asarray(cal.dist).size <= 5 else "rational_polynomial")
-    return {"model": chosen, "K": cal.K, "dist": np.asarray(cal.dist).ravel(), "rms": float(cal.rms),
-            "note": f"{len(cal.views)} views used"}
+    sigma = (assess(cal, vs)["sigma_px"] or {}).get("median_covered", float("nan"))
+    return {"model": cal.model, "K": cal.K, "dist": np.asarray(cal.dist).ravel(), "rms": float(cal.rms),
+            "sigma": sigma, "note": f"{len(cal.views)} views used"}
 
 
 PIPELINES = {
@@ -136,7 +140,8 @@ def evaluate_sequence(name, samples, detectors, pipelines=tuple(PIPELINES)) -> l
             err = calibration_errors(r["K"], r["dist"], lab["K"], lab["dist"], size, model=r["model"],
                                      model_true=row["true_model"], max_theta_true=theta, seen=seen, grid=(64, 48))
             row.update(model=r["model"], seen_px=err["proj_err_seen_mean_px"], image_px=err["proj_err_mean_px"],
-                       fail=err["proj_err_fail_frac"], fx_pct=err["fx_pct"], rms=r["rms"], note=r["note"])
+                       fail=err["proj_err_fail_frac"], fx_pct=err["fx_pct"], rms=r["rms"], note=r["note"],
+                       sigma_px=r.get("sigma", float("nan")))
         except Exception as exc:  # a pipeline's failure is a result, recorded as such
             row.update(model="failed", note=f"{type(exc).__name__}: {str(exc).strip().splitlines()[-1][:90]}")
         row["s"] = time.perf_counter() - t0
@@ -146,7 +151,7 @@ def evaluate_sequence(name, samples, detectors, pipelines=tuple(PIPELINES)) -> l
 
 def _fmt(rows) -> str:
     head = f"{'sequence':11} {'pipeline':24} {'views':>5} {'model':20} {'seen px':>8} {'image px':>9} {'fail':>5} " \
-           f"{'fx %':>8} {'RMS':>7}  note"
+           f"{'fx %':>8} {'RMS':>7} {'σ px':>7}  note"
     lines = [head, "-" * len(head)]
     for r in rows:
         if r["model"] == "failed":
@@ -154,7 +159,7 @@ def _fmt(rows) -> str:
                          f"{'':>5} {'':>8} {'':>7}  {r['note']}")
             continue
         lines.append(f"{r['sequence']:11} {r['pipeline']:24} {r['views_found']:>5} {r['model']:20} {r['seen_px']:8.3f} "
-                     f"{r['image_px']:9.3f} {r['fail']:5.0%} {r['fx_pct']:+8.2f} {r['rms']:7.3f}  {r['note']}")
+                     f"{r['image_px']:9.3f} {r['fail']:5.0%} {r['fx_pct']:+8.2f} {r['rms']:7.3f} {r['sigma_px']:7.3f}  {r['note']}")
     return "\n".join(lines)
 
 
@@ -182,7 +187,7 @@ def main(argv=None) -> int:
 
         ok = pd.DataFrame([r for r in rows if r["model"] != "failed"])
         print("\nmean over seeds (px):")
-        print(ok.groupby(["sequence", "pipeline"], sort=False)[["seen_px", "image_px"]].agg(["mean", "max", "count"])
+        print(ok.groupby(["sequence", "pipeline"], sort=False)[["seen_px", "image_px", "sigma_px"]].agg(["mean", "max", "count"])
               .round(3).to_string())
     if a.out:
         import pandas as pd

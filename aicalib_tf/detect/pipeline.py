@@ -278,11 +278,11 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     """:func:`detect_corners` on one scale: gray (H, W) float32, pattern already checked.
 
     second_look : None, or ``look(grid, candidates) -> Detection | None``, asked with the largest
-    grid and the candidate points when no full board is found (:func:`_zoomed`, at full size). Its board is returned when complete or
-    with more than half the pattern's corners (the partial-board search here is the costly part
-    of a thin board's time); else the one with more corners of its board and this scale's partial
-    board. partial_above : partial boards are only looked for when the largest grid has more
-    corners than this. relative : as :func:`detect_corners`.
+    grid and the candidate points when no full board is found (:func:`_zoomed`, at full size). Its
+    board is returned when complete or with more than half the pattern's corners (the partial
+    search here is the costly part of a thin board's time); else the one with more corners of it and
+    this scale's partial board. partial_above : partial boards are only looked for when the largest
+    grid has more corners than this. relative : as :func:`detect_corners`.
     """
     h, w = gray.shape
     empty = Detection(np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
@@ -327,13 +327,10 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
         return replace(empty, reason=NO_MATCH if grids else NO_GRID)
     board, undecided = partial_board(grids, scores, pattern_size, smooth, (w, h), propose)
     rel = relative_board(grids[0], scores, pattern_size, (w, h), propose) if board is None and undecided and relative else None
-    if rel is not None:
-        det = Detection(*rel, tuple(pattern_size), False, (w, h), relative=True)
-    elif board is None:
-        det = replace(empty, reason=UNDECIDED if undecided else NO_MATCH)
+    if board is not None or rel is not None:
+        det = Detection(*(rel or board[:3]), tuple(pattern_size), board is not None and board[3], (w, h), relative=rel is not None)
     else:
-        corners, ids, sc, complete = board
-        det = Detection(corners, ids, sc, tuple(pattern_size), complete, (w, h))
+        det = replace(empty, reason=UNDECIDED if undecided else NO_MATCH)
     return look if look is not None and len(look.corners) > len(det.corners) else det
 
 
