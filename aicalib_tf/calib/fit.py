@@ -31,13 +31,12 @@ import numpy as np
 from aicalib_tf.calib.bundle import (BundleResult, CalibrationError, bundle_adjust, convert_start, fisheye_start,
                                      param_names, poses_from_rays)
 from aicalib_tf.calib.select import select_model
-from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens, project
+from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens, model_from_ros, project
 from aicalib_tf.geometry.pattern import board_points, check_pattern
 
-__all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "fit_views", "view_rms", "INTRINSIC_NAMES",
-           "MIN_VIEW_CORNERS", "outlier_threshold"]
+__all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "fit_views", "view_rms", "MIN_VIEW_CORNERS",
+           "outlier_threshold"]
 
-INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
 MIN_VIEW_CORNERS = 6  # and spanning ≥ 2 rows and ≥ 2 columns: a homography needs a 2-D spread
 _CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
 
@@ -137,16 +136,13 @@ class Calibration:
         return self.views[k], float(self.per_view_rms[k])
 
 
-_MODEL_OF_LENGTH = {4: "plumb_bob", 5: "plumb_bob", 8: "rational_polynomial", 12: "thin_prism"}
-
-
 def view_rms(view: View, K, dist, rvec, tvec, square_size: float, model: str | None = None) -> tuple[float, np.ndarray]:
     """(RMS px, residuals (N, 2) px = detected − projected) of one view under a camera and pose.
 
     model : the lens model of ``dist``; None guesses a pinhole model from its length (4 means
     plumb_bob here: pass "equidistant" for a fisheye). Unprojectable corners give NaN.
     """
-    model = _MODEL_OF_LENGTH.get(np.asarray(dist).size, "plumb_bob") if model is None else model
+    model = model_from_ros("rational_polynomial", np.asarray(dist).size) if model is None else model
     R, _ = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))
     pts = board_points(view.ids, square_size) @ R.T + np.asarray(tvec, np.float64).ravel()
     res = view.corners - project(pts, model, K, dist)
@@ -169,37 +165,35 @@ def _usable(view: View, pattern_size: tuple[int, int]) -> str | None:
     return None
 
 
-def _starts(image_size, warm) -> list:
-    """Initial (K, dist) guesses: OpenCV's own (None), a warm start, and three pinhole fields of view.
+def _starts(image_size) -> list:
+    """Initial K guesses: OpenCV's own (None) and three pinhole fields of view.
 
     OpenCV initialises from homographies that ignore distortion; under strong barrel distortion
     Levenberg–Marquardt can then settle in a wrong minimum (measured: fx +28% on a data_gen
     sequence whose true fx it finds from a better start). The fit with the lowest RMS wins.
     """
     w, h = (float(s) for s in image_size)
-    starts = [None] if warm is None else [None, warm]
+    starts = [None]
     for hfov in (50.0, 80.0, 110.0):
         f = 0.5 * w / np.tan(np.radians(hfov) / 2)
-        starts.append((np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]]), None))
+        starts.append(np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]]))
     return starts
 
 
-def _run(views: list[View], square_size: float, image_size, flags: int, warm=None):
-    """plumb_bob by OpenCV from several starts (flags 0 or CALIB_FIX_K3); returns the lowest-RMS fit and the per-view RMS."""
+def _opencv_start(views: list[View], square_size: float, image_size, flags: int):
+    """plumb_bob by OpenCV from :func:`_starts` (flags 0 or CALIB_FIX_K3), the lowest RMS kept:
+    (K (3, 3), dist (5,), rvecs (V, 3), tvecs (V, 3)), the bundle fit's start."""
     obj = [board_points(v.ids, square_size).astype(np.float32) for v in views]
     img = [v.corners.astype(np.float32).reshape(-1, 1, 2) for v in views]
     size = tuple(int(s) for s in image_size)
     best, last_error = None, None
-    n_dist = 5
-    for start in _starts(image_size, warm):
+    for K0 in _starts(image_size):
         try:
-            if start is None:
-                fit = cv2.calibrateCameraExtended(obj, img, size, None, None, flags=flags, criteria=_CRITERIA)
+            if K0 is None:
+                fit = cv2.calibrateCamera(obj, img, size, None, None, flags=flags, criteria=_CRITERIA)
             else:
-                K0 = start[0].copy()
-                d0 = np.zeros(n_dist) if start[1] is None else np.asarray(start[1], np.float64).copy()
-                fit = cv2.calibrateCameraExtended(obj, img, size, K0, d0, flags=flags | cv2.CALIB_USE_INTRINSIC_GUESS,
-                                                  criteria=_CRITERIA)
+                fit = cv2.calibrateCamera(obj, img, size, K0, np.zeros(5), flags=flags | cv2.CALIB_USE_INTRINSIC_GUESS,
+                                          criteria=_CRITERIA)
         except cv2.error as exc:
             last_error = exc
             continue
@@ -207,11 +201,9 @@ def _run(views: list[View], square_size: float, image_size, flags: int, warm=Non
             best = fit
     if best is None:
         raise CalibrationError(f"OpenCV could not calibrate from {len(views)} views: {getattr(last_error, 'err', last_error)}")
-    rms, K, dist, rvecs, tvecs, std_in, _, _ = best
-    rvecs = np.asarray(rvecs, np.float64).reshape(-1, 3)
-    tvecs = np.asarray(tvecs, np.float64).reshape(-1, 3)
-    per_view = np.array([view_rms(v, K, dist, r, t, square_size)[0] for v, r, t in zip(views, rvecs, tvecs)])
-    return float(rms), K, dist.ravel(), rvecs, tvecs, np.asarray(std_in).ravel(), per_view
+    _, K, dist, rvecs, tvecs = best
+    return (K, dist.ravel()[:5], np.asarray(rvecs, np.float64).reshape(-1, 3),
+            np.asarray(tvecs, np.float64).reshape(-1, 3))
 
 
 def outlier_threshold(per_view_rms: np.ndarray) -> float:
@@ -262,7 +254,7 @@ def _fit_model(model: str, views: list[View], square_size: float, image_size, st
     """One bundle fit of ``model`` to the views, from ``start`` (a Lens or Calibration) or from scratch.
 
     From scratch, the pinhole models start from OpenCV's multi-start plumb_bob fit (extra
-    coefficients 0) and ``equidistant`` from :func:`_fisheye_start`. ``fix_k3`` holds k3 at 0
+    coefficients 0) and ``equidistant`` from :func:`~aicalib_tf.calib.bundle.fisheye_start`. ``fix_k3`` holds k3 at 0
     (pinhole models). Raises CalibrationError naming the model when it cannot be fitted (a
     rank-deficient fit only when ``rank_strict``).
     """
@@ -280,7 +272,7 @@ def _fit_model(model: str, views: list[View], square_size: float, image_size, st
     elif model == "equidistant":
         intr, poses = fisheye_start(obj, px, image_size, free)
     else:
-        _, K, dist, rvecs, tvecs, _, _ = _run(views, square_size, image_size, cv2.CALIB_FIX_K3 if fix_k3 else 0)
+        K, dist, rvecs, tvecs = _opencv_start(views, square_size, image_size, cv2.CALIB_FIX_K3 if fix_k3 else 0)
         intr = np.zeros(4 + N_COEFFS[model])
         intr[:4], intr[4:9] = (K[0, 0], K[1, 1], K[0, 2], K[1, 2]), dist[:5]
         poses = (rvecs, tvecs)
@@ -291,9 +283,9 @@ def _fit_model(model: str, views: list[View], square_size: float, image_size, st
 def _calibration(fit: BundleResult, views, pattern_size, square_size, image_size, rejected, square_unit,
                  meta, table=()) -> Calibration:
     std = dict(zip(param_names(fit.model), np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))))
-    K = np.array([[fit.intrinsics[0], 0, fit.intrinsics[2]], [0, fit.intrinsics[1], fit.intrinsics[3]], [0, 0, 1.0]])
+    lens = Lens.from_intrinsics(fit.model, fit.intrinsics, image_size)
     return Calibration(
-        K=K, dist=fit.intrinsics[4:].copy(), image_size=(int(image_size[0]), int(image_size[1])),
+        K=lens.K, dist=lens.dist, image_size=(int(image_size[0]), int(image_size[1])),
         pattern_size=pattern_size, square_size=float(square_size), rms=fit.rms, views=tuple(v.name for v in views),
         rvecs=fit.rvecs, tvecs=fit.tvecs, per_view_rms=fit.per_view_rms,
         corner_counts=np.array([len(v.ids) for v in views]), std={k: float(v) for k, v in std.items()},
