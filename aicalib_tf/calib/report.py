@@ -82,7 +82,8 @@ def format_report(cal: Calibration, views: list[View], *, skipped: dict | None =
         lines.append(f"  rejected {name}: {why}")
     worst, worst_rms = cal.worst_view()
     partial = int(np.sum(cal.corner_counts < cal.pattern_size[0] * cal.pattern_size[1]))
-    relative = sum(1 for v in views if getattr(v, "relative", False) and v.name in set(cal.views))
+    used = set(cal.views)
+    relative = sum(1 for v in views if getattr(v, "relative", False) and v.name in used)
     lines.append(f"RMS reprojection error {cal.rms:.3f} px (worst view {worst}: {worst_rms:.3f} px)"
                  + (f"; {partial} partial board{'s' if partial != 1 else ''}" if partial else "")
                  + (f" ({relative} larger than the frame, ids relative to what is seen)" if relative else ""))

@@ -278,6 +278,14 @@ def _corners_beyond(ids: np.ndarray, pts: np.ndarray, pattern_size, propose, siz
     return int((np.all(np.isfinite(got), axis=1) & (np.linalg.norm(got - pred, axis=1) <= MATCH_STEP * step)).sum())
 
 
+def _cells(grid: Grid, scores: np.ndarray) -> dict:
+    """{(i, j): (point (2,) px, weight)} of a grid, its (i, j) turned to the image's handedness; a
+    corner the ``propose`` callback found (index -1) weighs 0."""
+    ij = handed(grid.ij, grid.points)
+    sc = np.where(grid.index >= 0, scores[np.maximum(grid.index, 0)], 0.0)
+    return {(int(i), int(j)): (np.asarray(p, np.float64), float(s)) for (i, j), p, s in zip(ij, grid.points, sc)}
+
+
 def partial_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int, int], gray: np.ndarray,
                   size: tuple[int, int], propose):
     """The largest grid whose place on the board the image decides, as an incomplete board.
@@ -300,9 +308,7 @@ def partial_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int
     for grid in grids:
         if len(grid) < MIN_CORNERS:
             continue
-        ij = handed(grid.ij, grid.points)
-        sc = np.where(grid.index >= 0, scores[np.maximum(grid.index, 0)], 0.0)
-        cells = {(int(i), int(j)): (np.asarray(p, np.float64), float(s)) for (i, j), p, s in zip(ij, grid.points, sc)}
+        cells = _cells(grid, scores)
         _grow_cut_lines(cells, propose, max(pattern_size) + 1, size)
         _reach(cells, propose, max(pattern_size) + 1, size)
         ids = placement.place_cells(cells, pattern_size, gray)
@@ -364,9 +370,7 @@ def relative_board(grid: Grid, scores: np.ndarray, pattern_size: tuple[int, int]
     """
     if propose is None or len(grid) < MIN_CORNERS:
         return None
-    ij = handed(grid.ij, grid.points)
-    sc = np.where(grid.index >= 0, scores[np.maximum(grid.index, 0)], 0.0)
-    cells = {(int(i), int(j)): (np.asarray(p, np.float64), float(s)) for (i, j), p, s in zip(ij, grid.points, sc)}
+    cells = _cells(grid, scores)
     _grow_cut_lines(cells, propose, max(pattern_size) + 1, size)
     ids = _fit_pattern(np.array(list(cells.keys())), pattern_size)
     if ids is None:
