@@ -1,7 +1,8 @@
 """``python -m aicalib_tf.export``: write models/default.tflite and models/report.tflite (and their
-.sha256) from the trained .keras models, optionally an int8 model; ``--warm`` compiles the numba
+.sha256) from the trained .keras models, optionally an int8 model, and the model card's runtime
+section (size, sha256, output difference and speed against Keras); ``--warm`` compiles the numba
 kernels' on-disk caches instead (a first detection then costs no compile). Logic:
-:mod:`aicalib_tf.cnn.export`, :mod:`aicalib_tf.detect.warm`."""
+:mod:`aicalib_tf.cnn.export`, :mod:`aicalib_tf.cnn.model_card`, :mod:`aicalib_tf.detect.warm`."""
 
 from __future__ import annotations
 
@@ -13,8 +14,7 @@ import sys
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m aicalib_tf.export", description=__doc__.split("\n\n")[0])
     ap.add_argument("--int8", action="store_true", help="also write models/default_int8.tflite (calibrated on data_gen images)")
-    ap.add_argument("--warm", action="store_true", help="only compile the numba caches (detect one bundled image), export nothing")
-    ap.add_argument("--card", action="store_true", help="re-render models/MODEL_CARD.md afterwards")
+    ap.add_argument("--warm", action="store_true", help="only compile the numba caches (detect two synthetic boards), export nothing")
     args = ap.parse_args(argv)
     if args.warm:
         from aicalib_tf.detect.warm import warm
@@ -22,14 +22,18 @@ def main(argv: list[str] | None = None) -> int:
         print(f"numba caches ready: one detection in {warm():.2f} s")
         return 0
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
-    from aicalib_tf.cnn.export import export_all
+    from aicalib_tf.cnn.export import compare_runtime, export_all
+    from aicalib_tf.cnn.model_card import runtime_section, with_runtime_section
+    from aicalib_tf.cnn.spec import MODELS_DIR, SHIPPED
+    from aicalib_tf.io import atomic_write_text
 
     for path in export_all(int8=args.int8):
         print(f"wrote {path} ({path.stat().st_size} bytes)")
-    if args.card:
-        from aicalib_tf.cnn.model_card import main as card
-
-        card([])
+    checks = {name: compare_runtime(name) for name in SHIPPED}
+    card = MODELS_DIR / "MODEL_CARD.md"
+    atomic_write_text(card, with_runtime_section(card.read_text(encoding="utf-8"), runtime_section(MODELS_DIR, checks)))
+    print(f"updated {card}: " + "; ".join(f"{n} max diff {c['max_abs_diff']:.1e}, {c['runtime_ms']:.2f} ms "
+                                         f"(Keras {c['keras_ms']:.2f} ms)" for n, c in checks.items()))
     return 0
 
 

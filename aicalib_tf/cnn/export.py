@@ -7,6 +7,9 @@ checks on load. Path: Keras -> SavedModel (``model.export``) -> ``tf.lite.TFLite
 TFLite builtin ops only. Optionally an int8 model (weights and activations, float input and
 output), calibrated on data_gen renders (:func:`calibration_images`).
 
+:func:`compare_runtime` measures each export against its Keras model (largest output difference,
+ms per call); ``python -m aicalib_tf.export`` writes that into ``models/MODEL_CARD.md``.
+
 Imports TensorFlow: for export only, never at detection time.
 """
 
@@ -20,7 +23,7 @@ import numpy as np
 
 from aicalib_tf.cnn.spec import MODELS_DIR, file_sha256
 
-__all__ = ["export_tflite", "write_sha256", "calibration_images", "export_all"]
+__all__ = ["export_tflite", "write_sha256", "calibration_images", "export_all", "compare_runtime"]
 
 
 def write_sha256(path: Path) -> str:
@@ -76,3 +79,59 @@ def export_all(models_dir: Path = MODELS_DIR, *, int8: bool = False) -> list[Pat
     if int8:
         out.append(export_tflite(models_dir / "default.keras", models_dir / "default_int8.tflite", int8=True))
     return out
+
+
+def _median_ms(fn, inputs, repeat: int = 3) -> float:
+    """Median wall time of ``fn(x)`` over the inputs (after one untimed call each), ms."""
+    import time
+
+    times = []
+    for x in inputs:
+        fn(x)
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            fn(x)
+            times.append(1e3 * (time.perf_counter() - t0))
+    return float(np.median(times))
+
+
+def compare_runtime(name: str, models_dir: Path = MODELS_DIR, *, n: int = 8) -> dict:
+    """How ``models/<name>.tflite`` on the runtime compares with ``<name>.keras`` (float32).
+
+    The corner-map model runs on ``n`` data_gen images (:func:`calibration_images`), the patch
+    classifier on batches of 256 patches cut from them at random places. Returns {"inputs":
+    description, "max_abs_diff": largest output difference, "keras_ms", "runtime_ms": median per
+    call}.
+    """
+    from aicalib_tf.cnn.keras_inference import run_map, run_patches
+    from aicalib_tf.cnn.model import load_model
+    from aicalib_tf.cnn.spec import PATCH_SIZE, model_kind
+
+    keras_model = load_model(models_dir / f"{name}.keras")
+    runtime = load_model(models_dir / f"{name}.tflite")
+    images = list(calibration_images(n))
+    if model_kind(keras_model) == "map":
+        inputs, what = images, f"{n} data_gen images (corner maps)"
+
+        def ours(x):
+            return runtime(x)[0]
+
+        def theirs(x):
+            return run_map(keras_model, x, "float32")
+    else:
+        rng = np.random.default_rng(0)
+        inputs = []
+        for x in images:
+            h, w = x.shape[1:3]
+            ys, xs = rng.integers(0, h - PATCH_SIZE, 256), rng.integers(0, w - PATCH_SIZE, 256)
+            inputs.append(np.stack([x[0, y:y + PATCH_SIZE, c:c + PATCH_SIZE] for y, c in zip(ys, xs)]))
+        what = f"{n} batches of 256 patches of data_gen images"
+
+        def ours(x):
+            return runtime(x)[:, 0]
+
+        def theirs(x):
+            return run_patches(keras_model, x)
+    diff = max(float(np.max(np.abs(ours(x) - theirs(x)))) for x in inputs)
+    return {"inputs": what, "max_abs_diff": diff, "keras_ms": _median_ms(theirs, inputs),
+            "runtime_ms": _median_ms(ours, inputs)}

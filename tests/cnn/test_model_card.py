@@ -59,3 +59,15 @@ def test_the_card_says_how_much_of_the_wall_time_was_the_image_pool(tmp_path):
     (run / "metrics.json").write_text(json.dumps({**metrics, "data_prep_s": 6.0}))
     assert main([str(run), "--out", str(tmp_path / "models")]) == 0
     assert "15.0 min (of which 0.1 min rendering or loading the image pools)." in (tmp_path / "models" / "MODEL_CARD.md").read_text()
+
+
+def test_runtime_section_replaces_its_own_part_of_the_card_only():
+    from aicalib_tf.cnn.model_card import RUNTIME_HEADING, with_runtime_section
+
+    card = "# Model card\n\n## `default.keras`\n\nweights\n"
+    once = with_runtime_section(card, f"{RUNTIME_HEADING}\n\nold\n")
+    assert once.startswith(card.rstrip("\n")) and once.endswith("old\n")
+    middle = once + "\n## later\n\nkept\n"
+    again = with_runtime_section(middle, f"{RUNTIME_HEADING}\n\nnew\n")
+    assert "old" not in again and "new" in again and again.endswith("## later\n\nkept\n")
+    assert again.count(RUNTIME_HEADING) == 1 and "## `default.keras`\n\nweights" in again
