@@ -27,9 +27,13 @@ def main(argv: list[str] | None = None) -> int:
     from aicalib_tf.cnn.spec import MODELS_DIR, SHIPPED
     from aicalib_tf.io import atomic_write_text
 
-    for path in export_all(int8=args.int8):
-        print(f"wrote {path} ({path.stat().st_size} bytes)")
-    checks = {name: compare_runtime(name) for name in SHIPPED}
+    try:
+        for path in export_all(int8=args.int8):
+            print(f"wrote {path} ({path.stat().st_size} bytes)")
+        checks = {name: compare_runtime(name) for name in SHIPPED}
+    except (FileNotFoundError, ValueError) as exc:  # a missing or corrupt model, named by the loader
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     card = MODELS_DIR / "MODEL_CARD.md"
     atomic_write_text(card, with_runtime_section(card.read_text(encoding="utf-8"), runtime_section(MODELS_DIR, checks)))
     print(f"updated {card}: " + "; ".join(f"{n} max diff {c['max_abs_diff']:.1e}, {c['runtime_ms']:.2f} ms "

@@ -136,8 +136,11 @@ def compile_model(model: keras.Model, learning_rate: float = 2e-3, *, focal_gamm
 def load_keras(path: Path, *, compile: bool = False) -> keras.Model:
     """Load a ``.keras`` corner model with ``safe_mode=True`` (weights and a layer graph, never code).
 
-    Raises ``ValueError`` for a corrupt or incompatible file, naming the path.
+    Raises ``FileNotFoundError`` for a missing file and ``ValueError`` for a corrupt or incompatible
+    one, naming the path.
     """
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"model file not found: {path}")
     if not zipfile.is_zipfile(path):
         raise ValueError(f"cannot load model {path}: not a Keras 3 .keras archive (corrupt or wrong format)")
     try:
