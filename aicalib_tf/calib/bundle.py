@@ -28,7 +28,8 @@ import numpy as np
 
 from aicalib_tf.geometry.lens import COEFF_NAMES, N_COEFFS, Lens, check_model, projection_jacobian
 
-__all__ = ["CalibrationError", "BundleResult", "bundle_adjust", "poses_from_rays", "solve_pose", "param_names",
+__all__ = ["CalibrationError", "BundleResult", "bundle_adjust", "levenberg_marquardt", "schur_complement", "reduce_blocks",
+           "poses_from_rays", "solve_pose", "param_names",
            "convert_start", "fisheye_start", "FISHEYE_FOVS"]
 
 _PENALTY = 1e3  # px, the residual of a corner the parameters cannot project
@@ -131,17 +132,24 @@ class _Problem:
     def normal_blocks(self, x):
         """Blocks of JᵀJ and Jᵀr without forming J: U (nf, nf), W (V, nf, 6), Vb (V, 6, 6), gu (nf,), gv (V, 6)."""
         r, Ji, Jp, _ = self._evaluate(x)
-        r = r.reshape(-1, 2)
-        starts = np.concatenate([[0], self.splits])
-        U = np.einsum("nri,nrj->ij", Ji, Ji)
-        W = np.add.reduceat(np.einsum("nri,nrj->nij", Ji, Jp), starts, axis=0)
-        Vb = np.add.reduceat(np.einsum("nri,nrj->nij", Jp, Jp), starts, axis=0)
-        gu = np.einsum("nri,nr->i", Ji, r)
-        gv = np.add.reduceat(np.einsum("nri,nr->ni", Jp, r), starts, axis=0)
-        return U, W, Vb, gu, gv
+        return reduce_blocks(r, Ji, Jp, self.splits)
 
 
-def _schur(U, W, Vb):
+def reduce_blocks(r, Ji, Jp, splits):
+    """JᵀJ and Jᵀr in blocks from residuals r (2N,), global columns Ji (N, 2, nf) and pose columns
+    Jp (N, 2, 6), the corners grouped by pose (``splits``: np.split indices, every group non-empty):
+    (U (nf, nf), W (V, nf, 6), Vb (V, 6, 6), gu (nf,), gv (V, 6))."""
+    r = r.reshape(-1, 2)
+    starts = np.concatenate([[0], splits]).astype(np.int64)
+    U = np.einsum("nri,nrj->ij", Ji, Ji)
+    W = np.add.reduceat(np.einsum("nri,nrj->nij", Ji, Jp), starts, axis=0)
+    Vb = np.add.reduceat(np.einsum("nri,nrj->nij", Jp, Jp), starts, axis=0)
+    gu = np.einsum("nri,nr->i", Ji, r)
+    gv = np.add.reduceat(np.einsum("nri,nr->ni", Jp, r), starts, axis=0)
+    return U, W, Vb, gu, gv
+
+
+def schur_complement(U, W, Vb):
     """(S = U − W·Vb⁻¹·Wᵀ (nf, nf), Vb⁻¹ (V, 6, 6)): the intrinsics block of JᵀJ with the poses eliminated."""
     Vinv = np.linalg.inv(Vb)
     WV = np.einsum("vij,vjk->vik", W, Vinv)
@@ -164,7 +172,7 @@ def _covariance(prob: _Problem, x, cost: float, model: str, strict: bool):
     wv = np.linalg.eigvalsh(Vb / (dv[:, :, None] * dv[:, None, :]))
     if not np.all(np.isfinite(Vb)) or np.any(~(wv[:, 0] > _RANK_TOL * wv[:, -1])):
         raise CalibrationError(f"{model}: a view's pose is not determined")
-    S, _ = _schur(U, W, Vb)
+    S, _ = schur_complement(U, W, Vb)
     d = np.sqrt(np.maximum(np.diag(S), 0.0))
     sigma2, note = 2.0 * cost / dof, ""
     if np.any(~(d > 0)) or not np.all(np.isfinite(S)):
@@ -191,8 +199,12 @@ def _covariance(prob: _Problem, x, cost: float, model: str, strict: bool):
     return cov, jtj, sigma2, note
 
 
-def _levenberg_marquardt(prob: _Problem, x0, max_nfev: int):
-    """Minimise ½|r(x)|² by Levenberg–Marquardt on the Schur-reduced normal equations; returns (x, cost, evaluations)."""
+def levenberg_marquardt(prob, x0, max_nfev: int):
+    """Minimise ½|r(x)|² by Levenberg–Marquardt on the Schur-reduced normal equations; returns (x, cost, evaluations).
+
+    prob : any problem whose parameters are ``prob.nf`` global ones followed by 6 per pose, with
+    ``prob.fun(x)`` -> residuals and ``prob.normal_blocks(x)`` -> :func:`reduce_blocks`' tuple
+    (this module's bundle, and the rig fit of :mod:`aicalib_tf.calib.rig_bundle`)."""
     x = x0.copy()
     r = prob.fun(x)
     cost, nfev, lam, nf = 0.5 * float(r @ r), 1, 1e-3, prob.nf
@@ -203,7 +215,7 @@ def _levenberg_marquardt(prob: _Problem, x0, max_nfev: int):
         improved = done = False
         while nfev < max_nfev and lam < 1e16:
             try:
-                S, Vinv = _schur(U + lam * np.diag(dU), W, Vb + lam * dV[:, :, None] * np.eye(6))
+                S, Vinv = schur_complement(U + lam * np.diag(dU), W, Vb + lam * dV[:, :, None] * np.eye(6))
                 du = -np.linalg.solve(S, gu - np.einsum("vij,vjk,vk->i", W, Vinv, gv)) if nf else np.zeros(0)
             except np.linalg.LinAlgError:
                 lam *= 10.0
@@ -247,7 +259,7 @@ def bundle_adjust(model: str, obj, px, intrinsics, rvecs, tvecs, *, free=None, m
                                     np.asarray(tvecs, np.float64).reshape(-1, 3)]).ravel()])
     if not np.all(np.isfinite(x0)):
         raise CalibrationError(f"{model}: non-finite start parameters")
-    x, cost, nfev = _levenberg_marquardt(prob, x0, max_nfev or 200)
+    x, cost, nfev = levenberg_marquardt(prob, x0, max_nfev or 200)
     intr, rv, tv = prob.unpack(x)
     res, _, _, n_bad = prob._evaluate(x)
     if strict and (n_bad or not np.all(np.isfinite(x))):
