@@ -18,6 +18,19 @@ K and distortion with ±1σ; field of view; warnings) and writes into --out, ato
 camera.yaml (OpenCV FileStorage), camera.json (the same plus board, detector, model sha256 and
 per-view poses), camera_info.yaml (ROS), report.png, and an undistorted preview of one image.
 
+A rig (stereo pair or more cameras) takes one NAME=GLOB per camera instead of the images:
+
+    python -m aicalib_tf.calibrate --rig cam0="left/*.png" cam1="right/*.png" [cam2=...] --pattern 9x6 --square 25mm --out rig/
+
+Images are paired by a shared name stem (``left01``/``right01`` -> ``01``, or equal stems), else by
+sorted order when the counts match; the report says which rule it used and lists unpaired files.
+Each camera's lens is chosen as above, then one joint fit refines every lens and the cameras'
+poses; frames whose cameras disagree are rejected with the reason. It writes intrinsics.yml and
+extrinsics.yml (OpenCV's stereo_calib nodes, plus E, F and distortion_model1/2), one ROS
+camera_info per camera with the rectification, rig.json, each camera's own files, report.png
+(rectified preview, per-pair epipolar errors, baseline with σ) and report.txt. A rig of three
+or more cameras writes the stereo files per pair with camera 0 (cam0_cam2/...).
+
 Images of different sizes are an error naming the odd files unless --resize-policy says what to
 do: skip them, crop them to the common size (top-left kept; exact when an image only has extra
 rows or columns at the right or bottom, like 1281x721 among 1280x720), or scale their corners.
@@ -47,7 +60,9 @@ def _parse_args(argv):
 
     ap = argparse.ArgumentParser(prog="python -m aicalib_tf.calibrate", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("images", nargs="+", help="image files or glob patterns (quote globs)")
+    ap.add_argument("images", nargs="*", help="image files or glob patterns (quote globs)")
+    ap.add_argument("--rig", nargs="+", metavar="NAME=GLOB",
+                    help='calibrate a rig: one NAME=GLOB per camera, e.g. cam0="left/*.png" cam1="right/*.png"')
     ap.add_argument("--pattern", required=True, help="inner corners, COLSxROWS, e.g. 9x6")
     ap.add_argument("--square", default="1", help="square size with unit, e.g. 25mm (default: 1, unitless)")
     ap.add_argument("--out", default="calib", help="output folder (default: %(default)s)")
@@ -79,6 +94,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.model != "auto" and args.model not in MODELS:
         print(f"error: unknown --model {args.model!r}; choose auto or one of {', '.join(MODELS)}", file=sys.stderr)
         return 2
+    if bool(args.rig) == bool(args.images):
+        print("error: give either images or --rig NAME=GLOB ... (not both)" if args.rig else "error: no images given",
+              file=sys.stderr)
+        return 2
+    if args.rig:
+        return _main_rig(args)
     try:
         pattern = check_pattern(parse_pattern(args.pattern))
         square, unit = parse_square(args.square)
@@ -92,6 +113,24 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     print(report)
     print(f"wrote {Path(cfg.out) / 'camera.yaml'}, camera.json, camera_info.yaml, report.png")
+    return 0
+
+
+def _main_rig(args) -> int:
+    from aicalib_tf.calib.rig_workflow import RigConfig, parse_rig, run_rig
+    from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
+
+    try:
+        cfg = RigConfig(cameras=tuple(parse_rig(args.rig)), pattern=check_pattern(parse_pattern(args.pattern)),
+                        **dict(zip(("square", "square_unit"), parse_square(args.square))), out=args.out,
+                        detector=args.detector, network=args.network,
+                        model="rational_polynomial" if args.rational else args.model, quiet=args.quiet)
+        _, report = run_rig(cfg)
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(report)
+    print(f"wrote {Path(cfg.out) / 'rig.json'}, the stereo YAML files, camera_info per camera, report.png")
     return 0
 
 

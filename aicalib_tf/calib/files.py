@@ -38,7 +38,7 @@ from aicalib_tf.geometry import lens as L
 from aicalib_tf.io import atomic_write_text
 
 __all__ = ["save_calibration", "load_calibration", "to_opencv_yaml", "to_json", "to_camera_info_yaml", "undistort",
-           "undistort_camera_matrix"]
+           "undistort_camera_matrix", "calibration_dict", "calibration_from_dict", "jsonable"]
 
 FILES = ("camera.yaml", "camera.json", "camera_info.yaml")
 MAX_FISHEYE_HALF_ANGLE_DEG = 75.0  # the widest half-angle a rectified pinhole of equidistant shows (alpha = 1)
@@ -64,20 +64,21 @@ def to_opencv_yaml(cal: Calibration) -> str:
     return fs.releaseAndGetString()
 
 
-def _jsonable(x):
+def jsonable(x):
     """Nested dicts/lists/tuples with numpy scalars and arrays -> plain JSON types."""
     if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
+        return {str(k): jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
+        return [jsonable(v) for v in x]
     if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
+        return jsonable(x.tolist())
     if isinstance(x, np.generic):
         return x.item()
     return x
 
 
-def _as_dict(cal: Calibration) -> dict:
+def calibration_dict(cal: Calibration) -> dict:
+    """``camera.json``'s content: a JSON-able dict of the calibration (:func:`calibration_from_dict` reads it)."""
     lens = lens_of(cal)
     cov = getattr(cal, "covariance", None)
     return {
@@ -87,8 +88,8 @@ def _as_dict(cal: Calibration) -> dict:
         "avg_reprojection_error": float(cal.rms),
         "std": {k: float(v) for k, v in cal.std.items()},
         "covariance": None if cov is None else np.asarray(cov, np.float64).tolist(),
-        "model_table": _jsonable(list(getattr(cal, "model_table", ()) or ())),
-        "quality": _jsonable(dict(getattr(cal, "quality", {}) or {})),
+        "model_table": jsonable(list(getattr(cal, "model_table", ()) or ())),
+        "quality": jsonable(dict(getattr(cal, "quality", {}) or {})),
         "board": {"pattern_size": list(cal.pattern_size), "square_size": float(cal.square_size),
                   "square_unit": cal.square_unit},
         "views": [
@@ -102,7 +103,7 @@ def _as_dict(cal: Calibration) -> dict:
 
 def to_json(cal: Calibration) -> str:
     """The calibration as JSON text (the format :func:`load_calibration` reads)."""
-    return json.dumps(_as_dict(cal), indent=1) + "\n"
+    return json.dumps(calibration_dict(cal), indent=1) + "\n"
 
 
 def _ros_matrix(name: str, m: np.ndarray) -> str:
@@ -111,18 +112,21 @@ def _ros_matrix(name: str, m: np.ndarray) -> str:
     return f"{name}:\n  rows: {m.shape[0]}\n  cols: {m.shape[1]}\n  data: [{data}]\n"
 
 
-def to_camera_info_yaml(cal: Calibration, camera_name: str = "camera") -> str:
-    """The calibration in ROS's camera_info YAML layout (monocular: identity rectification).
+def to_camera_info_yaml(cal: Calibration, camera_name: str = "camera", *, R=None, P=None) -> str:
+    """The calibration in ROS's camera_info YAML layout.
 
-    P is :func:`undistort_camera_matrix` with alpha = 0 (module docstring)."""
+    Monocular (R, P None): identity rectification, P = :func:`undistort_camera_matrix` with alpha = 0
+    (module docstring). A camera of a rectified stereo pair: R (3, 3) its rectifying rotation and
+    P (3, 4) its rectified projection, as ROS's stereo calibrator writes them."""
     w, h = cal.image_size
-    P = undistort_camera_matrix(cal, 0.0)
+    R = np.eye(3) if R is None else np.asarray(R, np.float64)
+    P = np.concatenate([undistort_camera_matrix(cal, 0.0), np.zeros((3, 1))], axis=1) if P is None else np.asarray(P, np.float64)
     return (f"image_width: {w}\nimage_height: {h}\ncamera_name: {camera_name}\n"
             + _ros_matrix("camera_matrix", cal.K)
             + f"distortion_model: {L.ROS_NAMES[lens_of(cal).model]}\n"
             + _ros_matrix("distortion_coefficients", np.asarray(cal.dist).reshape(1, -1))
-            + _ros_matrix("rectification_matrix", np.eye(3))
-            + _ros_matrix("projection_matrix", np.concatenate([P, np.zeros((3, 1))], axis=1)))
+            + _ros_matrix("rectification_matrix", R)
+            + _ros_matrix("projection_matrix", P))
 
 
 def save_calibration(cal: Calibration, folder) -> Path:
@@ -150,7 +154,11 @@ def _build(fields: dict, extra: dict) -> Calibration:
 
 
 def _load_json(path: Path) -> Calibration:
-    d = json.loads(path.read_text(encoding="utf-8"))
+    return calibration_from_dict(json.loads(path.read_text(encoding="utf-8")))
+
+
+def calibration_from_dict(d: dict) -> Calibration:
+    """The inverse of :func:`calibration_dict` (``camera.json``'s content). Raises KeyError/ValueError when bad."""
     views, board = d["views"], d["board"]
     dist = np.asarray(d["distortion_coefficients"], np.float64).ravel()
     model = d.get("model") or L.model_from_ros(d.get("distortion_model", "plumb_bob"), dist.size)

@@ -1,0 +1,181 @@
+"""From each camera's photos to a saved rig calibration: pair the images, detect, calibrate, assess, write.
+
+Pairing (:func:`pair_images`): images of different cameras taken at one instant are matched by a
+shared name stem, either the whole file stem (``cam0/0001.png`` with ``cam1/0001.png``) or the
+number it ends with (``left01.jpg`` with ``right01.jpg``: frame ``01``); whichever pairs more images
+wins. When no name is shared and every camera has as many images, they are paired in sorted
+order. Images left without a partner are reported; they still serve their own camera's lens.
+
+The command line is ``python -m aicalib_tf.calibrate --rig cam0="left/*.png" cam1="right/*.png"``.
+"""
+
+from __future__ import annotations
+
+import re
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+from aicalib_tf.calib.bundle import CalibrationError
+
+__all__ = ["RigConfig", "Pairing", "parse_rig", "pair_images", "run_rig"]
+
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
+
+
+def parse_rig(items) -> list[tuple[str, str]]:
+    """["cam0=left/*.png", "cam1=right/*.png"] -> [(name, pattern)]; ValueError naming a bad item."""
+    out = []
+    for item in items:
+        name, sep, pattern = str(item).partition("=")
+        if not sep or not _NAME.fullmatch(name) or not pattern:
+            raise ValueError(f"--rig takes NAME=GLOB items such as cam0=\"left/*.png\", got {item!r}")
+        out.append((name, pattern))
+    names = [n for n, _ in out]
+    if len(set(names)) != len(names):
+        raise ValueError(f"--rig names a camera twice: {', '.join(sorted(n for n, c in Counter(names).items() if c > 1))}")
+    if len(out) < 2:
+        raise ValueError(f"--rig needs at least two cameras, got {len(out)}")
+    return out
+
+
+@dataclass(frozen=True)
+class Pairing:
+    """frames: [(frame name, {camera: file})] in order; rule: how they were paired; unpaired: {camera: [file]}."""
+
+    frames: list
+    rule: str
+    unpaired: dict
+
+
+def _stem(f: str) -> str:
+    return Path(f).stem
+
+
+def _number(f: str) -> str | None:
+    m = re.search(r"(\d+)\D*$", Path(f).stem)
+    return str(int(m.group(1))) if m else None
+
+
+def _keyed(files: dict[str, list[str]], key) -> dict[str, dict[str, str]] | None:
+    """{key: {camera: file}} or None when a camera has two files of one key or a file has none."""
+    out: dict[str, dict[str, str]] = {}
+    for cam, fs in files.items():
+        for f in fs:
+            k = key(f)
+            if k is None or cam in out.setdefault(k, {}):
+                return None
+            out[k][cam] = f
+    return out
+
+
+def pair_images(files: dict[str, list[str]]) -> Pairing:
+    """Pair each camera's sorted files into frames (module docstring). ValueError when they cannot be paired."""
+    best = None
+    for rule, key in (("the same file name stem", _stem), ("the number ending each file name", _number)):
+        keyed = _keyed(files, key)
+        if keyed is None:
+            continue
+        n = sum(len(v) >= 2 for v in keyed.values())
+        if n and (best is None or n > best[0]):
+            best = (n, rule, keyed, key)
+    if best is None:
+        counts = {c: len(fs) for c, fs in files.items()}
+        if len(set(counts.values())) != 1:
+            raise ValueError("cannot pair the images: their names share no stem or number, and the cameras have "
+                             f"different image counts ({', '.join(f'{c}: {n}' for c, n in counts.items())})")
+        first = next(iter(files))
+        frames = [(_stem(files[first][i]), {c: fs[i] for c, fs in files.items()}) for i in range(counts[first])]
+        return Pairing(frames, "sorted order (the names share no stem or number)", {})
+    _, rule, keyed, key = best
+    order = sorted(keyed, key=lambda k: min(sorted(files[c]).index(f) for c, f in keyed[k].items()))
+    shown = {k: _stem(next(iter(keyed[k].values()))) if key is _stem else
+             re.search(r"(\d+)\D*$", _stem(next(iter(keyed[k].values())))).group(1) for k in order}
+    frames = [(shown[k], keyed[k]) for k in order]
+    unpaired = {c: [keyed[k][c] for k in order if c in keyed[k] and len(keyed[k]) < 2] for c in files}
+    return Pairing(frames, rule, {c: v for c, v in unpaired.items() if v})
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    """Everything one rig run needs (the CLI's options)."""
+
+    cameras: tuple[tuple[str, str], ...]  # (name, glob)
+    pattern: tuple[int, int]
+    square: float = 1.0
+    square_unit: str = ""
+    out: str = "rig"
+    detector: str = "cnn"
+    network: str = "default"
+    model: str = "auto"
+    quiet: bool = False
+
+
+def _detect_camera(cam, frames, detect, quiet) -> tuple[dict, dict, dict]:
+    """({frame: View}, {frame: (w, h)}, {frame: why skipped}) of one camera."""
+    from aicalib_tf.calib.workflow import _detect_all
+
+    files = [fs[cam] for _, fs in frames if cam in fs]
+    labels = {fs[cam]: name for name, fs in frames if cam in fs}
+    found, skipped = _detect_all(files, labels, detect, quiet)
+    views = {f.label: f.view for f in found if f.view is not None}
+    for f in found:
+        if f.view is None:
+            skipped[f.label] = "no board found" + (f": {f.why}" if f.why else "")
+    return views, {f.label: f.size for f in found}, skipped
+
+
+def _check_sizes(cam, views, sizes, frames, skipped) -> tuple[int, int]:
+    """The camera's image size (its most common one); a frame of another size is dropped with a message
+    naming the pair and both sizes."""
+    if not sizes:
+        raise CalibrationError(f"{cam}: none of its images could be read")
+    size = Counter(sizes.values()).most_common(1)[0][0]
+    files = dict((n, fs) for n, fs in frames)
+    for name, s in sizes.items():
+        if s != size:
+            views.pop(name, None)
+            others = ", ".join(f"{c} {Path(f).name}" for c, f in files[name].items() if c != cam)
+            skipped[name] = (f"pair {name}: {cam}'s {Path(files[name][cam]).name} is {s[0]}x{s[1]} but {cam}'s other "
+                             f"images are {size[0]}x{size[1]} (with {others})")
+    return size
+
+
+def run_rig(cfg: RigConfig) -> tuple[object, str]:
+    """Pair, detect, calibrate the rig, assess it, write every file; returns (rig, printed report).
+
+    Raises ValueError / CalibrationError / FileNotFoundError for bad input, before writing anything.
+    """
+    from aicalib_tf.calib.rig import calibrate_rig
+    from aicalib_tf.calib.rig_files import save_rig
+    from aicalib_tf.calib.rig_quality import assess_rig
+    from aicalib_tf.calib.rig_report import format_rig_report, rig_figure
+    from aicalib_tf.calib.workflow import make_detector
+    from aicalib_tf.io import atomic_write_bytes, atomic_write_text, expand_images
+
+    files = {}
+    for name, pattern in cfg.cameras:
+        files[name] = expand_images([pattern])
+        if not files[name]:
+            raise ValueError(f"{name}: no images match {pattern}")
+    pairing = pair_images(files)
+    detect = make_detector(cfg.detector, cfg.pattern, cfg.network)
+    views, sizes, skipped = {}, {}, {}
+    for cam in files:
+        v, s, sk = _detect_camera(cam, pairing.frames, detect, cfg.quiet)
+        sizes[cam] = _check_sizes(cam, v, s, pairing.frames, sk)
+        views[cam] = [v[n] for n, _ in pairing.frames if n in v]
+        skipped.update({f"{cam}/{n}": why for n, why in sk.items()})
+    meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
+            "lens_model": cfg.model, "pairing": pairing.rule, "images": {c: len(f) for c, f in files.items()}}
+    names = list(files)
+    rig = calibrate_rig([views[c] for c in names], cfg.pattern, cfg.square, [sizes[c] for c in names], names=names,
+                        models=cfg.model, square_unit=cfg.square_unit, meta=meta)
+    rig = assess_rig(rig, [views[c] for c in names])
+    report = format_rig_report(rig, pairing, skipped)
+    figure = rig_figure(rig, pairing)
+    out = Path(cfg.out)
+    save_rig(rig, out)
+    atomic_write_bytes(out / "report.png", figure)
+    atomic_write_text(out / "report.txt", report + "\n")
+    return rig, report
