@@ -240,8 +240,8 @@ def undistort_camera_matrix(cal: Calibration, alpha: float = 0.0) -> np.ndarray:
     if lens.model != "equidistant":
         new_K, _ = cv2.getOptimalNewCameraMatrix(lens.K, lens.dist, (w, h), a)
         return np.asarray(new_K, np.float64)
-    half = np.nanmin(np.radians(lens.field_of_view()["horizontal"]) / 2)
-    half = min(float(half) if np.isfinite(half) else np.pi, np.radians(MAX_FISHEYE_HALF_ANGLE_DEG))
+    half = float(np.radians(lens.field_of_view()["horizontal"]) / 2)  # NaN when the edge has no ray
+    half = min(half if np.isfinite(half) else np.pi, np.radians(MAX_FISHEYE_HALF_ANGLE_DEG))
     f1 = 0.5 * w / np.tan(half)
     fx, fy = (1 - a) * lens.fx + a * f1, (1 - a) * lens.fy + a * f1 * lens.fy / lens.fx
     return np.array([[fx, 0.0, (w - 1) / 2], [0.0, fy, (h - 1) / 2], [0.0, 0.0, 1.0]])
