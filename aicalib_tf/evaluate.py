@@ -31,6 +31,10 @@ wrong ids are counted); nothing is a *miss*. Corner errors (median, RMSE, p95) a
 corners of hits. On board-free images any full board is a false board. Calibration: each
 detector's boards of a sequence (partial ones too) -> aicalib_tf.calib.workflow.calibrate_camera ->
 focal error %, principal point px, distortion-field px against the true camera, and RMS.
+Rigs (full suite with calibration, not --quick): the four data_gen rigs of aicalib_tf.bench.rigs
+(two pinholes, pinhole + fisheye, two fisheyes, three cameras; 20 pairs at 1280×960), our rig
+calibration against OpenCV's stereoCalibrate pipeline: baseline and rotation errors against the
+truth and rectified |Δy| in-sample and on held-out pairs (rigs.csv).
 
 Sizes: the full suite renders 100 images per named condition, 32 per sweep level, 30 at
 1920×1080 and 20 views per calibration sequence; --quick renders 6, 3, 2 and 6; --limit N caps
@@ -43,7 +47,8 @@ result and time, pairwise agreement of full boards, and the calibration each det
 consensus board (see aicalib_tf.bench.photos).
 
 Writes into --out (default reports/<YYYYmmdd-HHMMSS>), atomically: results.csv (one row per
-image × detector), summary.csv, calibration.csv, report.md, figures/*.png and config.json.
+image × detector), summary.csv, calibration.csv, rigs.csv (full suite), report.md, figures/*.png and
+config.json.
 Exit codes: 0 done; 2 bad arguments.
 """
 

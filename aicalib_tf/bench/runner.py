@@ -29,8 +29,9 @@ from aicalib_tf.bench.timing import keep_slowest, retime_slowest, time_detector
 
 __all__ = ["DETECTORS", "EvalConfig", "Found", "make_detectors", "time_detector", "score_detection", "run_synthetic", "calibrate_sequences", "run"]
 
-FULL_COUNTS = {"named": 100, "sweep": 32, "hd": 30, "fisheye": 100, "calib_views": 20, "fisheye_sequences": 1}
-QUICK_COUNTS = {"named": 6, "sweep": 3, "hd": 2, "fisheye": 2, "calib_views": 6, "fisheye_sequences": 0}
+FULL_COUNTS = {"named": 100, "sweep": 32, "hd": 30, "fisheye": 100, "calib_views": 20, "fisheye_sequences": 1,
+               "rigs": 1}
+QUICK_COUNTS = {"named": 6, "sweep": 3, "hd": 2, "fisheye": 2, "calib_views": 6, "fisheye_sequences": 0, "rigs": 0}
 
 
 @dataclass(frozen=True)
@@ -280,6 +281,19 @@ def _split_calib(spec: str | None) -> tuple[str | None, bool]:
     return (",".join(rest) if rest else ""), len(rest) < len(items)
 
 
+def run_rigs(seeds: int, model: str = "default", *, progress: bool = True) -> list[dict]:
+    """Every rig of :data:`aicalib_tf.bench.rigs.RIGS` for ``seeds`` seeds, scored against the truth (rigs.csv rows)."""
+    from tqdm import tqdm
+
+    from aicalib_tf.bench.rigs import RIG_PAIRS, RIGS, evaluate_rig
+
+    detectors, _ = make_detectors(["cnn", "opencv"], PATTERN, model, relative=True)
+    rows = []
+    for name, seed in tqdm([(n, s) for n in RIGS for s in range(seeds)], desc="rigs", unit="rig", disable=not progress):
+        rows += evaluate_rig(name, seed, RIG_PAIRS, detectors)
+    return rows
+
+
 def run(cfg: EvalConfig, detectors: dict | None = None, info: dict | None = None, *,
         started: float | None = None) -> Path:
     """Run the evaluation described by ``cfg``; returns the output folder.
@@ -304,6 +318,8 @@ def run(cfg: EvalConfig, detectors: dict | None = None, info: dict | None = None
     spec, with_calib = _split_calib(cfg.conditions)
     conds = select_conditions(spec) if spec != "" else []
     result = run_synthetic(conds, detectors, cfg.counts(), with_calibration=with_calib, progress=not cfg.quiet)
+    if with_calib and cfg.counts().get("rigs") and {"cnn", "opencv"} <= set(detectors):
+        result["rigs"] = run_rigs(cfg.counts()["rigs"], cfg.model, progress=not cfg.quiet)
     result["wall_s"] = time.perf_counter() - t0
     report.write_report(out, cfg, conds, result, info, _versions())
     return out

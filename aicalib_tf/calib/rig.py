@@ -153,7 +153,7 @@ def fit_rig(models, intr, extr, obs, poses, names, *, reject_outliers=True) -> t
     """The joint fit with outlier frames rejected: (fit, observations, group names, group RMS, rejected)."""
     rejected = {}
     fit = rig_adjust(models, obs, intr, extr, poses)
-    max_drop = sum(1 for n in names if not n.endswith(")")) // 3
+    max_drop = sum(len(c) > 1 for c in _group_rms(fit, obs, len(names))[1]) // 3
     while reject_outliers and max_drop > 0:
         rms, cams = _group_rms(fit, obs, len(names))
         shared = [g for g in range(len(names)) if len(cams[g]) > 1]
