@@ -81,8 +81,6 @@ def _parse_args(argv):
 def main(argv: list[str] | None = None) -> int:
     """CLI entry: returns 0 on success, 2 on bad input (message on stderr, no files written)."""
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
-    from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
-
     args = _parse_args(argv)
     if args.model.endswith(".keras") or args.model in ("default", "report"):  # the old meaning of --model
         print(f"note: --model {args.model} names a network; use --network {args.model} (the lens model stays auto)",
@@ -99,38 +97,35 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     if args.rig:
-        return _main_rig(args)
-    try:
-        pattern = check_pattern(parse_pattern(args.pattern))
-        square, unit = parse_square(args.square)
-        cfg = CalibrateConfig(images=tuple(args.images), pattern=pattern, square=square, square_unit=unit,
-                              out=args.out, detector=args.detector, network=args.network,
-                              model="rational_polynomial" if args.rational else args.model, fix_k3=args.fix_k3,
-                              rational=args.rational, resize_policy=args.resize_policy, quiet=args.quiet)
-        cal, report = run(cfg)
-    except (ValueError, FileNotFoundError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    print(report)
-    print(f"wrote {Path(cfg.out) / 'camera.yaml'}, camera.json, camera_info.yaml, report.png")
-    return 0
+        from aicalib_tf.calib.rig_workflow import RigConfig, parse_rig, run_rig
+
+        return _run(lambda: RigConfig(cameras=tuple(parse_rig(args.rig)), **_common(args)), run_rig,
+                    "rig.json, the stereo YAML files, camera_info per camera, report.png")
+    return _run(lambda: CalibrateConfig(images=tuple(args.images), fix_k3=args.fix_k3, rational=args.rational,
+                                        resize_policy=args.resize_policy, **_common(args)), run,
+                "camera.yaml, camera.json, camera_info.yaml, report.png")
 
 
-def _main_rig(args) -> int:
-    from aicalib_tf.calib.rig_workflow import RigConfig, parse_rig, run_rig
+def _common(args) -> dict:
+    """The options one camera and a rig share, parsed (ValueError for a bad --pattern or --square)."""
     from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
 
+    square, unit = parse_square(args.square)
+    return dict(pattern=check_pattern(parse_pattern(args.pattern)), square=square, square_unit=unit, out=args.out,
+                detector=args.detector, network=args.network,
+                model="rational_polynomial" if args.rational else args.model, quiet=args.quiet)
+
+
+def _run(build, run_fn, wrote: str) -> int:
+    """Build the config, run it, print the report: 0, or 2 with one error line for bad input."""
     try:
-        cfg = RigConfig(cameras=tuple(parse_rig(args.rig)), pattern=check_pattern(parse_pattern(args.pattern)),
-                        **dict(zip(("square", "square_unit"), parse_square(args.square))), out=args.out,
-                        detector=args.detector, network=args.network,
-                        model="rational_polynomial" if args.rational else args.model, quiet=args.quiet)
-        _, report = run_rig(cfg)
+        cfg = build()
+        _, report = run_fn(cfg)
     except (ValueError, FileNotFoundError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(report)
-    print(f"wrote {Path(cfg.out) / 'rig.json'}, the stereo YAML files, camera_info per camera, report.png")
+    print(f"wrote {Path(cfg.out)}: {wrote}")
     return 0
 
 
