@@ -24,7 +24,8 @@ A rig (stereo pair or more cameras) takes one NAME=GLOB per camera instead of th
 
 Images are paired by a shared name stem (``left01``/``right01`` -> ``01``, or equal stems), else by
 sorted order when the counts match; the report says which rule it used and lists unpaired files.
-Each camera's lens is chosen as above, then one joint fit refines every lens and the cameras'
+Each camera's lens is chosen as above (or forced: ``--model equidistant`` for all, or one per
+camera: ``--model plumb_bob,equidistant``), then one joint fit refines every lens and the cameras'
 poses; frames whose cameras disagree are rejected with the reason. It writes intrinsics.yml and
 extrinsics.yml (OpenCV's stereo_calib nodes, plus E, F and distortion_model1/2), one ROS
 camera_info per camera with the rectification, rig.json, each camera's own files, report.png
@@ -68,7 +69,8 @@ def _parse_args(argv):
     ap.add_argument("--out", default="calib", help="output folder (default: %(default)s)")
     ap.add_argument("--detector", default="cnn", choices=DETECTORS, help="corner detector (default: %(default)s)")
     ap.add_argument("--model", default="auto",
-                    help=f"lens model: auto (chosen on held-out views) or one of {', '.join(MODELS)} (default: %(default)s)")
+                    help=f"lens model: auto (chosen on held-out views) or one of {', '.join(MODELS)}; with --rig, one "
+                         "for all cameras or a comma list, one per camera (default: %(default)s)")
     ap.add_argument("--network", default="default", help="the cnn detector's network: default, report, or a .keras path (default: %(default)s)")
     ap.add_argument("--fix-k3", action="store_true", help="hold k3 at 0 (pinhole models; narrow lenses, few views)")
     ap.add_argument("--rational", action="store_true", help="the same as --model rational_polynomial")
@@ -89,8 +91,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.rational and args.model not in ("auto", "rational_polynomial"):
         print(f"error: --rational means --model rational_polynomial, but --model is {args.model}", file=sys.stderr)
         return 2
-    if args.model != "auto" and args.model not in MODELS:
-        print(f"error: unknown --model {args.model!r}; choose auto or one of {', '.join(MODELS)}", file=sys.stderr)
+    bad = [m for m in args.model.split(",") if m != "auto" and m not in MODELS]
+    if bad or ("," in args.model and not args.rig):
+        print(f"error: unknown --model {args.model!r}; choose auto or one of {', '.join(MODELS)}"
+              + (" (a comma list, one per camera, goes with --rig)" if not bad else ""), file=sys.stderr)
         return 2
     if bool(args.rig) == bool(args.images):
         print("error: give either images or --rig NAME=GLOB ... (not both)" if args.rig else "error: no images given",

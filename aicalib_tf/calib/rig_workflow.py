@@ -107,7 +107,7 @@ class RigConfig:
     out: str = "rig"
     detector: str = "cnn"
     network: str = "default"
-    model: str = "auto"
+    model: str = "auto"  # one lens model (or auto) for every camera, or a comma list, one per camera
     quiet: bool = False
 
 
@@ -158,6 +158,10 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
         files[name] = expand_images([pattern])
         if not files[name]:
             raise ValueError(f"{name}: no images match {pattern}")
+    names = list(files)
+    models = cfg.model.split(",")
+    if len(models) not in (1, len(names)):
+        raise ValueError(f"--model lists {len(models)} lens models for {len(names)} cameras ({', '.join(names)})")
     pairing = pair_images(files)
     detect = make_detector(cfg.detector, cfg.pattern, cfg.network)
     views, sizes, skipped = {}, {}, {}
@@ -168,9 +172,8 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
         skipped.update({f"{cam}/{n}": why for n, why in sk.items()})
     meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
             "lens_model": cfg.model, "pairing": pairing.rule, "images": {c: len(f) for c, f in files.items()}}
-    names = list(files)
     rig = calibrate_rig([views[c] for c in names], cfg.pattern, cfg.square, [sizes[c] for c in names], names=names,
-                        models=cfg.model, square_unit=cfg.square_unit, meta=meta)
+                        models=models if len(models) > 1 else models[0], square_unit=cfg.square_unit, meta=meta)
     rig = assess_rig(rig, [views[c] for c in names])
     report = format_rig_report(rig, pairing, skipped)
     figure = rig_figure(rig, pairing)

@@ -87,4 +87,9 @@ def test_rig_cli_bad_input(rig_photos, tmp_path, capsys):
     assert main(["--rig", f"cam0={root}/left/*.png", "--pattern", "9x6"]) == 2
     assert "at least two cameras" in capsys.readouterr().err
     assert main(["--rig", f"cam0={root}/left/*.png", f"cam1={root}/right/*.png", str(root), "--pattern", "9x6"]) == 2
+    assert main(["--rig", f"cam0={root}/left/*.png", f"cam1={root}/right/*.png", "--pattern", "9x6",
+                 "--model", "plumb_bob,equidistant,plumb_bob", "--out", str(tmp_path / "o")]) == 2
+    assert "3 lens models for 2 cameras" in capsys.readouterr().err
+    assert main([f"{root}/left/*.png", "--pattern", "9x6", "--model", "plumb_bob,equidistant"]) == 2
+    assert "goes with --rig" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
