@@ -235,11 +235,18 @@ def _versions() -> dict:
 
     v = {"python": platform.python_version(), "numpy": np.__version__, "opencv": cv2.__version__,
          "platform": platform.platform(), "cpu": _cpu_model(), "cpus": os.cpu_count()}
-    for mod in ("tensorflow", "keras", "pandas", "matplotlib"):
-        try:
-            v[mod] = __import__(mod).__version__
-        except ImportError:
-            v[mod] = None
+    from importlib.metadata import PackageNotFoundError, version
+
+    # read from the installed metadata: importing tensorflow for its version costs seconds and memory
+    for mod, dists in (("tensorflow", ("tensorflow", "tensorflow-cpu")), ("keras", ("keras",)),
+                       ("ai-edge-litert", ("ai-edge-litert",)), ("pandas", ("pandas",)), ("matplotlib", ("matplotlib",))):
+        v[mod] = None
+        for dist in dists:
+            try:
+                v[mod] = version(dist)
+                break
+            except PackageNotFoundError:
+                continue
     v.update(_git_state())
     return v
 
