@@ -75,7 +75,25 @@ def test_missing_or_corrupt_tflite_names_the_file_and_the_sha256(tmp_path):
 def test_shipped_tflite_matches_its_recorded_sha256():
     from aicalib_tf.cnn.model import MODELS_DIR, file_sha256
     from aicalib_tf.cnn.runtime import expected_sha256
+    from aicalib_tf.cnn.spec import RUNTIME_FILES
 
-    for name in ("default", "report"):
+    assert set(RUNTIME_FILES) == {"default", "report", "default_int8"}
+    for name in RUNTIME_FILES:
         path = MODELS_DIR / f"{name}.tflite"
         assert file_sha256(path) == expected_sha256(path)
+
+
+@pytest.mark.parametrize("name", ["left01.jpg", "left12.jpg"])
+def test_int8_model_gives_float32_boards(name):
+    """default_int8 (weights and activations int8) finds the same full board, corners within 0.05 px."""
+    from aicalib_tf.cnn.model import load_model
+    from aicalib_tf.detect.pipeline import detect_corners
+    from aicalib_tf.io import load_image
+
+    q = load_model("default_int8")
+    assert q.kind == "map" and q.aicalib_path.endswith("default_int8.tflite")
+    gray = load_image(LEFT / name)
+    a, b = detect_corners(gray, (9, 6), model=load_model("default")), detect_corners(gray, (9, 6), model=q)
+    assert a.complete and b.complete
+    np.testing.assert_array_equal(a.ids, b.ids)
+    assert np.abs(a.corners - b.corners).max() < 0.05

@@ -26,7 +26,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from aicalib_tf.cnn.spec import ARCHITECTURES, MODELS_DIR, PATCH_SIZE, SHIPPED, file_sha256, model_kind
+from aicalib_tf.cnn.spec import ARCHITECTURES, MODELS_DIR, PATCH_SIZE, RUNTIME_FILES, SHIPPED, file_sha256, model_kind
 
 __all__ = [
     "ARCHITECTURES",
@@ -57,6 +57,8 @@ def __getattr__(name: str):
 
 
 def _resolve(weights, backend: str) -> Path:
+    if isinstance(weights, str) and weights in RUNTIME_FILES and weights not in ARCHITECTURES:
+        return MODELS_DIR / f"{weights}.tflite"  # a runtime-only model (default_int8)
     if isinstance(weights, str) and weights in ARCHITECTURES:
         suffix = ".tflite" if backend == "runtime" and weights in SHIPPED else ".keras"
         return MODELS_DIR / f"{weights}{suffix}"
@@ -66,8 +68,9 @@ def _resolve(weights, backend: str) -> Path:
 def load_model(weights: str | os.PathLike = "default", *, compile: bool = False, backend: str = "auto"):
     """Load a trained corner model.
 
-    weights : ``"default"`` or ``"report"`` (the models shipped in ``models/``), or a path to a
-        ``.tflite`` or ``.keras`` file.
+    weights : ``"default"`` or ``"report"`` (the models shipped in ``models/``), ``"default_int8"``
+        (default quantised to int8, runtime only: about 2× faster, the same detections on
+        evaluate's images; see the model card), or a path to a ``.tflite`` or ``.keras`` file.
     backend : ``"auto"`` (a name loads the shipped ``.tflite`` on the LiteRT runtime, a path by
         its suffix), ``"runtime"`` or ``"keras"`` (a name loads ``models/<name>.keras``; for
         training and tests). ``.tflite`` files are checked against their recorded sha256

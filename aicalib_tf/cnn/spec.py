@@ -7,10 +7,13 @@ import hashlib
 import os
 from pathlib import Path
 
-__all__ = ["ARCHITECTURES", "SHIPPED", "PATCH_SIZE", "MODELS_DIR", "model_kind", "file_sha256"]
+__all__ = ["ARCHITECTURES", "SHIPPED", "RUNTIME_FILES", "PATCH_SIZE", "MODELS_DIR", "model_kind", "file_sha256"]
 
 ARCHITECTURES = ("default", "report", "default_v1", "default_c12", "default_c16", "default_pre")
 SHIPPED = ("default", "report")  # the models shipped in models/ as .keras and .tflite
+# every shipped runtime file (models/<name>.tflite) -> the .keras model it is exported from; default_int8 is
+# default post-training quantised to int8 (weights and activations), calibrated on data_gen renders
+RUNTIME_FILES = {"default": "default", "report": "report", "default_int8": "default"}
 PATCH_SIZE = 32
 MODELS_DIR = Path(os.environ.get("AICALIB_MODELS", Path(__file__).resolve().parents[2] / "models"))
 
