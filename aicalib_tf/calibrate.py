@@ -57,6 +57,8 @@ def _parse_args(argv):
     ap.add_argument("--network", default="default", help="the cnn detector's network: default, default_int8 (about 2x faster, int8), report, or a .tflite/.keras path (default: %(default)s)")
     ap.add_argument("--fix-k3", action="store_true", help="hold k3 at 0 (pinhole models; narrow lenses, few views)")
     ap.add_argument("--rational", action="store_true", help="the same as --model rational_polynomial")
+    ap.add_argument("--workers", type=int, default=None,
+                    help="detection processes (default: one per core, but one per 16 images at most)")
     ap.add_argument("--resize-policy", default="error", choices=RESIZE_POLICIES,
                     help="images whose size differs from the most common one (default: %(default)s)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -85,7 +87,8 @@ def main(argv: list[str] | None = None) -> int:
         cfg = CalibrateConfig(images=tuple(args.images), pattern=pattern, square=square, square_unit=unit,
                               out=args.out, detector=args.detector, network=args.network,
                               model="rational_polynomial" if args.rational else args.model, fix_k3=args.fix_k3,
-                              rational=args.rational, resize_policy=args.resize_policy, quiet=args.quiet)
+                              rational=args.rational, resize_policy=args.resize_policy, quiet=args.quiet,
+                              workers=args.workers)
         cal, report = run(cfg)
     except (ValueError, FileNotFoundError) as exc:
         print(f"error: {exc}", file=sys.stderr)
