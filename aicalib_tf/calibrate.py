@@ -90,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
                               rational=args.rational, resize_policy=args.resize_policy, quiet=args.quiet,
                               workers=args.workers)
         cal, report = run(cfg)
-    except (ValueError, FileNotFoundError) as exc:
+    except (ValueError, FileNotFoundError, ImportError) as exc:  # ImportError: a .keras model without TensorFlow
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(report)

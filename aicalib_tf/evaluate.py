@@ -114,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
                          quiet=args.quiet, command="python -m aicalib_tf.evaluate " + " ".join(
                              sys.argv[1:] if argv is None else argv))
         detectors, info = make_detectors(dets, pattern or PATTERN, args.model)  # a bad model is a bad argument
-    except (ValueError, FileNotFoundError) as exc:
+    except (ValueError, FileNotFoundError, ImportError) as exc:  # ImportError: a .keras model without TensorFlow
         print(f"error: {exc}", file=sys.stderr)
         return 2
     folder = run(cfg, detectors, info, started=started)

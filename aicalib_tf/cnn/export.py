@@ -21,16 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from aicalib_tf.cnn.spec import MODELS_DIR, RUNTIME_FILES, file_sha256
+from aicalib_tf.cnn.spec import MODELS_DIR, RUNTIME_FILES, write_sha256
 
 __all__ = ["export_tflite", "write_sha256", "calibration_images", "export_all", "compare_runtime"]
-
-
-def write_sha256(path: Path) -> str:
-    """Write ``<path>.sha256`` (sha256sum's format) and return the hash."""
-    sha = file_sha256(path)
-    Path(str(path) + ".sha256").write_text(f"{sha}  {Path(path).name}\n", encoding="ascii")
-    return sha
 
 
 def calibration_images(n: int = 48, seed: int = 0):

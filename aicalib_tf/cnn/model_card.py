@@ -15,6 +15,7 @@ import json
 import sys
 from pathlib import Path
 
+from aicalib_tf.cnn.spec import write_sha256
 from aicalib_tf.io import atomic_write_bytes, atomic_write_text
 
 __all__ = ["train_command", "card_section", "runtime_section", "with_runtime_section", "main", "RUNTIME_HEADING"]
@@ -157,6 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     sections = []
     for config, metrics, data, log in runs:
         atomic_write_bytes(args.out / f"{config['arch']}.keras", data)
+        write_sha256(args.out / f"{config['arch']}.keras")  # checked on load (aicalib_tf.cnn.spec.check_model_file)
         atomic_write_bytes(args.out / f"{config['arch']}_log.csv", log)
         sections.append(card_section(config, metrics))
     intro = args.intro.read_text() if args.intro else INTRO

@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from aicalib_tf.cnn.spec import check_model_file, expected_sha256
+
 __all__ = ["RuntimeModel", "load_runtime", "expected_sha256", "default_threads", "THREADS_ENV"]
 
 THREADS_ENV = "AICALIB_THREADS"
@@ -42,15 +44,6 @@ def default_threads() -> int:
     if env:
         return max(1, int(env))
     return max(1, min(2, os.cpu_count() or 1))
-
-
-def expected_sha256(path: Path) -> str | None:
-    """The sha256 recorded beside a model file (``<file>.sha256``, first word), or None."""
-    side = Path(str(path) + ".sha256")
-    if not side.is_file():
-        return None
-    text = side.read_text(encoding="ascii", errors="replace").split()
-    return text[0].lower() if text else None
 
 
 class RuntimeModel:
@@ -117,18 +110,9 @@ def load_runtime(path: str | os.PathLike, *, check_sha256: bool = True, num_thre
 
     Raises FileNotFoundError / ValueError with one line naming the file and the expected sha256.
     """
-    from aicalib_tf.cnn.spec import file_sha256
-
     path = Path(path)
-    want = expected_sha256(path)
+    want = check_model_file(path, check_sha256=check_sha256)
     expect = f" (expected sha256 {want})" if want else ""
-    if not path.is_file():
-        raise FileNotFoundError(f"model file not found: {path}{expect}; re-create it with `python -m aicalib_tf.export`")
-    if check_sha256 and want:
-        got = file_sha256(path)
-        if got != want:
-            raise ValueError(f"corrupt model file {path}: sha256 {got}, expected {want}; "
-                             "restore it (git checkout) or re-create it with `python -m aicalib_tf.export`")
     try:
         return RuntimeModel(path, num_threads=num_threads)
     except ValueError:

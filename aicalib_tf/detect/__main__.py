@@ -53,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"no images match {' '.join(args.images)}")
         model = load_model(args.model)
         workers = worker_count(args.workers, len(files))
-    except (ValueError, FileNotFoundError) as exc:
+    except (ValueError, FileNotFoundError, ImportError) as exc:  # ImportError: a .keras model without TensorFlow
         print(f"error: {exc}", file=sys.stderr)
         return 2
     out = Path(args.out)
