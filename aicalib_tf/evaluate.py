@@ -36,6 +36,10 @@ Rigs (full suite with calibration, not --quick): the four data_gen rigs of aical
 calibration against OpenCV's stereoCalibrate pipeline: baseline and rotation errors against the
 truth and rectified |Δy| in-sample and on held-out pairs (rigs.csv).
 
+With ``--workers N`` (default: one per core) N processes render the images, N conditions at a time,
+before any of them is timed; the detectors and their timings stay in this process, one image at a
+time, so the times are those of one detection on an idle machine, whatever N is.
+
 Sizes: the full suite renders 100 images per named condition, 32 per sweep level, 30 at
 1920×1080 and 20 views per calibration sequence; --quick renders 6, 3, 2 and 6; --limit N caps
 every count at N (calibration views at max(3, N)).
@@ -62,6 +66,7 @@ from pathlib import Path
 from aicalib_tf.bench.conditions import PATTERN, select_conditions
 from aicalib_tf.bench.detectors import DETECTORS, make_detectors
 from aicalib_tf.bench.runner import EvalConfig, _split_calib, run
+from aicalib_tf.detect.batch import default_workers
 
 
 def _parse_args(argv):
@@ -71,7 +76,7 @@ def _parse_args(argv):
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default=None, help="output folder (default: reports/<YYYYmmdd-HHMMSS>)")
     ap.add_argument("--quick", action="store_true", help="a small suite (about 2 minutes)")
-    ap.add_argument("--model", default="default", help="the cnn detector's model: default, report or a .keras path")
+    ap.add_argument("--model", default="default", help="the cnn detector's model: default, default_int8, report or a .tflite/.keras path")
     ap.add_argument("--detectors", default=",".join(DETECTORS), help="comma list from %(default)s")
     ap.add_argument("--conditions", default=None, help="comma list of conditions / sweeps / named / sweeps / calib / all")
     ap.add_argument("--limit", type=int, default=None, help="at most N images per condition (tiny runs)")
@@ -79,6 +84,8 @@ def _parse_args(argv):
     ap.add_argument("--pattern", default=None, help="inner corners COLSxROWS for --images, e.g. 9x6")
     ap.add_argument("--degrade", action="store_true", help="with --images: also score seeded degradations of each photo")
     ap.add_argument("--seed", type=int, default=0, help="seed of the --degrade noise (default: %(default)s)")
+    ap.add_argument("--workers", type=int, default=None,
+                    help="processes rendering the images (default: one per core); detection is timed in one process")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     return ap.parse_args(argv)
 
@@ -93,6 +100,8 @@ def main(argv: list[str] | None = None) -> int:
         bad = [d for d in dets if d not in DETECTORS]
         if bad or not dets:
             raise ValueError(f"unknown detector(s) {', '.join(bad) or '(none)'}; choose from {', '.join(DETECTORS)}")
+        if args.workers is not None and args.workers < 1:
+            raise ValueError(f"--workers must be >= 1, got {args.workers}")
         if args.limit is not None and args.limit < 1:
             raise ValueError(f"--limit must be >= 1, got {args.limit}")
         pattern = None
@@ -116,10 +125,10 @@ def main(argv: list[str] | None = None) -> int:
         out = args.out or str(Path("reports") / time.strftime("%Y%m%d-%H%M%S"))
         cfg = EvalConfig(out=out, quick=args.quick, model=args.model, detectors=dets, conditions=args.conditions,
                          limit=args.limit, images=args.images, pattern=pattern, degrade=args.degrade, seed=args.seed,
-                         quiet=args.quiet, command="python -m aicalib_tf.evaluate " + " ".join(
+                         quiet=args.quiet, workers=args.workers or default_workers(), command="python -m aicalib_tf.evaluate " + " ".join(
                              sys.argv[1:] if argv is None else argv))
         detectors, info = make_detectors(dets, pattern or PATTERN, args.model)  # a bad model is a bad argument
-    except (ValueError, FileNotFoundError) as exc:
+    except (ValueError, FileNotFoundError, ImportError) as exc:  # ImportError: a .keras model without TensorFlow
         print(f"error: {exc}", file=sys.stderr)
         return 2
     folder = run(cfg, detectors, info, started=started)

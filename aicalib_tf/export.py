@@ -1,5 +1,6 @@
 """``python -m aicalib_tf.export``: write models/default.tflite and models/report.tflite (and their
-.sha256) from the trained .keras models, optionally an int8 model, and the model card's runtime
+.sha256) from the trained .keras models, models/default_int8.tflite (default quantised to int8,
+calibrated on data_gen images), and the model card's runtime
 section (size, sha256, output difference and speed against Keras); ``--warm`` compiles the numba
 kernels' on-disk caches instead (a first detection then costs no compile). Logic:
 :mod:`aicalib_tf.cnn.export`, :mod:`aicalib_tf.cnn.model_card`, :mod:`aicalib_tf.detect.warm`."""
@@ -11,9 +12,11 @@ import os
 import sys
 
 
+INT8_CHECK_IMAGES = 6  # images per named condition on which the int8 model's detections are compared (as evaluate --quick)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m aicalib_tf.export", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--int8", action="store_true", help="also write models/default_int8.tflite (calibrated on data_gen images)")
     ap.add_argument("--warm", action="store_true", help="only compile the numba caches (detect two synthetic boards), export nothing")
     args = ap.parse_args(argv)
     if args.warm:
@@ -22,20 +25,24 @@ def main(argv: list[str] | None = None) -> int:
         print(f"numba caches ready: one detection in {warm():.2f} s")
         return 0
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+    from aicalib_tf.bench.model_detections import compare_models, verdict_line
     from aicalib_tf.cnn.export import compare_runtime, export_all
     from aicalib_tf.cnn.model_card import runtime_section, with_runtime_section
-    from aicalib_tf.cnn.spec import MODELS_DIR, SHIPPED
+    from aicalib_tf.cnn.spec import MODELS_DIR, RUNTIME_FILES
     from aicalib_tf.io import atomic_write_text
 
     try:
-        for path in export_all(int8=args.int8):
+        for path in export_all():
             print(f"wrote {path} ({path.stat().st_size} bytes)")
-        checks = {name: compare_runtime(name) for name in SHIPPED}
+        checks = {name: compare_runtime(name) for name in RUNTIME_FILES}
+        int8 = verdict_line(compare_models({"float32": "default", "int8": "default_int8"}, INT8_CHECK_IMAGES),
+                            "float32", "int8", INT8_CHECK_IMAGES)
     except (FileNotFoundError, ValueError) as exc:  # a missing or corrupt model, named by the loader
         print(f"error: {exc}", file=sys.stderr)
         return 2
     card = MODELS_DIR / "MODEL_CARD.md"
-    atomic_write_text(card, with_runtime_section(card.read_text(encoding="utf-8"), runtime_section(MODELS_DIR, checks)))
+    atomic_write_text(card, with_runtime_section(card.read_text(encoding="utf-8"), runtime_section(MODELS_DIR, checks, int8)))
+    print(f"int8: {int8}")
     print(f"updated {card}: " + "; ".join(f"{n} max diff {c['max_abs_diff']:.1e}, {c['runtime_ms']:.2f} ms "
                                          f"(Keras {c['keras_ms']:.2f} ms)" for n, c in checks.items()))
     return 0

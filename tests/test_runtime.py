@@ -75,7 +75,60 @@ def test_missing_or_corrupt_tflite_names_the_file_and_the_sha256(tmp_path):
 def test_shipped_tflite_matches_its_recorded_sha256():
     from aicalib_tf.cnn.model import MODELS_DIR, file_sha256
     from aicalib_tf.cnn.runtime import expected_sha256
+    from aicalib_tf.cnn.spec import RUNTIME_FILES
 
-    for name in ("default", "report"):
+    assert set(RUNTIME_FILES) == {"default", "report", "default_int8"}
+    for name in RUNTIME_FILES:
         path = MODELS_DIR / f"{name}.tflite"
         assert file_sha256(path) == expected_sha256(path)
+
+
+@pytest.mark.parametrize("name", ["left01.jpg", "left12.jpg"])
+def test_int8_model_gives_float32_boards(name):
+    """default_int8 (weights and activations int8) finds the same full board, corners within 0.05 px."""
+    from aicalib_tf.cnn.model import load_model
+    from aicalib_tf.detect.pipeline import detect_corners
+    from aicalib_tf.io import load_image
+
+    q = load_model("default_int8")
+    assert q.kind == "map" and q.aicalib_path.endswith("default_int8.tflite")
+    gray = load_image(LEFT / name)
+    a, b = detect_corners(gray, (9, 6), model=load_model("default")), detect_corners(gray, (9, 6), model=q)
+    assert a.complete and b.complete
+    np.testing.assert_array_equal(a.ids, b.ids)
+    assert np.abs(a.corners - b.corners).max() < 0.05
+
+
+def test_missing_or_corrupt_keras_names_the_file_and_the_sha256(tmp_path):
+    from aicalib_tf.cnn.model import MODELS_DIR, load_model
+    from aicalib_tf.cnn.spec import expected_sha256
+
+    want = expected_sha256(MODELS_DIR / "default.keras")
+    assert want and len(want) == 64
+    bad = tmp_path / "default.keras"
+    bad.write_bytes((MODELS_DIR / "default.keras").read_bytes()[:-10] + b"0123456789")
+    (tmp_path / "default.keras.sha256").write_text(f"{want}  default.keras\n")
+    with pytest.raises(ValueError, match=f"corrupt model file {bad}: sha256 [0-9a-f]{{64}}, expected {want}; restore"):
+        load_model(bad)
+    bad.unlink()
+    with pytest.raises(FileNotFoundError, match=f"model file not found: {bad} \\(expected sha256 {want}\\)"):
+        load_model(bad)
+
+
+def test_a_keras_model_without_tensorflow_says_what_to_install(tmp_path):
+    """TensorFlow and Keras blocked from importing: loading a .keras model, and the CLI, say what to install."""
+    block = "import sys; sys.modules['tensorflow'] = None; sys.modules['keras'] = None\n"
+    code = block + (
+        "from aicalib_tf.cnn.model import load_model\n"
+        "try:\n"
+        "    load_model('default', backend='keras')\n"
+        "except ImportError as exc:\n"
+        "    print(exc)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert "default.keras" in out.stdout and "pip install 'tensorflow-cpu" in out.stdout
+    cli = block + ("import sys; from aicalib_tf.detect.__main__ import main\n"
+                   f"sys.exit(main([{str(LEFT / 'left01.jpg')!r}, '--pattern', '9x6', '--out', {str(tmp_path)!r}, "
+                   "'--model', 'models/default.keras']))\n")
+    out = subprocess.run([sys.executable, "-c", cli], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert out.returncode == 2 and out.stderr.count("\n") == 1 and "pip install 'tensorflow-cpu" in out.stderr

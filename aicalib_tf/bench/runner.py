@@ -26,6 +26,7 @@ from aicalib_tf.bench.conditions import (
 from aicalib_tf.bench.detectors import DETECTORS, Found, make_detectors, score_detection
 from aicalib_tf.bench.metrics import calibration_errors
 from aicalib_tf.bench.timing import keep_slowest, retime_slowest, time_detector
+from aicalib_tf.detect.batch import worker_pool
 
 __all__ = ["DETECTORS", "EvalConfig", "Found", "make_detectors", "time_detector", "score_detection", "run_synthetic", "calibrate_sequences", "run"]
 
@@ -50,6 +51,7 @@ class EvalConfig:
     seed: int = 0
     quiet: bool = False
     command: str = ""
+    workers: int = 1  # processes rendering the synthetic images (detection and timing stay in one process)
 
     def counts(self) -> dict:
         """Images per named condition, per sweep level, at 1920×1080, per fisheye condition, views per
@@ -80,13 +82,15 @@ def _warm_up(detectors: dict, size: tuple[int, int]) -> None:
 
 
 def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *, with_calibration: bool = True,
-                  progress: bool = True) -> dict:
+                  progress: bool = True, workers: int = 1) -> dict:
     """Run every detector on every image of ``conditions`` (and the calibration sequences).
 
     counts : see :meth:`EvalConfig.counts`. Returns {"rows": [dict per image × detector],
     "errors": {(condition, detector): [(K,) px arrays]}, "examples": [hardest images],
     "calibration": [dict per sequence × detector], "render_s": seconds spent rendering}.
-    Each detector's slowest images are timed again at the end (:func:`retime_slowest`).
+    Each detector's slowest images are timed again at the end (:func:`retime_slowest`). workers :
+    processes rendering the images (``workers`` conditions at a time, before any of them is timed;
+    detection and timing stay in this process, one image at a time).
     """
     from tqdm import tqdm
 
@@ -103,23 +107,18 @@ def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *,
     render_s = 0.0
     slowest = {}  # (detector, W, H) -> the slowest images so far, timed again at the end
     warm = set()  # image sizes (W, H) the detectors have been warmed up at
-    for cond in conditions:
-        if tuple(cond.size) not in warm:
-            _warm_up(detectors, cond.size)
-            warm.add(tuple(cond.size))
-        # a condition's images are all rendered before any is timed: rendering between detections
-        # (large numpy and OpenCV passes) would leave caches and thread pools cold for the next one
-        t0 = time.perf_counter()
-        samples = list(condition_samples(cond, n_for(cond)))
-        render_s += time.perf_counter() - t0
-        for index, s in samples:
-            img_rows, found_by = _detect_sample(cond.name, cond, index, s, detectors, rows, errors)
-            keep_slowest(slowest, img_rows, s.image)
-            score = _difficulty(img_rows)
-            group = cond.sweep or cond.name  # one example per named condition or sweep
-            if score > 0 and score > hardest.get(group, (0,))[0]:
-                hardest[group] = (score, cond.name, index, s.image, s.corners if cond.has_board else None, found_by)
-            bar.update(1)
+    with worker_pool(_renderer, workers=workers) as render:
+        for start in range(0, len(conditions), workers):
+            group = conditions[start:start + workers]
+            # a condition's images are all rendered before any is timed: rendering between detections
+            # (large numpy and OpenCV passes) would leave caches and thread pools cold for the next one;
+            # with workers, ``workers`` conditions are rendered at once, one per process, and nothing
+            # runs beside the timed detections
+            t0 = time.perf_counter()
+            rendered = list(render([(c, n_for(c)) for c in group]))
+            render_s += time.perf_counter() - t0
+            for cond, samples in zip(group, rendered):
+                _detect_condition(cond, samples, detectors, warm, rows, errors, slowest, hardest, bar)
     calib = []
     if with_calibration:
         t0 = time.perf_counter()
@@ -132,6 +131,26 @@ def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *,
     retime_slowest(slowest, detectors)
     examples = sorted(hardest.values(), key=lambda h: -h[0])[:6]
     return {"rows": rows, "errors": errors, "examples": examples, "calibration": calib, "render_s": render_s}
+
+
+def _renderer():
+    """Render one condition's images: ``(condition, count) -> [(index, Sample)]`` (a worker's setup)."""
+    return lambda job: list(condition_samples(*job))
+
+
+def _detect_condition(cond: Condition, samples, detectors: dict, warm: set, rows, errors, slowest, hardest, bar) -> None:
+    """Every detector on a condition's rendered images (warmed up first at a new size), kept in the run's records."""
+    if tuple(cond.size) not in warm:
+        _warm_up(detectors, cond.size)
+        warm.add(tuple(cond.size))
+    for index, s in samples:
+        img_rows, found_by = _detect_sample(cond.name, cond, index, s, detectors, rows, errors)
+        keep_slowest(slowest, img_rows, s.image)
+        score = _difficulty(img_rows)
+        group = cond.sweep or cond.name  # one example per named condition or sweep
+        if score > 0 and score > hardest.get(group, (0,))[0]:
+            hardest[group] = (score, cond.name, index, s.image, s.corners if cond.has_board else None, found_by)
+        bar.update(1)
 
 
 def _detect_sample(name: str, cond: Condition | None, index: int, s, detectors: dict, rows: list, errors: dict):
@@ -236,11 +255,18 @@ def _versions() -> dict:
 
     v = {"python": platform.python_version(), "numpy": np.__version__, "opencv": cv2.__version__,
          "platform": platform.platform(), "cpu": _cpu_model(), "cpus": os.cpu_count()}
-    for mod in ("tensorflow", "keras", "pandas", "matplotlib"):
-        try:
-            v[mod] = __import__(mod).__version__
-        except ImportError:
-            v[mod] = None
+    from importlib.metadata import PackageNotFoundError, version
+
+    # read from the installed metadata: importing tensorflow for its version costs seconds and memory
+    for mod, dists in (("tensorflow", ("tensorflow", "tensorflow-cpu")), ("keras", ("keras",)),
+                       ("ai-edge-litert", ("ai-edge-litert",)), ("pandas", ("pandas",)), ("matplotlib", ("matplotlib",))):
+        v[mod] = None
+        for dist in dists:
+            try:
+                v[mod] = version(dist)
+                break
+            except PackageNotFoundError:
+                continue
     v.update(_git_state())
     return v
 
@@ -317,7 +343,8 @@ def run(cfg: EvalConfig, detectors: dict | None = None, info: dict | None = None
         return out
     spec, with_calib = _split_calib(cfg.conditions)
     conds = select_conditions(spec) if spec != "" else []
-    result = run_synthetic(conds, detectors, cfg.counts(), with_calibration=with_calib, progress=not cfg.quiet)
+    result = run_synthetic(conds, detectors, cfg.counts(), with_calibration=with_calib, progress=not cfg.quiet,
+                           workers=cfg.workers)
     if with_calib and cfg.counts().get("rigs") and {"cnn", "opencv"} <= set(detectors):
         result["rigs"] = run_rigs(cfg.counts()["rigs"], cfg.model, progress=not cfg.quiet)
     result["wall_s"] = time.perf_counter() - t0

@@ -109,15 +109,16 @@ class RigConfig:
     network: str = "default"
     model: str = "auto"  # one lens model (or auto) for every camera, or a comma list, one per camera
     quiet: bool = False
+    workers: int | None = None  # detection processes (None: aicalib_tf.detect.batch's default)
 
 
-def _detect_camera(cam, frames, detect, quiet) -> tuple[dict, dict, dict]:
+def _detect_camera(cam, frames, cfg: RigConfig) -> tuple[dict, dict, dict]:
     """({frame: View}, {frame: (w, h)}, {frame: why skipped}) of one camera."""
     from aicalib_tf.calib.workflow import _detect_all
 
     files = [fs[cam] for _, fs in frames if cam in fs]
     labels = {fs[cam]: name for name, fs in frames if cam in fs}
-    found, skipped = _detect_all(files, labels, detect, quiet)
+    found, skipped = _detect_all(files, labels, cfg)
     views = {f.label: f.view for f in found if f.view is not None}
     for f in found:
         if f.view is None:
@@ -163,10 +164,10 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
     if len(models) not in (1, len(names)):
         raise ValueError(f"--model lists {len(models)} lens models for {len(names)} cameras ({', '.join(names)})")
     pairing = pair_images(files)
-    detect = make_detector(cfg.detector, cfg.pattern, cfg.network)
+    detect = make_detector(cfg.detector, cfg.pattern, cfg.network)  # a bad network fails here, before any work
     views, sizes, skipped = {}, {}, {}
     for cam in files:
-        v, s, sk = _detect_camera(cam, pairing.frames, detect, cfg.quiet)
+        v, s, sk = _detect_camera(cam, pairing.frames, cfg)
         sizes[cam] = _check_sizes(cam, v, s, pairing.frames, sk)
         views[cam] = [v[n] for n, _ in pairing.frames if n in v]
         skipped.update({f"{cam}/{n}": why for n, why in sk.items()})

@@ -90,6 +90,7 @@ class CalibrateConfig:
     rational: bool = False
     resize_policy: str = "error"
     quiet: bool = False
+    workers: int | None = None  # detection processes (None: aicalib_tf.detect.batch.worker_count's default)
 
 
 @dataclass
@@ -107,22 +108,38 @@ def _labels(files: list[str]) -> dict[str, str]:
     return {f: Path(f).name if counts[Path(f).name] == 1 else f for f in files}
 
 
-def _detect_all(files: list[str], labels: dict[str, str], detect, quiet: bool) -> tuple[list[_Found], dict[str, str]]:
-    from tqdm import tqdm
-
+def _file_detector(name: str, pattern: tuple[int, int], network: str):
+    """``file -> (size (w, h), (corners, ids) or None, why, relative)`` or the ImageError's text, with
+    the detector made once (the setup of :func:`aicalib_tf.detect.batch.map_images`)."""
     from aicalib_tf.io import ImageError, load_image
 
-    found, skipped = [], {}
-    for f in tqdm(files, desc="detect", unit="img", disable=quiet):
+    detect = make_detector(name, pattern, network)
+
+    def work(f):
         try:
             gray = load_image(f)
         except ImageError as exc:
-            skipped[labels[f]] = str(exc).removeprefix(f"{f}: ")
-            continue
-        h, w = gray.shape
+            return str(exc)
         hit = detect(gray)
-        found.append(_Found(labels[f], f, (w, h), View(labels[f], *hit, relative=detect.relative) if hit is not None else None,
-                            "" if hit is not None else detect.why))
+        return gray.shape[::-1], hit, detect.why, detect.relative
+    return work
+
+
+def _detect_all(files: list[str], labels: dict[str, str], cfg: "CalibrateConfig") -> tuple[list[_Found], dict[str, str]]:
+    """Detect every file (in ``cfg.workers`` processes; :mod:`aicalib_tf.detect.batch`), in order."""
+    from tqdm import tqdm
+
+    from aicalib_tf.detect.batch import map_images
+
+    found, skipped = [], {}
+    results = map_images(files, _file_detector, (cfg.detector, cfg.pattern, cfg.network), workers=cfg.workers)
+    for f, res in zip(files, tqdm(results, total=len(files), desc="detect", unit="img", disable=cfg.quiet)):
+        if isinstance(res, str):
+            skipped[labels[f]] = res.removeprefix(f"{f}: ")
+            continue
+        size, hit, why, relative = res
+        found.append(_Found(labels[f], f, size, View(labels[f], *hit, relative=relative) if hit is not None else None,
+                            "" if hit is not None else why))
     return found, skipped
 
 
@@ -220,9 +237,9 @@ def run(cfg: CalibrateConfig) -> tuple[Calibration, str]:
         raise ValueError(f"--resize-policy must be one of {', '.join(RESIZE_POLICIES)}, got {cfg.resize_policy!r}")
     if cfg.model != "auto" and cfg.model not in LENS_MODELS:
         raise ValueError(f"--model must be auto or one of {', '.join(LENS_MODELS)}, got {cfg.model!r}")
-    detect = make_detector(cfg.detector, cfg.pattern, cfg.network)
+    detect = make_detector(cfg.detector, cfg.pattern, cfg.network)  # a bad network fails here, before any work
     labels = _labels(files)
-    found, skipped = _detect_all(files, labels, detect, cfg.quiet)
+    found, skipped = _detect_all(files, labels, cfg)
     if not found:
         raise CalibrationError(f"none of the {len(files)} images could be read")
     found, size = _apply_size_policy(found, cfg.resize_policy, skipped)

@@ -4,8 +4,8 @@
 runtime resizes the input tensor per image), ``report.keras`` -> ``report.tflite`` (float32, a
 batch of (32, 32, 1) patches). Each file gets ``<file>.sha256`` beside it, which the runtime
 checks on load. Path: Keras -> SavedModel (``model.export``) -> ``tf.lite.TFLiteConverter``,
-TFLite builtin ops only. Optionally an int8 model (weights and activations, float input and
-output), calibrated on data_gen renders (:func:`calibration_images`).
+TFLite builtin ops only. ``default_int8.tflite`` is ``default`` quantised to int8 (weights and
+activations, float input and output), calibrated on data_gen renders (:func:`calibration_images`).
 
 :func:`compare_runtime` measures each export against its Keras model (largest output difference,
 ms per call); ``python -m aicalib_tf.export`` writes that into ``models/MODEL_CARD.md``.
@@ -21,16 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from aicalib_tf.cnn.spec import MODELS_DIR, file_sha256
+from aicalib_tf.cnn.spec import MODELS_DIR, RUNTIME_FILES, write_sha256
 
 __all__ = ["export_tflite", "write_sha256", "calibration_images", "export_all", "compare_runtime"]
-
-
-def write_sha256(path: Path) -> str:
-    """Write ``<path>.sha256`` (sha256sum's format) and return the hash."""
-    sha = file_sha256(path)
-    Path(str(path) + ".sha256").write_text(f"{sha}  {Path(path).name}\n", encoding="ascii")
-    return sha
 
 
 def calibration_images(n: int = 48, seed: int = 0):
@@ -73,12 +66,11 @@ def export_tflite(keras_path: Path, out: Path, *, int8: bool = False, images=Non
     return out
 
 
-def export_all(models_dir: Path = MODELS_DIR, *, int8: bool = False) -> list[Path]:
-    """Export default and report (and ``default_int8.tflite`` with ``int8``); returns the files."""
-    out = [export_tflite(models_dir / f"{n}.keras", models_dir / f"{n}.tflite") for n in ("default", "report")]
-    if int8:
-        out.append(export_tflite(models_dir / "default.keras", models_dir / "default_int8.tflite", int8=True))
-    return out
+def export_all(models_dir: Path = MODELS_DIR) -> list[Path]:
+    """Export every runtime file of :data:`~aicalib_tf.cnn.spec.RUNTIME_FILES` (default, report, and
+    default_int8, quantised on :func:`calibration_images`); returns the files."""
+    return [export_tflite(models_dir / f"{keras}.keras", models_dir / f"{name}.tflite", int8=name.endswith("_int8"))
+            for name, keras in RUNTIME_FILES.items()]
 
 
 def _median_ms(fn, inputs, repeat: int = 3) -> float:
@@ -96,7 +88,8 @@ def _median_ms(fn, inputs, repeat: int = 3) -> float:
 
 
 def compare_runtime(name: str, models_dir: Path = MODELS_DIR, *, n: int = 8) -> dict:
-    """How ``models/<name>.tflite`` on the runtime compares with ``<name>.keras`` (float32).
+    """How ``models/<name>.tflite`` on the runtime compares with the ``.keras`` model it is exported
+    from (:data:`~aicalib_tf.cnn.spec.RUNTIME_FILES`; float32).
 
     The corner-map model runs on ``n`` data_gen images (:func:`calibration_images`), the patch
     classifier on batches of 256 patches cut from them at random places. Returns {"inputs":
@@ -107,7 +100,7 @@ def compare_runtime(name: str, models_dir: Path = MODELS_DIR, *, n: int = 8) -> 
     from aicalib_tf.cnn.model import load_model
     from aicalib_tf.cnn.spec import PATCH_SIZE, model_kind
 
-    keras_model = load_model(models_dir / f"{name}.keras")
+    keras_model = load_model(models_dir / f"{RUNTIME_FILES[name]}.keras")
     runtime = load_model(models_dir / f"{name}.tflite")
     images = list(calibration_images(n))
     if model_kind(keras_model) == "map":

@@ -26,7 +26,16 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from aicalib_tf.cnn.spec import ARCHITECTURES, MODELS_DIR, PATCH_SIZE, SHIPPED, file_sha256, model_kind
+from aicalib_tf.cnn.spec import (
+    ARCHITECTURES,
+    MODELS_DIR,
+    PATCH_SIZE,
+    RUNTIME_FILES,
+    SHIPPED,
+    check_model_file,
+    file_sha256,
+    model_kind,
+)
 
 __all__ = [
     "ARCHITECTURES",
@@ -57,6 +66,8 @@ def __getattr__(name: str):
 
 
 def _resolve(weights, backend: str) -> Path:
+    if isinstance(weights, str) and weights in RUNTIME_FILES and weights not in ARCHITECTURES:
+        return MODELS_DIR / f"{weights}.tflite"  # a runtime-only model (default_int8)
     if isinstance(weights, str) and weights in ARCHITECTURES:
         suffix = ".tflite" if backend == "runtime" and weights in SHIPPED else ".keras"
         return MODELS_DIR / f"{weights}{suffix}"
@@ -66,12 +77,14 @@ def _resolve(weights, backend: str) -> Path:
 def load_model(weights: str | os.PathLike = "default", *, compile: bool = False, backend: str = "auto"):
     """Load a trained corner model.
 
-    weights : ``"default"`` or ``"report"`` (the models shipped in ``models/``), or a path to a
-        ``.tflite`` or ``.keras`` file.
+    weights : ``"default"`` or ``"report"`` (the models shipped in ``models/``), ``"default_int8"``
+        (default quantised to int8, runtime only: about 2× faster, the same detections on
+        evaluate's images; see the model card), or a path to a ``.tflite`` or ``.keras`` file.
     backend : ``"auto"`` (a name loads the shipped ``.tflite`` on the LiteRT runtime, a path by
         its suffix), ``"runtime"`` or ``"keras"`` (a name loads ``models/<name>.keras``; for
-        training and tests). ``.tflite`` files are checked against their recorded sha256
-        (``<file>.sha256``); ``.keras`` files load with ``safe_mode=True`` and import TensorFlow.
+        training and tests). Both kinds of file are checked against their recorded sha256
+        (``<file>.sha256``, when there is one); ``.keras`` files load with ``safe_mode=True`` and
+        import TensorFlow.
     Returns a :class:`aicalib_tf.cnn.runtime.RuntimeModel` or a ``keras.Model``, either with
     ``aicalib_path``. Raises ``FileNotFoundError`` for a missing file and ``ValueError`` for a
     corrupt or incompatible one, in one line naming the path (and the expected sha256), and
@@ -86,9 +99,7 @@ def load_model(weights: str | os.PathLike = "default", *, compile: bool = False,
         from aicalib_tf.cnn.runtime import load_runtime
 
         return load_runtime(path)
-    if not path.is_file():
-        hint = "" if path.suffix == ".keras" else " (expected a .tflite or .keras file)"
-        raise FileNotFoundError(f"model file not found: {path}{hint}")
+    check_model_file(path)  # missing, or not the file recorded in <file>.sha256: one line naming both
     try:
         from aicalib_tf.cnn.keras_model import load_keras
     except ImportError as exc:

@@ -15,6 +15,7 @@ import json
 import sys
 from pathlib import Path
 
+from aicalib_tf.cnn.spec import write_sha256
 from aicalib_tf.io import atomic_write_bytes, atomic_write_text
 
 __all__ = ["train_command", "card_section", "runtime_section", "with_runtime_section", "main", "RUNTIME_HEADING"]
@@ -98,14 +99,17 @@ def card_section(config: dict, metrics: dict) -> str:
     ])
 
 
-def runtime_section(models_dir: Path, checks: dict) -> str:
+def runtime_section(models_dir: Path, checks: dict, int8_detections: str = "") -> str:
     """The card's section on the shipped .tflite files: each one's size, sha256 and ``checks[name]``
-    (:func:`aicalib_tf.cnn.export.compare_runtime`: output difference and speed against Keras)."""
+    (:func:`aicalib_tf.cnn.export.compare_runtime`: output difference and speed against Keras);
+    ``int8_detections``: the int8 model's detections against float32, one sentence
+    (:func:`aicalib_tf.bench.model_detections.verdict_line`)."""
     from aicalib_tf.cnn.spec import file_sha256
 
     lines = [RUNTIME_HEADING, "",
              "Written by `python -m aicalib_tf.export` (Keras -> SavedModel -> `tf.lite.TFLiteConverter`, float32, "
-             "TFLite builtin ops) and run by `aicalib_tf.cnn.runtime` on `ai_edge_litert`'s interpreter, which "
+             "TFLite builtin ops; `default_int8` quantised to int8 in weights and activations, float input and output, "
+             "calibrated on 48 data_gen renders of every preset) and run by `aicalib_tf.cnn.runtime` on `ai_edge_litert`'s interpreter, which "
              "checks each file against its `<file>.sha256` on load. Compared with the `.keras` model on this "
              "machine when exported:", ""]
     for name, c in checks.items():
@@ -114,8 +118,11 @@ def runtime_section(models_dir: Path, checks: dict) -> str:
                   f"largest output difference {c['max_abs_diff']:.1e}, {c['runtime_ms']:.2f} ms per call against "
                   f"{c['keras_ms']:.2f} ms for Keras (median)."]
     lines += ["", "`tests/test_runtime.py` checks that detection with the runtime gives the Keras model's ids and "
-              "corners within 1e-3 px on three real photos. No int8 model ships.", ""]
-    return "\n".join(lines)
+              "corners within 1e-3 px on three real photos."]
+    if int8_detections:
+        lines += ["", "`default_int8.tflite` is an option (`load_model(\"default_int8\")`, `--model default_int8` on the "
+                  "command lines); the default stays float32. Detections, " + int8_detections + "."]
+    return "\n".join(lines + [""])
 
 
 def with_runtime_section(card: str, section: str) -> str:
@@ -151,6 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     sections = []
     for config, metrics, data, log in runs:
         atomic_write_bytes(args.out / f"{config['arch']}.keras", data)
+        write_sha256(args.out / f"{config['arch']}.keras")  # checked on load (aicalib_tf.cnn.spec.check_model_file)
         atomic_write_bytes(args.out / f"{config['arch']}_log.csv", log)
         sections.append(card_section(config, metrics))
     intro = args.intro.read_text() if args.intro else INTRO

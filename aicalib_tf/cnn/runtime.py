@@ -6,8 +6,13 @@ any H×W input) and ``models/report.tflite`` (the patch classifier), each with i
 ``ai_edge_litert.interpreter.Interpreter`` (XNNPACK, float32): it matches the Keras model to
 about 1e-6 in corner weight and gives the same detections (measured in models/MODEL_CARD.md).
 
-One interpreter serves every input size: a new size resizes its input tensor and re-plans
-(``allocate_tensors``, about 0.1 ms for this 25k-parameter net), the same size reuses the plan.
+One interpreter per input shape, the ``MAX_SHAPES`` most recently used kept (at most
+``MAX_PIXELS`` input values together, the newest always): re-planning an
+interpreter for a new size (``resize_tensor_input`` and ``allocate_tensors``, which re-applies the
+XNNPACK delegate) costs 10–30 ms at 640×480 on this project's 2-core CPU, more than the 8 ms call
+itself, while a new interpreter costs about 0.5 ms. A stream of one image size alternating with
+zoomed regions (:mod:`aicalib_tf.detect.zoom`) or a pyramid's scales then never re-plans the
+image size's interpreter.
 Threads: ``AICALIB_THREADS`` if set, else 2 where the machine has two or more cores (measured on
 this project's 2-core CPU: 640×480 11.4 ms on 2 threads against 17.8 ms on 1; 1920×1080 62 against
 119 ms). A process pool of detection workers sets it to 1 per worker.
@@ -19,13 +24,18 @@ from __future__ import annotations
 
 import os
 import threading
+from collections import OrderedDict
 from pathlib import Path
 
 import numpy as np
 
+from aicalib_tf.cnn.spec import check_model_file, expected_sha256
+
 __all__ = ["RuntimeModel", "load_runtime", "expected_sha256", "default_threads", "THREADS_ENV"]
 
 THREADS_ENV = "AICALIB_THREADS"
+MAX_SHAPES = 4  # interpreters kept per model, one per input shape, least recently used dropped first
+MAX_PIXELS = 4_000_000  # and together planned for at most this many input values (each holds its activations)
 
 
 def default_threads() -> int:
@@ -34,15 +44,6 @@ def default_threads() -> int:
     if env:
         return max(1, int(env))
     return max(1, min(2, os.cpu_count() or 1))
-
-
-def expected_sha256(path: Path) -> str | None:
-    """The sha256 recorded beside a model file (``<file>.sha256``, first word), or None."""
-    side = Path(str(path) + ".sha256")
-    if not side.is_file():
-        return None
-    text = side.read_text(encoding="ascii", errors="replace").split()
-    return text[0].lower() if text else None
 
 
 class RuntimeModel:
@@ -57,10 +58,11 @@ class RuntimeModel:
 
         self.aicalib_path = str(path)
         self.num_threads = num_threads or default_threads()
-        self._interp = Interpreter(model_path=str(path), num_threads=self.num_threads)
+        self._new = lambda: Interpreter(model_path=str(path), num_threads=self.num_threads)
+        first = self._new()
         self._lock = threading.Lock()  # an interpreter runs one call at a time
-        inp = self._interp.get_input_details()[0]
-        out = self._interp.get_output_details()[0]
+        inp = first.get_input_details()[0]
+        out = first.get_output_details()[0]
         self._in, self._out = inp["index"], out["index"]
         sig = tuple(int(v) for v in inp.get("shape_signature", inp["shape"]))
         if len(sig) == 4 and sig[3] == 1 and sig[1] == -1 and len(out["shape"]) == 4 and out["shape"][3] == 3:
@@ -69,7 +71,8 @@ class RuntimeModel:
             self.kind = "patch"
         else:
             raise ValueError(f"incompatible model {path}: input {sig}, output {tuple(out['shape'])}")
-        self._shape: tuple | None = None
+        self._by_shape: OrderedDict[tuple, object] = OrderedDict()  # input shape -> interpreter planned for it
+        self._spare = first  # not planned yet: serves the first shape
         self.name = Path(path).stem
 
     def __repr__(self) -> str:
@@ -79,13 +82,27 @@ class RuntimeModel:
         """The raw network on a float32 batch ``x`` (standardised input); returns a fresh array."""
         x = np.ascontiguousarray(x, dtype=np.float32)
         with self._lock:
-            if x.shape != self._shape:
-                self._interp.resize_tensor_input(self._in, list(x.shape), strict=False)
-                self._interp.allocate_tensors()
-                self._shape = x.shape
-            self._interp.set_tensor(self._in, x)
-            self._interp.invoke()
-            return self._interp.get_tensor(self._out).copy()
+            interp = self._interpreter(x.shape)
+            interp.set_tensor(self._in, x)
+            interp.invoke()
+            return interp.get_tensor(self._out).copy()
+
+    def _interpreter(self, shape: tuple):
+        """The interpreter planned for input ``shape`` (made and planned on first use; LRU of ``MAX_SHAPES``)."""
+        interp = self._by_shape.pop(shape, None)
+        if interp is None:
+            interp, self._spare = self._spare or self._new(), None
+            interp.resize_tensor_input(self._in, list(shape), strict=False)
+            interp.allocate_tensors()
+        self._by_shape[shape] = interp
+        while len(self._by_shape) > 1 and (len(self._by_shape) > MAX_SHAPES or sum(
+                int(np.prod(k)) for k in self._by_shape) > MAX_PIXELS):
+            self._by_shape.popitem(last=False)
+        return interp
+
+    def planned_shapes(self) -> list[tuple]:
+        """The input shapes with a planned interpreter kept, least recently used first."""
+        return list(self._by_shape)
 
 
 def load_runtime(path: str | os.PathLike, *, check_sha256: bool = True, num_threads: int | None = None) -> RuntimeModel:
@@ -93,18 +110,9 @@ def load_runtime(path: str | os.PathLike, *, check_sha256: bool = True, num_thre
 
     Raises FileNotFoundError / ValueError with one line naming the file and the expected sha256.
     """
-    from aicalib_tf.cnn.spec import file_sha256
-
     path = Path(path)
-    want = expected_sha256(path)
+    want = check_model_file(path, check_sha256=check_sha256)
     expect = f" (expected sha256 {want})" if want else ""
-    if not path.is_file():
-        raise FileNotFoundError(f"model file not found: {path}{expect}; re-create it with `python -m aicalib_tf.export`")
-    if check_sha256 and want:
-        got = file_sha256(path)
-        if got != want:
-            raise ValueError(f"corrupt model file {path}: sha256 {got}, expected {want}; "
-                             "restore it (git checkout) or re-create it with `python -m aicalib_tf.export`")
     try:
         return RuntimeModel(path, num_threads=num_threads)
     except ValueError:

@@ -7,10 +7,14 @@ import hashlib
 import os
 from pathlib import Path
 
-__all__ = ["ARCHITECTURES", "SHIPPED", "PATCH_SIZE", "MODELS_DIR", "model_kind", "file_sha256"]
+__all__ = ["ARCHITECTURES", "SHIPPED", "RUNTIME_FILES", "PATCH_SIZE", "MODELS_DIR", "model_kind", "file_sha256",
+           "expected_sha256", "check_model_file", "write_sha256"]
 
 ARCHITECTURES = ("default", "report", "default_v1", "default_c12", "default_c16", "default_pre")
 SHIPPED = ("default", "report")  # the models shipped in models/ as .keras and .tflite
+# every shipped runtime file (models/<name>.tflite) -> the .keras model it is exported from; default_int8 is
+# default post-training quantised to int8 (weights and activations), calibrated on data_gen renders
+RUNTIME_FILES = {"default": "default", "report": "report", "default_int8": "default"}
 PATCH_SIZE = 32
 MODELS_DIR = Path(os.environ.get("AICALIB_MODELS", Path(__file__).resolve().parents[2] / "models"))
 
@@ -43,3 +47,44 @@ def file_sha256(path: str | os.PathLike) -> str:
         for chunk in iter(lambda: f.read(1 << 20), b""):
             h.update(chunk)
     return h.hexdigest()
+
+
+def expected_sha256(path: str | os.PathLike) -> str | None:
+    """The sha256 recorded beside a model file (``<file>.sha256``, sha256sum's format: first word), or None."""
+    side = Path(str(path) + ".sha256")
+    if not side.is_file():
+        return None
+    text = side.read_text(encoding="ascii", errors="replace").split()
+    return text[0].lower() if text else None
+
+
+_REMEDY = {".tflite": "re-create it with `python -m aicalib_tf.export`",
+           ".keras": "restore it (git checkout) or train it again (`python -m aicalib_tf.train`)"}
+
+
+def check_model_file(path: str | os.PathLike, *, check_sha256: bool = True) -> str | None:
+    """Check that a model file exists and matches the sha256 recorded beside it; returns that sha256 (or None).
+
+    Raises ``FileNotFoundError`` or ``ValueError`` in one line naming the file, the expected sha256
+    and what to do.
+    """
+    path = Path(path)
+    want = expected_sha256(path)
+    remedy = _REMEDY.get(path.suffix, "expected a .tflite or .keras file")
+    if not path.is_file():
+        expect = f" (expected sha256 {want})" if want else ""
+        raise FileNotFoundError(f"model file not found: {path}{expect}; {remedy}")
+    if check_sha256 and want:
+        got = file_sha256(path)
+        if got != want:
+            raise ValueError(f"corrupt model file {path}: sha256 {got}, expected {want}; {remedy}")
+    return want
+
+
+def write_sha256(path: str | os.PathLike) -> str:
+    """Write ``<path>.sha256`` (sha256sum's format), atomically, and return the hash."""
+    from aicalib_tf.io import atomic_write_text
+
+    sha = file_sha256(path)
+    atomic_write_text(Path(str(path) + ".sha256"), f"{sha}  {Path(path).name}\n")
+    return sha

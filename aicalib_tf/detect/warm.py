@@ -2,9 +2,11 @@
 
 Every kernel is ``@njit(cache=True)``: the first process that reaches one compiles it (up to a few
 seconds) and writes the machine code beside the module (``__pycache__``); later processes load it.
-:func:`warm` runs the pipeline on two synthetic views (a whole board, and one cut by the frame so
-the partial-board stages run too), which reaches the kernels a detection uses.
-``python -m aicalib_tf.export --warm`` calls it after an install.
+:func:`warm` runs the pipeline on three synthetic views (a whole board, one cut by the frame so
+the partial-board stages run too, one crossed by a shadow edge so the shadow-robust fit runs),
+which reaches the kernels a detection uses (checked against OpenCV's 13 photos: no kernel is
+compiled after it).
+``python -m aicalib_tf.export --warm`` calls it after an install (``make setup``).
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import time
 import cv2
 import numpy as np
 
-__all__ = ["warm", "synthetic_board"]
+__all__ = ["warm", "synthetic_board", "shadowed"]
 
 
 def synthetic_board(pattern_size=(9, 6), square: int = 40, size=(640, 480), angle: float = 12.0,
@@ -34,11 +36,33 @@ def synthetic_board(pattern_size=(9, 6), square: int = 40, size=(640, 480), angl
     return cv2.warpAffine(board, M, (w, h), flags=cv2.INTER_AREA, borderValue=200)
 
 
-def warm(model=None) -> float:
-    """Detect two synthetic boards (whole, and cut by the frame); returns the seconds it took."""
+def warm(model=None, size: tuple[int, int] = (640, 480)) -> float:
+    """Detect three synthetic boards of ``size`` (W, H) px (whole, cut by the frame, and crossed by
+    a shadow edge); returns the seconds it took.
+
+    Also the way to start a stream of frames without a stall: in a fresh process the first call of
+    any numba kernel sets numba's runtime up (about 0.4 s on this project's 2-core CPU, even with
+    every cache compiled) and the interpreter plans itself for a new image size (10–30 ms), so a
+    first frame takes 10–14× the median (``benchmarks/first_image.py``). ``warm(model, size)``
+    with the stream's model and frame size pays both before the first frame.
+    """
     from aicalib_tf.detect.pipeline import detect_corners
 
     t0 = time.perf_counter()
-    for shift in ((0.0, 0.0), (230.0, 0.0)):
-        detect_corners(synthetic_board(shift=shift), (9, 6), model=model)
+    for shift in ((0.0, 0.0), (WARM_SHIFT * size[0] / 640, 0.0)):
+        detect_corners(synthetic_board(shift=shift, size=size), (9, 6), model=model)
+    detect_corners(shadowed(synthetic_board(size=size)), (9, 6), model=model)
     return time.perf_counter() - t0
+
+
+def shadowed(gray: np.ndarray, factor: float = 0.55) -> np.ndarray:
+    """``gray`` (H, W) uint8 with a hard shadow edge across it: the pixels right of a slanted line
+    through the centre darkened by ``factor``. Corners on the edge take the shadow-robust fit
+    (:mod:`aicalib_tf.detect.shadow`), whose kernels the plain views never reach."""
+    h, w = gray.shape
+    y, x = np.mgrid[0:h, 0:w]
+    dark = x > w / 2 + 0.3 * (y - h / 2)
+    return np.where(dark, gray * factor, gray).astype(np.uint8)
+
+
+WARM_SHIFT = 230.0  # px at 640 px wide: the second view's board is cut by the frame (a partial board)

@@ -208,6 +208,25 @@ def test_detectors_warm_up_once_per_image_size_before_timing():
     assert all(r["time_first_ms"] >= r["time_ms"] for r in out["rows"])
 
 
+def test_rendering_workers_give_the_same_images_in_the_same_order():
+    """Two processes render (two conditions at a time); the detector still sees every image in order, here."""
+    from aicalib_tf.bench.runner import run_synthetic
+
+    def run(workers):
+        seen = []
+
+        def counting(img):
+            seen.append(int(img.astype(np.int64).sum()))
+            return Found(np.zeros((0, 2)), np.zeros(0, np.int64), False)
+        out = run_synthetic(select_conditions("clean,noise20,blur3"), {"counting": counting},
+                            {"named": 2, "sweep": 1, "hd": 1, "calib_views": 3}, with_calibration=False,
+                            progress=False, workers=workers)
+        # 2 warm-up calls and 6 timed images, in order; then the re-timing, ordered by time
+        return seen[:8], sorted(seen[8:]), [(r["condition"], r["index"], r["seed"]) for r in out["rows"]]
+
+    assert run(1) == run(2)
+
+
 def test_the_slowest_images_are_timed_again_and_keep_their_least_time(monkeypatch):
     import aicalib_tf.bench.timing as ev
 

@@ -11,5 +11,9 @@ def test_warm_views_give_a_full_and_a_partial_board():
     assert not cut.complete and 9 <= len(cut.corners) < 54
 
 
-def test_warm_returns_its_time():
-    assert warm() > 0.0
+def test_warm_returns_its_time_and_plans_the_frame_size():
+    from aicalib_tf.cnn.model import load_model
+
+    model = load_model("default")
+    assert warm(model, (800, 600)) > 0.0
+    assert (1, 600, 800, 1) in model.planned_shapes()
