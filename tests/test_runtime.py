@@ -56,19 +56,21 @@ def test_runtime_map_matches_keras_float32():
     assert np.abs(wa - wb).max() < 1e-4
 
 
-def test_missing_or_corrupt_tflite_names_the_file_and_the_sha256(tmp_path):
+@pytest.mark.parametrize("name, remedy", [("default.tflite", "re-create it with `python -m aicalib_tf.export`"),
+                                          ("default.keras", "restore it \\(git checkout\\)")])
+def test_missing_or_corrupt_model_names_the_file_and_the_sha256(tmp_path, name, remedy):
     from aicalib_tf.cnn.model import MODELS_DIR, load_model
-    from aicalib_tf.cnn.runtime import expected_sha256
+    from aicalib_tf.cnn.spec import expected_sha256
 
-    want = expected_sha256(MODELS_DIR / "default.tflite")
+    want = expected_sha256(MODELS_DIR / name)
     assert want and len(want) == 64
-    bad = tmp_path / "default.tflite"
-    bad.write_bytes((MODELS_DIR / "default.tflite").read_bytes()[:-10] + b"0123456789")
-    (tmp_path / "default.tflite.sha256").write_text(f"{want}  default.tflite\n")
-    with pytest.raises(ValueError, match=f"corrupt model file {bad}.*expected {want}"):
+    bad = tmp_path / name
+    bad.write_bytes((MODELS_DIR / name).read_bytes()[:-10] + b"0123456789")
+    (tmp_path / f"{name}.sha256").write_text(f"{want}  {name}\n")
+    with pytest.raises(ValueError, match=f"corrupt model file {bad}: sha256 [0-9a-f]{{64}}, expected {want}; {remedy}"):
         load_model(bad)
     bad.unlink()
-    with pytest.raises(FileNotFoundError, match=f"{bad}.*expected sha256 {want}"):
+    with pytest.raises(FileNotFoundError, match=f"model file not found: {bad} \\(expected sha256 {want}\\); {remedy}"):
         load_model(bad)
 
 
@@ -78,8 +80,8 @@ def test_shipped_tflite_matches_its_recorded_sha256():
     from aicalib_tf.cnn.spec import RUNTIME_FILES
 
     assert set(RUNTIME_FILES) == {"default", "report", "default_int8"}
-    for name in RUNTIME_FILES:
-        path = MODELS_DIR / f"{name}.tflite"
+    paths = [MODELS_DIR / f"{n}.tflite" for n in RUNTIME_FILES] + [MODELS_DIR / f"{n}.keras" for n in ("default", "report")]
+    for path in paths:
         assert file_sha256(path) == expected_sha256(path)
 
 
@@ -97,22 +99,6 @@ def test_int8_model_gives_float32_boards(name):
     assert a.complete and b.complete
     np.testing.assert_array_equal(a.ids, b.ids)
     assert np.abs(a.corners - b.corners).max() < 0.05
-
-
-def test_missing_or_corrupt_keras_names_the_file_and_the_sha256(tmp_path):
-    from aicalib_tf.cnn.model import MODELS_DIR, load_model
-    from aicalib_tf.cnn.spec import expected_sha256
-
-    want = expected_sha256(MODELS_DIR / "default.keras")
-    assert want and len(want) == 64
-    bad = tmp_path / "default.keras"
-    bad.write_bytes((MODELS_DIR / "default.keras").read_bytes()[:-10] + b"0123456789")
-    (tmp_path / "default.keras.sha256").write_text(f"{want}  default.keras\n")
-    with pytest.raises(ValueError, match=f"corrupt model file {bad}: sha256 [0-9a-f]{{64}}, expected {want}; restore"):
-        load_model(bad)
-    bad.unlink()
-    with pytest.raises(FileNotFoundError, match=f"model file not found: {bad} \\(expected sha256 {want}\\)"):
-        load_model(bad)
 
 
 def test_a_keras_model_without_tensorflow_says_what_to_install(tmp_path):

@@ -8,7 +8,9 @@ and gives the same results: detection is deterministic and each image is detecte
 Workers are forked from a fork server (Linux; elsewhere spawned) that has imported the pipeline
 once, about 0.5 s for the first pool of a process; a worker then starts in about 10 ms and
 loads the model. A plain fork of the caller is not used: after OpenCV's or the interpreter's
-thread pools have run in it, a forked child can hang on their locks. Each worker's interpreter and OpenCV run on one
+thread pools have run in it, a forked child can hang on their locks. As with spawn, a script that
+asks for more than one worker must keep its work under ``if __name__ == "__main__":`` (the
+workers import the main module). Each worker's interpreter and OpenCV run on one
 thread (``AICALIB_THREADS=1``, ``cv2.setNumThreads(1)``): N workers keep N cores busy. ``work``
 should return a failure (an unreadable file, say) as a value rather than raise: an exception
 raised in a worker ends the batch.
