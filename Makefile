@@ -1,5 +1,6 @@
 # One command each: `make demo` (sets up .venv and runs a representative slice of the benchmark, about
-# 1.5 minutes; `make demo-full` runs the whole suite of 2634 images, about 8 minutes) and `make test`.
+# 1.5 minutes; `make demo-full` runs the whole suite of 2634 images and the four rig sequences, about
+# 8 minutes plus about 2 for the rigs) and `make test`.
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
