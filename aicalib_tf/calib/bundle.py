@@ -29,6 +29,7 @@ import numpy as np
 from aicalib_tf.geometry.lens import COEFF_NAMES, N_COEFFS, Lens, check_model, projection_jacobian
 
 __all__ = ["CalibrationError", "BundleResult", "bundle_adjust", "levenberg_marquardt", "schur_complement", "reduce_blocks",
+           "SchurProblem",
            "poses_from_rays", "solve_pose", "param_names",
            "convert_start", "fisheye_start", "FISHEYE_FOVS"]
 
@@ -79,7 +80,22 @@ class BundleResult:
         return Lens.from_intrinsics(self.model, self.intrinsics, (1, 1))
 
 
-class _Problem:
+class SchurProblem:
+    """What :func:`levenberg_marquardt` needs of a problem whose parameters are ``nf`` global ones then 6 per
+    pose: a subclass sets ``splits`` (corner groups by pose) and ``_evaluate(x)`` -> (residuals (2N,),
+    global Jacobian (N, 2, nf), pose Jacobian (N, 2, 6), number of unprojectable corners)."""
+
+    def fun(self, x):
+        """Residuals (2N,), px."""
+        return self._evaluate(x)[0]
+
+    def normal_blocks(self, x):
+        """Blocks of JᵀJ and Jᵀr without forming J: U (nf, nf), W (V, nf, 6), Vb (V, 6, 6), gu (nf,), gv (V, 6)."""
+        r, Ji, Jp, _ = self._evaluate(x)
+        return reduce_blocks(r, Ji, Jp, self.splits)
+
+
+class _Problem(SchurProblem):
     """Residuals and the Jacobian's blocks of one bundle problem (cached per parameter vector)."""
 
     def __init__(self, model, obj, px, intr0, free):
@@ -126,13 +142,6 @@ class _Problem:
         self._key, self._val = x.copy(), (res.ravel(), J_intr, J_pose, int(bad.sum()))
         return self._val
 
-    def fun(self, x):
-        return self._evaluate(x)[0]
-
-    def normal_blocks(self, x):
-        """Blocks of JᵀJ and Jᵀr without forming J: U (nf, nf), W (V, nf, 6), Vb (V, 6, 6), gu (nf,), gv (V, 6)."""
-        r, Ji, Jp, _ = self._evaluate(x)
-        return reduce_blocks(r, Ji, Jp, self.splits)
 
 
 def reduce_blocks(r, Ji, Jp, splits):

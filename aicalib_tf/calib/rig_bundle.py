@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from aicalib_tf.calib.bundle import (_PENALTY, _RANK_TOL, CalibrationError, levenberg_marquardt, reduce_blocks,
+from aicalib_tf.calib.bundle import (_PENALTY, _RANK_TOL, CalibrationError, SchurProblem, levenberg_marquardt,
                                      schur_complement)
 from aicalib_tf.geometry.lens import N_COEFFS, check_model, projection_jacobian
 
@@ -81,7 +81,7 @@ def _rodrigues(rvecs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return R, dR
 
 
-class _RigProblem:
+class _RigProblem(SchurProblem):
     """Residuals and Jacobian blocks of one rig problem; corners sorted by board pose."""
 
     def __init__(self, models, observations, base, free, n_groups):
@@ -151,13 +151,6 @@ class _RigProblem:
         J_pose, J_glob = np.nan_to_num(J_pose), np.nan_to_num(J_glob)
         self._key, self._val = x.copy(), (res.ravel(), J_glob, J_pose, int(bad.sum()))
         return self._val
-
-    def fun(self, x):
-        return self._evaluate(x)[0]
-
-    def normal_blocks(self, x):
-        r, Jg, Jp, _ = self._evaluate(x)
-        return reduce_blocks(r, Jg, Jp, self.splits)
 
 
 def _covariance(prob: _RigProblem, x, cost: float, strict: bool) -> tuple[np.ndarray, float, str]:
