@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from aicalib_tf.calib.bundle import CalibrationError
-from aicalib_tf.calib.fit import Calibration, View, calibrate_camera, outlier_threshold
+from aicalib_tf.calib.fit import Calibration, calibrate_camera, outlier_threshold
 from aicalib_tf.calib.rig_bundle import Observation, RigFit, rig_adjust
 from aicalib_tf.calib.rig_result import RigCalibration, rig_result
 from aicalib_tf.geometry.pattern import board_points, check_pattern

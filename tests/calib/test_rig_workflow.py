@@ -1,7 +1,6 @@
 """The rig command line: pairing rules, bad input, and an end-to-end run on rendered rig photos."""
 
 import json
-from pathlib import Path
 
 import cv2
 import numpy as np
