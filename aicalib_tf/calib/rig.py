@@ -31,7 +31,7 @@ import numpy as np
 from aicalib_tf.calib.bundle import CalibrationError
 from aicalib_tf.calib.fit import Calibration, calibrate_camera, outlier_threshold
 from aicalib_tf.calib.rig_bundle import Observation, RigFit, rig_adjust
-from aicalib_tf.calib.rig_result import RigCalibration, rig_result
+from aicalib_tf.calib.rig_result import RigCalibration, relative_flags, rig_result
 from aicalib_tf.geometry.pattern import board_points, check_pattern
 from aicalib_tf.geometry.rectify import compose, invert, relative_pose
 
@@ -39,11 +39,6 @@ __all__ = ["RigCalibration", "calibrate_rig", "place_cameras", "MIN_SHARED_VIEWS
            "relative_flags", "pose_vector", "joint_start"]
 
 MIN_SHARED_VIEWS = 3  # frames two cameras must share for one to be placed from the other
-
-
-def relative_flags(cal: Calibration) -> tuple[bool, ...]:
-    """Per used view of a camera's own calibration: are its ids relative to the visible grid?"""
-    return tuple(cal.meta.get("relative_views") or (False,) * len(cal.views))
 
 
 def _rt(p) -> tuple[np.ndarray, np.ndarray]:
@@ -108,27 +103,28 @@ def frame_groups(cals: list[Calibration]) -> tuple[list[str], list[tuple[int, st
     return frames, solo
 
 
+def _board_in_cam0(cam_pose, cal: Calibration, i: int) -> np.ndarray:
+    """(6,) the board pose of ``cal``'s view i in camera 0's frame, given that camera's pose (R, t) from camera 0."""
+    return pose_vector(*compose(*invert(*cam_pose), cv2.Rodrigues(cal.rvecs[i])[0], cal.tvecs[i]))
+
+
 def joint_start(cals, extr, frames, solo, views_by_cam, square_size):
     """(observations, start board poses (G, 6), group names) for :func:`rig_adjust`."""
     obs, poses, names = [], [], []
     by_name = [{v.name: v for v in vs} for vs in views_by_cam]
-    cam_pose = [(_rt(e)) for e in extr]
+    cam_pose = [_rt(e) for e in extr]
+    absolute = [{n: i for i, (n, rel) in enumerate(zip(c.views, relative_flags(c))) if not rel} for c in cals]
     for g, f in enumerate(frames):
-        first = None
-        for k, c in enumerate(cals):
-            if f in c.views and not relative_flags(c)[c.views.index(f)]:
-                v = by_name[k][f]
-                obs.append(Observation(k, g, board_points(v.ids, square_size), v.corners, f))
-                if first is None:
-                    i = c.views.index(f)
-                    first = compose(*invert(*cam_pose[k]), cv2.Rodrigues(c.rvecs[i])[0], c.tvecs[i])
-        poses.append(pose_vector(*first))
+        seen = [k for k in range(len(cals)) if f in absolute[k]]
+        for k in seen:
+            v = by_name[k][f]
+            obs.append(Observation(k, g, board_points(v.ids, square_size), v.corners, f))
+        poses.append(_board_in_cam0(cam_pose[seen[0]], cals[seen[0]], absolute[seen[0]][f]))
         names.append(f)
     for k, n in solo:
-        c, v = cals[k], by_name[k][n]
-        i = c.views.index(n)
+        v = by_name[k][n]
         obs.append(Observation(k, len(poses), board_points(v.ids, square_size), v.corners, n))
-        poses.append(pose_vector(*compose(*invert(*cam_pose[k]), cv2.Rodrigues(c.rvecs[i])[0], c.tvecs[i])))
+        poses.append(_board_in_cam0(cam_pose[k], cals[k], cals[k].views.index(n)))
         names.append(f"{n} ({k})")
     return obs, np.array(poses), names
 

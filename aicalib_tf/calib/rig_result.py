@@ -14,7 +14,7 @@ from aicalib_tf.calib.rig_bundle import Observation, RigFit, global_layout
 from aicalib_tf.geometry.lens import Lens
 from aicalib_tf.geometry.rectify import compose, invert
 
-__all__ = ["RigCalibration", "rig_result", "camera_calibration"]
+__all__ = ["RigCalibration", "rig_result", "camera_calibration", "relative_flags"]
 
 
 @dataclass(frozen=True)
@@ -61,6 +61,12 @@ class RigCalibration:
         return compose(self.R[j], self.T[j], *invert(self.R[i], self.T[i]))
 
 
+def relative_flags(cal: Calibration) -> tuple[bool, ...]:
+    """Per used view of a camera's calibration in a rig: are its ids relative to the visible grid?
+    (``meta["relative_views"]``; all False when absent)."""
+    return tuple(cal.meta.get("relative_views") or (False,) * len(cal.views))
+
+
 def _R(rvec) -> np.ndarray:
     return cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
 
@@ -80,7 +86,7 @@ def camera_calibration(fit: RigFit, obs: list[Observation], k: int, own: Calibra
         tvecs.append(t)
     sq = np.concatenate([np.sum(r * r, axis=1) for _, r in mine])
     std = {} if cov is None else dict(zip(param_names(lens.model), np.sqrt(np.maximum(np.diag(cov), 0.0)).tolist()))
-    rel = dict(zip(own.views, own.meta.get("relative_views") or (False,) * len(own.views)))
+    rel = dict(zip(own.views, relative_flags(own)))
     return dataclasses.replace(
         own, K=lens.K, dist=lens.dist, rms=float(np.sqrt(np.mean(sq))), views=tuple(o.name for o, _ in mine),
         rvecs=np.array(rvecs), tvecs=np.array(tvecs),
