@@ -7,12 +7,12 @@ code, 0.03 ms here. Compiled on first use and cached on disk.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from aicalib_tf.kernels import kernel
 
 __all__ = ['decode_cells']
 
 
-@njit(cache=True, nogil=True)
+@kernel("f4[:, :, ::1], f4, f4, f4, f4, f4")
 def decode_cells(cmap, threshold, min_distance, pool_distance, pool_floor, stride):
     """The cell loop of :func:`aicalib_tf.corner_map.decode_map`, whose docstring defines it.
 

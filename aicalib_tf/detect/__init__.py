@@ -1,8 +1,9 @@
 """Chessboard detection: image -> corner map -> candidates -> sub-pixel refinement -> junctions
 -> grid -> board order or partial board -> :class:`Detection`.
 
-:mod:`aicalib_tf.detect.pipeline` runs the stages; each stage has its module, and each numba
-kernel sits beside the module whose maths it implements (``*_kernels.py``). Never imports the
+:mod:`aicalib_tf.detect.pipeline` runs the stages; each stage has its module, and each compiled
+kernel sits beside the module whose maths it implements (``*_kernels.py``; how they are compiled:
+:mod:`aicalib_tf.kernels`). Never imports the
 benchmark. ``python -m aicalib_tf.detect`` is the command line.
 """
 

@@ -9,12 +9,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from aicalib_tf.kernels import kernel
 
 __all__ = ['seed_block']
 
 
-@njit(cache=True, nogil=True)
+@kernel("f8[:, ::1], i8, i8[::1], f8[::1], b1[::1], f8[:, :, ::1], i8, f8, f8, f8, f8")
 def seed_block(pts, k, near, contrast, free, blocks, orders, tolerance, max_step_ratio, max_cell_area, max_span_ratio):
     """The first block of lattice points about point ``k`` that the seed pairs place on free points.
 

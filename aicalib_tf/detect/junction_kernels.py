@@ -4,14 +4,14 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from aicalib_tf.kernels import kernel
 
 from .sampling import _bilinear
 
 __all__ = ['ring_stats']
 
 
-@njit(cache=True, nogil=True)
+@kernel("f4[:, ::1], f8[:, ::1], f8[::1], f8[:, ::1]")
 def ring_stats(img, pts, radius, ring):
     """Amplitude and point asymmetry of the image on a ring about each point.
 

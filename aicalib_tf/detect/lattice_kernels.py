@@ -9,12 +9,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from aicalib_tf.kernels import helper, kernel
 
 __all__ = ['lattice_predict', 'nearest_predict', 'nearest_steps', 'lattice_residuals_loop']
 
 
-@njit(cache=True, nogil=True)
+@helper
 def _normaliser(p, idx):
     """Mean (2,) and scale of points p[idx]: centred, their mean distance from the mean becomes √2."""
     mx = my = 0.0
@@ -29,7 +29,7 @@ def _normaliser(p, idx):
     return mx, my, math.sqrt(2.0) / max(dist / len(idx), 1e-12)
 
 
-@njit(cache=True, nogil=True)
+@helper
 def _solve8(a, b):
     """Solve a (8, 8) x = b (8,) in place by Gaussian elimination with partial pivoting; returns det(a)."""
     n = 8
@@ -61,7 +61,7 @@ def _solve8(a, b):
     return det
 
 
-@njit(cache=True, nogil=True)
+@helper
 def _fit_lattice(ids, pts, idx, ata, atb, row, norm):
     """Fit the homography of ids[idx] -> pts[idx] (see :func:`lattice_predict`) into atb (8,).
 
@@ -88,7 +88,7 @@ def _fit_lattice(ids, pts, idx, ata, atb, row, norm):
     return abs(_solve8(ata, atb)) > 1e-12
 
 
-@njit(cache=True, nogil=True)
+@helper
 def _apply_lattice(h, norm, wx, wy, out):
     """Put id (wx, wy) in the image with a fit of :func:`_fit_lattice`: out (2,) px."""
     sx, sy, ss, dx, dy, ds = norm[0], norm[1], norm[2], norm[3], norm[4], norm[5]
@@ -98,7 +98,7 @@ def _apply_lattice(h, norm, wx, wy, out):
     out[1] = (h[3] * x + h[4] * y + h[5]) / w / ds + dy
 
 
-@njit(cache=True, nogil=True)
+@kernel("f8[:, ::1], f8[:, ::1], i8[:, ::1], f8[:, :, ::1]")
 def lattice_predict(ids, pts, near, want):
     """Image positions of lattice ids, each set from a homography of its own known corners.
 
@@ -119,7 +119,7 @@ def lattice_predict(ids, pts, near, want):
     return out
 
 
-@njit(cache=True, nogil=True)
+@kernel("f8[:, ::1], f8[:, ::1], f8[:, ::1], i8")
 def nearest_predict(ids, pts, want, k):
     """Image positions of lattice ids ``want`` (M, 2) float64, each from a homography of its k nearest known ids.
 
@@ -172,7 +172,7 @@ def nearest_predict(ids, pts, want, k):
     return out
 
 
-@njit(cache=True, nogil=True)
+@helper
 def _nearest_sq(pts, i):
     """Squared distance (in pts' own precision) from pts[i] to the nearest other point; inf when alone."""
     best = np.inf
@@ -183,7 +183,7 @@ def _nearest_sq(pts, i):
     return best
 
 
-@njit(cache=True, nogil=True)
+@kernel("f8[:, ::1], f8[:, ::1]")
 def nearest_steps(pts, want):
     """For each want (M, 2) px: the nearest point of pts (N, 2) px (first on ties), and that point's
     distance to its own nearest other point. Returns (M,) px (inf where N < 2)."""
@@ -203,7 +203,7 @@ def nearest_steps(pts, want):
     return out
 
 
-@njit(cache=True, nogil=True)
+@kernel("f8[:, ::1], f8[:, ::1], i8, b1", "f8[:, ::1], f4[:, ::1], i8, b1")
 def lattice_residuals_loop(ids, pts, k, single):
     """The loop of :func:`aicalib_tf.lattice.lattice_residuals`: ids (N, 2) float64, pts (N, 2) px, N >= 5.
 

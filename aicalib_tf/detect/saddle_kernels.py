@@ -9,14 +9,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from aicalib_tf.kernels import kernel
 
 from .sampling import _sample_grid
 
 __all__ = ['saddle_loop']
 
 
-@njit(cache=True, nogil=True)
+@kernel("f4[:, ::1], f8[:, ::1], f8[:, ::1], i8, i8")
 def saddle_loop(img, pts, fit, radius, iterations):
     """The saddle fit's iterations for each point.
 

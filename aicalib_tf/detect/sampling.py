@@ -11,12 +11,12 @@ import math
 
 import cv2
 import numpy as np
-from numba import njit
+from aicalib_tf.kernels import helper, kernel
 
 __all__ = ['sample_bilinear', 'sample_windows']
 
 
-@njit(cache=True, nogil=True)
+@helper
 def _lerp(img, r0, r1, c0, c1, fx, fy):
     """Bilinear value between pixels (r0, c0), (r0, c1), (r1, c0), (r1, c1) at fractions fx, fy."""
     top = img[r0, c0] + fx * (img[r0, c1] - img[r0, c0])
@@ -24,7 +24,7 @@ def _lerp(img, r0, r1, c0, c1, fx, fy):
     return top + fy * (bot - top)
 
 
-@njit(cache=True, nogil=True)
+@helper
 def _sample_grid(img, x, y, lo, side, out):
     """Bilinear samples at (x + i, y + j) for i, j in lo .. lo + side − 1, row-major into out (side²,)."""
     h, w = img.shape
@@ -41,7 +41,7 @@ def _sample_grid(img, x, y, lo, side, out):
             k += 1
 
 
-@njit(cache=True, nogil=True)
+@kernel("f4[:, ::1], f8[:, ::1], i8")
 def sample_windows(img, pts, radius):
     """(P, (2r+1)²) float64: bilinear samples of img about each point, offsets row-major (dy outer)."""
     side = 2 * radius + 1
@@ -51,7 +51,7 @@ def sample_windows(img, pts, radius):
     return out
 
 
-@njit(cache=True, nogil=True)
+@helper
 def _bilinear(img, x, y):
     """The image at (x, y) px, bilinear, the nearest edge pixel outside."""
     h, w = img.shape

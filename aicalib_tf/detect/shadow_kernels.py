@@ -7,14 +7,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from aicalib_tf.kernels import helper, kernel
 
 from .sampling import _sample_grid
 
 __all__ = ['symmetric_loop', 'symmetry_energies']
 
 
-@njit(cache=True, nogil=True)
+@helper
 def _n_bins(kbin):
     """How many 1 px bins of |n·o| the (M, D) bin table uses."""
     nk = 0
@@ -24,7 +24,7 @@ def _n_bins(kbin):
     return nk
 
 
-@njit(cache=True, nogil=True)
+@helper
 def _symmetric_step(big, side, inner, weights, mirror, kbin, sign, nk, acc, cand):
     """One Gauss–Newton step of the shadow-robust fit from the (2r+3)² samples ``big``: (ux, uy)."""
     m = inner.shape[0]
@@ -81,7 +81,7 @@ def _symmetric_step(big, side, inner, weights, mirror, kbin, sign, nk, acc, cand
     return best_ux, best_uy
 
 
-@njit(cache=True, nogil=True)
+@kernel("f4[:, ::1], f8[:, ::1], i8, f8[::1], i8[::1], i8[:, ::1], f8[:, ::1], i8")
 def symmetric_loop(img, pts, radius, weights, mirror, kbin, sign, iterations):
     """The shadow-robust fit's iterations for each point.
 
@@ -125,7 +125,7 @@ def symmetric_loop(img, pts, radius, weights, mirror, kbin, sign, iterations):
     return out, last
 
 
-@njit(cache=True, nogil=True)
+@kernel("f4[:, ::1], f8[:, ::1], i8, f8[::1], i8[::1], i8[:, ::1], f8[:, ::1], b1")
 def symmetry_energies(img, pts, radius, weights, mirror, kbin, sign, shadow):
     """How far the window about each point is from point symmetry, as three energies per point.
 

@@ -1,12 +1,13 @@
-"""Compile the detector's numba kernels into their on-disk caches ahead of the first real image.
+"""Run every kernel of the detector once ahead of the first real image, and set a process up
+before a stream of frames.
 
-Every kernel is ``@njit(cache=True)``: the first process that reaches one compiles it (up to a few
-seconds) and writes the machine code beside the module (``__pycache__``); later processes load it.
 :func:`warm` runs the pipeline on three synthetic views (a whole board, one cut by the frame so
 the partial-board stages run too, one crossed by a shadow edge so the shadow-robust fit runs),
-which reaches the kernels a detection uses (checked against OpenCV's 13 photos: no kernel is
-compiled after it).
-``python -m aicalib_tf.export --warm`` calls it after an install (``make setup``).
+which reaches the kernels a detection uses (checked against OpenCV's 13 photos). With the kernels
+compiled ahead of time (:mod:`aicalib_tf.kernels`) that costs little; where they run on numba's
+JIT (no C compiler at install), it compiles each into numba's on-disk cache (up to a few seconds
+each), so no later process compiles. ``python -m aicalib_tf.export --warm`` calls it after
+building the kernels (``make setup``).
 """
 
 from __future__ import annotations
@@ -40,11 +41,12 @@ def warm(model=None, size: tuple[int, int] = (640, 480)) -> float:
     """Detect three synthetic boards of ``size`` (W, H) px (whole, cut by the frame, and crossed by
     a shadow edge); returns the seconds it took.
 
-    Also the way to start a stream of frames without a stall: in a fresh process the first call of
-    any numba kernel sets numba's runtime up (about 0.4 s on this project's 2-core CPU, even with
-    every cache compiled) and the interpreter plans itself for a new image size (10–30 ms), so a
-    first frame takes 10–14× the median (``benchmarks/first_image.py``). ``warm(model, size)``
-    with the stream's model and frame size pays both before the first frame.
+    Also the way to start a stream of frames without a stall: the interpreter plans itself for a
+    new image size (10–30 ms), and with numba's JIT instead of the compiled kernels, the first
+    kernel call of a process sets numba's runtime up (about 0.7 s on this project's 2-core CPU,
+    caches compiled or not), so a first frame takes 2–3× the median with the compiled kernels and
+    12–16× without (``benchmarks/first_image.py``). ``warm(model, size)`` with the stream's model
+    and frame size pays that before the first frame.
     """
     from aicalib_tf.detect.pipeline import detect_corners
 
