@@ -75,7 +75,7 @@ def _parse_args(argv):
     ap.add_argument("--fix-k3", action="store_true", help="hold k3 at 0 (pinhole models; narrow lenses, few views)")
     ap.add_argument("--rational", action="store_true", help="the same as --model rational_polynomial")
     ap.add_argument("--workers", type=int, default=None,
-                    help="detection processes (default: one per core, but one per 16 images at most)")
+                    help="detection processes (default: one per core, but one per 8 images at most)")
     ap.add_argument("--resize-policy", default="error", choices=RESIZE_POLICIES,
                     help="images whose size differs from the most common one (default: %(default)s)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -3,7 +3,7 @@
 For each image it writes ``<stem>.png`` (the corners drawn over the image) and ``<stem>.json``
 (corners (x, y) px, their (col, row) ids, scores, whether the board is complete, and why not),
 atomically, and ends with the counts: full boards, partial boards, no board (with the reasons)
-and unreadable files. ``--workers N`` (default: one per core, one per 16 images at most) detects and writes N images at a time
+and unreadable files. ``--workers N`` (default: one per core, one per 8 images at most) detects and writes N images at a time
 in worker processes that each load the model once (:mod:`aicalib_tf.detect.batch`); the files
 and counts are the same as with ``--workers 1``, which runs in this process. An unreadable file
 is counted and named at the end; the batch goes on. Exit codes: 0 done; 2 bad arguments or model.
@@ -24,7 +24,7 @@ def _parse_args(argv):
     ap.add_argument("--pattern", required=True, help="inner corners, COLSxROWS, e.g. 9x6")
     ap.add_argument("--out", required=True, help="folder for <image>.png overlays and <image>.json corners")
     ap.add_argument("--model", default="default", help="default, default_int8 (int8, about 2x faster), report, or a .tflite/.keras path (default: %(default)s)")
-    ap.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core, but one per 16 images at most)")
+    ap.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core, but one per 8 images at most)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     return ap.parse_args(argv)
 

@@ -26,9 +26,10 @@ from typing import Callable, Iterable, Iterator
 
 __all__ = ["default_workers", "map_images", "worker_count", "worker_pool"]
 
-# measured (benchmarks/batch_speed.py, OpenCV's 640x480 photos): a pool of 2 costs about 0.7 s more to start
-# than one process, and saves about 20 ms an image (45 -> 25 ms); it pays from about 33 images
-MIN_ITEMS_PER_WORKER = 16
+# measured (benchmarks/batch_speed.py, OpenCV's 640x480 photos, kernels compiled ahead of time): 13 photos
+# take 0.96 s in one process and 0.91 s with a pool of 2, 26 photos 1.75 and 1.42 s (with numba's JIT,
+# whose set-up each worker paid, a pool paid from about 33 images)
+MIN_ITEMS_PER_WORKER = 8
 _WORK: list = []  # in a worker process: the work function its setup built
 
 
