@@ -8,25 +8,34 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: setup demo demo-full test bench clean
 
+# the compiled kernels (aicalib_tf/kernels.py) are rebuilt when their sources change; a failed build
+# (no C compiler) leaves numba's JIT to compile them on first use, and is not retried until they change
+KERNELS := $(VENV)/.kernels
+KERNEL_SOURCES := aicalib_tf/kernels.py aicalib_tf/cnn/corner_map_kernels.py aicalib_tf/detect/sampling.py \
+                  $(wildcard aicalib_tf/detect/*_kernels.py)
+
 $(STAMP): pyproject.toml
 	test -d $(VENV) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[dev]"
-	$(PY) -m aicalib_tf.export --warm
 	touch $(STAMP)
 
-setup: $(STAMP)
+$(KERNELS): $(STAMP) $(KERNEL_SOURCES)
+	$(PY) -m aicalib_tf.export --warm
+	touch $(KERNELS)
 
-demo: $(STAMP)
+setup: $(KERNELS)
+
+demo: $(KERNELS)
 	$(PY) -m aicalib_tf.evaluate --quick
 
-demo-full: $(STAMP)
+demo-full: $(KERNELS)
 	$(PY) -m aicalib_tf.evaluate
 
-test: $(STAMP)
+test: $(KERNELS)
 	$(PY) -m pytest -q
 
-bench: $(STAMP)
+bench: $(KERNELS)
 	$(PY) -m aicalib_tf.evaluate --images tests/data/opencv_left --pattern 9x6 --degrade
 	$(PY) benchmarks/datagen_accuracy.py
 	$(PY) benchmarks/datagen_speed.py
@@ -34,4 +43,4 @@ bench: $(STAMP)
 	$(PY) benchmarks/model_compare.py
 
 clean:
-	rm -rf $(VENV) .pytest_cache reports
+	rm -rf $(VENV) .pytest_cache reports aicalib_tf/_kernels_aot*

@@ -115,23 +115,30 @@ def _describe(args) -> str:
 
 
 def source_digest(root: Path = PACKAGE_DIR) -> str:
-    """sha256 over the kernel modules' sources, in :data:`KERNEL_SOURCES` order."""
+    """sha256 over this module and the kernel modules' sources (:data:`KERNEL_SOURCES` order)."""
     h = hashlib.sha256()
-    for rel in KERNEL_SOURCES:
+    for rel in ("kernels.py", *KERNEL_SOURCES):
         h.update(rel.encode() + b"\0" + (root / rel).read_bytes() + b"\0")
     return h.hexdigest()
 
 
 def cpu_name() -> str:
-    """This CPU's model (the extension is compiled for the building machine's instruction set)."""
+    """This CPU's model and a digest of its feature flags: the extension is compiled for the
+    building machine's instruction set, and a virtual machine may show the same model with fewer
+    features."""
+    model, flags = platform.processor(), ""
     try:
         with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
             for line in fh:
-                if line.startswith("model name"):
-                    return f"{platform.machine()} {line.split(':', 1)[1].strip()}"
+                key, _, value = line.partition(":")
+                if key.strip() == "model name" and not flags:
+                    model = value.strip()
+                elif key.strip() in ("flags", "Features"):
+                    flags = hashlib.sha256(" ".join(sorted(value.split())).encode()).hexdigest()[:12]
+                    break
     except OSError:
         pass
-    return f"{platform.machine()} {platform.processor()}"
+    return f"{platform.machine()} {model} flags {flags or '?'}"
 
 
 def _stamp() -> dict:
@@ -151,7 +158,7 @@ def _load_extension():
     except (OSError, ValueError):
         built = None
     if built != _stamp():
-        warnings.warn(f"{STAMP_FILE.with_suffix('.so').name}: the compiled kernels were built from other sources or on "
+        warnings.warn(f"{Path(ext.__file__).name}: the compiled kernels were built from other sources or on "
                       "another CPU; using numba (just in time). Rebuild: python -m aicalib_tf.export --warm",
                       RuntimeWarning, stacklevel=3)
         return None
