@@ -34,6 +34,7 @@ __all__ = ["CalibrationError", "BundleResult", "bundle_adjust", "levenberg_marqu
            "convert_start", "fisheye_start", "FISHEYE_FOVS"]
 
 _PENALTY = 1e3  # px, the residual of a corner the parameters cannot project
+MAX_EVALUATIONS = 200  # a bundle fit's residual evaluations; one that needs more has not converged
 _RANK_TOL = 1e-13  # smallest eigenvalue / largest of the column-normalised JᵀJ for a determined fit
 
 
@@ -73,6 +74,7 @@ class BundleResult:
     cost: float
     nfev: int
     note: str = ""
+    converged: bool = True
 
     @property
     def lens(self) -> Lens:
@@ -212,7 +214,8 @@ def _covariance(prob: _Problem, x, cost: float, model: str, strict: bool):
 
 
 def levenberg_marquardt(prob, x0, max_nfev: int):
-    """Minimise ½|r(x)|² by Levenberg–Marquardt on the Schur-reduced normal equations; returns (x, cost, evaluations).
+    """Minimise ½|r(x)|² by Levenberg–Marquardt on the Schur-reduced normal equations; returns (x,
+    cost, evaluations, converged): converged is False when ``max_nfev`` evaluations ran out first.
 
     prob : any problem whose parameters are ``prob.nf`` global ones followed by 6 per pose, with
     ``prob.fun(x)`` -> residuals and ``prob.normal_blocks(x)`` -> :func:`reduce_blocks`' tuple
@@ -220,6 +223,7 @@ def levenberg_marquardt(prob, x0, max_nfev: int):
     x = x0.copy()
     r = prob.fun(x)
     cost, nfev, lam, nf = 0.5 * float(r @ r), 1, 1e-3, prob.nf
+    improved = done = False
     while nfev < max_nfev:
         U, W, Vb, gu, gv = prob.normal_blocks(x)
         dU = np.maximum(np.diag(U), 1e-12 * max(float(np.max(np.diag(U), initial=0.0)), 1e-300))
@@ -244,7 +248,7 @@ def levenberg_marquardt(prob, x0, max_nfev: int):
             lam *= 10.0
         if not improved or done:
             break
-    return x, cost, nfev
+    return x, cost, nfev, done or (not improved and nfev < max_nfev)
 
 
 def bundle_adjust(model: str, obj, px, intrinsics, rvecs, tvecs, *, free=None, max_nfev: int | None = None,
@@ -271,7 +275,7 @@ def bundle_adjust(model: str, obj, px, intrinsics, rvecs, tvecs, *, free=None, m
                                     np.asarray(tvecs, np.float64).reshape(-1, 3)]).ravel()])
     if not np.all(np.isfinite(x0)):
         raise CalibrationError(f"{model}: non-finite start parameters")
-    x, cost, nfev = levenberg_marquardt(prob, x0, max_nfev or 200)
+    x, cost, nfev, converged = levenberg_marquardt(prob, x0, max_nfev or MAX_EVALUATIONS)
     intr, rv, tv = prob.unpack(x)
     res, _, _, n_bad = prob._evaluate(x)
     if strict and (n_bad or not np.all(np.isfinite(x))):
@@ -285,7 +289,7 @@ def bundle_adjust(model: str, obj, px, intrinsics, rvecs, tvecs, *, free=None, m
     if covariance:
         cov, jtj, sigma2, note = _covariance(prob, x, cost, model, rank_strict)
     return BundleResult(model, intr, rv.copy(), tv.copy(), np.split(res2, prob.splits), float(np.sqrt(np.mean(sq))),
-                        per_view, cov, jtj, sigma2, cost, nfev, note)
+                        per_view, cov, jtj, sigma2, cost, nfev, note, converged)
 
 
 def poses_from_rays(lens: Lens, obj, px, min_z: float = 0.2):

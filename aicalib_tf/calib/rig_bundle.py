@@ -200,7 +200,7 @@ def rig_adjust(models, observations, intrinsics, extrinsics, poses, *, free=None
     x0 = np.concatenate([base[free], poses.ravel()])
     if not np.all(np.isfinite(x0)):
         raise CalibrationError("rig: non-finite start parameters")
-    x, cost, nfev = levenberg_marquardt(prob, x0, max_nfev)
+    x, cost, nfev, _ = levenberg_marquardt(prob, x0, max_nfev)
     res, _, _, n_bad = prob._evaluate(x)
     if n_bad or not np.all(np.isfinite(x)):
         raise CalibrationError(f"rig: the fit diverged ({n_bad} of {prob.N} corners cannot be projected)")

@@ -43,7 +43,9 @@ def cross_validate(views, square_size: float, fit, model: str, full) -> tuple[fl
     """(cv_rms px, cv_se px) of one model; ``full`` is its all-views fit (a BundleResult), the folds' start.
 
     views : list of View; fit(views, model, start) -> BundleResult. Raises CalibrationError when a
-    fold cannot be fitted or a held-out view cannot be posed.
+    fold cannot be fitted, its fit does not converge within the evaluation cap (its parameters are
+    then not the model's estimate from those views, so they say nothing about the model; the model
+    has more parameters than the views determine), or a held-out view cannot be posed.
     """
     k = min(MAX_FOLDS, len(views))
     if k < 2:
@@ -55,7 +57,11 @@ def cross_validate(views, square_size: float, fit, model: str, full) -> tuple[fl
         held = [v for i, v in enumerate(views) if i % k == f]
         if len(train) < 3:
             raise CalibrationError(f"{model}: a fold leaves {len(train)} views to fit (need 3)")
-        lens = Lens.from_intrinsics(model, fit(train, model, start).intrinsics, (1, 1))
+        fold = fit(train, model, start)
+        if not fold.converged:
+            raise CalibrationError(f"{model}: fold {f + 1} of {k} did not converge in {fold.nfev} evaluations "
+                                   f"(its {fold.intrinsics.size} parameters are not determined by {len(train)} views)")
+        lens = Lens.from_intrinsics(model, fold.intrinsics, (1, 1))
         sq, n = 0.0, 0
         for v in held:
             pose = solve_pose(lens, board_points(v.ids, square_size), v.corners)

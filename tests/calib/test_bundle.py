@@ -49,6 +49,9 @@ def test_plumb_bob_fit_reaches_opencvs_minimum_and_its_standard_deviations():
     assert abs(fit.rms - rms) < 1e-5
     np.testing.assert_allclose(fit.intrinsics[:4], start[:4], atol=2e-3)
     np.testing.assert_allclose(np.sqrt(np.diag(fit.covariance))[:9], std.ravel()[:9], rtol=0.05)
+    assert fit.converged and fit.nfev < 200
+    short = bundle_adjust("plumb_bob", obj, px, start * [1.01, 0.99, 1, 1, 1, 1, 1, 1, 1], *poses, max_nfev=2)
+    assert not short.converged and short.nfev == 2 and short.rms > fit.rms
 
 
 def test_solve_pose_with_fixed_intrinsics_finds_the_view():

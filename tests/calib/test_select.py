@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from aicalib_tf.calib.fit import calibrate_camera
-from aicalib_tf.calib.select import COMPLEXITY, choose
+from aicalib_tf.calib.bundle import CalibrationError
+from aicalib_tf.calib.fit import _fit_model, calibrate_camera
+from aicalib_tf.calib.select import COMPLEXITY, choose, cross_validate
 from aicalib_tf.geometry import lens as L
 from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views
 
@@ -80,3 +83,20 @@ def test_relative_ids_calibrate_as_the_true_ids_do():
     b = calibrate_camera(rel, (9, 9), SQUARE, MILD.image_size, model="plumb_bob")
     np.testing.assert_allclose(b.K, a.K, rtol=1e-7)
     np.testing.assert_allclose(b.dist, a.dist, atol=1e-7)
+
+
+def test_a_fold_that_does_not_converge_fails_the_models_cross_validation():
+    views = synthetic_views(MILD, 10, 0.1, seed=4)
+    full = _fit_model("plumb_bob", views, SQUARE, MILD.image_size)
+    calls = []
+
+    def fit(vs, model, start):  # the real fit; the second fold is reported as having run out of evaluations
+        calls.append(len(vs))
+        out = _fit_model(model, vs, SQUARE, MILD.image_size, start)
+        return dataclasses.replace(out, converged=False) if len(calls) == 2 else out
+
+    cv, se = cross_validate(views, SQUARE, lambda vs, m, s: _fit_model(m, vs, SQUARE, MILD.image_size, s), "plumb_bob", full)
+    assert 0.05 < cv < 0.2 and se > 0
+    with pytest.raises(CalibrationError, match=r"plumb_bob: fold 2 of 5 did not converge in \d+ evaluations"):
+        cross_validate(views, SQUARE, fit, "plumb_bob", full)
+    assert calls == [8, 8]  # the folds after it are not fitted
