@@ -145,7 +145,6 @@ class _Problem(SchurProblem):
         return self._val
 
 
-
 def reduce_blocks(r, Ji, Jp, splits):
     """JᵀJ and Jᵀr in blocks from residuals r (2N,), global columns Ji (N, 2, nf) and pose columns
     Jp (N, 2, 6), the corners grouped by pose (``splits``: np.split indices, every group non-empty):
@@ -215,15 +214,14 @@ def _covariance(prob: _Problem, x, cost: float, model: str, strict: bool):
 
 def levenberg_marquardt(prob, x0, max_nfev: int):
     """Minimise ½|r(x)|² by Levenberg–Marquardt on the Schur-reduced normal equations; returns (x,
-    cost, evaluations, converged): converged is False when ``max_nfev`` evaluations ran out first.
+    cost, evaluations, converged), converged False when ``max_nfev`` ran out first.
 
     prob : any problem whose parameters are ``prob.nf`` global ones followed by 6 per pose, with
     ``prob.fun(x)`` -> residuals and ``prob.normal_blocks(x)`` -> :func:`reduce_blocks`' tuple
     (this module's bundle, and the rig fit of :mod:`aicalib_tf.calib.rig_bundle`)."""
     x = x0.copy()
     r = prob.fun(x)
-    cost, nfev, lam, nf = 0.5 * float(r @ r), 1, 1e-3, prob.nf
-    improved = done = False
+    cost, nfev, lam, nf, improved, done = 0.5 * float(r @ r), 1, 1e-3, prob.nf, False, False
     while nfev < max_nfev:
         U, W, Vb, gu, gv = prob.normal_blocks(x)
         dU = np.maximum(np.diag(U), 1e-12 * max(float(np.max(np.diag(U), initial=0.0)), 1e-300))

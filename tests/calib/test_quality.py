@@ -132,13 +132,3 @@ def verdict_share(text: str) -> float:
     """The Y of "good to X px (1σ) over Y% of the image"."""
     return float(text.split(" over ")[1].split("%")[0])
 
-
-@pytest.mark.parametrize("model, dist", [("plumb_bob", [-0.2, 0.05, 1e-3, -1e-3, 0.0]), ("equidistant", [0.02, -0.01, 3e-3, -1e-3])])
-def test_best_rotation_recovers_a_known_rotation(model, dist):
-    import cv2
-
-    lens = L.Lens(model, [[400.0, 0, 320], [0, 400.0, 240], [0, 0, 1]], dist, (640, 480))
-    rays = lens.unproject(Q.grid_points((640, 480), (16, 12)))
-    R_true = cv2.Rodrigues(np.array([0.004, -0.007, 0.002]))[0]
-    R = Q.best_rotation(lens, rays, lens.project(rays @ R_true.T))
-    assert np.abs(R - R_true).max() < 1e-10
