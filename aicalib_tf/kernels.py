@@ -145,9 +145,13 @@ def _stamp() -> dict:
     return {"sources_sha256": source_digest(), "cpu": cpu_name()}
 
 
+def _jit_forced() -> bool:
+    return os.environ.get(MODE_ENV, "").strip().lower() == "jit"
+
+
 def _load_extension():
     """The built extension module, or None (missing, stale, another CPU, or JIT asked for)."""
-    if os.environ.get(MODE_ENV, "").strip().lower() == "jit":
+    if _jit_forced():
         return None
     try:
         ext = importlib.import_module(f"aicalib_tf.{EXTENSION}")
@@ -266,7 +270,7 @@ def main() -> int:
     import subprocess
     import time
 
-    if _EXT is not None or os.environ.get(MODE_ENV, "").strip().lower() != "jit":
+    if _EXT is not None or not _jit_forced():
         env = dict(os.environ, **{MODE_ENV: "jit"})
         return subprocess.call([sys.executable, "-m", "aicalib_tf.kernels"], env=env)
     t0 = time.perf_counter()
