@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import numpy as np
+
 from aicalib_tf.kernels import kernel
 
 from .sampling import _bilinear

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from aicalib_tf.kernels import helper, kernel
 
 __all__ = ['lattice_predict', 'nearest_predict', 'nearest_steps', 'lattice_residuals_loop']

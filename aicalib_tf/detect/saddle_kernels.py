@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from aicalib_tf.kernels import kernel
 
 from .sampling import _sample_grid

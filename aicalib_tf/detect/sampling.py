@@ -11,6 +11,7 @@ import math
 
 import cv2
 import numpy as np
+
 from aicalib_tf.kernels import helper, kernel
 
 __all__ = ['sample_bilinear', 'sample_windows']

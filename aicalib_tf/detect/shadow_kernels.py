@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from aicalib_tf.kernels import helper, kernel
 
 from .sampling import _sample_grid
