@@ -38,7 +38,7 @@ from aicalib_tf.geometry import lens as L
 from aicalib_tf.io import atomic_write_text
 
 __all__ = ["save_calibration", "load_calibration", "to_opencv_yaml", "to_json", "to_camera_info_yaml", "undistort",
-           "undistort_camera_matrix", "calibration_dict", "calibration_from_dict", "jsonable"]
+           "undistort_camera_matrix", "calibration_dict", "calibration_from_dict", "jsonable", "existing_file"]
 
 FILES = ("camera.yaml", "camera.json", "camera_info.yaml")
 MAX_FISHEYE_HALF_ANGLE_DEG = 75.0  # the widest half-angle a rectified pinhole of equidistant shows (alpha = 1)
@@ -204,6 +204,17 @@ def _load_opencv_yaml(path: Path) -> Calibration:
     return _build(fields, {"model": model})
 
 
+def existing_file(path, default_name: str, what: str) -> Path:
+    """``path``, or ``path / default_name`` when it is a folder; FileNotFoundError ("no such ``what``
+    file") when that is not a file."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / default_name
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such {what} file")
+    return path
+
+
 def load_calibration(path) -> Calibration:
     """Read ``camera.json`` (or a folder holding it) or an OpenCV ``camera.yaml``.
 
@@ -211,11 +222,7 @@ def load_calibration(path) -> Calibration:
     count (:func:`~aicalib_tf.geometry.lens.model_from_ros`; plumb_bob when absent, as in older
     files). Raises FileNotFoundError, or ValueError naming the file if it is bad.
     """
-    path = Path(path)
-    if path.is_dir():
-        path = path / "camera.json"
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such calibration file")
+    path = existing_file(path, "camera.json", "calibration")
     try:
         return _load_opencv_yaml(path) if path.suffix.lower() in (".yaml", ".yml") else _load_json(path)
     except (json.JSONDecodeError, KeyError, TypeError, ValueError, cv2.error) as exc:

@@ -25,8 +25,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from aicalib_tf.calib.files import (FILES, calibration_dict, calibration_from_dict, jsonable, to_camera_info_yaml,
-                                    to_json, to_opencv_yaml)
+from aicalib_tf.calib.files import (FILES, calibration_dict, calibration_from_dict, existing_file, jsonable,
+                                    to_camera_info_yaml, to_json, to_opencv_yaml)
 from aicalib_tf.calib.rig_quality import pair_rectification
 from aicalib_tf.calib.rig_result import RigCalibration
 from aicalib_tf.geometry import lens as L
@@ -123,11 +123,7 @@ def save_rig(rig: RigCalibration, folder) -> list[Path]:
 
 def load_rig(path) -> RigCalibration:
     """Read ``rig.json`` (or a folder holding it). Raises FileNotFoundError, or ValueError naming the file."""
-    path = Path(path)
-    if path.is_dir():
-        path = path / "rig.json"
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such rig file")
+    path = existing_file(path, "rig.json", "rig")
     try:
         return rig_from_dict(json.loads(path.read_text(encoding="utf-8")))
     except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
