@@ -57,10 +57,9 @@ from aicalib_tf.geometry.lens import MODELS
 
 
 def _parse_args(argv):
-    import argparse
+    from aicalib_tf.cli import parser
 
-    ap = argparse.ArgumentParser(prog="python -m aicalib_tf.calibrate", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = parser("python -m aicalib_tf.calibrate", __doc__)
     ap.add_argument("images", nargs="*", help="image files or glob patterns (quote globs)")
     ap.add_argument("--rig", nargs="+", metavar="NAME=GLOB",
                     help='calibrate a rig: one NAME=GLOB per camera, e.g. cam0="left/*.png" cam1="right/*.png"')
@@ -84,8 +83,14 @@ def _parse_args(argv):
 
 def main(argv: list[str] | None = None) -> int:
     """CLI entry: returns 0 on success, 2 on bad input (message on stderr, no files written)."""
+    from aicalib_tf.cli import run_main
+
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
     args = _parse_args(argv)
+    return run_main(lambda: _main(args), debug=args.debug)
+
+
+def _main(args) -> int:
     if args.model.endswith(".keras") or args.model in ("default", "report"):  # the old meaning of --model
         print(f"note: --model {args.model} names a network; use --network {args.model} (the lens model stays auto)",
               file=sys.stderr)
@@ -123,13 +128,9 @@ def _common(args) -> dict:
 
 
 def _run(build, run_fn, wrote: str) -> int:
-    """Build the config, run it, print the report: 0, or 2 with one error line for bad input."""
-    try:
-        cfg = build()
-        _, report = run_fn(cfg)
-    except (ValueError, FileNotFoundError, ImportError) as exc:  # ImportError: a .keras model without TensorFlow
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    """Build the config, run it, print the report; errors reach :func:`aicalib_tf.cli.run_main`."""
+    cfg = build()
+    _, report = run_fn(cfg)
     print(report)
     print(f"wrote {Path(cfg.out)}: {wrote}")
     return 0

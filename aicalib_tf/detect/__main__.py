@@ -16,10 +16,9 @@ from collections import Counter
 
 
 def _parse_args(argv):
-    import argparse
+    from aicalib_tf.cli import parser
 
-    ap = argparse.ArgumentParser(prog="python -m aicalib_tf.detect", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = parser("python -m aicalib_tf.detect", __doc__)
     ap.add_argument("images", nargs="+", help="image files or glob patterns (** recurses; each file once)")
     ap.add_argument("--pattern", required=True, help="inner corners, COLSxROWS, e.g. 9x6")
     ap.add_argument("--out", required=True, help="folder for <image>.png overlays and <image>.json corners")
@@ -33,8 +32,14 @@ def main(argv: list[str] | None = None) -> int:
     """Detect boards in images and write overlays and corner files; exit 2 on bad arguments."""
     import os
 
+    from aicalib_tf.cli import run_main
+
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
-    import sys
+    args = _parse_args(argv)
+    return run_main(lambda: _main(args), debug=args.debug)
+
+
+def _main(args) -> int:
     from pathlib import Path
 
     from tqdm import tqdm
@@ -45,17 +50,12 @@ def main(argv: list[str] | None = None) -> int:
     from aicalib_tf.geometry.pattern import parse_pattern
     from aicalib_tf.io import expand_images
 
-    args = _parse_args(argv)
-    try:
-        pattern = parse_pattern(args.pattern)
-        files = expand_images(args.images)
-        if not files:
-            raise ValueError(f"no images match {' '.join(args.images)}")
-        model = load_model(args.model)
-        workers = worker_count(args.workers, len(files))
-    except (ValueError, FileNotFoundError, ImportError) as exc:  # ImportError: a .keras model without TensorFlow
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    pattern = parse_pattern(args.pattern)
+    files = expand_images(args.images)
+    if not files:
+        raise ValueError(f"no images match {' '.join(args.images)}")
+    model = load_model(args.model)
+    workers = worker_count(args.workers, len(files))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     sha = file_sha256(model.aicalib_path) if hasattr(model, "aicalib_path") else None
