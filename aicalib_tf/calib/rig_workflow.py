@@ -130,7 +130,9 @@ def _check_sizes(cam, views, sizes, frames, skipped) -> tuple[int, int]:
     """The camera's image size (its most common one); a frame of another size is dropped with a message
     naming the pair and both sizes."""
     if not sizes:
-        raise CalibrationError(f"{cam}: none of its images could be read")
+        from aicalib_tf.calib.workflow import unreadable_error
+
+        raise unreadable_error([fs[cam] for _, fs in frames if cam in fs], skipped, f"{cam} images")
     size = Counter(sizes.values()).most_common(1)[0][0]
     files = dict((n, fs) for n, fs in frames)
     for name, s in sizes.items():
@@ -147,12 +149,10 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
 
     Raises ValueError / CalibrationError / FileNotFoundError for bad input, before writing anything.
     """
-    from aicalib_tf.calib.rig import calibrate_rig
     from aicalib_tf.calib.rig_files import save_rig
-    from aicalib_tf.calib.rig_quality import assess_rig
-    from aicalib_tf.calib.rig_report import format_rig_report, rig_figure
     from aicalib_tf.calib.workflow import make_detector
     from aicalib_tf.io import atomic_write_bytes, atomic_write_text, expand_images
+    from aicalib_tf.outfolder import OutputFolder
 
     files = {}
     for name, pattern in cfg.cameras:
@@ -165,6 +165,21 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
         raise ValueError(f"--model lists {len(models)} lens models for {len(names)} cameras ({', '.join(names)})")
     pairing = pair_images(files)
     detect = make_detector(cfg.detector, cfg.pattern, cfg.network)  # a bad network fails here, before any work
+    with OutputFolder(cfg.out, "rig") as out:  # a bad --out fails here; files are swapped in at the end
+        rig, report, figure = _calibrate_rig_files(files, pairing, detect, models, cfg)
+        save_rig(rig, out.path)
+        atomic_write_bytes(out.path / "report.png", figure)
+        atomic_write_text(out.path / "report.txt", report + "\n")
+    return rig, report
+
+
+def _calibrate_rig_files(files, pairing, detect, models, cfg: RigConfig):
+    """Detect every camera's images, calibrate and assess the rig; returns (rig, report text, report.png bytes)."""
+    from aicalib_tf.calib.rig import calibrate_rig
+    from aicalib_tf.calib.rig_quality import assess_rig
+    from aicalib_tf.calib.rig_report import format_rig_report, rig_figure
+
+    names = list(files)
     views, sizes, skipped = {}, {}, {}
     for cam in files:
         v, s, sk = _detect_camera(cam, pairing.frames, cfg)
@@ -177,9 +192,4 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
                         models=models if len(models) > 1 else models[0], square_unit=cfg.square_unit, meta=meta)
     rig = assess_rig(rig, [views[c] for c in names])
     report = format_rig_report(rig, pairing, skipped)
-    figure = rig_figure(rig, pairing)
-    out = Path(cfg.out)
-    save_rig(rig, out)
-    atomic_write_bytes(out / "report.png", figure)
-    atomic_write_text(out / "report.txt", report + "\n")
-    return rig, report
+    return rig, report, rig_figure(rig, pairing)
