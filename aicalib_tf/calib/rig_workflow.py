@@ -49,7 +49,9 @@ class Pairing:
 
 
 def _stem(f: str) -> str:
-    return Path(f).stem
+    from aicalib_tf.io import display_name
+
+    return display_name(Path(f).stem)
 
 
 def _number(f: str) -> str | None:
@@ -126,6 +128,19 @@ def _detect_camera(cam, frames, cfg: RigConfig) -> tuple[dict, dict, dict]:
     return views, {f.label: f.size for f in found}, skipped
 
 
+def _refuse_shared_files(files: dict[str, list[str]]) -> None:
+    """ValueError when two cameras are given the same image files (a rig of one camera with itself)."""
+    import os
+
+    owner: dict[str, str] = {}
+    for cam, fs in files.items():
+        for f in fs:
+            key = os.path.realpath(f)
+            if owner.setdefault(key, cam) != cam:
+                raise ValueError(f"--rig: {owner[key]} and {cam} are given the same image file ({Path(f).name}); "
+                                 "each camera needs its own images")
+
+
 def _check_sizes(cam, views, sizes, frames, skipped) -> tuple[int, int]:
     """The camera's image size (its most common one); a frame of another size is dropped with a message
     naming the pair and both sizes."""
@@ -163,6 +178,7 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
     models = cfg.model.split(",")
     if len(models) not in (1, len(names)):
         raise ValueError(f"--model lists {len(models)} lens models for {len(names)} cameras ({', '.join(names)})")
+    _refuse_shared_files(files)
     pairing = pair_images(files)
     detect = make_detector(cfg.detector, cfg.pattern, cfg.network)  # a bad network fails here, before any work
     with OutputFolder(cfg.out, "rig") as out:  # a bad --out fails here; files are swapped in at the end

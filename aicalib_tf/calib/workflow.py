@@ -104,9 +104,12 @@ class _Found:
 
 
 def _labels(files: list[str]) -> dict[str, str]:
-    """Short names for reports: the file name, or the path where two files share a name."""
+    """Short names for reports: the file name, or the path where two files share a name (printable:
+    undecodable bytes of a name shown as \\xNN)."""
+    from aicalib_tf.io import display_name
+
     counts = Counter(Path(f).name for f in files)
-    return {f: Path(f).name if counts[Path(f).name] == 1 else f for f in files}
+    return {f: display_name(Path(f).name if counts[Path(f).name] == 1 else f) for f in files}
 
 
 def _file_detector(name: str, pattern: tuple[int, int], network: str):
