@@ -130,8 +130,11 @@ def _common(args) -> dict:
 def _run(build, run_fn, wrote: str) -> int:
     """Build the config, run it, print the report; errors reach :func:`aicalib_tf.cli.run_main`."""
     cfg = build()
-    _, report = run_fn(cfg)
+    result, report = run_fn(cfg)
     print(report)
+    if getattr(result, "quality", {}).get("status") == "failed":
+        print(f"wrote {Path(cfg.out)}: rig.json marked failed, each camera's own calibration", file=sys.stderr)
+        return 1
     print(f"wrote {Path(cfg.out)}: {wrote}")
     return 0
 

@@ -11,6 +11,7 @@ The command line is ``python -m aicalib_tf.calibrate --rig cam0="left/*.png" cam
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from collections import Counter
 from dataclasses import dataclass
@@ -128,6 +129,21 @@ def _detect_camera(cam, frames, cfg: RigConfig) -> tuple[dict, dict, dict]:
     return views, {f.label: f.size for f in found}, skipped
 
 
+def _save_failed_rig(rig, folder: Path) -> None:
+    """A failed rig's files: rig.json (status "failed", the problems) and each camera's own calibration
+    (alone, never the joint fit's) in a folder of its name; no stereo files to be used by mistake."""
+    from aicalib_tf.calib.files import FILES
+    from aicalib_tf.calib.rig_files import rig_texts
+    from aicalib_tf.io import atomic_write_text
+
+    texts = rig_texts(dataclasses.replace(rig, cameras=rig.single or rig.cameras))
+    for rel, text in texts.items():
+        parts = Path(rel).parts
+        if rel == "rig.json" or (len(parts) == 2 and parts[0] in rig.names and parts[1] in FILES):
+            (folder / rel).parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(folder / rel, text)
+
+
 def _refuse_shared_files(files: dict[str, list[str]]) -> None:
     """ValueError when two cameras are given the same image files (a rig of one camera with itself)."""
     import os
@@ -183,7 +199,10 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
     detect = make_detector(cfg.detector, cfg.pattern, cfg.network)  # a bad network fails here, before any work
     with OutputFolder(cfg.out, "rig") as out:  # a bad --out fails here; files are swapped in at the end
         rig, report, figure = _calibrate_rig_files(files, pairing, detect, models, cfg)
-        save_rig(rig, out.path)
+        if rig.quality.get("status") == "failed":
+            _save_failed_rig(rig, out.path)
+        else:
+            save_rig(rig, out.path)
         atomic_write_bytes(out.path / "report.png", figure)
         atomic_write_text(out.path / "report.txt", report + "\n")
     return rig, report
@@ -194,6 +213,7 @@ def _calibrate_rig_files(files, pairing, detect, models, cfg: RigConfig):
     from aicalib_tf.calib.rig import calibrate_rig
     from aicalib_tf.calib.rig_quality import assess_rig
     from aicalib_tf.calib.rig_report import format_rig_report, rig_figure
+    from aicalib_tf.calib.rig_sanity import rig_problems
 
     names = list(files)
     views, sizes, skipped = {}, {}, {}
@@ -207,5 +227,10 @@ def _calibrate_rig_files(files, pairing, detect, models, cfg: RigConfig):
     rig = calibrate_rig([views[c] for c in names], cfg.pattern, cfg.square, [sizes[c] for c in names], names=names,
                         models=models if len(models) > 1 else models[0], square_unit=cfg.square_unit, meta=meta)
     rig = assess_rig(rig, [views[c] for c in names])
+    problems = rig_problems(rig)
+    rig = dataclasses.replace(rig, quality=dict(rig.quality, status="failed" if problems else "ok", problems=problems))
     report = format_rig_report(rig, pairing, skipped)
+    if problems:
+        report += "\n\nFAILED: this is not a usable rig calibration\n" + "\n".join(f"  - {p}" for p in problems) + \
+            "\nrig.json is written with status \"failed\" and each camera's own calibration; no stereo files."
     return rig, report, rig_figure(rig, pairing)
