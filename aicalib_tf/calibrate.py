@@ -107,6 +107,11 @@ def _main(args) -> int:
         print("error: give either images or --rig NAME=GLOB ... (not both)" if args.rig else "error: no images given",
               file=sys.stderr)
         return 2
+    if args.rig and (args.fix_k3 or args.rational or args.resize_policy != "error"):
+        given = [f for f, on in (("--fix-k3", args.fix_k3), ("--rational", args.rational),
+                                 ("--resize-policy", args.resize_policy != "error")) if on]
+        raise ValueError(f"{', '.join(given)} cannot be used with --rig (give --model per camera instead; "
+                         "every image of a camera must have one size)")
     if args.rig:
         from aicalib_tf.calib.rig_workflow import RigConfig, parse_rig, run_rig
 
