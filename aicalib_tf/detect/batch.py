@@ -30,6 +30,7 @@ __all__ = ["default_workers", "map_images", "worker_count", "worker_pool"]
 # take 0.96 s in one process and 0.91 s with a pool of 2, 26 photos 1.75 and 1.42 s (with numba's JIT,
 # whose set-up each worker paid, a pool paid from about 33 images)
 MIN_ITEMS_PER_WORKER = 8
+MAX_WORKERS_PER_CORE = 4  # more processes than this per core only multiply memory (each loads the model)
 _WORK: list = []  # in a worker process: the work function its setup built
 
 
@@ -43,10 +44,13 @@ def worker_count(workers: int | None, items: int) -> int:
     core, but no more than one per ``MIN_ITEMS_PER_WORKER`` items (a pool's start costs about as
     much as that many detections).
 
-    Raises ValueError for ``workers`` < 1.
+    Raises ValueError for ``workers`` < 1 or over :data:`MAX_WORKERS_PER_CORE` per core.
     """
     if workers is not None and workers < 1:
         raise ValueError(f"--workers must be >= 1, got {workers}")
+    cap = MAX_WORKERS_PER_CORE * (os.cpu_count() or 1)
+    if workers is not None and workers > cap:
+        raise ValueError(f"--workers {workers} is more than {cap} ({MAX_WORKERS_PER_CORE} per core); each loads the model")
     if workers is None:
         workers = min(default_workers(), items // MIN_ITEMS_PER_WORKER)
     return max(1, min(workers, items))

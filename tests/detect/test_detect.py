@@ -338,7 +338,7 @@ def test_cli_writes_overlays_and_corner_files_and_skips_bad_files(tmp_path, caps
     assert main([str(DATA / "opencv_left" / "left0[12].jpg"), str(bad), "--pattern", "9x6", "--out", str(out), "--quiet"]) == 0
     printed = capsys.readouterr().out
     assert "3 images: 2 full boards" in printed and "1 unreadable" in printed and "corrupt.jpg" in printed
-    assert sorted(p.name for p in out.iterdir()) == ["left01.json", "left01.png", "left02.json", "left02.png"]
+    assert sorted(p.name for p in out.iterdir() if p.name != ".aicalib") == ["left01.json", "left01.png", "left02.json", "left02.png"]
     record = json.loads((out / "left01.json").read_text())
     assert record["complete"] and len(record["corners"]) == 54 and len(record["model_sha256"]) == 64
     assert main(["x.jpg", "--pattern", "9x", "--out", str(out)]) == 2
