@@ -1,0 +1,303 @@
+"""Field check: does an existing calibration still hold for new views of the board?
+
+The intrinsics stay as calibrated and only the new views' poses are fitted; two tests then ask
+whether the new corners agree with the calibration within its own uncertainty:
+
+* **Residuals.** With the calibration's intrinsics fixed, the squared residuals of the new views
+  sum to about σ²·(2N − 6V) + tr(S·Σ) under "nothing changed": σ is the corner noise per axis
+  that the calibration's RMS implies (:func:`corner_noise`), N corners in V views, S the new views'
+  JᵀJ over the intrinsics with their poses eliminated (Schur complement) and Σ the calibration's
+  covariance (what its own uncertainty adds once the poses have absorbed what they can). The sum
+  is compared with the (1 − α) quantile of a scaled χ² of the same mean and variance
+  (Satterthwaite), the variance including the noise of σ² itself (the calibration's degrees of freedom).
+* **Drift.** fx, fy, cx, cy are fitted to the new views with the distortion held at the
+  calibration's (or, ``hold_distortion=False``, every intrinsic fitted). The difference d from the
+  calibration has covariance C = Σ_new + M·Σ·Mᵀ, M = [−I, B], where B = −S_ff⁻¹·S_fd says how the
+  held distortion's own error moves the new fit; dᵀC⁻¹d is compared with χ²(4)'s (1 − α) quantile.
+
+The calibration holds when neither test rejects at level α (default 0.01 each, so an unchanged
+camera fails the check in at most about 2% of checks). Poses come from rays
+(:func:`~aicalib_tf.calib.bundle.poses_from_rays`), so every lens model works, fisheye included.
+Views without a pose and outlier views (:func:`~aicalib_tf.calib.fit.outlier_threshold` of the
+fixed-intrinsics RMS; a misread board sits tens of px off) are skipped with the reason.
+Pure numpy/OpenCV (and the standard library's normal quantile).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from statistics import NormalDist
+
+import numpy as np
+
+from aicalib_tf.calib.bundle import CalibrationError, _Problem, bundle_adjust, poses_from_rays, schur_complement
+from aicalib_tf.calib.fit import _sort_views, outlier_threshold
+from aicalib_tf.calib.quality import lens_of
+from aicalib_tf.geometry.pattern import board_points
+
+__all__ = ["CheckResult", "check_calibration", "corner_noise", "calibration_covariance", "chi2_sf", "chi2_quantile",
+           "ALPHA", "MIN_CHECK_VIEWS", "PARAMS"]
+
+ALPHA = 0.01  # each test's false-alarm rate for an unchanged camera
+MIN_CHECK_VIEWS = 3
+MIN_NOISE_PX = 0.01  # floor of the corner noise per axis (a noise-free calibration would make any change significant)
+PARAMS = ("fx", "fy", "cx", "cy")
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    """The field check of one calibration against new views.
+
+    holds : neither test rejects at level ``alpha``. model : the lens model. views : names of the
+    used views; per_view_rms (V,) px with the calibration's intrinsics. skipped : {name: why}.
+    rms, expected_rms, limit_rms : residual RMS over the used corners, px, what the calibration
+    predicts, and the (1 − alpha) limit; residual_p : its p-value. noise_px : corner noise per axis.
+    calibrated, calibrated_std, measured, measured_std, drift, drift_std : (4,) float64 px for
+    fx, fy, cx, cy (measured: fitted to the new views; drift = measured − calibrated, its σ with
+    both uncertainties). drift_chi2, drift_limit, drift_p : the drift test. notes : caveats.
+    """
+
+    holds: bool
+    model: str
+    views: tuple
+    per_view_rms: np.ndarray
+    skipped: dict
+    rms: float
+    expected_rms: float
+    limit_rms: float
+    residual_p: float
+    noise_px: float
+    calibrated: np.ndarray
+    calibrated_std: np.ndarray
+    measured: np.ndarray
+    measured_std: np.ndarray
+    drift: np.ndarray
+    drift_std: np.ndarray
+    drift_chi2: float
+    drift_limit: float
+    drift_p: float
+    alpha: float
+    hold_distortion: bool = True
+    notes: tuple = field(default=())
+
+    @property
+    def failures(self) -> list[str]:
+        """Why the calibration does not hold, one line per failed test ([] when it holds)."""
+        out = []
+        if self.residual_p < self.alpha:
+            out.append(f"residual RMS {self.rms:.3f} px is above the limit {self.limit_rms:.3f} px "
+                       f"(expected {self.expected_rms:.3f} px)")
+        if self.drift_p < self.alpha:
+            z = self.drift / self.drift_std
+            k = int(np.argmax(np.abs(z)))
+            out.append(f"the intrinsics drifted (chi2 {self.drift_chi2:.1f} > {self.drift_limit:.1f}; largest: "
+                       f"{PARAMS[k]} {self.drift[k]:+.2f} ± {self.drift_std[k]:.2f} px)")
+        return out
+
+    def to_dict(self) -> dict:
+        """A JSON-able dict (finite floats only; a non-finite value becomes None)."""
+        def num(x):
+            return float(x) if np.isfinite(x) else None
+
+        def per_param(a):
+            return {p: num(v) for p, v in zip(PARAMS, a)}
+
+        return {
+            "holds": bool(self.holds), "model": self.model, "alpha": self.alpha,
+            "hold_distortion": self.hold_distortion, "failures": self.failures, "notes": list(self.notes),
+            "views": [{"name": n, "rms": num(e)} for n, e in zip(self.views, self.per_view_rms)],
+            "skipped": dict(self.skipped),
+            "residuals": {"rms": num(self.rms), "expected_rms": num(self.expected_rms),
+                          "limit_rms": num(self.limit_rms), "p": num(self.residual_p), "noise_px": num(self.noise_px)},
+            "calibrated": per_param(self.calibrated), "calibrated_std": per_param(self.calibrated_std),
+            "measured": per_param(self.measured), "measured_std": per_param(self.measured_std),
+            "drift": per_param(self.drift), "drift_std": per_param(self.drift_std),
+            "drift_test": {"chi2": num(self.drift_chi2), "limit": num(self.drift_limit), "p": num(self.drift_p),
+                           "dof": len(PARAMS)},
+        }
+
+
+# ----------------------------------------------------------------------------- statistics
+def chi2_sf(x: float, k: float) -> float:
+    """P(χ²_k > x): exact for even integer k <= 200, else the Wilson–Hilferty approximation."""
+    if not x > 0:
+        return 1.0
+    if float(k).is_integer() and int(k) % 2 == 0 and k <= 200:
+        term, total = 1.0, 1.0
+        for j in range(1, int(k) // 2):
+            term *= (x / 2) / j
+            total += term
+        return float(min(1.0, math.exp(-x / 2) * total))
+    c = 2.0 / (9.0 * k)
+    return float(1.0 - NormalDist().cdf(((x / k) ** (1 / 3) - (1 - c)) / math.sqrt(c)))
+
+
+def chi2_quantile(p: float, k: float) -> float:
+    """The p-quantile of χ²_k (bisection on :func:`chi2_sf`, to 1e-9 relative)."""
+    if not 0.0 < p < 1.0 or not k > 0:
+        raise ValueError(f"p must be in (0, 1) and k > 0, got p={p!r}, k={k!r}")
+    lo, hi = 0.0, max(4.0 * k, 10.0)
+    while chi2_sf(hi, k) > 1 - p:
+        hi *= 2
+    while hi - lo > 1e-9 * hi:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if chi2_sf(mid, k) > 1 - p else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def corner_noise(cal) -> tuple[float, float]:
+    """(σ px per axis, degrees of freedom) of the corner noise the calibration's RMS implies.
+
+    σ² = rms²·N / (2N − 6V − n): N corners of V views (``cal.corner_counts``, or full boards of
+    ``cal.pattern_size`` when a file does not say, as an OpenCV camera.yaml), n free intrinsics.
+    Floored at :data:`MIN_NOISE_PX`.
+    """
+    V = len(cal.views)
+    counts = np.asarray(cal.corner_counts, np.float64)
+    N = float(counts.sum()) if counts.size and counts.sum() > 0 else float(V * cal.pattern_size[0] * cal.pattern_size[1])
+    n = 4 + np.asarray(cal.dist).size
+    dof = 2 * N - 6 * V - n
+    if not (dof > 0 and N > 0 and np.isfinite(cal.rms)):
+        return max(float(cal.rms) / math.sqrt(2), MIN_NOISE_PX), math.inf
+    return max(float(cal.rms) * math.sqrt(N / dof), MIN_NOISE_PX), dof
+
+
+def calibration_covariance(cal) -> tuple[np.ndarray, str]:
+    """((4+n, 4+n) covariance of [fx, fy, cx, cy, *dist], note): ``cal.covariance``, else the diagonal
+    of ``cal.std``, else zeros; the note says when the file did not carry the full covariance."""
+    lens = lens_of(cal)
+    n = 4 + lens.dist.size
+    cov = getattr(cal, "covariance", None)
+    if cov is not None and np.asarray(cov).shape == (n, n) and np.all(np.isfinite(cov)):
+        return np.asarray(cov, np.float64), ""
+    names = ("fx", "fy", "cx", "cy") + tuple(f"d{k}" for k in range(n - 4))
+    std = getattr(cal, "std", {}) or {}
+    if all(k in std for k in PARAMS):
+        from aicalib_tf.geometry.lens import COEFF_NAMES
+
+        names = PARAMS + COEFF_NAMES[lens.model]
+        return np.diag([float(std.get(k, 0.0)) ** 2 for k in names]), (
+            "the calibration file carries σ but no covariance: correlations ignored")
+    return np.zeros((n, n)), ("the calibration file carries no uncertainty (e.g. an OpenCV camera.yaml): its "
+                              "intrinsics are taken as exact, which flags changes more readily; check against camera.json")
+
+
+def _satterthwaite(observed: float, mean: float, var: float, alpha: float) -> tuple[float, float]:
+    """(p-value, (1 − alpha) limit) of a sum of squares with that mean and variance, as a scaled χ²."""
+    g, h = var / (2 * mean), 2 * mean * mean / var
+    return chi2_sf(observed / g, h), g * chi2_quantile(1 - alpha, h)
+
+
+# ----------------------------------------------------------------------------- the check
+def _poses(lens, obj, px, names, skipped):
+    """Start poses per view from rays; views without one go to ``skipped``. Returns kept indices and poses."""
+    keep, rv, tv = [], [], []
+    for k, (o, p) in enumerate(zip(obj, px)):
+        pose = poses_from_rays(lens, [o], [p])
+        if pose is None:
+            skipped[names[k]] = "no pose: the calibrated lens sees the board behind it"
+            continue
+        keep.append(k)
+        rv.append(pose[0][0])
+        tv.append(pose[1][0])
+    return keep, np.array(rv).reshape(-1, 3), np.array(tv).reshape(-1, 3)
+
+
+def _fixed_fit(lens, obj, px, names, skipped):
+    """Poses of every view with the intrinsics fixed, outlier views skipped; returns (kept indices, BundleResult)."""
+    keep, rv, tv = _poses(lens, obj, px, names, skipped)
+    if len(keep) < MIN_CHECK_VIEWS:
+        raise CalibrationError(f"{len(keep)} views with a pose; the check needs at least {MIN_CHECK_VIEWS}")
+    fit = bundle_adjust(lens.model, [obj[k] for k in keep], [px[k] for k in keep], lens.intrinsics(), rv, tv,
+                        free=np.zeros(4 + lens.dist.size, bool), covariance=False, strict=False)
+    rms = np.where(np.isfinite(fit.per_view_rms), fit.per_view_rms, np.inf)
+    thr = outlier_threshold(rms[np.isfinite(rms)]) if np.isfinite(rms).any() else 0.0
+    order = [int(i) for i in np.argsort(-rms) if rms[i] > thr][: max(len(keep) // 3, 0)]
+    order += [int(i) for i in np.flatnonzero(~np.isfinite(rms)) if int(i) not in order]
+    for i in order:
+        skipped[names[keep[i]]] = (f"outlier: RMS {rms[i]:.2f} px > {thr:.2f} px" if np.isfinite(rms[i])
+                                   else "a corner cannot be projected by the calibrated lens")
+    kept = [i for i in range(len(keep)) if i not in order]
+    if len(kept) < MIN_CHECK_VIEWS:
+        raise CalibrationError(f"{len(kept)} usable views after outliers; the check needs at least {MIN_CHECK_VIEWS}")
+    if len(kept) < len(keep):
+        fit = bundle_adjust(lens.model, [obj[keep[i]] for i in kept], [px[keep[i]] for i in kept], lens.intrinsics(),
+                            fit.rvecs[kept], fit.tvecs[kept], free=np.zeros(4 + lens.dist.size, bool),
+                            covariance=False, strict=False)
+    return [keep[i] for i in kept], fit
+
+
+def _schur(model, obj, px, intrinsics, rvecs, tvecs) -> np.ndarray:
+    """(4+n, 4+n) JᵀJ of the views over the intrinsics with their poses eliminated, at the given parameters."""
+    prob = _Problem(model, obj, px, intrinsics, np.ones(len(intrinsics), bool))
+    x = np.concatenate([intrinsics, np.hstack([rvecs, tvecs]).ravel()])
+    U, W, Vb, _, _ = prob.normal_blocks(x)
+    return schur_complement(U, W, Vb)[0]
+
+
+def _residual_test(fit, S, cov, sigma, dof_cal, alpha):
+    """(rms, expected rms, limit rms, p) of the fixed-intrinsics residuals (module docstring)."""
+    N = sum(len(r) for r in fit.residuals)
+    ss = float(sum(np.sum(r * r) for r in fit.residuals))
+    dof = 2 * N - 6 * len(fit.residuals)
+    SC = S @ cov
+    s2 = sigma * sigma
+    mean = s2 * dof + float(np.trace(SC))
+    var = 2 * s2 * s2 * dof + 2 * float(np.trace(SC @ SC)) + 4 * s2 * float(np.trace(SC)) + 2 * (s2 * dof) ** 2 / dof_cal
+    p, limit = _satterthwaite(ss, mean, var, alpha)
+    return math.sqrt(ss / N), math.sqrt(mean / N), math.sqrt(limit / N), p
+
+
+def _drift_test(lens, obj, px, fit, S, cov, hold_distortion):
+    """(measured (4,), its covariance (4, 4), drift covariance (4, 4)) from a fit of fx, fy, cx, cy (module docstring)."""
+    n = 4 + lens.dist.size
+    free = np.zeros(n, bool)
+    free[:4 if hold_distortion else n] = True
+    new = bundle_adjust(lens.model, obj, px, lens.intrinsics(), fit.rvecs, fit.tvecs, free=free, rank_strict=False)
+    M = np.zeros((4, n))
+    M[:, :4] = -np.eye(4)
+    if hold_distortion and n > 4:
+        M[:, 4:] = -np.linalg.solve(S[:4, :4], S[:4, 4:])
+    cnew = new.covariance[:4, :4]
+    return new.intrinsics[:4], cnew, cnew + M @ cov @ M.T
+
+
+def check_calibration(cal, views, *, alpha: float = ALPHA, hold_distortion: bool = True) -> CheckResult:
+    """Test new views of the board against a calibration (module docstring).
+
+    cal : a :class:`~aicalib_tf.calib.fit.Calibration` (any lens model; its covariance is used when
+    it has one). views : sequence of :class:`~aicalib_tf.calib.fit.View` seen by the same camera,
+    of ``cal.pattern_size`` boards (full or partial). alpha : each test's level in (0, 0.5).
+    hold_distortion : fit fx, fy, cx, cy with the distortion held (default) or every intrinsic.
+    Raises ValueError for bad arguments and CalibrationError with fewer than
+    :data:`MIN_CHECK_VIEWS` usable views.
+    """
+    if not 0.0 < float(alpha) < 0.5:
+        raise ValueError(f"alpha must be in (0, 0.5), got {alpha!r}")
+    lens = lens_of(cal)
+    usable, skipped = _sort_views(views, tuple(cal.pattern_size))
+    if len(usable) < MIN_CHECK_VIEWS:
+        raise CalibrationError(f"{len(usable)} usable views; the check needs at least {MIN_CHECK_VIEWS}"
+                               + "".join(f"; {k}: {v}" for k, v in list(skipped.items())[:5]))
+    names = [v.name for v in usable]
+    obj = [board_points(v.ids, cal.square_size) for v in usable]
+    px = [v.corners for v in usable]
+    kept, fit = _fixed_fit(lens, obj, px, names, skipped)
+    obj, px = [obj[k] for k in kept], [px[k] for k in kept]
+    cov, note = calibration_covariance(cal)
+    S = _schur(lens.model, obj, px, lens.intrinsics(), fit.rvecs, fit.tvecs)
+    sigma, dof_cal = corner_noise(cal)
+    rms, expected, limit, p_res = _residual_test(fit, S, cov, sigma, dof_cal, alpha)
+    measured, cnew, cdrift = _drift_test(lens, obj, px, fit, S, cov, hold_distortion)
+    calibrated = lens.intrinsics()[:4]
+    drift = measured - calibrated
+    chi2 = float(drift @ np.linalg.solve(cdrift, drift))
+    p_drift = chi2_sf(chi2, 4)
+    return CheckResult(
+        holds=bool(p_res >= alpha and p_drift >= alpha), model=lens.model, views=tuple(names[k] for k in kept),
+        per_view_rms=fit.per_view_rms, skipped=skipped, rms=rms, expected_rms=expected, limit_rms=limit,
+        residual_p=p_res, noise_px=sigma, calibrated=calibrated, calibrated_std=np.sqrt(np.diag(cov)[:4]),
+        measured=measured, measured_std=np.sqrt(np.diag(cnew)), drift=drift, drift_std=np.sqrt(np.diag(cdrift)),
+        drift_chi2=chi2, drift_limit=chi2_quantile(1 - alpha, 4), drift_p=p_drift, alpha=float(alpha),
+        hold_distortion=hold_distortion, notes=(note,) if note else ())
