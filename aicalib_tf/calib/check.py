@@ -36,7 +36,7 @@ from aicalib_tf.calib.fit import _sort_views, outlier_threshold
 from aicalib_tf.calib.quality import lens_of
 from aicalib_tf.geometry.pattern import board_points
 
-__all__ = ["CheckResult", "check_calibration", "corner_noise", "calibration_covariance", "chi2_sf", "chi2_quantile",
+__all__ = ["CheckResult", "check_calibration", "format_check", "corner_noise", "calibration_covariance", "chi2_sf", "chi2_quantile",
            "ALPHA", "MIN_CHECK_VIEWS", "PARAMS"]
 
 ALPHA = 0.01  # each test's false-alarm rate for an unchanged camera
@@ -120,15 +120,16 @@ class CheckResult:
 
 # ----------------------------------------------------------------------------- statistics
 def chi2_sf(x: float, k: float) -> float:
-    """P(χ²_k > x): exact for even integer k <= 200, else the Wilson–Hilferty approximation."""
+    """P(χ²_k > x): exact for integer k <= 400 (the recurrence from k = 1 or 2), else Wilson–Hilferty."""
     if not x > 0:
         return 1.0
-    if float(k).is_integer() and int(k) % 2 == 0 and k <= 200:
-        term, total = 1.0, 1.0
-        for j in range(1, int(k) // 2):
-            term *= (x / 2) / j
-            total += term
-        return float(min(1.0, math.exp(-x / 2) * total))
+    if float(k).is_integer() and 1 <= k <= 400:
+        k = int(k)
+        sf, j = (math.erfc(math.sqrt(x / 2)), 1) if k % 2 else (math.exp(-x / 2), 2)
+        while j < k:
+            j += 2  # sf(x, j) = sf(x, j - 2) + (x/2)^(j/2 - 1)·e^(-x/2) / Γ(j/2)
+            sf += math.exp((j / 2 - 1) * math.log(x / 2) - x / 2 - math.lgamma(j / 2))
+        return float(min(1.0, sf))
     c = 2.0 / (9.0 * k)
     return float(1.0 - NormalDist().cdf(((x / k) ** (1 / 3) - (1 - c)) / math.sqrt(c)))
 
@@ -301,3 +302,29 @@ def check_calibration(cal, views, *, alpha: float = ALPHA, hold_distortion: bool
         measured=measured, measured_std=np.sqrt(np.diag(cnew)), drift=drift, drift_std=np.sqrt(np.diag(cdrift)),
         drift_chi2=chi2, drift_limit=chi2_quantile(1 - alpha, 4), drift_p=p_drift, alpha=float(alpha),
         hold_distortion=hold_distortion, notes=(note,) if note else ())
+
+
+def format_check(result: CheckResult, *, source: str = "", total: int | None = None) -> str:
+    """The printed report: the verdict, views used and skipped with reasons, the residual RMS
+    against the expected and its limit, and the drift of fx, fy, cx, cy (±1σ of the difference)."""
+    used, skipped = len(result.views), len(result.skipped)
+    given = total if total is not None else used + skipped
+    head = "HOLDS" if result.holds else "DOES NOT HOLD"
+    lines = [f"field check{f' of {source}' if source else ''} ({result.model}): the calibration {head}",
+             f"  {given} views: {used} used, {given - used} skipped"]
+    lines += [f"  skipped  {name}: {why}" for name, why in result.skipped.items()]
+    ok = lambda p: "ok" if p >= result.alpha else "FAIL"  # noqa: E731
+    q = 100 * (1 - result.alpha)
+    lines.append(f"  residual RMS {result.rms:.3f} px with the calibrated intrinsics (expected {result.expected_rms:.3f}, "
+                 f"limit {result.limit_rms:.3f} at {q:g}%): {ok(result.residual_p)}")
+    what = "distortion held" if result.hold_distortion else "every intrinsic refitted"
+    lines.append(f"  drift, new views − calibration ({what}; ±1σ of the difference):")
+    for k, p in enumerate(PARAMS):
+        rel = f" ({100 * result.drift[k] / result.calibrated[k]:+.2f}%)" if k < 2 else ""
+        lines.append(f"    {p} {result.measured[k]:9.2f} − {result.calibrated[k]:9.2f} = {result.drift[k]:+7.2f} "
+                     f"± {result.drift_std[k]:.2f} px{rel}")
+    lines.append(f"  drift test: chi2 {result.drift_chi2:.1f} for 4 parameters (limit {result.drift_limit:.1f} at "
+                 f"{q:g}%): {ok(result.drift_p)}")
+    lines += [f"  note: {n}" for n in result.notes]
+    lines += [f"  why: {f}" for f in result.failures]
+    return "\n".join(lines)
