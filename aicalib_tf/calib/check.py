@@ -55,7 +55,8 @@ class CheckResult:
     predicts, and the (1 − alpha) limit; residual_p : its p-value. noise_px : corner noise per axis.
     calibrated, calibrated_std, measured, measured_std, drift, drift_std : (4,) float64 px for
     fx, fy, cx, cy (measured: fitted to the new views; drift = measured − calibrated, its σ with
-    both uncertainties). drift_chi2, drift_limit, drift_p : the drift test. notes : caveats.
+    both uncertainties). drift_chi2, drift_limit, drift_p : the drift test. inflation : κ >= 1, the
+    factor on both covariances that the scatter between the new views asks for. notes : caveats.
     """
 
     holds: bool
@@ -79,6 +80,7 @@ class CheckResult:
     drift_p: float
     alpha: float
     hold_distortion: bool = True
+    inflation: float = 1.0
     notes: tuple = field(default=())
 
     @property
@@ -105,7 +107,7 @@ class CheckResult:
 
         return {
             "holds": bool(self.holds), "model": self.model, "alpha": self.alpha,
-            "hold_distortion": self.hold_distortion, "failures": self.failures, "notes": list(self.notes),
+            "hold_distortion": self.hold_distortion, "inflation": num(self.inflation), "failures": self.failures, "notes": list(self.notes),
             "views": [{"name": n, "rms": num(e)} for n, e in zip(self.views, self.per_view_rms)],
             "skipped": dict(self.skipped),
             "residuals": {"rms": num(self.rms), "expected_rms": num(self.expected_rms),
@@ -237,21 +239,93 @@ def _schur(model, obj, px, intrinsics, rvecs, tvecs) -> np.ndarray:
     return schur_complement(U, W, Vb)[0]
 
 
-def _residual_test(fit, S, cov, sigma, dof_cal, alpha):
-    """(rms, expected rms, limit rms, p) of the fixed-intrinsics residuals (module docstring)."""
-    N = sum(len(r) for r in fit.residuals)
+def t_quantile(p: float, nu: float) -> float:
+    """The p-quantile of Student's t with ``nu`` degrees of freedom (Cornish–Fisher, within 1% for nu >= 4)."""
+    z = NormalDist().inv_cdf(p)
+    if not math.isfinite(nu):
+        return z
+    return (z + (z ** 3 + z) / (4 * nu) + (5 * z ** 5 + 16 * z ** 3 + 3 * z) / (96 * nu ** 2)
+            + (3 * z ** 7 + 19 * z ** 5 + 17 * z ** 3 - 15 * z) / (384 * nu ** 3))
+
+
+def _t_sf(x: float, nu: float) -> float:
+    """P(t_nu > x) by bisection on :func:`t_quantile` (x >= 0), else from the normal."""
+    if x <= 0 or not math.isfinite(nu):
+        return 1.0 - NormalDist().cdf(x)
+    lo, hi = 1e-16, 0.5  # the tail probability
+    for _ in range(60):
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if t_quantile(1 - mid, nu) > x else (lo, mid)
+    return math.sqrt(lo * hi)
+
+
+def _view_scatter(cal, sigma: float) -> tuple[float, float]:
+    """(relative variance of one view's mean squared residual, its degrees of freedom) from the
+    calibration's per-view RMS; never below what pure corner noise gives (2 / (2·54 − 6) for a 9x6 board)."""
+    per_view = np.asarray(cal.per_view_rms, np.float64) ** 2
+    per_view = per_view[np.isfinite(per_view) & (per_view > 0)]
+    floor = 2.0 / max(2 * cal.pattern_size[0] * cal.pattern_size[1] - 6, 1)
+    if per_view.size < 3:
+        return floor, math.inf
+    return max(float(np.var(per_view, ddof=1) / np.mean(per_view) ** 2), floor), per_view.size - 1.0
+
+
+def _residual_test(fit, S, cov, sigma, scatter, alpha):
+    """(rms, expected rms, limit rms, p) of the fixed-intrinsics residuals (module docstring).
+
+    The mean squared residual per corner M is compared with its expectation E; its variance is the
+    views' scatter (``scatter``: (relative variance of one view's mean square, dof), :func:`_view_scatter`)
+    over the new views and over the calibration's, plus what the intrinsics' uncertainty adds; a
+    one-sided t test with the calibration's views' dof."""
+    counts = np.array([len(r) for r in fit.residuals], np.float64)
+    N, V = counts.sum(), len(counts)
     ss = float(sum(np.sum(r * r) for r in fit.residuals))
-    dof = 2 * N - 6 * len(fit.residuals)
     SC = S @ cov
-    s2 = sigma * sigma
-    mean = s2 * dof + float(np.trace(SC))
-    var = 2 * s2 * s2 * dof + 2 * float(np.trace(SC @ SC)) + 4 * s2 * float(np.trace(SC)) + 2 * (s2 * dof) ** 2 / dof_cal
-    p, limit = _satterthwaite(ss, mean, var, alpha)
-    return math.sqrt(ss / N), math.sqrt(mean / N), math.sqrt(limit / N), p
+    noise = 2 * sigma * sigma * (2 * N - 6 * V) / (2 * N)  # per corner, after the poses took their share
+    mean = noise + float(np.trace(SC)) / N
+    rel, nu = scatter
+    var = (noise ** 2 * rel * (float(np.sum(counts ** 2)) / N ** 2 + 1.0 / max(nu + 1, 1))
+           + (2 * float(np.trace(SC @ SC)) + 4 * sigma * sigma * float(np.trace(SC))) / N ** 2)
+    sd = math.sqrt(var)
+    z = (ss / N - mean) / sd
+    limit = mean + t_quantile(1 - alpha, nu) * sd
+    return math.sqrt(ss / N), math.sqrt(mean), math.sqrt(limit), _t_sf(z, nu)
+
+
+def _view_inflation(model, obj, px, new, free) -> float:
+    """κ >= 1: the views-as-clusters (sandwich) covariance of fx, fy, cx, cy over the formal one
+    (mean of the eigenvalue ratios; 1 with fewer than 5 views).
+
+    With each view's pose eliminated, view v adds S_v to JᵀJ and g_v to the gradient; the robust
+    covariance is S⁻¹·(Σ g_v g_vᵀ)·S⁻¹·V/(V − 1), the linearised leave-one-view-out jackknife. Real
+    corners carry errors shared within a view (blur, lighting, the lens model's misfit) that the
+    formal σ²·S⁻¹ misses; with independent corner noise κ stays near 1."""
+    V = len(obj)
+    if V < 5:
+        return 1.0
+    x = np.concatenate([new.intrinsics[free], np.hstack([new.rvecs, new.tvecs]).ravel()])
+    r, Ji, Jp, _ = _Problem(model, obj, px, new.intrinsics, free)._evaluate(x)
+    r = r.reshape(-1, 2)
+    nf = int(np.sum(free))
+    S, G = np.zeros((nf, nf)), np.zeros((nf, nf))
+    start = 0
+    for o in obj:
+        sl = slice(start, start + len(o))
+        start += len(o)
+        ji, jp, rv = Ji[sl].reshape(-1, nf), Jp[sl].reshape(-1, 6), r[sl].ravel()
+        WVinv = (ji.T @ jp) @ np.linalg.inv(jp.T @ jp)
+        S += ji.T @ ji - WVinv @ (jp.T @ ji)
+        g = ji.T @ rv - WVinv @ (jp.T @ rv)
+        G += np.outer(g, g)
+    Sinv = np.linalg.inv(S)
+    robust = (Sinv @ G @ Sinv * V / (V - 1))[:4, :4]
+    formal = new.sigma2 * Sinv[:4, :4]
+    return max(1.0, float(np.trace(np.linalg.solve(formal, robust))) / 4)
 
 
 def _drift_test(lens, obj, px, fit, S, cov, hold_distortion):
-    """(measured (4,), its covariance (4, 4), drift covariance (4, 4)) from a fit of fx, fy, cx, cy (module docstring)."""
+    """(measured (4,), its covariance (4, 4), drift covariance (4, 4), κ) from a fit of fx, fy, cx, cy
+    (module docstring); both covariances are scaled by κ (:func:`_jackknife_inflation`)."""
     n = 4 + lens.dist.size
     free = np.zeros(n, bool)
     free[:4 if hold_distortion else n] = True
@@ -260,8 +334,9 @@ def _drift_test(lens, obj, px, fit, S, cov, hold_distortion):
     M[:, :4] = -np.eye(4)
     if hold_distortion and n > 4:
         M[:, 4:] = -np.linalg.solve(S[:4, :4], S[:4, 4:])
-    cnew = new.covariance[:4, :4]
-    return new.intrinsics[:4], cnew, cnew + M @ cov @ M.T
+    kappa = _view_inflation(lens.model, obj, px, new, free)
+    cnew = kappa * new.covariance[:4, :4]
+    return new.intrinsics[:4], cnew, cnew + kappa * (M @ cov @ M.T), kappa
 
 
 def check_calibration(cal, views, *, alpha: float = ALPHA, hold_distortion: bool = True) -> CheckResult:
@@ -288,9 +363,9 @@ def check_calibration(cal, views, *, alpha: float = ALPHA, hold_distortion: bool
     obj, px = [obj[k] for k in kept], [px[k] for k in kept]
     cov, note = calibration_covariance(cal)
     S = _schur(lens.model, obj, px, lens.intrinsics(), fit.rvecs, fit.tvecs)
-    sigma, dof_cal = corner_noise(cal)
-    rms, expected, limit, p_res = _residual_test(fit, S, cov, sigma, dof_cal, alpha)
-    measured, cnew, cdrift = _drift_test(lens, obj, px, fit, S, cov, hold_distortion)
+    measured, cnew, cdrift, kappa = _drift_test(lens, obj, px, fit, S, cov, hold_distortion)
+    sigma, _ = corner_noise(cal)
+    rms, expected, limit, p_res = _residual_test(fit, S, kappa * cov, sigma, _view_scatter(cal, sigma), alpha)
     calibrated = lens.intrinsics()[:4]
     drift = measured - calibrated
     chi2 = float(drift @ np.linalg.solve(cdrift, drift))
@@ -301,7 +376,7 @@ def check_calibration(cal, views, *, alpha: float = ALPHA, hold_distortion: bool
         residual_p=p_res, noise_px=sigma, calibrated=calibrated, calibrated_std=np.sqrt(np.diag(cov)[:4]),
         measured=measured, measured_std=np.sqrt(np.diag(cnew)), drift=drift, drift_std=np.sqrt(np.diag(cdrift)),
         drift_chi2=chi2, drift_limit=chi2_quantile(1 - alpha, 4), drift_p=p_drift, alpha=float(alpha),
-        hold_distortion=hold_distortion, notes=(note,) if note else ())
+        hold_distortion=hold_distortion, inflation=kappa, notes=(note,) if note else ())
 
 
 def format_check(result: CheckResult, *, source: str = "", total: int | None = None) -> str:
@@ -325,6 +400,8 @@ def format_check(result: CheckResult, *, source: str = "", total: int | None = N
                      f"± {result.drift_std[k]:.2f} px{rel}")
     lines.append(f"  drift test: chi2 {result.drift_chi2:.1f} for 4 parameters (limit {result.drift_limit:.1f} at "
                  f"{q:g}%): {ok(result.drift_p)}")
+    if result.inflation > 1.05:
+        lines.append(f"  (σ × {np.sqrt(result.inflation):.2f}: the new views scatter more than independent corner noise)")
     lines += [f"  note: {n}" for n in result.notes]
     lines += [f"  why: {f}" for f in result.failures]
     return "\n".join(lines)
