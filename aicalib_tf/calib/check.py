@@ -1,43 +1,47 @@
 """Field check: does an existing calibration still hold for new views of the board?
 
 The intrinsics stay as calibrated and only the new views' poses are fitted; two tests then ask
-whether the new corners agree with the calibration within its own uncertainty:
+whether the new corners agree with the calibration within its own uncertainty, each at level α:
 
-* **Residuals.** With the calibration's intrinsics fixed, the squared residuals of the new views
-  sum to about σ²·(2N − 6V) + tr(S·Σ) under "nothing changed": σ is the corner noise per axis
-  that the calibration's RMS implies (:func:`corner_noise`), N corners in V views, S the new views'
-  JᵀJ over the intrinsics with their poses eliminated (Schur complement) and Σ the calibration's
-  covariance (what its own uncertainty adds once the poses have absorbed what they can). The sum
-  is compared with the (1 − α) quantile of a scaled χ² of the same mean and variance
-  (Satterthwaite), the variance including the noise of σ² itself (the calibration's degrees of freedom).
 * **Drift.** fx, fy, cx, cy are fitted to the new views with the distortion held at the
   calibration's (or, ``hold_distortion=False``, every intrinsic fitted). The difference d from the
-  calibration has covariance C = Σ_new + M·Σ·Mᵀ, M = [−I, B], where B = −S_ff⁻¹·S_fd says how the
-  held distortion's own error moves the new fit; dᵀC⁻¹d is compared with χ²(4)'s (1 − α) quantile.
+  calibration has covariance C = κ·(Σ_new + M·Σ·Mᵀ): Σ the calibration's covariance, M = [−I, B]
+  with B = −S_ff⁻¹·S_fd saying how the held distortion's own error moves the new fit (S: the new
+  views' JᵀJ over the intrinsics with their poses eliminated, the Schur complement). dᵀC⁻¹d is
+  compared with χ²(4)'s (1 − α) quantile.
+* **Residuals.** With the calibration's intrinsics fixed, the mean squared residual per corner is
+  about 2σ²·(2N − 6V)/(2N) + tr(S·κΣ)/N under "nothing changed": σ the corner noise per axis that
+  the calibration's RMS implies (:func:`corner_noise`), N corners in V views. Its spread is the
+  scatter of the calibration's per-view RMS (views differ more than pure noise says: blur,
+  lighting), over the new views and the calibration's own; a one-sided t test.
 
-The calibration holds when neither test rejects at level α (default 0.01 each, so an unchanged
-camera fails the check in at most about 2% of checks). Poses come from rays
-(:func:`~aicalib_tf.calib.bundle.poses_from_rays`), so every lens model works, fisheye included.
-Views without a pose and outlier views (:func:`~aicalib_tf.calib.fit.outlier_threshold` of the
-fixed-intrinsics RMS; a misread board sits tens of px off) are skipped with the reason.
-Pure numpy/OpenCV (and the standard library's normal quantile).
+κ >= 1 (:func:`_view_inflation`) is what the scatter between the new views asks for beyond the
+formal σ²·(JᵀJ)⁻¹: 1 for independent corner noise (the synthetic trials of
+``benchmarks/field_check.py``), about 2–4 on real photos, where the formal covariance alone failed
+unchanged subsets of OpenCV's left photos in 70% of splits (docs/benchmark.md, "Field check").
+
+The calibration holds when neither test rejects (α = 0.01 each: an unchanged camera fails at most
+about 2% of checks). Poses come from rays (:func:`~aicalib_tf.calib.bundle.poses_from_rays`), so
+every lens model works, fisheye included. Views without a pose and outlier views
+(:func:`~aicalib_tf.calib.fit.outlier_threshold` of the fixed-intrinsics RMS; a misread board sits
+tens of px off) are skipped with the reason. Pure numpy/OpenCV.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from statistics import NormalDist
 
 import numpy as np
 
 from aicalib_tf.calib.bundle import CalibrationError, _Problem, bundle_adjust, poses_from_rays, schur_complement
 from aicalib_tf.calib.fit import _sort_views, outlier_threshold
 from aicalib_tf.calib.quality import lens_of
+from aicalib_tf.calib.significance import chi2_quantile, chi2_sf, t_quantile, t_sf
 from aicalib_tf.geometry.pattern import board_points
 
-__all__ = ["CheckResult", "check_calibration", "format_check", "corner_noise", "calibration_covariance", "chi2_sf", "chi2_quantile",
-           "ALPHA", "MIN_CHECK_VIEWS", "PARAMS"]
+__all__ = ["CheckResult", "check_calibration", "format_check", "corner_noise", "calibration_covariance", "ALPHA",
+           "MIN_CHECK_VIEWS", "PARAMS"]
 
 ALPHA = 0.01  # each test's false-alarm rate for an unchanged camera
 MIN_CHECK_VIEWS = 3
@@ -121,34 +125,6 @@ class CheckResult:
 
 
 # ----------------------------------------------------------------------------- statistics
-def chi2_sf(x: float, k: float) -> float:
-    """P(χ²_k > x): exact for integer k <= 400 (the recurrence from k = 1 or 2), else Wilson–Hilferty."""
-    if not x > 0:
-        return 1.0
-    if float(k).is_integer() and 1 <= k <= 400:
-        k = int(k)
-        sf, j = (math.erfc(math.sqrt(x / 2)), 1) if k % 2 else (math.exp(-x / 2), 2)
-        while j < k:
-            j += 2  # sf(x, j) = sf(x, j - 2) + (x/2)^(j/2 - 1)·e^(-x/2) / Γ(j/2)
-            sf += math.exp((j / 2 - 1) * math.log(x / 2) - x / 2 - math.lgamma(j / 2))
-        return float(min(1.0, sf))
-    c = 2.0 / (9.0 * k)
-    return float(1.0 - NormalDist().cdf(((x / k) ** (1 / 3) - (1 - c)) / math.sqrt(c)))
-
-
-def chi2_quantile(p: float, k: float) -> float:
-    """The p-quantile of χ²_k (bisection on :func:`chi2_sf`, to 1e-9 relative)."""
-    if not 0.0 < p < 1.0 or not k > 0:
-        raise ValueError(f"p must be in (0, 1) and k > 0, got p={p!r}, k={k!r}")
-    lo, hi = 0.0, max(4.0 * k, 10.0)
-    while chi2_sf(hi, k) > 1 - p:
-        hi *= 2
-    while hi - lo > 1e-9 * hi:
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if chi2_sf(mid, k) > 1 - p else (lo, mid)
-    return 0.5 * (lo + hi)
-
-
 def corner_noise(cal) -> tuple[float, float]:
     """(σ px per axis, degrees of freedom) of the corner noise the calibration's RMS implies.
 
@@ -184,12 +160,6 @@ def calibration_covariance(cal) -> tuple[np.ndarray, str]:
             "the calibration file carries σ but no covariance: correlations ignored")
     return np.zeros((n, n)), ("the calibration file carries no uncertainty (e.g. an OpenCV camera.yaml): its "
                               "intrinsics are taken as exact, which flags changes more readily; check against camera.json")
-
-
-def _satterthwaite(observed: float, mean: float, var: float, alpha: float) -> tuple[float, float]:
-    """(p-value, (1 − alpha) limit) of a sum of squares with that mean and variance, as a scaled χ²."""
-    g, h = var / (2 * mean), 2 * mean * mean / var
-    return chi2_sf(observed / g, h), g * chi2_quantile(1 - alpha, h)
 
 
 # ----------------------------------------------------------------------------- the check
@@ -239,26 +209,6 @@ def _schur(model, obj, px, intrinsics, rvecs, tvecs) -> np.ndarray:
     return schur_complement(U, W, Vb)[0]
 
 
-def t_quantile(p: float, nu: float) -> float:
-    """The p-quantile of Student's t with ``nu`` degrees of freedom (Cornish–Fisher, within 1% for nu >= 4)."""
-    z = NormalDist().inv_cdf(p)
-    if not math.isfinite(nu):
-        return z
-    return (z + (z ** 3 + z) / (4 * nu) + (5 * z ** 5 + 16 * z ** 3 + 3 * z) / (96 * nu ** 2)
-            + (3 * z ** 7 + 19 * z ** 5 + 17 * z ** 3 - 15 * z) / (384 * nu ** 3))
-
-
-def _t_sf(x: float, nu: float) -> float:
-    """P(t_nu > x) by bisection on :func:`t_quantile` (x >= 0), else from the normal."""
-    if x <= 0 or not math.isfinite(nu):
-        return 1.0 - NormalDist().cdf(x)
-    lo, hi = 1e-16, 0.5  # the tail probability
-    for _ in range(60):
-        mid = math.sqrt(lo * hi)
-        lo, hi = (mid, hi) if t_quantile(1 - mid, nu) > x else (lo, mid)
-    return math.sqrt(lo * hi)
-
-
 def _view_scatter(cal, sigma: float) -> tuple[float, float]:
     """(relative variance of one view's mean squared residual, its degrees of freedom) from the
     calibration's per-view RMS; never below what pure corner noise gives (2 / (2·54 − 6) for a 9x6 board)."""
@@ -289,7 +239,7 @@ def _residual_test(fit, S, cov, sigma, scatter, alpha):
     sd = math.sqrt(var)
     z = (ss / N - mean) / sd
     limit = mean + t_quantile(1 - alpha, nu) * sd
-    return math.sqrt(ss / N), math.sqrt(mean), math.sqrt(limit), _t_sf(z, nu)
+    return math.sqrt(ss / N), math.sqrt(mean), math.sqrt(limit), t_sf(z, nu)
 
 
 def _view_inflation(model, obj, px, new, free) -> float:
@@ -325,7 +275,7 @@ def _view_inflation(model, obj, px, new, free) -> float:
 
 def _drift_test(lens, obj, px, fit, S, cov, hold_distortion):
     """(measured (4,), its covariance (4, 4), drift covariance (4, 4), κ) from a fit of fx, fy, cx, cy
-    (module docstring); both covariances are scaled by κ (:func:`_jackknife_inflation`)."""
+    (module docstring); both covariances are scaled by κ (:func:`_view_inflation`)."""
     n = 4 + lens.dist.size
     free = np.zeros(n, bool)
     free[:4 if hold_distortion else n] = True

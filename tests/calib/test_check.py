@@ -11,11 +11,10 @@ import pytest
 from aicalib_tf.calib.check import (
     CalibrationError,
     check_calibration,
-    chi2_quantile,
-    chi2_sf,
     corner_noise,
     format_check,
 )
+from aicalib_tf.calib.significance import chi2_quantile, chi2_sf, t_quantile, t_sf
 from aicalib_tf.calib.fit import View, calibrate_camera
 from aicalib_tf.geometry import lens as L
 from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views
@@ -113,9 +112,10 @@ def test_the_result_is_strict_json(calibrated):
     assert d["drift_test"]["dof"] == 4 and d["holds"] is True
 
 
-def test_chi_square_tails():
+def test_chi_square_and_t_tails():
     assert chi2_quantile(0.99, 4) == pytest.approx(13.2767, abs=1e-3)  # exact for even degrees of freedom
     assert chi2_sf(13.2767, 4) == pytest.approx(0.01, abs=1e-5)
     assert chi2_quantile(0.99, 1000) == pytest.approx(1106.97, rel=1e-3)  # Wilson–Hilferty
     assert chi2_quantile(0.95, 3) == pytest.approx(7.8147, abs=1e-3)  # odd
+    assert t_quantile(0.99, 6) == pytest.approx(3.1427, rel=0.01) and t_sf(3.1427, 6) == pytest.approx(0.01, rel=0.05)
     assert chi2_quantile(0.99, 1000.5) == pytest.approx(1107.5, rel=1e-3)  # Wilson–Hilferty
