@@ -17,8 +17,8 @@ whether the new corners agree with the calibration within its own uncertainty, e
 
 κ >= 1 (:func:`_view_inflation`) is what the scatter between the new views asks for beyond the
 formal σ²·(JᵀJ)⁻¹: 1 for independent corner noise (the synthetic trials of
-``benchmarks/field_check.py``), about 2–4 on real photos, where the formal covariance alone failed
-unchanged subsets of OpenCV's left photos in 70% of splits (docs/benchmark.md, "Field check").
+``benchmarks/field_check.py``), a median of 5 on real photos, where the formal covariance alone failed
+unchanged subsets of OpenCV's left photos in 68% of splits (docs/benchmark.md, "Field check").
 
 The calibration holds when neither test rejects (α = 0.01 each: an unchanged camera fails at most
 about 2% of checks). Poses come from rays (:func:`~aicalib_tf.calib.bundle.poses_from_rays`), so
