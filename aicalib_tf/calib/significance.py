@@ -29,7 +29,11 @@ def chi2_sf(x: float, k: float) -> float:
 
 
 def chi2_quantile(p: float, k: float) -> float:
-    """The p-quantile of χ²_k (bisection on :func:`chi2_sf`, to 1e-9 relative)."""
+    """The p-quantile of χ²_k (bisection on :func:`chi2_sf`, to 1e-9 relative).
+
+    >>> round(chi2_quantile(0.99, 4), 3)
+    13.277
+    """
     if not 0.0 < p < 1.0 or not k > 0:
         raise ValueError(f"p must be in (0, 1) and k > 0, got p={p!r}, k={k!r}")
     lo, hi = 0.0, max(4.0 * k, 10.0)
@@ -42,7 +46,11 @@ def chi2_quantile(p: float, k: float) -> float:
 
 
 def t_quantile(p: float, nu: float) -> float:
-    """The p-quantile of Student's t with ``nu`` degrees of freedom (Cornish–Fisher, within 1% for nu >= 4)."""
+    """The p-quantile of Student's t with ``nu`` degrees of freedom (Cornish–Fisher, within 1% for nu >= 4).
+
+    >>> round(t_quantile(0.975, 10), 2)  # the table's 2.228
+    2.23
+    """
     z = NormalDist().inv_cdf(p)
     if not math.isfinite(nu):
         return z

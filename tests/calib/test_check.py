@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import doctest
 import json
 
 import numpy as np
@@ -119,3 +120,9 @@ def test_chi_square_and_t_tails():
     assert chi2_quantile(0.95, 3) == pytest.approx(7.8147, abs=1e-3)  # odd
     assert t_quantile(0.99, 6) == pytest.approx(3.1427, rel=0.01) and t_sf(3.1427, 6) == pytest.approx(0.01, rel=0.05)
     assert chi2_quantile(0.99, 1000.5) == pytest.approx(1107.5, rel=1e-3)  # Wilson–Hilferty
+
+
+def test_the_examples_run():
+    from aicalib_tf.calib import significance
+
+    assert doctest.testmod(significance).failed == 0
