@@ -209,7 +209,7 @@ def _schur(model, obj, px, intrinsics, rvecs, tvecs) -> np.ndarray:
     return schur_complement(U, W, Vb)[0]
 
 
-def _view_scatter(cal, sigma: float) -> tuple[float, float]:
+def _view_scatter(cal) -> tuple[float, float]:
     """(relative variance of one view's mean squared residual, its degrees of freedom) from the
     calibration's per-view RMS; never below what pure corner noise gives (2 / (2·54 − 6) for a 9x6 board)."""
     per_view = np.asarray(cal.per_view_rms, np.float64) ** 2
@@ -315,7 +315,7 @@ def check_calibration(cal, views, *, alpha: float = ALPHA, hold_distortion: bool
     S = _schur(lens.model, obj, px, lens.intrinsics(), fit.rvecs, fit.tvecs)
     measured, cnew, cdrift, kappa = _drift_test(lens, obj, px, fit, S, cov, hold_distortion)
     sigma, _ = corner_noise(cal)
-    rms, expected, limit, p_res = _residual_test(fit, S, kappa * cov, sigma, _view_scatter(cal, sigma), alpha)
+    rms, expected, limit, p_res = _residual_test(fit, S, kappa * cov, sigma, _view_scatter(cal), alpha)
     calibrated = lens.intrinsics()[:4]
     drift = measured - calibrated
     chi2 = float(drift @ np.linalg.solve(cdrift, drift))
