@@ -54,6 +54,8 @@ def test_photos_shifted_by_8px_do_not_hold(calibration, tmp_path, capsys):
 def test_a_video_is_sampled(calibration, tmp_path, capsys):
     video = tmp_path / "clip.avi"
     writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (640, 480))
+    if not writer.isOpened():
+        pytest.skip("this OpenCV build writes no MJPG video")
     for f in sorted(LEFT.glob("*.jpg")):
         for _ in range(2):  # each photo twice: every second frame is a different photo
             writer.write(cv2.imread(str(f)))
