@@ -9,13 +9,14 @@ Public API (this package imports without TensorFlow; Keras loads only where a mo
 * :func:`calibrate_camera` (:class:`View` in) -> :class:`Calibration`;
   :func:`save_calibration` / :func:`load_calibration` write and read its files.
 * :func:`undistort` — remove lens distortion with a calibration.
+* :func:`check_calibration` — does a calibration still hold for new views? (the field check).
 * :func:`load_model` — the shipped CNNs ("default", "report") or a ``.keras`` path, safe mode.
 
 The package's rooms (``docs/architecture.md``): :mod:`~aicalib_tf.geometry` (patterns, lens
 models, poses), :mod:`~aicalib_tf.cnn` (the network; the only TensorFlow user),
 :mod:`~aicalib_tf.detect` (image -> board), :mod:`~aicalib_tf.calib` (views -> camera -> files),
-:mod:`~aicalib_tf.bench` (the benchmark). ``train``, ``evaluate``, ``calibrate`` and ``detect``
-are the command lines.
+:mod:`~aicalib_tf.bench` (the benchmark). ``train``, ``evaluate``, ``calibrate``, ``check`` and
+``detect`` are the command lines.
 """
 
 import os as _os
@@ -33,12 +34,13 @@ from aicalib_tf.io import ImageError, load_image  # noqa: E402
 _LAZY = {
     "Calibration": "calib.fit", "CalibrationError": "calib.fit", "View": "calib.fit",
     "calibrate_camera": "calib.fit", "undistort": "calib.files", "save_calibration": "calib.files",
-    "load_calibration": "calib.files",
+    "load_calibration": "calib.files", "check_calibration": "calib.check",
     "Detection": "detect.pipeline", "detect_corners": "detect.pipeline", "find_chessboard_corners": "detect.pipeline",
 }
 
 __all__ = [
-    "Calibration", "CalibrationError", "Detection", "ImageError", "View", "calibrate_camera", "detect_corners",
+    "Calibration", "CalibrationError", "Detection", "ImageError", "View", "calibrate_camera", "check_calibration",
+    "detect_corners",
     "find_chessboard_corners", "load_calibration", "load_image", "load_model", "save_calibration", "undistort",
     "__version__",
 ]

@@ -1,0 +1,216 @@
+"""Field check: does an existing calibration still hold? (for a camera that may have been knocked)
+
+    python -m aicalib_tf.check calib/camera.json "check/*.jpg" [--out check.json]
+    python -m aicalib_tf.check calib/ drive.mp4 --every 15
+
+The calibration is a camera.json, a camera.yaml (OpenCV; it carries no covariance, so the check
+takes its intrinsics as exact and flags more readily) or a folder holding camera.json. Show the
+same board (the calibration's pattern and square size) in about 15 new photos or a short video
+from varied angles. Every image goes through the detector; the intrinsics stay as calibrated and
+only the boards' poses are fitted. Two tests follow (:mod:`aicalib_tf.calib.check`), each at
+level --alpha (default 0.01):
+
+- the residual RMS against what the calibration's corner noise and its own uncertainty predict;
+- the drift of fx, fy, cx, cy, refitted to the new views with the distortion held, against
+  the calibration's values, with both uncertainties combined (a chi-square test over the four).
+
+It prints the verdict, the views used and skipped with reasons, the residual RMS against the
+expected and its limit, and each drift with ±1σ; --out writes the same as JSON (atomically).
+
+A video file (.mp4, .avi, .mov, .mkv, .webm, .m4v, .mpg) is sampled every --every frames
+(default 10, at most --max-frames of them).
+
+Exit codes: 0 the calibration holds; 1 it does not; 2 bad input (an unreadable calibration, no
+images, fewer than 3 usable views, images of another size than the calibration's).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import sys
+from collections import Counter
+from pathlib import Path
+
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg")
+
+
+@dataclasses.dataclass(frozen=True)
+class CheckConfig:
+    """Everything one field check needs (the CLI's options)."""
+
+    calibration: str
+    sources: tuple[str, ...]
+    detector: str = "cnn"
+    network: str = "default"
+    alpha: float = 0.01
+    hold_distortion: bool = True
+    every: int = 10
+    max_frames: int = 200
+    workers: int | None = None
+    out: str | None = None
+
+
+def _parse_args(argv):
+    from aicalib_tf.calib.workflow import DETECTORS
+    from aicalib_tf.cli import parser
+
+    ap = parser("python -m aicalib_tf.check", __doc__)
+    ap.add_argument("calibration", help="camera.json, camera.yaml or a folder holding camera.json")
+    ap.add_argument("sources", nargs="+", help="photos, glob patterns (quote them) or a video file")
+    ap.add_argument("--out", default=None, help="also write the result as JSON to this file")
+    ap.add_argument("--alpha", type=float, default=0.01, help="each test's false-alarm rate (default: %(default)s)")
+    ap.add_argument("--all-intrinsics", action="store_true",
+                    help="refit the distortion too for the drift (default: held at the calibration's)")
+    ap.add_argument("--detector", default="cnn", choices=DETECTORS, help="corner detector (default: %(default)s)")
+    ap.add_argument("--network", default="default", help="the cnn detector's network (default: %(default)s)")
+    ap.add_argument("--every", type=int, default=10, help="video: use every Nth frame (default: %(default)s)")
+    ap.add_argument("--max-frames", type=int, default=200, help="video: at most this many frames (default: %(default)s)")
+    ap.add_argument("--workers", type=int, default=None, help="detection processes for photos (default: one per core)")
+    return ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """CLI entry: 0 the calibration holds, 1 it does not, 2 bad input (one line on stderr)."""
+    from aicalib_tf.cli import run_main
+
+    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+    args = _parse_args(argv)
+    cfg = CheckConfig(calibration=args.calibration, sources=tuple(args.sources), detector=args.detector,
+                      network=args.network, alpha=args.alpha, hold_distortion=not args.all_intrinsics,
+                      every=args.every, max_frames=args.max_frames, workers=args.workers, out=args.out)
+    return run_main(lambda: _main(cfg), debug=args.debug)
+
+
+def _main(cfg: CheckConfig) -> int:
+    result, report = run_check(cfg)
+    print(report)
+    if cfg.out:
+        print(f"wrote {cfg.out}")
+    return 0 if result.holds else 1
+
+
+def run_check(cfg: CheckConfig):
+    """Load, detect, check, write --out; returns (CheckResult with every skipped view, printed report).
+
+    Raises FileNotFoundError / ValueError / CalibrationError for bad input, before writing anything.
+    """
+    from aicalib_tf.calib.check import MIN_CHECK_VIEWS, check_calibration, format_check
+    from aicalib_tf.calib.fit import CalibrationError
+    from aicalib_tf.calib.files import jsonable, load_calibration
+    from aicalib_tf.io import atomic_write_text, expand_images
+
+    if not 0.0 < cfg.alpha < 0.5:
+        raise ValueError(f"--alpha must be in (0, 0.5), got {cfg.alpha}")
+    if cfg.every < 1 or cfg.max_frames < 1:
+        raise ValueError(f"--every and --max-frames must be >= 1, got {cfg.every} and {cfg.max_frames}")
+    cal = load_calibration(cfg.calibration)
+    files = expand_images(cfg.sources)
+    if not files:
+        raise ValueError(f"no photos or video match {' '.join(cfg.sources)}")
+    views, skipped = _detect(files, cal, cfg)
+    if len(views) < MIN_CHECK_VIEWS:
+        why = "; ".join(f"{k}: {v}" for k, v in list(skipped.items())[:3]) + ("; ..." if len(skipped) > 3 else "")
+        raise CalibrationError(f"{len(views)} of {len(views) + len(skipped)} images show the calibration's "
+                               f"{cal.pattern_size[0]}x{cal.pattern_size[1]} board; the check needs at least "
+                               f"{MIN_CHECK_VIEWS}" + (f" ({why})" if why else ""))
+    result = check_calibration(cal, views, alpha=cfg.alpha, hold_distortion=cfg.hold_distortion)
+    result = dataclasses.replace(result, skipped={**skipped, **result.skipped})
+    report = format_check(result, source=str(cfg.calibration))
+    if cfg.out:
+        doc = {"calibration": str(cfg.calibration), "sources": list(cfg.sources), "detector": cfg.detector,
+               **result.to_dict()}
+        atomic_write_text(Path(cfg.out), json.dumps(jsonable(doc), indent=1, allow_nan=False) + "\n")
+    return result, report
+
+
+def _detect(files: list[str], cal, cfg: CheckConfig):
+    """Views of the calibration's board in every photo and sampled video frame; (views, {label: why skipped})."""
+    from aicalib_tf.calib.fit import View
+    from aicalib_tf.detect.batch import map_images
+
+    videos = [f for f in files if Path(f).suffix.lower() in VIDEO_SUFFIXES]
+    photos = [f for f in files if f not in videos]
+    views, skipped = [], {}
+    cols, rows = cal.pattern_size
+    found = list(zip(photos, map_images(photos, _photo_detector, (cfg.detector, tuple(cal.pattern_size), cfg.network),
+                                        workers=cfg.workers))) if photos else []
+    for video in videos:
+        found += list(_detect_frames(video, cal, cfg))
+    names = Counter(Path(label).name for label, _ in found)
+    for label, res in found:
+        label = Path(label).name if names[Path(label).name] == 1 else label
+        if isinstance(res, str):
+            skipped[label] = res
+        elif res[0] != tuple(cal.image_size):
+            skipped[label] = (f"image is {res[0][0]}x{res[0][1]}, the calibration is for "
+                              f"{cal.image_size[0]}x{cal.image_size[1]}")
+        elif res[1] is None:
+            skipped[label] = f"no {cols}x{rows} board found" + (f": {res[2]}" if res[2] else "")
+        else:
+            views.append(View(label, *res[1], relative=res[3]))
+    return views, skipped
+
+
+def _photo_detector(name: str, pattern: tuple[int, int], network: str):
+    """``file -> (size (w, h), (corners, ids) or None, why, relative)`` or the image error's text
+    (a module-level setup for :func:`aicalib_tf.detect.batch.map_images`)."""
+    from aicalib_tf.calib.workflow import make_detector
+    from aicalib_tf.io import ImageError, load_image
+
+    detect = make_detector(name, pattern, network)
+
+    def work(f):
+        try:
+            gray = load_image(f)
+        except ImageError as exc:
+            return str(exc).removeprefix(f"{f}: ")
+        hit = detect(gray)
+        return gray.shape[::-1], hit, detect.why, detect.relative
+    return work
+
+
+def _detect_frames(video: str, cal, cfg: CheckConfig):
+    """(label, detection as :func:`_photo_detector`'s work returns) per sampled frame of a video."""
+    from aicalib_tf.calib.workflow import make_detector
+    from aicalib_tf.io import load_image
+
+    detect = make_detector(cfg.detector, tuple(cal.pattern_size), cfg.network)
+    for index, frame in video_frames(video, cfg.every, cfg.max_frames):
+        gray = load_image(frame)
+        hit = detect(gray)
+        yield f"{video}#{index}", (gray.shape[::-1], hit, detect.why, detect.relative)
+
+
+def video_frames(path: str, every: int = 10, limit: int = 200):
+    """(frame index, BGR uint8 frame) for every ``every``-th frame of a video file, at most ``limit``.
+
+    A small local reader with ``cv2.VideoCapture``; a shared frame iterator can replace it.
+    Raises ValueError when the file cannot be opened as a video.
+    """
+    import cv2
+
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"{path}: no such video file")
+    cap = cv2.VideoCapture(str(path))
+    try:
+        if not cap.isOpened():
+            raise ValueError(f"{path}: cannot be read as a video")
+        index = taken = 0
+        while taken < limit:
+            ok = cap.grab()
+            if not ok:
+                break
+            if index % every == 0:
+                ok, frame = cap.retrieve()
+                if ok:
+                    taken += 1
+                    yield index, frame
+            index += 1
+    finally:
+        cap.release()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
