@@ -79,14 +79,16 @@ def json_depth(data: bytes) -> int:
     return bracket_depth(_JSON_STRING.sub(b'""', data))
 
 
-def read_text(path, *, max_bytes: int = MAX_FILE_BYTES) -> str:
+def read_text(path, *, max_bytes: int | None = None) -> str:
     """The text of ``path`` (UTF-8, an optional byte-order mark dropped); ValueError naming the file when
-    it is larger than ``max_bytes``, empty, holds NUL bytes or is not UTF-8. OSError when unreadable."""
+    it is larger than ``max_bytes`` (default :data:`MAX_FILE_BYTES`), empty, holds NUL bytes or is not
+    UTF-8. OSError when unreadable."""
     path = Path(path)
+    max_bytes = MAX_FILE_BYTES if max_bytes is None else max_bytes
     with open(path, "rb") as fh:
         data = fh.read(max_bytes + 1)
     if len(data) > max_bytes:
-        raise ValueError(f"{path}: file is larger than {max_bytes // (1024 * 1024)} MB; not a calibration file")
+        raise ValueError(f"{path}: file is larger than {max_bytes} bytes, the most that is read")
     if not data.strip():
         raise ValueError(f"{path}: empty file")
     if b"\0" in data:
@@ -108,9 +110,10 @@ def _finite_float(text: str) -> float:
     return value
 
 
-def loads(text: str, name: str = "JSON text", *, max_depth: int = MAX_DEPTH):
+def loads(text: str, name: str = "JSON text", *, max_depth: int | None = None):
     """Parse strict JSON; ValueError ``"<name>: ..."`` for bad JSON, NaN/Infinity or nesting deeper than
-    ``max_depth``."""
+    ``max_depth`` (default :data:`MAX_DEPTH`)."""
+    max_depth = MAX_DEPTH if max_depth is None else max_depth
     data = text.encode("utf-8", "surrogatepass")
     depth = json_depth(data)
     if depth > max_depth:
@@ -123,6 +126,6 @@ def loads(text: str, name: str = "JSON text", *, max_depth: int = MAX_DEPTH):
         raise ValueError(f"{name}: not valid JSON ({exc})") from None
 
 
-def read_json(path, *, max_bytes: int = MAX_FILE_BYTES, max_depth: int = MAX_DEPTH):
+def read_json(path, *, max_bytes: int | None = None, max_depth: int | None = None):
     """The JSON value in ``path`` (:func:`read_text`, then :func:`loads`); ValueError naming the file."""
     return loads(read_text(path, max_bytes=max_bytes), str(path), max_depth=max_depth)

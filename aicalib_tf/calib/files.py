@@ -145,7 +145,7 @@ def _build(fields: dict, extra: dict) -> Calibration:
 _TABLE_FLOATS = ("rms", "cv_rms", "cv_se")  # model_table numbers that may be null (NaN: the fit failed or was forced)
 _YAML_KEYS = ("camera_matrix", "distortion_coefficients", "distortion_model", "image_width", "image_height",
               "board_width", "board_height", "square_size", "avg_reprojection_error", "per_view_reprojection_errors",
-              "extrinsic_parameters")
+              "extrinsic_parameters", "camera_name")
 
 
 def _optional_mapping(d: dict, key: str) -> dict:
@@ -213,6 +213,8 @@ def calibration_from_dict(d: dict) -> Calibration:
 
 def _load_opencv_yaml(path: Path) -> Calibration:
     d = S.read_opencv_yaml(path, _YAML_KEYS)
+    if "camera_name" in d and "board_width" not in d:
+        raise ValueError(f"{path}: a ROS camera_info file holds no board or views; load camera.json or camera.yaml")
     K = S.require_camera_matrix(d, "camera_matrix")
     model = S.require_model(d, S.require_vector(d, "distortion_coefficients").size, key=None)
     ext = S.require_matrix(d, "extrinsic_parameters", (-1, 6), default=None)

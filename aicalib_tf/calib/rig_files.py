@@ -183,19 +183,21 @@ _STEREO_NODES = {
 
 
 def _intrinsics(d: dict) -> dict:
+    """intrinsics.yml's nodes, checked: M1, M2 camera matrices; D1, D2 with the counts of their models."""
     out = {}
     for k in ("1", "2"):
         out[f"M{k}"] = S.require_camera_matrix(d, f"M{k}")
         D = S.require_matrix(d, f"D{k}", (-1, -1))
-        model = S.require_model(d, D.size, key=None, ros_key=f"distortion_model{k}")
-        S.require_dist(d, f"D{k}", model)
-        out[f"D{k}"], out[f"distortion_model{k}"] = D, d[f"distortion_model{k}"]
+        ros = S.require_str(d, f"distortion_model{k}")
+        S.require_dist(d, f"D{k}", S.require_model(d, D.size, key=None, ros_key=f"distortion_model{k}"))
+        out[f"D{k}"], out[f"distortion_model{k}"] = D, ros
     if "image_width" in d or "image_height" in d:
         out["image_width"], out["image_height"] = S.require_image_size(d)
     return out
 
 
 def _extrinsics(d: dict) -> dict:
+    """extrinsics.yml's nodes, checked: R, R1, R2 rotations; T (3 values); P1, P2 (3, 4); Q (4, 4); E, F (3, 3)."""
     out = {key: S.require_rotation(d, key) for key in ("R", "R1", "R2")}
     T = S.require_matrix(d, "T", (-1, -1))
     S.require_vector(d, "T", 3)

@@ -38,7 +38,7 @@ MAX_PATTERN_SIDE = 10_000  # inner corners along one side of a board
 ROTATION_TOL = 1e-6  # max |RᵀR − I| and |det R − 1| of a rotation read from a file (written with 16 digits)
 _INT_DTYPES = {"u": (0, 255), "c": (-128, 127), "w": (0, 65535), "s": (-32768, 32767), "i": (-2**31, 2**31 - 1)}
 _FLOAT_DTYPES = ("d", "f")
-_MAX_INT_MATRIX = 100_000  # integer matrices are converted value by value; larger ones are refused
+_MAX_ELEMENTWISE = 100_000  # integer (and dt-less ROS) matrices are read value by value; larger ones are refused
 _MISSING = object()
 
 # a quoted scalar where YAML lets one start (line start, after a flow indicator, or after ": ", "- ", "? ");
@@ -67,6 +67,7 @@ def within(prefix: str):
 
 def _short(value, limit: int = 80) -> str:
     text = np.array2string(value, threshold=12, max_line_width=10**6) if isinstance(value, np.ndarray) else repr(value)
+    text = " ".join(text.split())
     return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
@@ -95,12 +96,20 @@ def yaml_depth(text: str) -> int:
     return _block_depth(text) + flow
 
 
+def _values(data, n: int, field: str) -> np.ndarray:
+    """The n numbers of a sequence node, one by one (NaN for a non-number)."""
+    if n > _MAX_ELEMENTWISE:
+        raise FieldError(field, f"has {n} values; a matrix this large must be written as dt: d")
+    items = [data.at(k) for k in range(n)]
+    return np.array([v.real() if v.isInt() or v.isReal() else math.nan for v in items], np.float64)
+
+
 def _matrix(node, field: str) -> np.ndarray:
-    """An ``!!opencv-matrix`` node as a (rows, cols) float64 array."""
+    """An ``!!opencv-matrix`` node (or ROS's rows/cols/data matrix, without dt) as a (rows, cols) float64 array."""
     rows, cols, dt, data = (node.getNode(k) for k in ("rows", "cols", "dt", "data"))
-    if not (rows.isInt() and cols.isInt() and dt.isString() and data.isSeq()):
+    if not (rows.isInt() and cols.isInt() and (dt.empty() or dt.isString()) and data.isSeq()):
         raise FieldError(field, "must be an OpenCV matrix (rows, cols, dt, data)")
-    r, c, kind = int(rows.real()), int(cols.real()), dt.string()
+    r, c, kind = int(rows.real()), int(cols.real()), "" if dt.empty() else dt.string()
     if not (0 <= r <= 10**7 and 0 <= c <= 10**7) or r * c != data.size():
         raise FieldError(field, f"has {data.size()} values for {r}x{c}")
     if kind in _FLOAT_DTYPES:
@@ -108,15 +117,12 @@ def _matrix(node, field: str) -> np.ndarray:
             return np.asarray(node.mat(), np.float64).reshape(r, c)
         except (cv2.error, SystemError, ValueError, TypeError):
             raise FieldError(field, "must hold numbers") from None
-    if kind not in _INT_DTYPES:
+    if kind and kind not in _INT_DTYPES:
         raise FieldError(field, f"has dt {kind!r}; expected d or f (float64 or float32)")
-    if r * c > _MAX_INT_MATRIX:
-        raise FieldError(field, f"is an integer matrix of {r * c} values; write it as dt: d")
-    lo, hi = _INT_DTYPES[kind]
-    values = [data.at(k) for k in range(r * c)]
-    out = np.array([v.real() if v.isInt() else math.nan for v in values], np.float64)
-    if not np.all((out >= lo) & (out <= hi)):
-        raise FieldError(field, f"has dt {kind!r}, which cannot hold its values exactly (range {lo}..{hi}); "
+    out = _values(data, r * c, field)
+    lo, hi = _INT_DTYPES.get(kind, (-math.inf, math.inf))
+    if kind and not np.all((out >= lo) & (out <= hi) & (out == np.round(out))):
+        raise FieldError(field, f"has dt {kind!r}, which cannot hold its values exactly (integers {lo}..{hi}); "
                                 "write it as dt: d")
     return out.reshape(r, c)
 
@@ -130,9 +136,17 @@ def _node_value(node, field: str):
         return int(v) if node.isInt() and math.isfinite(v) else v
     if node.isString():
         return node.string()
-    if node.isMap() and {"rows", "cols", "dt", "data"} <= set(node.keys()):
+    if node.isMap() and {"rows", "cols", "data"} <= set(node.keys()):
         return _matrix(node, field)
     raise FieldError(field, "must be a number, a string or an OpenCV matrix")
+
+
+def _parse_error(exc: BaseException) -> str:
+    """"line N: why" from OpenCV's parse error (raised as the cause of a SystemError). Parsing from
+    memory, OpenCV puts the text where the file name would be: only what follows it is kept."""
+    inner = exc.__cause__ or exc.__context__ or exc
+    found = re.search(r"\((\d+)\): ([^\n]*?)'?\s*$", str(getattr(inner, "func", "") or ""))
+    return f"line {found[1]}: {found[2][:120]}" if found else "parse error"
 
 
 def read_opencv_yaml(path, keys) -> dict:
@@ -149,9 +163,7 @@ def read_opencv_yaml(path, keys) -> dict:
     try:
         fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
     except (SystemError, cv2.error) as exc:
-        inner = exc.__cause__ or exc.__context__ or exc
-        why = " ".join(str(getattr(inner, "err", "") or "").split()) or "parse error"
-        raise ValueError(f"{path}: not an OpenCV YAML file ({why[:160]})") from None
+        raise ValueError(f"{path}: not an OpenCV YAML file ({_parse_error(exc)})") from None
     try:
         if not fs.isOpened() or not fs.root().isMap():
             raise ValueError(f"{path}: not an OpenCV YAML file (no top-level map)")
@@ -249,7 +261,7 @@ def require_matrix(d: dict, key: str, shape: tuple, *, positive_diag: bool = Fal
     want = "x".join("N" if n < 0 else str(n) for n in shape)
     a = _floats(value, key, want)
     if a.ndim != len(shape) or any(n >= 0 and m != n for m, n in zip(a.shape, shape)):
-        raise FieldError(key, f"must be a {want} matrix, got shape {a.shape}")
+        raise FieldError(key, f"must be a {want} matrix, got {f'shape {a.shape}' if a.ndim else _short(value)}")
     if not np.all(np.isfinite(a)):
         raise FieldError(key, f"must be finite, got {_short(a)}")
     if positive_diag and not np.all(np.diagonal(a, axis1=-2, axis2=-1) > 0):
@@ -306,10 +318,12 @@ def require_image_size(d: dict, width: str = "image_width", height: str = "image
 def require_board(d: dict, pattern: str, square: str) -> tuple[tuple[int, int], float]:
     """((cols, rows) >= (2, 2) inner corners, square size > 0) from fields ``pattern`` (a [cols, rows]
     list) and ``square``."""
-    p = require_list(d, pattern)
-    if len(p) != 2:
-        raise FieldError(pattern, f"must be [cols, rows], got {_short(p)}")
-    cols, rows = (require_int({pattern: v}, pattern, 2, MAX_PATTERN_SIDE) for v in p)
+    p = require(d, pattern)
+    try:
+        cols, rows = (require_int({pattern: v}, pattern, 2, MAX_PATTERN_SIDE) for v in p)
+    except (FieldError, TypeError, ValueError):
+        raise FieldError(pattern, f"must be [cols, rows] inner corners, each in [2, {MAX_PATTERN_SIDE}], "
+                                  f"got {_short(p)}") from None
     return (cols, rows), require_number(d, square, positive=True)
 
 
