@@ -28,7 +28,7 @@ import numpy as np
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.jsonio import MAX_DEPTH, bracket_depth, read_text
 
-__all__ = ["FieldError", "within", "MAX_IMAGE_SIDE", "MAX_PATTERN_SIDE", "ROTATION_TOL", "yaml_depth", "read_opencv_yaml", "require",
+__all__ = ["FieldError", "within", "MAX_DEPTH", "MAX_IMAGE_SIDE", "MAX_PATTERN_SIDE", "ROTATION_TOL", "yaml_depth", "read_opencv_yaml", "require",
            "require_mapping", "require_list", "require_str", "require_int", "require_number", "require_matrix",
            "require_vector", "require_camera_matrix", "require_rotation", "require_dist", "require_image_size",
            "require_board", "require_model", "require_item"]
@@ -41,9 +41,9 @@ _FLOAT_DTYPES = ("d", "f")
 _MAX_ELEMENTWISE = 100_000  # integer (and dt-less ROS) matrices are read value by value; larger ones are refused
 _MISSING = object()
 
-# a quoted scalar where YAML lets one start (line start, after a flow indicator, or after ": ", "- ", "? ");
-# an unclosed quote runs to the end of its line
-_YAML_QUOTED = re.compile(r"(?m)(?:^|(?<=[,\[{])|(?<=[:?\-][ \t]))[ \t]*"
+# a quoted scalar where YAML lets one start (group 1: line start, a flow indicator, or ": ", "- ", "? "
+# before it); an unclosed quote runs to the end of its line
+_YAML_QUOTED = re.compile(r"(?m)(^|[,\[{]|[:?\-][ \t])[ \t]*"
                           r"(?:\"(?:[^\"\\\n]+|\\.)*(?:\"|$)|'(?:[^'\n]+|'')*(?:'|$))")
 _YAML_LINE = re.compile(r"(?m)^([ \t]*(?:-[ \t]+)*)(\S?)")
 
@@ -73,27 +73,34 @@ def _short(value, limit: int = 80) -> str:
 
 # ----------------------------------------------------------------------------- YAML before OpenCV
 def _block_depth(text: str) -> int:
-    """Levels of block structure: each deeper indentation and each ``- `` on a line opens one."""
-    lines = [(p, c) for p, c in _YAML_LINE.findall(text) if c and c != "#"]
-    bound = max((len(p) for p, _ in lines), default=0) + 1
-    if bound <= MAX_DEPTH:
-        return bound  # depth never exceeds the widest indentation + 1: a cheap upper bound
+    """Levels of block structure (an upper bound): each deeper indentation and each ``- `` on a line opens one."""
+    for bound in (8, 16, 32):  # no line indented by ``bound`` columns of spaces and dashes: at most that many levels
+        if not re.search(rf"(?m)^[ \t-]{{{bound}}}", text):
+            return bound
     stack, deepest = [], 0
-    for prefix, _ in lines:
+    for prefix, first in _YAML_LINE.findall(text):
+        if not first or first == "#":
+            continue
         for col in [m.start() for m in re.finditer("-", prefix)] + [len(prefix)]:
             while stack and stack[-1] > col:
                 stack.pop()
             if not stack or stack[-1] < col:
                 stack.append(col)
         deepest = max(deepest, len(stack))
+        if deepest > MAX_DEPTH:
+            break
     return deepest
 
 
 def yaml_depth(text: str) -> int:
-    """An upper bound on the nesting depth of YAML (or OpenCV's JSON) text: block levels plus flow
-    brackets ``[{`` outside quoted strings."""
-    flow = bracket_depth(_YAML_QUOTED.sub("", text).encode("utf-8", "surrogatepass"))
-    return _block_depth(text) + flow
+    """An upper bound on the nesting depth of YAML (or OpenCV's JSON) text, block levels plus flow
+    brackets ``[{`` outside quoted strings, while it is at most :data:`MAX_DEPTH`; past that, some
+    number over :data:`MAX_DEPTH` (the block scan stops early)."""
+    block = _block_depth(text)
+    opens = text.count("[") + text.count("{")
+    if opens + block <= MAX_DEPTH or ('"' not in text and "'" not in text):  # no quoted string to skip
+        return block + min(opens, bracket_depth(text.encode("utf-8", "surrogatepass")))
+    return block + bracket_depth(_YAML_QUOTED.sub(r"\1", text).encode("utf-8", "surrogatepass"))
 
 
 def _values(data, n: int, field: str) -> np.ndarray:
@@ -159,7 +166,7 @@ def read_opencv_yaml(path, keys) -> dict:
         raise ValueError(f"{path}: XML storage is not read here; expected OpenCV YAML")
     depth = yaml_depth(text)
     if depth > MAX_DEPTH:
-        raise ValueError(f"{path}: nested about {depth} deep; at most {MAX_DEPTH} levels are read")
+        raise ValueError(f"{path}: nested more than {MAX_DEPTH} levels deep; not read (the limit guards the parser)")
     try:
         fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
     except (SystemError, cv2.error) as exc:

@@ -10,15 +10,16 @@ from aicalib_tf.calib import schema as S
 
 
 @pytest.mark.parametrize("text, low, high", [
-    ("%YAML:1.0\n---\na: 1\nm: !!opencv-matrix\n   rows: 1\n   cols: 1\n   dt: d\n   data: [ 1. ]\n", 1, 8),
-    ("a: " + "[" * 100 + "]" * 100, 100, 110),
-    ("a:\n  " + "- " * 100 + "1\n", 100, 110),
-    ("".join(" " * i + "a:\n" for i in range(100)), 100, 110),  # block maps, one space deeper each
-    ('a: "[[[[[[[[[["\nb: [x, \'[[[[\', [1]]\n', 2, 4),  # brackets in quoted strings are text
-    ('a: [x, "]]]]]]]]", ' + "[" * 80 + "]" * 80 + "]", 80, 90),  # quoted closers hide nothing
-    ('a: [x"' + ", " + "[" * 80 + "]" * 80 + '"]', 80, 90),  # a quote inside a plain scalar opens no string
+    ("%YAML:1.0\n---\na: 1\nm: !!opencv-matrix\n   rows: 1\n   cols: 1\n   dt: d\n   data: [ 1. ]\n", 1, 10),
+    ("a: " + "[" * 100 + "]" * 100, S.MAX_DEPTH + 1, 110),
+    ("a:\n  " + "- " * 100 + "1\n", S.MAX_DEPTH + 1, 110),
+    ("".join(" " * i + "a:\n" for i in range(100)), S.MAX_DEPTH + 1, 110),  # block maps, one space deeper each
+    ('a: "' + "[" * 100 + '"\nb: [x, \'' + "{" * 100 + "', [1]]\n", 2, 12),  # brackets in quoted strings are text
+    ('a: [x, "' + "]" * 100 + '", ' + "[" * 80 + "]" * 80 + "]", 81, 92),  # quoted closers hide nothing
+    ('a: [x"' + ", " + "[" * 80 + "]" * 80 + '"]', 81, 92),  # a quote inside a plain scalar opens no string
 ])
 def test_yaml_depth_bounds_the_nesting(text, low, high):
+    """An upper bound up to MAX_DEPTH; past it, some number over MAX_DEPTH (the scan stops early)."""
     assert low <= S.yaml_depth(text) <= high
 
 
