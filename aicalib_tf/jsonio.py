@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["MAX_FILE_BYTES", "MAX_DEPTH", "jsonable", "dumps", "loads", "read_text", "read_json", "json_depth",
+__all__ = ["MAX_FILE_BYTES", "MAX_DEPTH", "jsonable", "nan_for_null", "dumps", "loads", "read_text", "read_json", "json_depth",
            "bracket_depth"]
 
 MAX_FILE_BYTES = 16 * 1024 * 1024  # the largest calibration or rig file read (a rig of many cameras is < 1 MB)
@@ -49,6 +49,16 @@ def jsonable(x):
     if isinstance(x, float) and not math.isfinite(x):
         return None
     return x
+
+
+def nan_for_null(x):
+    """The inverse of :func:`jsonable` for records of numbers and text: every None (a NaN or ±inf when
+    written) becomes NaN, in nested dicts and lists."""
+    if isinstance(x, dict):
+        return {k: nan_for_null(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [nan_for_null(v) for v in x]
+    return math.nan if x is None else x
 
 
 def dumps(obj, *, indent: int | None = 1) -> str:

@@ -24,6 +24,12 @@ def test_jsonable_maps_numpy_and_non_finite_numbers():
     assert json.loads(jsonio.dumps(out), parse_constant=lambda c: pytest.fail(c)) == out
 
 
+def test_nan_for_null_inverts_jsonable():
+    value = {"a": [1.0, float("nan")], "b": {"c": float("nan"), "d": "x"}}
+    back = jsonio.nan_for_null(jsonio.loads(jsonio.dumps(value)))
+    assert math.isnan(back["a"][1]) and math.isnan(back["b"]["c"]) and back["b"]["d"] == "x" and back["a"][0] == 1.0
+
+
 def test_dumps_never_writes_nan():
     text = jsonio.dumps({"x": [float("nan"), np.float64("inf")]})
     assert "NaN" not in text and "Infinity" not in text and text.endswith("\n")

@@ -13,7 +13,14 @@ or ``equidistant``; the thin prism is ``rational_polynomial`` with OpenCV's 12 c
 the model-choice table, the quality summary, view names, per-view corner counts, standard
 deviations, rejected views with reasons, the square unit and the provenance in ``meta``.
 :func:`load_calibration` reads it back exactly (floats are written with full precision); it also
-reads ``camera.yaml`` (without view names, covariance or table).
+reads ``camera.yaml`` (without view names, covariance or table). The JSON is strict (:mod:`aicalib_tf.jsonio`):
+a number the calibration does not have (NaN: the cross-validation RMS of a forced model) is ``null``,
+read back as NaN.
+
+Loading checks every field before a :class:`Calibration` is made (:mod:`aicalib_tf.calib.schema`:
+types, shapes, finite values, image size 1..100000 px, board ≥ 2×2 with a positive square, fx, fy
+> 0, the coefficient count of the lens model, the covariance's size); the YAML is checked as text
+before ``cv2.FileStorage`` parses it. A bad file is a ValueError naming the file and the field.
 
 ``camera_info.yaml`` follows ROS's ``sensor_msgs/CameraInfo`` calibration file layout with the same
 ``distortion_model``. Its projection matrix P is the new camera matrix of :func:`undistort` with
@@ -36,7 +43,7 @@ from aicalib_tf.calib.fit import Calibration
 from aicalib_tf.calib.quality import lens_of
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.io import atomic_write_text
-from aicalib_tf.jsonio import dumps, jsonable, read_json
+from aicalib_tf.jsonio import dumps, jsonable, nan_for_null, read_json
 
 __all__ = ["save_calibration", "load_calibration", "to_opencv_yaml", "to_json", "to_camera_info_yaml", "undistort",
            "undistort_camera_matrix", "calibration_dict", "calibration_from_dict", "jsonable", "existing_file"]
@@ -190,7 +197,7 @@ def calibration_from_dict(d: dict) -> Calibration:
     """The inverse of :func:`calibration_dict` (``camera.json``'s content), every field checked.
 
     Raises :class:`~aicalib_tf.calib.schema.FieldError` (a ValueError naming the field) when a field
-    is missing or wrong; null reads as NaN where a number is optional (std, model_table)."""
+    is missing or wrong; null reads as NaN where a number is optional (std, model_table, quality)."""
     if not isinstance(d, dict):
         raise ValueError(f"expected a JSON object, got {type(d).__name__}")
     K = S.require_camera_matrix(d, "camera_matrix")
@@ -204,7 +211,7 @@ def calibration_from_dict(d: dict) -> Calibration:
     with S.within("std"):
         std = {k: S.require_number(std, k, nullable=True) for k in std}
     extra = {"model": model, "covariance": S.require_matrix(d, "covariance", (n, n), default=None),
-             "model_table": _model_table(d), "quality": _optional_mapping(d, "quality")}
+             "model_table": _model_table(d), "quality": nan_for_null(_optional_mapping(d, "quality"))}
     return _build(dict(K=K, dist=S.require_dist(d, "distortion_coefficients", model), image_size=S.require_image_size(d),
                        pattern_size=pattern, square_size=square, square_unit=unit,
                        rms=S.require_number(d, "avg_reprojection_error", nonnegative=True), **_views(d), std=std,

@@ -14,7 +14,10 @@ A rig of two cameras writes them at the top of the output folder; a larger rig w
 per pair with camera 0 (``cam0_cam2/``...). Every rig also gets ``rig.json`` (every camera's full
 calibration as ``camera.json`` holds it, the poses with their covariance, the frames, the quality
 and the rectifications) and each camera's one-camera files in a folder of its name.
-:func:`load_rig` reads ``rig.json`` back exactly; :func:`load_stereo_yml` reads the YAML pair.
+:func:`load_rig` reads ``rig.json`` back exactly; :func:`load_stereo_yml` reads the YAML pair. Both
+check every field (:mod:`aicalib_tf.calib.schema`: at least one camera, rotations orthonormal with
+det +1, finite values, shapes) and raise a ValueError naming the file and the field. ``rig.json`` is
+strict JSON (a missing number, such as a frame RMS that could not be measured, is ``null``).
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ from aicalib_tf.calib.rig_result import RigCalibration
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.rectify import Rectification, essential_matrix, fundamental_matrix
 from aicalib_tf.io import atomic_write_text
-from aicalib_tf.jsonio import dumps, jsonable, read_json
+from aicalib_tf.jsonio import dumps, jsonable, nan_for_null, read_json
 
 __all__ = ["save_rig", "load_rig", "load_stereo_yml", "rig_texts", "rig_dict", "rig_from_dict", "pair_folder"]
 
@@ -121,6 +124,7 @@ def rig_from_dict(d: dict) -> RigCalibration:
         pattern, square = S.require_board(board, "pattern_size", "square_size")
         unit = S.require_str(board, "square_unit", "")
     opt = {k: S.require_mapping(d, k, {}) if d.get(k) is not None else {} for k in ("rejected", "quality", "meta")}
+    opt["quality"] = nan_for_null(opt["quality"])
     return RigCalibration(
         names=names, cameras=cameras, R=S.require_rotation(d, "R", (c, 3, 3)), T=S.require_matrix(d, "T", (c, 3)),
         pose_covariance=S.require_matrix(d, "pose_covariance", (c, 6, 6)), **_frames(d, c),

@@ -28,10 +28,10 @@ import numpy as np
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.jsonio import MAX_DEPTH, bracket_depth, read_text
 
-__all__ = ["FieldError", "within", "MAX_DEPTH", "MAX_IMAGE_SIDE", "MAX_PATTERN_SIDE", "ROTATION_TOL", "yaml_depth", "read_opencv_yaml", "require",
-           "require_mapping", "require_list", "require_str", "require_int", "require_number", "require_matrix",
-           "require_vector", "require_camera_matrix", "require_rotation", "require_dist", "require_image_size",
-           "require_board", "require_model", "require_item"]
+__all__ = ["FieldError", "within", "MAX_DEPTH", "MAX_IMAGE_SIDE", "MAX_PATTERN_SIDE", "ROTATION_TOL", "yaml_depth",
+           "read_opencv_yaml", "require", "require_mapping", "require_list", "require_str", "require_int",
+           "require_number", "require_matrix", "require_vector", "require_camera_matrix", "require_rotation",
+           "require_dist", "require_image_size", "require_board", "require_model", "require_item"]
 
 MAX_IMAGE_SIDE = 100_000  # px: the widest or tallest image a calibration file may describe
 MAX_PATTERN_SIDE = 10_000  # inner corners along one side of a board
