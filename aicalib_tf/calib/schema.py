@@ -7,7 +7,8 @@ outside quoted strings), because OpenCV's parser recurses once per level and a f
 thousand deep crashes the process. It parses from memory (the bytes checked are the bytes parsed),
 turns OpenCV's parse errors into a ValueError, and converts only the nodes asked for: a matrix
 needs rows × cols values and a known ``dt``; integer ``dt`` values are read exactly (a ``dt: u``
-matrix is refused rather than clamped to 255).
+matrix is refused rather than clamped to 255). The only YAML tag read is ``!!opencv-matrix``: a
+``!!binary`` (base64) node can send OpenCV's reader into an endless loop.
 
 After parsing, the ``require_*`` helpers check one field each (type, shape, finite values,
 ranges) and raise :class:`FieldError` naming it: ``field board.square_size must be a positive
@@ -46,6 +47,7 @@ _MISSING = object()
 _YAML_QUOTED = re.compile(r"(?m)(^|[,\[{]|[:?\-][ \t])[ \t]*"
                           r"(?:\"(?:[^\"\\\n]+|\\.)*(?:\"|$)|'(?:[^'\n]+|'')*(?:'|$))")
 _YAML_LINE = re.compile(r"(?m)^([ \t]*(?:-[ \t]+)*)(\S?)")
+_OTHER_TAG = re.compile(r"!!(?!opencv-matrix(?![\w-]))\S*")  # any tag but !!opencv-matrix (e.g. !!binary)
 
 
 class FieldError(ValueError):
@@ -164,6 +166,9 @@ def read_opencv_yaml(path, keys) -> dict:
     text = read_text(path)
     if text.lstrip().startswith("<"):
         raise ValueError(f"{path}: XML storage is not read here; expected OpenCV YAML")
+    tag = _OTHER_TAG.search(text)
+    if tag:  # OpenCV's base64 reader (!!binary) can loop forever on bad input
+        raise ValueError(f"{path}: holds the YAML tag {tag[0][:40]!r}; only !!opencv-matrix is read")
     depth = yaml_depth(text)
     if depth > MAX_DEPTH:
         raise ValueError(f"{path}: nested more than {MAX_DEPTH} levels deep; not read (the limit guards the parser)")

@@ -30,7 +30,7 @@ from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views
 from tests.calib.test_files import _cal
 
 ROOT = Path(__file__).resolve().parents[2]
-FUZZ = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+FUZZ = settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
 
 def _strict(text: str):
@@ -141,23 +141,29 @@ def test_mutated_json_fields_are_refused_or_valid(folder, tmp_path, name, data, 
 
 # --- regressions ----------------------------------------------------------------------------------
 
-def test_deep_yaml_is_refused_without_a_crash(tmp_path):
-    """A 100 KB YAML nested 50,000 deep crashed the process inside cv2.FileStorage (SIGSEGV)."""
+def test_deep_or_binary_yaml_is_refused_without_a_crash_or_a_hang(tmp_path):
+    """A 100 KB YAML nested 50,000 deep crashed the process inside cv2.FileStorage (SIGSEGV), and a
+    ``!!binary`` value inside a matrix's data sent it into an endless loop."""
     deep = tmp_path / "camera.yaml"
     deep.write_text("%YAML:1.0\n---\ncamera_matrix: " + "[" * 50_000 + "]" * 50_000 + "\n")
     dash = tmp_path / "x" / "intrinsics.yml"
     dash.parent.mkdir()
     dash.write_text("%YAML:1.0\n---\nM1:\n  " + "- " * 50_000 + "1\n")
     (dash.parent / "extrinsics.yml").write_text("%YAML:1.0\n---\nR: 1\n")
+    binary = tmp_path / "b" / "camera.yaml"
+    binary.parent.mkdir()
+    binary.write_text("M1: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n"
+                      "   data: [ 520., 0., !!binary 0., 525.20000000000005, 238.25, 0., 0., 1. ]\n")
     code = ("import sys\nfrom aicalib_tf.calib.files import load_calibration\n"
             "from aicalib_tf.calib.rig_files import load_stereo_yml\n"
-            "for f, arg in ((load_calibration, sys.argv[1]), (load_stereo_yml, sys.argv[2])):\n"
+            "for f, arg in ((load_calibration, sys.argv[1]), (load_stereo_yml, sys.argv[2]), (load_calibration, sys.argv[3])):\n"
             "    try:\n        f(arg)\n    except ValueError as e:\n        print(e)\n")
-    out = subprocess.run([sys.executable, "-c", code, str(deep), str(dash.parent)], capture_output=True, text=True,
-                         cwd=ROOT, timeout=60)
-    assert out.returncode == 0, (out.returncode, out.stderr[-500:])
+    out = subprocess.run([sys.executable, "-c", code, str(deep), str(dash.parent), str(binary)], capture_output=True,
+                         text=True, cwd=ROOT, timeout=60)
+    assert out.returncode == 0, (out.returncode, out.stderr[-500:])  # -11 would be the segfault
     lines = out.stdout.splitlines()
-    assert len(lines) == 2 and "camera.yaml: nested" in lines[0] and "intrinsics.yml: nested" in lines[1], lines
+    assert len(lines) == 3 and "camera.yaml: nested more than 64" in lines[0], lines
+    assert "intrinsics.yml: nested more than 64" in lines[1] and "holds the YAML tag '!!binary'" in lines[2], lines
 
 
 @pytest.mark.parametrize("text", ["", "\n\n", "garbage: [ : }", "%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n"
