@@ -256,19 +256,15 @@ def load_calibration(path) -> Calibration:
 
     The lens model comes from ``model`` (JSON) or ``distortion_model`` with the coefficient
     count (:func:`~aicalib_tf.geometry.lens.model_from_ros`; plumb_bob when absent, as in older
-    files). Raises FileNotFoundError, or ValueError naming the file if it is bad.
+    files). Every field is checked (module docstring). Raises FileNotFoundError, or ValueError naming
+    the file (and the field: ``camera.json: field board.square_size must be a positive finite number,
+    got -25``) if it is bad; OSError when it cannot be read.
     """
     path = existing_file(path, "camera.json", "calibration")
-    try:
+    with S.file_errors(path, "aicalib_tf calibration file"):
         if path.suffix.lower() in (".yaml", ".yml"):
             return _load_opencv_yaml(path)
         return calibration_from_dict(read_json(path))
-    except S.FieldError as exc:
-        raise ValueError(f"{path}: {exc}") from None
-    except ValueError as exc:
-        if str(exc).startswith(f"{path}: "):
-            raise
-        raise ValueError(f"{path}: not a valid aicalib_tf calibration file ({exc})") from None
 
 
 def undistort_camera_matrix(cal: Calibration, alpha: float = 0.0) -> np.ndarray:

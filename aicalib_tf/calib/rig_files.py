@@ -170,14 +170,8 @@ def load_rig(path) -> RigCalibration:
     """Read ``rig.json`` (or a folder holding it). Raises FileNotFoundError, or ValueError naming the file
     (and the field, when one is wrong)."""
     path = existing_file(path, "rig.json", "rig")
-    try:
+    with S.file_errors(path, "aicalib_tf rig file"):
         return rig_from_dict(read_json(path))
-    except S.FieldError as exc:
-        raise ValueError(f"{path}: {exc}") from None
-    except ValueError as exc:
-        if str(exc).startswith(f"{path}: "):
-            raise
-        raise ValueError(f"{path}: not a valid aicalib_tf rig file ({exc})") from None
 
 
 _STEREO_NODES = {
@@ -220,9 +214,7 @@ def load_stereo_yml(folder) -> dict:
         path = Path(folder) / name
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no such file")
-        try:
+        with S.file_errors(path, "OpenCV stereo file"):
             d = S.read_opencv_yaml(path, keys)
             out.update(_intrinsics(d) if name == "intrinsics.yml" else _extrinsics(d))
-        except S.FieldError as exc:
-            raise ValueError(f"{path}: {exc}") from None
     return out

@@ -29,7 +29,7 @@ import numpy as np
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.jsonio import MAX_DEPTH, bracket_depth, read_text
 
-__all__ = ["FieldError", "within", "MAX_DEPTH", "MAX_IMAGE_SIDE", "MAX_PATTERN_SIDE", "ROTATION_TOL", "yaml_depth",
+__all__ = ["FieldError", "within", "file_errors", "MAX_DEPTH", "MAX_IMAGE_SIDE", "MAX_PATTERN_SIDE", "ROTATION_TOL", "yaml_depth",
            "read_opencv_yaml", "require", "require_mapping", "require_list", "require_str", "require_int",
            "require_number", "require_matrix", "require_vector", "require_camera_matrix", "require_rotation",
            "require_dist", "require_image_size", "require_board", "require_model", "require_item"]
@@ -65,6 +65,21 @@ def within(prefix: str):
         yield
     except FieldError as exc:
         raise FieldError(f"{prefix}.{exc.field}", exc.problem) from None
+
+
+@contextmanager
+def file_errors(path, what: str):
+    """Inside, every ValueError becomes one line that starts with the file: ``<path>: field <name>
+    <problem>`` for a :class:`FieldError`, ``<path>: not a valid <what> (<why>)`` for any other
+    (one that already starts with the path is kept)."""
+    try:
+        yield
+    except FieldError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    except ValueError as exc:
+        if str(exc).startswith(f"{path}: "):
+            raise
+        raise ValueError(f"{path}: not a valid {what} ({exc})") from None
 
 
 def _short(value, limit: int = 80) -> str:
