@@ -190,6 +190,7 @@ def test_empty_truncated_or_garbage_yaml_is_a_value_error(folder, tmp_path, text
     ("rows: 3", "rows: 300000000", "field camera_matrix has 9 values for 300000000x3"),
     ("distortion_model: rational_polynomial", "distortion_model: plumb_bob\nx: 1", None),
     ("distortion_model: rational_polynomial", "distortion_model: nonsense", "field distortion_model does not name"),
+    ("10., 20., 500.", ".Nan, 20., 500.", "field extrinsic_parameters must be finite"),
     ("avg_reprojection_error: 0.123456789012", "avg_reprojection_error: .Nan",
      "field avg_reprojection_error must be a finite number >= 0, got nan"),
 ])
@@ -230,6 +231,9 @@ def test_integer_matrices_are_read_exactly_or_refused(folder, tmp_path):
     (("distortion_coefficients",), [0.1, 0.2], "field distortion_coefficients does not fit"),
     (("model",), "pinhole", "field model must be one of"),
     (("views",), {"a": 1}, "field views must be a list"),
+    (("board",), [9, 6], "field board must be an object"),
+    (("covariance", 3, 3), None, "field covariance must be a 12x12 matrix of numbers"),
+    (("rejected",), {"a.png": 3}, "field rejected.a.png must be a string"),
     (("std", "fx"), "big", "field std.fx must be a finite number or null"),
     (("model_table", 0, "cv_rms"), "x", "field model_table\\[0\\].cv_rms must be a finite number or null"),
 ])
@@ -239,6 +243,14 @@ def test_camera_json_fields_are_checked(folder, tmp_path, path, value, message):
     (tmp_path / "camera.json").write_text(json.dumps(doc))
     with pytest.raises(ValueError, match=f"camera.json: {message}"):
         F.load_calibration(tmp_path)
+
+
+@pytest.mark.parametrize("text", ["[]", '"camera"', "3", "null"])
+def test_json_that_is_not_an_object_is_refused(tmp_path, text):
+    for name, loader in (("camera.json", F.load_calibration), ("rig.json", load_rig)):
+        (tmp_path / name).write_text(text)
+        with pytest.raises(ValueError, match=f"{name}: not a valid aicalib_tf .* file \\(expected a JSON object"):
+            loader(tmp_path / name)
 
 
 @pytest.mark.parametrize("path, value, message", [
