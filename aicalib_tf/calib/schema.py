@@ -136,6 +136,8 @@ def _matrix(node, field: str) -> np.ndarray:
     r, c, kind = int(rows.real()), int(cols.real()), "" if dt.empty() else dt.string()
     if not (0 <= r <= 10**7 and 0 <= c <= 10**7) or r * c != data.size():
         raise FieldError(field, f"has {data.size()} values for {r}x{c}")
+    if r * c == 0:
+        return np.zeros((r, c))
     if kind in _FLOAT_DTYPES:
         try:
             return np.asarray(node.mat(), np.float64).reshape(r, c)
