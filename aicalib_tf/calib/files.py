@@ -13,7 +13,14 @@ or ``equidistant``; the thin prism is ``rational_polynomial`` with OpenCV's 12 c
 the model-choice table, the quality summary, view names, per-view corner counts, standard
 deviations, rejected views with reasons, the square unit and the provenance in ``meta``.
 :func:`load_calibration` reads it back exactly (floats are written with full precision); it also
-reads ``camera.yaml`` (without view names, covariance or table).
+reads ``camera.yaml`` (without view names, covariance or table). The JSON is strict (:mod:`aicalib_tf.jsonio`):
+a number the calibration does not have (NaN: the cross-validation RMS of a forced model) is ``null``,
+read back as NaN.
+
+Loading checks every field before a :class:`Calibration` is made (:mod:`aicalib_tf.calib.schema`:
+types, shapes, finite values, image size 1..100000 px, board ≥ 2×2 with a positive square, fx, fy
+> 0, the coefficient count of the lens model, the covariance's size); the YAML is checked as text
+before ``cv2.FileStorage`` parses it. A bad file is a ValueError naming the file and the field.
 
 ``camera_info.yaml`` follows ROS's ``sensor_msgs/CameraInfo`` calibration file layout with the same
 ``distortion_model``. Its projection matrix P is the new camera matrix of :func:`undistort` with
@@ -25,17 +32,18 @@ the image (the central magnification kept, the periphery cropped).
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from aicalib_tf.calib import schema as S
 from aicalib_tf.calib.fit import Calibration
 from aicalib_tf.calib.quality import lens_of
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.io import atomic_write_text
+from aicalib_tf.jsonio import dumps, jsonable, nan_for_null, read_json
 
 __all__ = ["save_calibration", "load_calibration", "to_opencv_yaml", "to_json", "to_camera_info_yaml", "undistort",
            "undistort_camera_matrix", "calibration_dict", "calibration_from_dict", "jsonable", "existing_file"]
@@ -64,19 +72,6 @@ def to_opencv_yaml(cal: Calibration) -> str:
     return fs.releaseAndGetString()
 
 
-def jsonable(x):
-    """Nested dicts/lists/tuples with numpy scalars and arrays -> plain JSON types."""
-    if isinstance(x, dict):
-        return {str(k): jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return jsonable(x.tolist())
-    if isinstance(x, np.generic):
-        return x.item()
-    return x
-
-
 def calibration_dict(cal: Calibration) -> dict:
     """``camera.json``'s content: a JSON-able dict of the calibration (:func:`calibration_from_dict` reads it)."""
     lens = lens_of(cal)
@@ -102,8 +97,9 @@ def calibration_dict(cal: Calibration) -> dict:
 
 
 def to_json(cal: Calibration) -> str:
-    """The calibration as JSON text (the format :func:`load_calibration` reads)."""
-    return json.dumps(calibration_dict(cal), indent=1) + "\n"
+    """The calibration as strict JSON text (the format :func:`load_calibration` reads; a NaN, such as
+    the cross-validation RMS of a forced model, is written as null)."""
+    return dumps(calibration_dict(cal))
 
 
 def _ros_matrix(name: str, m: np.ndarray) -> str:
@@ -153,54 +149,94 @@ def _build(fields: dict, extra: dict) -> Calibration:
     return cal
 
 
-def _load_json(path: Path) -> Calibration:
-    return calibration_from_dict(json.loads(path.read_text(encoding="utf-8")))
+_TABLE_FLOATS = ("rms", "cv_rms", "cv_se")  # model_table numbers that may be null (NaN: the fit failed or was forced)
+_YAML_KEYS = ("camera_matrix", "distortion_coefficients", "distortion_model", "image_width", "image_height",
+              "board_width", "board_height", "square_size", "avg_reprojection_error", "per_view_reprojection_errors",
+              "extrinsic_parameters", "camera_name")
+
+
+def _optional_mapping(d: dict, key: str) -> dict:
+    return S.require_mapping(d, key, {}) if d.get(key) is not None else {}
+
+
+def _views(d: dict) -> dict:
+    """The Calibration fields of ``views`` (a list of {name, rms, corners, rvec, tvec})."""
+    views = S.require_list(d, "views")
+    rows = []
+    for k in range(len(views)):
+        v = S.require_item(views, k, "views")
+        with S.within(f"views[{k}]"):
+            rows.append((S.require_str(v, "name"), S.require_number(v, "rms", nonnegative=True),
+                         S.require_int(v, "corners", 0, 10**9), S.require_vector(v, "rvec", 3),
+                         S.require_vector(v, "tvec", 3)))
+    names, rms, corners, rvecs, tvecs = zip(*rows) if rows else ((), (), (), (), ())
+    return dict(views=tuple(names), per_view_rms=np.asarray(rms, np.float64), corner_counts=np.asarray(corners, np.int64),
+                rvecs=np.asarray(rvecs, np.float64).reshape(-1, 3), tvecs=np.asarray(tvecs, np.float64).reshape(-1, 3))
+
+
+def _model_table(d: dict) -> tuple:
+    """``model_table`` rows, their numbers null -> NaN (as the calibration held them)."""
+    table = S.require_list(d, "model_table", default=None) if d.get("model_table") is not None else []
+    out = []
+    for k in range(len(table)):
+        row = dict(S.require_item(table, k, "model_table"))
+        with S.within(f"model_table[{k}]"):
+            row.update({key: S.require_number(row, key, nullable=True) for key in _TABLE_FLOATS if key in row})
+            S.require_str(row, "model", "")
+        out.append(row)
+    return tuple(out)
+
+
+def _str_map(d: dict, key: str) -> dict:
+    m = _optional_mapping(d, key)
+    with S.within(key):
+        return {k: S.require_str(m, k) for k in m}
 
 
 def calibration_from_dict(d: dict) -> Calibration:
-    """The inverse of :func:`calibration_dict` (``camera.json``'s content). Raises KeyError/ValueError when bad."""
-    views, board = d["views"], d["board"]
-    dist = np.asarray(d["distortion_coefficients"], np.float64).ravel()
-    model = d.get("model") or L.model_from_ros(d.get("distortion_model", "plumb_bob"), dist.size)
-    L.check_model(model, dist)
-    cov = d.get("covariance")
-    extra = {"model": model, "covariance": None if cov is None else np.asarray(cov, np.float64),
-             "model_table": tuple(d.get("model_table") or ()), "quality": dict(d.get("quality") or {})}
-    return _build(dict(
-        K=np.asarray(d["camera_matrix"], np.float64).reshape(3, 3), dist=dist,
-        image_size=(int(d["image_width"]), int(d["image_height"])),
-        pattern_size=tuple(int(v) for v in board["pattern_size"]),
-        square_size=float(board["square_size"]), square_unit=str(board.get("square_unit", "")),
-        rms=float(d["avg_reprojection_error"]), views=tuple(str(v["name"]) for v in views),
-        rvecs=np.asarray([v["rvec"] for v in views], np.float64).reshape(-1, 3),
-        tvecs=np.asarray([v["tvec"] for v in views], np.float64).reshape(-1, 3),
-        per_view_rms=np.asarray([v["rms"] for v in views], np.float64),
-        corner_counts=np.asarray([v["corners"] for v in views], np.int64),
-        std={str(k): float(v) for k, v in d.get("std", {}).items()},
-        rejected={str(k): str(v) for k, v in d.get("rejected", {}).items()}, meta=dict(d.get("meta", {}))), extra)
+    """The inverse of :func:`calibration_dict` (``camera.json``'s content), every field checked.
+
+    Raises :class:`~aicalib_tf.calib.schema.FieldError` (a ValueError naming the field) when a field
+    is missing or wrong; null reads as NaN where a number is optional (std, model_table, quality)."""
+    if not isinstance(d, dict):
+        raise ValueError(f"expected a JSON object, got {type(d).__name__}")
+    K = S.require_camera_matrix(d, "camera_matrix")
+    model = S.require_model(d, S.require_vector(d, "distortion_coefficients").size)
+    n = 4 + L.N_COEFFS[model]
+    board = S.require_mapping(d, "board")
+    with S.within("board"):
+        pattern, square = S.require_board(board, "pattern_size", "square_size")
+        unit = S.require_str(board, "square_unit", "")
+    std = _optional_mapping(d, "std")
+    with S.within("std"):
+        std = {k: S.require_number(std, k, nullable=True) for k in std}
+    extra = {"model": model, "covariance": S.require_matrix(d, "covariance", (n, n), default=None),
+             "model_table": _model_table(d), "quality": nan_for_null(_optional_mapping(d, "quality"))}
+    return _build(dict(K=K, dist=S.require_dist(d, "distortion_coefficients", model), image_size=S.require_image_size(d),
+                       pattern_size=pattern, square_size=square, square_unit=unit,
+                       rms=S.require_number(d, "avg_reprojection_error", nonnegative=True), **_views(d), std=std,
+                       rejected=_str_map(d, "rejected"), meta=dict(_optional_mapping(d, "meta"))), extra)
 
 
 def _load_opencv_yaml(path: Path) -> Calibration:
-    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    try:
-        K, dist = fs.getNode("camera_matrix").mat(), fs.getNode("distortion_coefficients").mat()
-        if K is None or dist is None:
-            raise ValueError("no camera_matrix or distortion_coefficients matrix")
-        dist = dist.astype(np.float64).ravel()
-        node = fs.getNode("distortion_model")
-        model = L.model_from_ros(node.string() if not node.empty() else "plumb_bob", dist.size)
-        ext = fs.getNode("extrinsic_parameters").mat()
-        ext = np.zeros((0, 6)) if ext is None else ext.reshape(-1, 6).astype(np.float64)
-        errs = fs.getNode("per_view_reprojection_errors").mat()
-        errs = np.zeros(len(ext)) if errs is None else errs.astype(np.float64).ravel()
-        fields = dict(K=K.astype(np.float64), dist=L.check_model(model, dist)[1],
-                      image_size=(int(fs.getNode("image_width").real()), int(fs.getNode("image_height").real())),
-                      pattern_size=(int(fs.getNode("board_width").real()), int(fs.getNode("board_height").real())),
-                      square_size=float(fs.getNode("square_size").real()), rms=float(fs.getNode("avg_reprojection_error").real()),
-                      views=tuple(f"view{k}" for k in range(len(ext))), rvecs=ext[:, :3], tvecs=ext[:, 3:],
-                      per_view_rms=errs, corner_counts=np.zeros(len(ext), np.int64), std={})
-    finally:
-        fs.release()
+    d = S.read_opencv_yaml(path, _YAML_KEYS)
+    if "camera_name" in d and "board_width" not in d:
+        raise ValueError(f"{path}: a ROS camera_info file holds no board or views; load camera.json or camera.yaml")
+    K = S.require_camera_matrix(d, "camera_matrix")
+    model = S.require_model(d, S.require_vector(d, "distortion_coefficients").size, key=None)
+    ext = S.require_matrix(d, "extrinsic_parameters", (-1, 6), default=None)
+    ext = np.zeros((0, 6)) if ext is None else ext
+    errs = S.require_vector(d, "per_view_reprojection_errors", len(ext), default=None)
+    if errs is not None and np.any(errs < 0):
+        raise S.FieldError("per_view_reprojection_errors", f"must be >= 0, got {errs.tolist()}")
+    fields = dict(K=K, dist=S.require_dist(d, "distortion_coefficients", model), image_size=S.require_image_size(d),
+                  pattern_size=(S.require_int(d, "board_width", 2, S.MAX_PATTERN_SIDE),
+                                S.require_int(d, "board_height", 2, S.MAX_PATTERN_SIDE)),
+                  square_size=S.require_number(d, "square_size", positive=True),
+                  rms=S.require_number(d, "avg_reprojection_error", nonnegative=True),
+                  views=tuple(f"view{k}" for k in range(len(ext))), rvecs=ext[:, :3], tvecs=ext[:, 3:],
+                  per_view_rms=np.zeros(len(ext)) if errs is None else errs, corner_counts=np.zeros(len(ext), np.int64),
+                  std={})
     return _build(fields, {"model": model})
 
 
@@ -220,13 +256,15 @@ def load_calibration(path) -> Calibration:
 
     The lens model comes from ``model`` (JSON) or ``distortion_model`` with the coefficient
     count (:func:`~aicalib_tf.geometry.lens.model_from_ros`; plumb_bob when absent, as in older
-    files). Raises FileNotFoundError, or ValueError naming the file if it is bad.
+    files). Every field is checked (module docstring). Raises FileNotFoundError, or ValueError naming
+    the file (and the field: ``camera.json: field board.square_size must be a positive finite number,
+    got -25``) if it is bad; OSError when it cannot be read.
     """
     path = existing_file(path, "camera.json", "calibration")
-    try:
-        return _load_opencv_yaml(path) if path.suffix.lower() in (".yaml", ".yml") else _load_json(path)
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError, cv2.error) as exc:
-        raise ValueError(f"{path}: not a valid aicalib_tf calibration file ({type(exc).__name__}: {exc})") from None
+    with S.file_errors(path, "aicalib_tf calibration file"):
+        if path.suffix.lower() in (".yaml", ".yml"):
+            return _load_opencv_yaml(path)
+        return calibration_from_dict(read_json(path))
 
 
 def undistort_camera_matrix(cal: Calibration, alpha: float = 0.0) -> np.ndarray:

@@ -14,24 +14,28 @@ A rig of two cameras writes them at the top of the output folder; a larger rig w
 per pair with camera 0 (``cam0_cam2/``...). Every rig also gets ``rig.json`` (every camera's full
 calibration as ``camera.json`` holds it, the poses with their covariance, the frames, the quality
 and the rectifications) and each camera's one-camera files in a folder of its name.
-:func:`load_rig` reads ``rig.json`` back exactly; :func:`load_stereo_yml` reads the YAML pair.
+:func:`load_rig` reads ``rig.json`` back exactly; :func:`load_stereo_yml` reads the YAML pair. Both
+check every field (:mod:`aicalib_tf.calib.schema`: at least one camera, rotations orthonormal with
+det +1, finite values, shapes) and raise a ValueError naming the file and the field. ``rig.json`` is
+strict JSON (a missing number, such as a frame RMS that could not be measured, is ``null``).
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from aicalib_tf.calib.files import (FILES, calibration_dict, calibration_from_dict, existing_file, jsonable,
-                                    to_camera_info_yaml, to_json, to_opencv_yaml)
+from aicalib_tf.calib import schema as S
+from aicalib_tf.calib.files import (FILES, calibration_dict, calibration_from_dict, existing_file, to_camera_info_yaml,
+                                    to_json, to_opencv_yaml)
 from aicalib_tf.calib.rig_quality import pair_rectification
 from aicalib_tf.calib.rig_result import RigCalibration
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.rectify import Rectification, essential_matrix, fundamental_matrix
 from aicalib_tf.io import atomic_write_text
+from aicalib_tf.jsonio import dumps, jsonable, nan_for_null, read_json
 
 __all__ = ["save_rig", "load_rig", "load_stereo_yml", "rig_texts", "rig_dict", "rig_from_dict", "pair_folder"]
 
@@ -74,17 +78,58 @@ def rig_dict(rig: RigCalibration) -> dict:
         "rejected": rig.rejected, "quality": rig.quality, "meta": rig.meta, "rectification": rects})
 
 
+def _cameras(d: dict) -> tuple[tuple[str, ...], tuple]:
+    """(names, calibrations): at least one camera, names unique strings, one calibration per name."""
+    names = S.require_list(d, "names", min_len=1)
+    names = tuple(S.require_str({f"names[{k}]": n}, f"names[{k}]") for k, n in enumerate(names))
+    if len(set(names)) != len(names):
+        raise S.FieldError("names", f"must be unique, got {list(names)}")
+    cams = S.require_list(d, "cameras")
+    if len(cams) != len(names):
+        raise S.FieldError("cameras", f"must hold one calibration per name ({len(names)}), got {len(cams)}")
+    out = []
+    for k in range(len(cams)):
+        cam = S.require_item(cams, k, "cameras")
+        with S.within(f"cameras[{k}]"):
+            out.append(calibration_from_dict(cam))
+    return names, tuple(out)
+
+
+def _frames(d: dict, n_cams: int) -> dict:
+    """frames (F names), frame_rms (F,) px (null: NaN) and frame_cameras (camera indices per frame)."""
+    frames = tuple(S.require_str({f"frames[{k}]": f}, f"frames[{k}]") for k, f in enumerate(S.require_list(d, "frames")))
+    rms = np.array([S.require_number({f"frame_rms[{k}]": v}, f"frame_rms[{k}]", nonnegative=True, nullable=True)
+                    for k, v in enumerate(S.require_list(d, "frame_rms"))], np.float64)
+    cams = []
+    for k, cs in enumerate(S.require_list(d, "frame_cameras")):
+        key = f"frame_cameras[{k}]"
+        cams.append(tuple(S.require_int({key: c}, key, 0, n_cams - 1) for c in S.require_list({key: cs}, key)))
+    cams = tuple(cams)
+    if not len(frames) == len(rms) == len(cams):
+        raise S.FieldError("frames", f"has {len(frames)} names, {len(rms)} frame_rms and {len(cams)} frame_cameras")
+    return dict(frames=frames, frame_rms=rms, frame_cameras=cams)
+
+
 def rig_from_dict(d: dict) -> RigCalibration:
-    """The inverse of :func:`rig_dict`."""
-    board = d["board"]
+    """The inverse of :func:`rig_dict`, every field checked (:mod:`~aicalib_tf.calib.schema`).
+
+    Raises :class:`~aicalib_tf.calib.schema.FieldError` (a ValueError naming the field) when a field
+    is missing or wrong (``cameras[1].board.square_size``, ``R``...)."""
+    if not isinstance(d, dict):
+        raise ValueError(f"expected a JSON object, got {type(d).__name__}")
+    names, cameras = _cameras(d)
+    c = len(names)
+    board = S.require_mapping(d, "board")
+    with S.within("board"):
+        pattern, square = S.require_board(board, "pattern_size", "square_size")
+        unit = S.require_str(board, "square_unit", "")
+    opt = {k: S.require_mapping(d, k, {}) if d.get(k) is not None else {} for k in ("rejected", "quality", "meta")}
+    opt["quality"] = nan_for_null(opt["quality"])
     return RigCalibration(
-        names=tuple(d["names"]), cameras=tuple(calibration_from_dict(c) for c in d["cameras"]),
-        R=np.asarray(d["R"], np.float64).reshape(-1, 3, 3), T=np.asarray(d["T"], np.float64).reshape(-1, 3),
-        pose_covariance=np.asarray(d["pose_covariance"], np.float64).reshape(-1, 6, 6), frames=tuple(d["frames"]),
-        frame_rms=np.asarray(d["frame_rms"], np.float64), frame_cameras=tuple(tuple(c) for c in d["frame_cameras"]),
-        rms=float(d["rms"]), pattern_size=tuple(board["pattern_size"]), square_size=float(board["square_size"]),
-        square_unit=str(board.get("square_unit", "")), rejected=dict(d.get("rejected", {})),
-        quality=dict(d.get("quality", {})), meta=dict(d.get("meta", {})))
+        names=names, cameras=cameras, R=S.require_rotation(d, "R", (c, 3, 3)), T=S.require_matrix(d, "T", (c, 3)),
+        pose_covariance=S.require_matrix(d, "pose_covariance", (c, 6, 6)), **_frames(d, c),
+        rms=S.require_number(d, "rms", nonnegative=True), pattern_size=pattern, square_size=square, square_unit=unit,
+        **opt)
 
 
 def pair_folder(rig: RigCalibration, k: int) -> str:
@@ -94,7 +139,7 @@ def pair_folder(rig: RigCalibration, k: int) -> str:
 
 def rig_texts(rig: RigCalibration) -> dict[str, str]:
     """{relative path: text} of every rig file (module docstring)."""
-    texts = {"rig.json": json.dumps(rig_dict(rig), indent=1) + "\n"}
+    texts = {"rig.json": dumps(rig_dict(rig))}
     for k in range(1, len(rig.names)):
         rect = pair_rectification(rig.lenses, rig.R, rig.T, 0, k)
         sub = pair_folder(rig, k)
@@ -122,30 +167,54 @@ def save_rig(rig: RigCalibration, folder) -> list[Path]:
 
 
 def load_rig(path) -> RigCalibration:
-    """Read ``rig.json`` (or a folder holding it). Raises FileNotFoundError, or ValueError naming the file."""
+    """Read ``rig.json`` (or a folder holding it). Raises FileNotFoundError, or ValueError naming the file
+    (and the field, when one is wrong)."""
     path = existing_file(path, "rig.json", "rig")
-    try:
-        return rig_from_dict(json.loads(path.read_text(encoding="utf-8")))
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"{path}: not a valid aicalib_tf rig file ({type(exc).__name__}: {exc})") from None
+    with S.file_errors(path, "aicalib_tf rig file"):
+        return rig_from_dict(read_json(path))
+
+
+_STEREO_NODES = {
+    "intrinsics.yml": ("M1", "D1", "M2", "D2", "distortion_model1", "distortion_model2", "image_width", "image_height"),
+    "extrinsics.yml": ("R", "T", "R1", "R2", "P1", "P2", "Q", "E", "F"),
+}
+
+
+def _intrinsics(d: dict) -> dict:
+    """intrinsics.yml's nodes, checked: M1, M2 camera matrices; D1, D2 with the counts of their models."""
+    out = {}
+    for k in ("1", "2"):
+        out[f"M{k}"] = S.require_camera_matrix(d, f"M{k}")
+        D = S.require_matrix(d, f"D{k}", (-1, -1))
+        ros = S.require_str(d, f"distortion_model{k}")
+        S.require_dist(d, f"D{k}", S.require_model(d, D.size, key=None, ros_key=f"distortion_model{k}"))
+        out[f"D{k}"], out[f"distortion_model{k}"] = D, ros
+    if "image_width" in d or "image_height" in d:
+        out["image_width"], out["image_height"] = S.require_image_size(d)
+    return out
+
+
+def _extrinsics(d: dict) -> dict:
+    """extrinsics.yml's nodes, checked: R, R1, R2 rotations; T (3 values); P1, P2 (3, 4); Q (4, 4); E, F (3, 3)."""
+    out = {key: S.require_rotation(d, key) for key in ("R", "R1", "R2")}
+    T = S.require_matrix(d, "T", (-1, -1))
+    S.require_vector(d, "T", 3)
+    out.update(T=T, P1=S.require_matrix(d, "P1", (3, 4)), P2=S.require_matrix(d, "P2", (3, 4)),
+               Q=S.require_matrix(d, "Q", (4, 4)), E=S.require_matrix(d, "E", (3, 3)), F=S.require_matrix(d, "F", (3, 3)))
+    return out
 
 
 def load_stereo_yml(folder) -> dict:
-    """The nodes of ``intrinsics.yml`` and ``extrinsics.yml`` in ``folder``: {"M1": (3, 3), ..., "Q": (4, 4),
-    "distortion_model1": str, ...}. Raises FileNotFoundError or ValueError naming the file."""
+    """The nodes of ``intrinsics.yml`` and ``extrinsics.yml`` in ``folder``: {"M1": (3, 3), "D1": (1, n), ...,
+    "T": (3, 1), "Q": (4, 4), "distortion_model1": str, ...} (matrices float64 as stored; image_width and
+    image_height ints when present), every node checked (:mod:`~aicalib_tf.calib.schema`: K's form,
+    coefficient counts, rotations, finite values). Raises FileNotFoundError or ValueError naming the file."""
     out = {}
-    for name, keys in (("intrinsics.yml", ("M1", "D1", "M2", "D2", "distortion_model1", "distortion_model2")),
-                       ("extrinsics.yml", ("R", "T", "R1", "R2", "P1", "P2", "Q", "E", "F"))):
+    for name, keys in _STEREO_NODES.items():
         path = Path(folder) / name
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no such file")
-        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-        try:
-            for key in keys:
-                node = fs.getNode(key)
-                if node.empty():
-                    raise ValueError(f"{path}: no {key} node")
-                out[key] = node.string() if key.startswith("distortion_model") else node.mat().astype(np.float64)
-        finally:
-            fs.release()
+        with S.file_errors(path, "OpenCV stereo file"):
+            d = S.read_opencv_yaml(path, keys)
+            out.update(_intrinsics(d) if name == "intrinsics.yml" else _extrinsics(d))
     return out

@@ -94,7 +94,7 @@ def test_bad_rig_files_name_the_file(tmp_path):
     with pytest.raises(FileNotFoundError, match="rig.json"):
         load_rig(tmp_path)
     (tmp_path / "rig.json").write_text("{}")
-    with pytest.raises(ValueError, match="not a valid aicalib_tf rig file"):
+    with pytest.raises(ValueError, match="rig.json: field names is missing"):
         load_rig(tmp_path)
     with pytest.raises(FileNotFoundError, match="intrinsics.yml"):
         load_stereo_yml(tmp_path)
