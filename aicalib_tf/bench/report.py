@@ -7,7 +7,6 @@ to PNG bytes in memory.
 # size: the report page in the order a reader sees it, and the CSV and figures it links.
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
@@ -17,6 +16,7 @@ import pandas as pd
 from aicalib_tf.bench.metrics import WRONG_PX, corner_error_stats
 from aicalib_tf.bench.targets import check_targets
 from aicalib_tf.io import atomic_write_bytes, atomic_write_text
+from aicalib_tf.jsonio import dumps
 from aicalib_tf.plotting import new_figure, png_bytes
 
 __all__ = ["summarize", "write_report", "write_photo_report", "SUMMARY_COLUMNS", "RESULT_COLUMNS"]
@@ -31,6 +31,15 @@ SWEEP_AXES = {"noise": ("Gaussian noise σ (grey levels)", False), "blur": ("Gau
               "contrast": ("contrast factor (1 = full)", True), "jpeg": ("JPEG quality", True),
               "distortion": ("lens distortion k1 (median of the images)", True),
               "tilt": ("board tilt (median, degrees)", False)}
+
+
+def _strings_for_objects(x):
+    """Nested dicts/lists with anything JSON cannot hold (paths, dataclasses) as its str()."""
+    if isinstance(x, dict):
+        return {str(k): _strings_for_objects(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_strings_for_objects(v) for v in x]
+    return x if x is None or isinstance(x, (bool, int, float, str, np.generic, np.ndarray)) else str(x)
 
 
 def _save_fig(fig, path: Path) -> None:
@@ -374,7 +383,7 @@ def write_report(out: Path, cfg, conds, result: dict, info: dict, versions: dict
              "calibration": {"preset": "calib", "seed": CALIB_SEED, "cameras": list(CALIB_CAMERAS),
                              "views": cfg.counts()["calib_views"]},
              "wall_s": result["wall_s"], "render_s": result["render_s"]}
-    atomic_write_text(out / "config.json", json.dumps(_config(cfg, versions, info, extra), indent=1, default=str) + "\n")
+    atomic_write_text(out / "config.json", dumps(_strings_for_objects(_config(cfg, versions, info, extra))) + "\n")
 
 
 def write_photo_report(out: Path, cfg, result: dict, info: dict, versions: dict) -> None:
@@ -459,4 +468,4 @@ def write_photo_report(out: Path, cfg, result: dict, info: dict, versions: dict)
     extra = {"images": str(cfg.images), "pattern": list(cfg.pattern), "degrade": cfg.degrade, "seed": cfg.seed,
              "degradations": {k: v[0] for k, v in PHOTO_DEGRADATIONS.items()} if cfg.degrade else {},
              "photos": result["files"], "skipped": result["skipped"], "wall_s": result["wall_s"]}
-    atomic_write_text(out / "config.json", json.dumps(_config(cfg, versions, info, extra), indent=1, default=str) + "\n")
+    atomic_write_text(out / "config.json", dumps(_strings_for_objects(_config(cfg, versions, info, extra))) + "\n")

@@ -32,9 +32,8 @@ def output_stems(files: list) -> list[str]:
 def write_detection(out: Path, f, stem: str, gray, det, pattern, *, model: str, sha) -> None:
     """Write ``<stem>.png`` (the overlay) and ``<stem>.json`` (the corners, ids, scores, why not) of one
     image into ``out``, atomically. gray : (H, W) float32 [0, 1]; det : its Detection."""
-    import json
-
     from aicalib_tf.io import atomic_write_bytes, atomic_write_text
+    from aicalib_tf.jsonio import dumps
 
     ok, png = cv2.imencode(".png", draw_detection(gray, det))
     atomic_write_bytes(out / f"{stem}.png", png.tobytes())
@@ -43,7 +42,7 @@ def write_detection(out: Path, f, stem: str, gray, det, pattern, *, model: str, 
         "found": det.found, "complete": det.complete, "reason": det.reason, "corners": det.corners.tolist(),
         "ids": det.ids.tolist(), "scores": det.scores.tolist(), "model": model, "model_sha256": sha,
     }
-    atomic_write_text(out / f"{stem}.json", json.dumps(record, indent=1) + "\n")
+    atomic_write_text(out / f"{stem}.json", dumps(record) + "\n")
 
 
 def file_detector(pattern, model_name: str, out, sha):
