@@ -29,7 +29,8 @@ from pathlib import Path
 import keras
 import tensorflow as tf
 
-__all__ = ["STRATEGIES", "make_strategy", "is_chief", "worker_dir", "WorkerBackup", "backup_epoch", "BACKUP_DIR"]
+__all__ = ["STRATEGIES", "make_strategy", "is_chief", "worker_dir", "WorkerBackup", "backup_epoch", "build_for_fit",
+           "discard", "BACKUP_DIR"]
 
 STRATEGIES = ("default", "mirrored", "multiworker")
 BACKUP_DIR = "backup"
@@ -111,6 +112,27 @@ class WorkerBackup(keras.callbacks.BackupAndRestore):
         self._prev_training_metadata_path = f"{self._training_metadata_path}.bkp"
         self.backup_dir = self._save_dir
         self._current_epoch = getattr(self.model, "_initial_epoch", None) or 0
+
+
+def build_for_fit(model: keras.Model) -> None:
+    """Get ``model`` ready for ``fit`` under a strategy: build its loss and metrics from its input
+    and output shapes, skip the build that ``fit`` does from a first batch, and shape the per-step figures so that they
+    can be averaged over the workers. Call it inside ``strategy.scope()``.
+
+    That build reduces the first distributed batch across replicas, which fails under
+    MultiWorkerMirroredStrategy (a batch of PerReplica values cannot be all-reduced), and under
+    any strategy it consumes one batch that training never sees. Building from shapes needs no data.
+    """
+    def spec(shape):
+        return keras.KerasTensor(shape if isinstance(shape, tuple) else tuple(shape), "float32")
+
+    model._symbolic_build(data_batch=(spec(model.input_shape), spec(model.output_shape)))
+    model._maybe_symbolic_build = lambda iterator=None, data_batch=None: None
+    if isinstance(tf.distribute.get_strategy(), tf.distribute.MultiWorkerMirroredStrategy):
+        # fit averages each step's figures over the workers along axis 0, which scalars lack:
+        # give them one (the mean over the replicas is then a scalar again)
+        step = model.train_step
+        model.train_step = lambda data: {k: tf.reshape(v, [1]) for k, v in step(data).items()}
 
 
 def discard(run: Path, out: Path) -> None:

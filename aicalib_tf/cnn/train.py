@@ -289,6 +289,8 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
             model = load_model(out / state["checkpoint"], compile=True)
         else:
             model = compile_model(build_model(cfg.arch), global_lr, focal_gamma=cfg.focal_gamma)
+        if cfg.strategy != "default":
+            distribute.build_for_fit(model)
     batches = _training_data(cfg, strategy, model_kind(model), global_batch, initial_epoch, progress)
     prep_s = time.perf_counter() - t0
     if initial_epoch < cfg.epochs:
