@@ -99,7 +99,7 @@ class WorkerBackup(keras.callbacks.BackupAndRestore):
     the chief saves there, any other worker into its own ``save_dir`` (removed at the end)."""
 
     def __init__(self, backup_dir: Path, save_dir: Path):
-        super().__init__(str(backup_dir), save_freq="epoch", delete_checkpoint=True)
+        super().__init__(str(backup_dir), save_freq="epoch", double_checkpoint=True, delete_checkpoint=True)
         self._restore_paths = (self._weights_path, self._training_metadata_path)
         self._save_paths = (str(Path(save_dir) / "latest.weights.h5"), str(Path(save_dir) / "training_metadata.json"))
         self._save_dir = str(save_dir)

@@ -193,11 +193,11 @@ def _callbacks(cfg: TrainConfig, run: Path, val, initial_epoch: int, wall_before
     except ImportError:
         tensorboard = []
     return [
-        *backup,  # first: it restores the weights and epoch before anything else runs
         Validation(),  # first: it adds to the logs that the CSV logger writes
         keras.callbacks.CSVLogger(str(run / "log.csv"), append=initial_epoch > 0),
         *tensorboard,
         Checkpoint(),
+        *backup,  # last: a backup of epoch e means its logs and checkpoint are written
     ]
 
 
