@@ -8,7 +8,7 @@ Writes DIR/index.csv, DIR/images/*.png, DIR/labels/*.json and DIR/meta.json (for
 DESIGN.md). The same arguments give byte-identical files whatever --workers is.
 
 With --format tfrecord it writes DIR/data-IIIII-of-NNNNN.tfrecord files (tf.train.Example: the
-PNG image, its visible corners and its label) and DIR/meta.json with the schema, for
+raw pixels, grey statistics, visible corners and label) and DIR/meta.json with the schema, for
 ``python -m aicalib_tf.train --data 'DIR/*.tfrecord'``. --shard i/N renders only shard i (one
 job per machine, say): it is byte for byte shard i of a full run. Shards hold a few hundred MB at most.
 """
