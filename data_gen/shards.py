@@ -21,7 +21,6 @@ it depends on the crop, flip and scale drawn at training time (see ``aicalib_tf.
 
 from __future__ import annotations
 
-import json
 import os
 import tempfile
 from dataclasses import dataclass, replace
