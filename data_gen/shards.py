@@ -21,6 +21,7 @@ it depends on the crop, flip and scale drawn at training time (see ``aicalib_tf.
 
 from __future__ import annotations
 
+import itertools
 import os
 import tempfile
 from dataclasses import dataclass, replace
@@ -139,9 +140,10 @@ def _example(job: tuple) -> bytes:
     }))
 
 
-def _records(cfg: DatasetConfig, indices: range) -> Iterator[bytes]:
+def _records(cfg: DatasetConfig, indices, count: int) -> Iterator[bytes]:
+    """The framed records of ``indices`` (``count`` of them), in order, over one pool of workers."""
     jobs = ((cfg.preset, cfg.seed, i, cfg.size, cfg.pattern) for i in indices)
-    return imap_ordered(_example, jobs, cfg.workers if len(indices) > 1 else 1)
+    return imap_ordered(_example, jobs, cfg.workers if count > 1 else 1)
 
 
 def _atomic_write(path: Path, chunks, mode: int = 0o644) -> None:
@@ -168,17 +170,20 @@ def write_shards(cfg: ShardConfig, *, progress: bool = True) -> list[Path]:
     todo = range(cfg.shards) if cfg.only is None else [cfg.only]
     total = sum(len(shard_range(i, cfg.shards, cfg.data.count)) for i in todo)
     bar = tqdm(total=total, desc=f"data_gen {cfg.data.preset} tfrecord", unit="img", disable=not progress)
+    ranges = [shard_range(i, cfg.shards, cfg.data.count) for i in todo]
+    records = _records(cfg.data, itertools.chain.from_iterable(ranges), total)  # one stream: one pool for all shards
+
+    def counted(n):
+        for r in itertools.islice(records, n):
+            bar.update()
+            yield r
+
     paths = []
-    for i in todo:
+    for i, indices in zip(todo, ranges):
         path = out / shard_name(i, cfg.shards)
-
-        def counted(records):
-            for r in records:
-                bar.update()
-                yield r
-
-        _atomic_write(path, counted(_records(cfg.data, shard_range(i, cfg.shards, cfg.data.count))))
+        _atomic_write(path, counted(len(indices)))
         paths.append(path)
+    records.close()
     bar.close()
     return paths
 

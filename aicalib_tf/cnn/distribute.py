@@ -20,6 +20,7 @@ config.json as ``global_batch_size`` and ``global_learning_rate``.
 
 from __future__ import annotations
 
+import atexit
 import json
 import os
 import shutil
@@ -80,7 +81,9 @@ def worker_dir(strategy: tf.distribute.Strategy, run: Path) -> Path:
     if is_chief(strategy):
         return run
     resolver = strategy.cluster_resolver
-    return Path(tempfile.mkdtemp(prefix=f"aicalib-{resolver.task_type}{resolver.task_id}-"))
+    path = Path(tempfile.mkdtemp(prefix=f"aicalib-{resolver.task_type}{resolver.task_id}-"))
+    atexit.register(shutil.rmtree, path, ignore_errors=True)  # also when training fails
+    return path
 
 
 def backup_epoch(run: Path) -> int:

@@ -253,10 +253,11 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
         initial_epoch = int(state["epochs_done"])
         wall_before = float(state.get("wall_s", 0.0))
     else:
-        initial_epoch = distribute.backup_epoch(out) if multiworker else 0
+        initial_epoch = distribute.backup_epoch(out) if multiworker else 0  # a cluster started again
         if (out / "model.keras").exists() or (not initial_epoch and (out / "state.json").exists()):
             raise ValueError(f"--out {out}: already holds a run; use --resume or a new folder")
-        wall_before = 0.0
+        state = json.loads((out / "state.json").read_text()) if initial_epoch and (out / "state.json").is_file() else {}
+        wall_before = float(state.get("wall_s", 0.0))
     run = distribute.worker_dir(strategy, out)  # a non-chief worker writes to a temporary folder
     run.mkdir(parents=True, exist_ok=True)
     replicas = int(strategy.num_replicas_in_sync)
@@ -312,7 +313,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
         "arch": cfg.arch,
         "params": int(model.count_params()),
         "epochs": cfg.epochs,
-        "resumed_at_epoch": initial_epoch if resume else None,
+        "resumed_at_epoch": initial_epoch if resume or initial_epoch else None,
         "data_prep_s": round(prep_s, 1),
         "replicas": replicas,
         "global_batch_size": global_batch,

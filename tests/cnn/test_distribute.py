@@ -131,7 +131,8 @@ def test_a_cluster_that_loses_a_worker_resumes_from_its_backup_to_the_same_weigh
     np.testing.assert_allclose([resumed[e] for e in range(EPOCHS)], [one[e] for e in range(EPOCHS)], rtol=1e-5)
     for a, b in zip(_weights(root / "killed"), _weights(root / "one")):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-5)
-    assert json.loads((root / "killed" / "metrics.json").read_text())["replicas"] == 2
+    metrics = json.loads((root / "killed" / "metrics.json").read_text())
+    assert metrics["replicas"] == 2 and metrics["resumed_at_epoch"] == backed_up
 
 
 def test_multiworker_without_tf_config_is_one_line_exit_2(tmp_path, monkeypatch, capsys):
