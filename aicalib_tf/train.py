@@ -5,6 +5,8 @@ Examples::
     python -m aicalib_tf.train --arch default --out runs/default            # the default network
     python -m aicalib_tf.train --arch report --out runs/report              # the report's network
     python -m aicalib_tf.train --out runs/default --resume                  # continue a killed run
+    python -m aicalib_tf.train --data 'shards/*.tfrecord' --out runs/big    # from data_gen --format tfrecord
+    TF_CONFIG=... python -m aicalib_tf.train --strategy multiworker --data 'shards/*.tfrecord' --out runs/big
 
 The exact commands of the shipped models, with their data options, are in models/MODEL_CARD.md.
 
@@ -24,6 +26,15 @@ trained on) and saves a checkpoint. RUN_DIR receives:
     model.keras        the final model (atomically, at the end)
     metrics.json       the final validation metrics, wall time and parameter count
 
+Training at scale: ``--data`` reads TFRecord shards of ``python -m data_gen --format tfrecord``
+through tf.data (files interleaved in parallel, shuffled, cropped and batched in parallel,
+prefetched; ``--deterministic`` fixes the element order, see :mod:`aicalib_tf.cnn.tfrecord_data`)
+instead of rendering a pool in memory (the default, for a small run). ``--strategy mirrored``
+trains on every local GPU, ``--strategy multiworker`` on a cluster described by TF_CONFIG
+(chief-only run folder, restart from a BackupAndRestore backup, see
+:mod:`aicalib_tf.cnn.distribute`). ``--batch-size`` and ``--learning-rate`` are per replica: the
+global batch and rate scale with the replicas and are recorded in config.json and metrics.json.
+
 Determinism: the same seed gives the same pool, crops and data order. On CPU the weights are
 reproducible run to run when TensorFlow's op determinism is on (it is, see ``--no-determinism``).
 
@@ -40,23 +51,23 @@ import os
 import sys
 from pathlib import Path
 
+from aicalib_tf.cli import debug_flag, parser, run_main
 from aicalib_tf.cnn.train import TrainConfig, train
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m aicalib_tf.train", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = parser("python -m aicalib_tf.train", __doc__)
     d = TrainConfig(out="")
     ap.add_argument("--out", required=True, metavar="RUN_DIR", help="run folder (created)")
     ap.add_argument("--arch", default=d.arch, help="default | report | default_v1 | default_c12 | default_c16 | default_pre (default: %(default)s)")
     ap.add_argument("--epochs", type=int, default=None, help=f"epochs (default: {d.epochs}; with --resume: the run's own)")
     ap.add_argument("--steps", type=int, default=d.steps, help="batches per epoch (default: %(default)s)")
-    ap.add_argument("--batch-size", type=int, default=d.batch_size, help="(default: %(default)s)")
+    ap.add_argument("--batch-size", type=int, default=d.batch_size, help="per replica (default: %(default)s)")
     ap.add_argument("--seed", type=int, default=d.seed, help="data and initialisation seed (default: %(default)s)")
     ap.add_argument("--preset", default=d.preset, help="data_gen preset to train on, or a mix such as train:0.8,distorted:0.2 (default: %(default)s)")
     ap.add_argument("--pool-images", type=int, default=d.pool_images, help="images rendered for training (default: %(default)s)")
     ap.add_argument("--val-images", type=int, default=d.val_images, help="validation images (default: %(default)s)")
-    ap.add_argument("--learning-rate", type=float, default=d.learning_rate, help="peak Adam rate, cosine decay (default: %(default)s)")
+    ap.add_argument("--learning-rate", type=float, default=d.learning_rate, help="peak Adam rate per replica, cosine decay (default: %(default)s)")
     ap.add_argument("--workers", type=int, default=d.workers, help="rendering processes (default: %(default)s)")
     ap.add_argument("--threshold", type=float, default=d.threshold, help="corner weight for validation (default: %(default)s)")
     ap.add_argument("--focal-gamma", type=float, default=d.focal_gamma,
@@ -67,6 +78,10 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--shrink", type=float, default=d.shrink,
                     help="default model: share of training crops cut from the image at half size "
                          "(squares half as wide) (default: %(default)s)")
+    ap.add_argument("--data", default=d.data, metavar="GLOB",
+                    help="TFRecord shards of data_gen --format tfrecord (globs, comma-separated); default: render a pool in memory")
+    ap.add_argument("--deterministic", action="store_true", help="--data: a fixed element order (slower parallel stages)")
+    ap.add_argument("--strategy", default=d.strategy, help="default | mirrored | multiworker (TF_CONFIG) (default: %(default)s)")
     ap.add_argument("--no-determinism", action="store_true", help="allow non-deterministic TensorFlow ops (other Keras backends: no effect)")
     ap.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     ap.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -76,6 +91,10 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """CLI entry (see the module docstring); returns the process exit code (2 on bad arguments)."""
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+    return run_main(lambda: _run(argv), debug=debug_flag(argv))
+
+
+def _run(argv: list[str] | None) -> int:
     args = _parser().parse_args(argv)
     d = TrainConfig(out="")
     cfg = TrainConfig(
@@ -83,12 +102,9 @@ def main(argv: list[str] | None = None) -> int:
         seed=args.seed, preset=args.preset, pool_images=args.pool_images, val_images=args.val_images,
         learning_rate=args.learning_rate, workers=args.workers, threshold=args.threshold, focal_gamma=args.focal_gamma,
         determinism=not args.no_determinism, squeeze=args.squeeze, shrink=args.shrink,
+        data=args.data, strategy=args.strategy, deterministic_data=args.deterministic,
     )
-    try:
-        metrics = train(cfg, resume=args.resume, progress=not args.quiet, epochs_given=args.epochs)
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    metrics = train(cfg, resume=args.resume, progress=not args.quiet, epochs_given=args.epochs)
     print(f"done: precision {metrics['precision']:.4f}, recall {metrics['recall']:.4f}, "
           f"loc median {metrics['loc_median_px']:.3f} px; model {Path(cfg.out) / 'model.keras'}")
     return 0

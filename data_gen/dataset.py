@@ -9,13 +9,14 @@ Layout::
 
 The whole dataset is built in a temporary sibling folder and renamed into place at the end, so
 an interrupted run never leaves a half-written DIR. Output bytes depend only on the arguments,
-never on ``workers``.
+never on ``workers``. Jobs are streamed (a window of a few per worker in flight, index rows written
+as they come), so memory does not grow with ``count``; ``count`` is bounded by ``MAX_COUNT``.
 """
 
 from __future__ import annotations
 
 import csv
-import io
+import itertools
 import json
 import multiprocessing as mp
 import os
@@ -23,7 +24,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterable, Iterator
 
 import cv2
 from tqdm import tqdm
@@ -31,8 +32,9 @@ from tqdm import tqdm
 from .presets import get_preset
 from .sample import GENERATOR_VERSION, make_sample
 
-__all__ = ["DatasetConfig", "write_dataset", "check_output_dir", "iter_samples"]
+__all__ = ["DatasetConfig", "write_dataset", "check_output_dir", "check_count", "iter_samples", "imap_ordered", "MAX_COUNT"]
 
+MAX_COUNT = 1_000_000  # images in one folder dataset (6-digit names); --format tfrecord allows more
 INDEX_COLUMNS = ("file", "label", "condition", "camera_id", "seed", "index", "width", "height")
 
 
@@ -59,6 +61,33 @@ class DatasetConfig:
             "pattern": list(self.pattern) if self.pattern else None,
             "preset_config": get_preset(self.preset).to_dict(),
         }
+
+
+def check_count(count: int, limit: int = MAX_COUNT, hint: str = "") -> None:
+    """Raise ``ValueError`` unless 1 <= ``count`` <= ``limit``."""
+    if count < 1:
+        raise ValueError(f"--count must be >= 1, got {count}")
+    if count > limit:
+        raise ValueError(f"--count must be at most {limit}, got {count}{hint}")
+
+
+def imap_ordered(fn: Callable, jobs: Iterable, workers: int = 1, window: int = 16) -> Iterator:
+    """``fn(job)`` for each job, in order, over ``workers`` spawned processes (or in this one).
+
+    Jobs are read from the iterable lazily: at most ``window`` per worker are in flight, so a huge
+    (or endless) stream of jobs runs in constant memory. Results never depend on ``workers``.
+    """
+    jobs = iter(jobs)
+    if workers <= 1:
+        yield from map(fn, jobs)
+        return
+    chunk = max(1, window // 4)
+    with mp.get_context("spawn").Pool(workers) as pool:
+        while True:
+            batch = list(itertools.islice(jobs, window * workers))
+            if not batch:
+                return
+            yield from pool.imap(fn, batch, chunksize=chunk)
 
 
 def check_output_dir(out: Path) -> None:
@@ -105,42 +134,29 @@ def iter_samples(preset, seed: int, indices, *, size=None, pattern=None, workers
     preset : a preset name or a ``Preset`` (overrides travel to the workers).
     workers : processes (spawned, so a parent holding TensorFlow is safe). Output never depends on it.
     """
-    jobs = [(preset, seed, int(i), size, pattern) for i in indices]
-    if workers > 1 and len(jobs) > 1:
-        with mp.get_context("spawn").Pool(workers) as pool:
-            yield from pool.imap(_make_one, jobs, chunksize=max(1, min(16, len(jobs) // (4 * workers))))
-    else:
-        for job in jobs:
-            yield _make_one(job)
+    jobs = ((preset, seed, int(i), size, pattern) for i in indices)
+    yield from imap_ordered(_make_one, jobs, workers if len(indices) > 1 else 1)
 
 
 def write_dataset(cfg: DatasetConfig, *, progress: bool = True) -> Path:
     """Render ``cfg.count`` images into ``cfg.out``; returns the folder."""
     out = Path(cfg.out)
+    check_count(cfg.count)
     check_output_dir(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
     try:
         (stage / "images").mkdir()
         (stage / "labels").mkdir()
-        jobs = [(str(stage), cfg.preset, cfg.seed, i, cfg.size, cfg.pattern) for i in range(cfg.count)]
+        jobs = ((str(stage), cfg.preset, cfg.seed, i, cfg.size, cfg.pattern) for i in range(cfg.count))
         bar = tqdm(total=cfg.count, desc=f"data_gen {cfg.preset}", unit="img", disable=not progress)
-        rows = []
-        if cfg.workers > 1 and cfg.count > 1:
-            with mp.get_context("spawn").Pool(cfg.workers) as pool:
-                for row in pool.imap(_render_one, jobs, chunksize=max(1, min(16, cfg.count // (4 * cfg.workers)))):
-                    rows.append(row)
-                    bar.update()
-        else:
-            for job in jobs:
-                rows.append(_render_one(job))
+        with open(stage / "index.csv", "w", newline="") as f:
+            writer = csv.writer(f, lineterminator="\n")
+            writer.writerow(INDEX_COLUMNS)
+            for row in imap_ordered(_render_one, jobs, cfg.workers if cfg.count > 1 else 1):
+                writer.writerow(row)
                 bar.update()
         bar.close()
-        buf = io.StringIO()
-        writer = csv.writer(buf, lineterminator="\n")
-        writer.writerow(INDEX_COLUMNS)
-        writer.writerows(rows)
-        (stage / "index.csv").write_text(buf.getvalue())
         (stage / "meta.json").write_bytes(_json_bytes(cfg.to_meta()))
         umask = os.umask(0)
         os.umask(umask)

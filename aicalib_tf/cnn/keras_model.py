@@ -104,7 +104,10 @@ class CornerMapLoss(keras.losses.Loss):
         eps = 1e-6
         t, p = y_true[..., 0], ops.clip(y_pred[..., 0], eps, 1.0 - eps)
         l1 = ops.sum(ops.abs(y_true[..., 1:] - y_pred[..., 1:]), axis=-1)
-        pos = ops.maximum(ops.sum(t), 1.0)
+        # divided by the corners of the global batch: under tf.distribute each replica returns its
+        # share, the gradients are summed over the replicas, and the loss is the global batch's
+        # whatever the replica count (Keras scales only per-sample losses by 1/replicas, not a scalar)
+        pos = ops.maximum(_global_sum(ops.sum(t)), 1.0)
         offset = self.offset_weight * ops.sum(t * l1) / pos
         if self.gamma > 0:
             g = self.gamma
@@ -116,6 +119,17 @@ class CornerMapLoss(keras.losses.Loss):
     def get_config(self) -> dict:
         return {"name": self.name, "gamma": self.gamma, "positive_weight": self.positive_weight,
                 "offset_weight": self.offset_weight}
+
+
+def _global_sum(x):
+    """``x`` summed over the replicas inside a ``tf.distribute`` replica context of several; else ``x``."""
+    if keras.backend.backend() == "tensorflow":
+        import tensorflow as tf
+
+        ctx = tf.distribute.get_replica_context()
+        if ctx is not None and ctx.num_replicas_in_sync > 1:
+            return ctx.all_reduce("SUM", tf.stop_gradient(x))
+    return x
 
 
 def corner_map_loss(y_true, y_pred, gamma: float = 2.0):

@@ -64,6 +64,10 @@ def train_command(config: dict) -> str:
     # runs from before --focal-gamma existed used cross-entropy; before --squeeze and --shrink, neither
     config = {"focal_gamma": 0.0, "squeeze": 0.0, "shrink": 0.0, **config}
     parts += [f"--{k.replace('_', '-')} {config[k]}" for k in _FLAGS]
+    if config.get("data"):  # runs on TFRecord shards or several devices (older runs have neither)
+        parts += [f"--data '{config['data']}'"] + (["--deterministic"] if config.get("deterministic_data") else [])
+    if config.get("strategy", "default") != "default":
+        parts.append(f"--strategy {config['strategy']}")
     return " ".join(parts)
 
 
@@ -75,6 +79,23 @@ def _prep_note(metrics: dict) -> str:
     return f" (of which {prep / 60.0:.1f} min rendering or loading the image pools)"
 
 
+def _data_line(config: dict) -> str:
+    if config.get("data"):
+        return (f"- Data: TFRecord shards `{config['data']}` (`python -m data_gen --format tfrecord`), crops drawn "
+                f"with seed {config['seed']}.")
+    return (f"- Data: data_gen preset `{config['preset']}` (checker distractors off; 10% board-free clutter images), "
+            f"{config['pool_images']} rendered 640×480 images, seed {config['seed']}.")
+
+
+def _scale_line(config: dict) -> list[str]:
+    """The replicas, global batch and rate of a run that recorded them (older runs: one replica)."""
+    if "replicas" not in config:
+        return []
+    return [f"- Replicas: {config['replicas']} (`--strategy {config.get('strategy', 'default')}`); global batch "
+            f"{config['global_batch_size']}, peak learning rate {config['global_learning_rate']:g} "
+            f"(per replica: {config['batch_size']} and {config['learning_rate']:g})."]
+
+
 def card_section(config: dict, metrics: dict) -> str:
     """The Markdown section of one model."""
     minutes = metrics.get("wall_s_total", metrics["wall_s_this_process"]) / 60.0
@@ -83,9 +104,9 @@ def card_section(config: dict, metrics: dict) -> str:
         f"## `{config['arch']}.keras`",
         "",
         f"- Training command: `{train_command(config)}`",
-        f"- Data: data_gen preset `{config['preset']}` (checker distractors off; 10% board-free clutter images), "
-        f"{config['pool_images']} rendered 640×480 images, seed {config['seed']}.",
+        _data_line(config),
         f"- Wall time on the 2-core CPU, rendering included: {minutes:.1f} min{_prep_note(metrics)}.",
+        *_scale_line(config),
         f"- Parameters: {metrics['params']:,}. File: {metrics['size_bytes'] / 1e6:.2f} MB.",
         f"- sha256: `{metrics['sha256']}`",
         f"- Validation ({v['images']} images of preset `{v['preset']}`, seed {v['seed']}, never trained on; "

@@ -37,6 +37,9 @@ class TrainConfig:
     determinism: bool = True
     squeeze: float = 0.0
     shrink: float = 0.0
+    data: str = ""  # TFRecord shards (globs, comma-separated); "" renders the pool in memory
+    strategy: str = "default"
+    deterministic_data: bool = False
 
     def check(self) -> None:
         """Raise ``ValueError`` naming the first bad option."""
@@ -63,6 +66,11 @@ class TrainConfig:
                 raise ValueError(f"--{name} must be in [0, 1], got {getattr(self, name)}")
         if not 0.0 < self.threshold < 1.0:
             raise ValueError(f"--threshold must be in (0, 1), got {self.threshold}")
+        if self.strategy not in ("default", "mirrored", "multiworker"):
+            raise ValueError(f"--strategy: unknown strategy {self.strategy!r}; choose from: default, mirrored, multiworker")
+        if self.data and self.arch == "report":
+            raise ValueError("--data: TFRecord shards train corner-map models; the report's patch classifier "
+                             "trains on an in-memory pool (leave out --data)")
 
 
 def _write_json(path: Path, obj) -> None:
@@ -148,7 +156,7 @@ def _backend_corner_points(model, gray, threshold: float):
     return decode_map(np.asarray(model.predict_on_batch(network_input(gray)))[0], threshold)[0]
 
 
-def _callbacks(cfg: TrainConfig, run: Path, val, initial_epoch: int, wall_before: float, t_start: float):
+def _callbacks(cfg: TrainConfig, run: Path, val, initial_epoch: int, wall_before: float, t_start: float, backup=()):
     import keras
 
     from aicalib_tf.cnn.model import save_model
@@ -189,7 +197,32 @@ def _callbacks(cfg: TrainConfig, run: Path, val, initial_epoch: int, wall_before
         keras.callbacks.CSVLogger(str(run / "log.csv"), append=initial_epoch > 0),
         *tensorboard,
         Checkpoint(),
+        *backup,  # last: a backup of epoch e means its logs and checkpoint are written
     ]
+
+
+def _training_data(cfg: TrainConfig, strategy, kind: str, global_batch: int, initial_epoch: int, progress: bool):
+    """What ``fit`` reads: the TFRecord shards through tf.data (``--data``), or batches cut from a
+    pool rendered in memory (global batches; tf.distribute splits them over the replicas)."""
+    from aicalib_tf.cnn.training_data import CornerMapBatches, PatchBatches
+
+    if cfg.data:
+        from aicalib_tf.cnn.tfrecord_data import corner_dataset, find_shards
+
+        files = find_shards(cfg.data)
+
+        def per_pipeline(ctx):
+            return corner_dataset(files, per_replica_batch=cfg.batch_size, steps=cfg.steps, seed=cfg.seed,
+                                  first_epoch=initial_epoch, epochs=cfg.epochs, input_context=ctx,
+                                  deterministic=cfg.deterministic_data, squeeze=cfg.squeeze, shrink=cfg.shrink)
+
+        if strategy.num_replicas_in_sync == 1 and cfg.strategy == "default":
+            return per_pipeline(None)
+        return strategy.distribute_datasets_from_function(per_pipeline)
+    pool = cached_pool(cfg.pool_images, cfg.seed, preset=cfg.preset, workers=cfg.workers, progress=progress)
+    batches_cls = CornerMapBatches if kind == "map" else PatchBatches
+    extra = {"squeeze": cfg.squeeze, "shrink": cfg.shrink} if batches_cls is CornerMapBatches else {}
+    return batches_cls(pool, batch_size=global_batch, steps=cfg.steps, seed=cfg.seed, epoch=initial_epoch, **extra)
 
 
 def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epochs_given: int | None = None) -> dict:
@@ -202,24 +235,35 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
 
     # size: a training run reads top to bottom: config, data, model, callbacks, fit, save (STYLE.md).
     cfg.check()
-    run = Path(cfg.out)
+    from aicalib_tf.cnn import distribute
+
+    strategy = distribute.make_strategy(cfg.strategy)  # before any other TensorFlow work (MultiWorkerMirrored)
+    out = Path(cfg.out)
+    multiworker = cfg.strategy == "multiworker"
+    if multiworker and resume:
+        raise ValueError("--resume: a multiworker run resumes by itself from RUN_DIR/backup; run the same commands again")
     if resume:
-        state = json.loads((run / "state.json").read_text()) if (run / "state.json").is_file() else {}
-        if not state.get("checkpoint") or not (run / state["checkpoint"]).is_file():
-            raise ValueError(f"--resume: {run} holds no checkpoint to resume from")
-        saved = json.loads((run / "config.json").read_text())
+        state = json.loads((out / "state.json").read_text()) if (out / "state.json").is_file() else {}
+        if not state.get("checkpoint") or not (out / state["checkpoint"]).is_file():
+            raise ValueError(f"--resume: {out} holds no checkpoint to resume from")
+        saved = json.loads((out / "config.json").read_text())
         known = {f.name for f in fields(TrainConfig)}
         epochs = saved["epochs"] if epochs_given is None else epochs_given
-        cfg = TrainConfig(**{**{k: v for k, v in saved.items() if k in known}, "epochs": epochs, "out": str(run)})
+        cfg = TrainConfig(**{**{k: v for k, v in saved.items() if k in known}, "epochs": epochs, "out": str(out)})
         initial_epoch = int(state["epochs_done"])
         wall_before = float(state.get("wall_s", 0.0))
     else:
-        if (run / "state.json").exists() or (run / "model.keras").exists():
-            raise ValueError(f"--out {run}: already holds a run; use --resume or a new folder")
-        run.mkdir(parents=True, exist_ok=True)
-        initial_epoch = 0
-        wall_before = 0.0
-    _write_json(run / "config.json", asdict(cfg))
+        initial_epoch = distribute.backup_epoch(out) if multiworker else 0  # a cluster started again
+        if (out / "model.keras").exists() or (not initial_epoch and (out / "state.json").exists()):
+            raise ValueError(f"--out {out}: already holds a run; use --resume or a new folder")
+        state = json.loads((out / "state.json").read_text()) if initial_epoch and (out / "state.json").is_file() else {}
+        wall_before = float(state.get("wall_s", 0.0))
+    run = distribute.worker_dir(strategy, out)  # a non-chief worker writes to a temporary folder
+    run.mkdir(parents=True, exist_ok=True)
+    replicas = int(strategy.num_replicas_in_sync)
+    global_batch, global_lr = cfg.batch_size * replicas, cfg.learning_rate * replicas
+    _write_json(run / "config.json", {**asdict(cfg), "replicas": replicas, "global_batch_size": global_batch,
+                                      "global_learning_rate": global_lr})
 
     import keras
 
@@ -231,7 +275,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
         model_kind,
         save_model,
     )
-    from aicalib_tf.cnn.training_data import CornerMapBatches, PatchBatches, parse_mix
+    from aicalib_tf.cnn.training_data import parse_mix
 
     keras.utils.set_random_seed(cfg.seed)
     if cfg.determinism and keras.backend.backend() == "tensorflow":
@@ -239,25 +283,27 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
 
         tf.config.experimental.enable_op_determinism()
     t0 = time.perf_counter()
-    pool = cached_pool(cfg.pool_images, cfg.seed, preset=cfg.preset, workers=cfg.workers, progress=progress)
     val_preset = parse_mix(cfg.preset)[0][0]  # a mix validates on its first preset
     val = validation_set(val_preset, cfg.val_images, workers=cfg.workers, progress=progress)
-    if resume:
-        model = load_model(run / state["checkpoint"], compile=True)
-    else:
-        model = compile_model(build_model(cfg.arch), cfg.learning_rate, focal_gamma=cfg.focal_gamma)
-    batches_cls = CornerMapBatches if model_kind(model) == "map" else PatchBatches
-    extra = {"squeeze": cfg.squeeze, "shrink": cfg.shrink} if batches_cls is CornerMapBatches else {}
-    batches = batches_cls(pool, batch_size=cfg.batch_size, steps=cfg.steps, seed=cfg.seed, epoch=initial_epoch, **extra)
+    with strategy.scope():
+        if resume:
+            model = load_model(out / state["checkpoint"], compile=True)
+        else:
+            model = compile_model(build_model(cfg.arch), global_lr, focal_gamma=cfg.focal_gamma)
+        if cfg.strategy != "default":
+            distribute.build_for_fit(model)
+    batches = _training_data(cfg, strategy, model_kind(model), global_batch, initial_epoch, progress)
     prep_s = time.perf_counter() - t0
     if initial_epoch < cfg.epochs:
         schedule = keras.callbacks.LearningRateScheduler(
-            lambda e, lr: cfg.learning_rate * 0.5 * (1 + math.cos(math.pi * e / cfg.epochs))
+            lambda e, lr: global_lr * 0.5 * (1 + math.cos(math.pi * e / cfg.epochs))
         )
+        backup = [distribute.WorkerBackup(out / distribute.BACKUP_DIR, run / distribute.BACKUP_DIR)] if multiworker else []
         # shuffle=False: batches are already random per (seed, epoch, index); Keras's own shuffle
         # draws from Python's global random, which a resumed process cannot replay
         model.fit(batches, epochs=cfg.epochs, initial_epoch=initial_epoch, verbose=1 if progress else 2, shuffle=False,
-                  callbacks=[schedule, *_callbacks(cfg, run, val, initial_epoch, wall_before, t0)])
+                  steps_per_epoch=cfg.steps,
+                  callbacks=[schedule, *_callbacks(cfg, run, val, initial_epoch, wall_before, t0, backup)])
     final = run / "model.keras"
     save_model(model, final)
     stats = evaluate_points(model, *val, cfg.threshold)
@@ -267,8 +313,11 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
         "arch": cfg.arch,
         "params": int(model.count_params()),
         "epochs": cfg.epochs,
-        "resumed_at_epoch": initial_epoch if resume else None,
+        "resumed_at_epoch": initial_epoch if resume or initial_epoch else None,
         "data_prep_s": round(prep_s, 1),
+        "replicas": replicas,
+        "global_batch_size": global_batch,
+        "global_learning_rate": global_lr,
         "wall_s_this_process": round(time.perf_counter() - t0, 1),
         "wall_s_total": round(wall_before + time.perf_counter() - t0, 1),
         "validation": {"preset": val_preset, "seed": VALIDATION_SEED, "images": cfg.val_images, "match_px": 1.0},
@@ -277,4 +326,5 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
         **({"previous": previous} if previous else {}),
     }
     _write_json(run / "metrics.json", metrics)
+    distribute.discard(run, out)
     return metrics

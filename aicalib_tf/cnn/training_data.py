@@ -31,7 +31,7 @@ from aicalib_tf.detect.candidates import saddle_points
 from data_gen.dataset import iter_samples
 from data_gen.presets import get_preset
 
-__all__ = ["Pool", "parse_mix", "render_pool", "CornerMapBatches", "PatchBatches", "CROP_SIZE"]
+__all__ = ["Pool", "parse_mix", "render_pool", "CornerMapBatches", "PatchBatches", "corner_crop", "CROP_SIZE"]
 
 CROP_SIZE = 128
 IMAGE_SIZE = (640, 480)
@@ -213,27 +213,41 @@ class CornerMapBatches(_PoolBatches):
         y = np.empty((self.batch_size, s // STRIDE, s // STRIDE, 3), np.float32)
         for b in range(self.batch_size):
             i = int(rng.integers(len(self.pool)))
-            img, pts = self.pool.images[i], self.pool.corners[i]
-            if self.shrink > 0 and rng.random() < self.shrink:
-                img, pts = halve(img, pts)
-            h, w = img.shape
-            if len(pts) and rng.random() < self.corner_bias:
-                cx, cy = pts[int(rng.integers(len(pts)))]
-                x0 = int(np.clip(cx - rng.uniform(8, s - 8), 0, w - s))
-                y0 = int(np.clip(cy - rng.uniform(8, s - 8), 0, h - s))
-            else:
-                x0, y0 = int(rng.integers(w - s + 1)), int(rng.integers(h - s + 1))
-            if self.squeeze > 0 and rng.random() < self.squeeze:
-                a = squeeze_matrix(rng.uniform(0.0, np.pi), np.exp(rng.uniform(0.0, np.log(self.max_squeeze))))
-                crop, local = _warp_crop(img, pts, a, (x0 + (s - 1) / 2, y0 + (s - 1) / 2), s)
-            else:
-                crop, local = img[y0 : y0 + s, x0 : x0 + s], pts - np.array([x0, y0], np.float32)
-            crop, local = _dihedral(self.pool.standardized(i, crop), local, int(rng.integers(8)))
-            if rng.random() < 0.5:
-                crop = -crop
-            x[b, :, :, 0] = crop
-            y[b] = encode_corners(local, (s, s))
+            x[b, :, :, 0], y[b] = corner_crop(self.pool.images[i], self.pool.corners[i], rng,
+                                              mean=self.pool.mean[i], std=self.pool.std[i],
+                                              corner_bias=self.corner_bias, squeeze=self.squeeze,
+                                              max_squeeze=self.max_squeeze, shrink=self.shrink)
         return x, y
+
+
+def corner_crop(img: np.ndarray, pts: np.ndarray, rng: np.random.Generator, *, mean: float, std: float,
+                corner_bias: float = 0.6, squeeze: float = 0.0, max_squeeze: float = 3.0,
+                shrink: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """One training pair for the corner-map model from one image (see :class:`CornerMapBatches`).
+
+    img : (H, W) uint8, H, W >= 128. pts : (k, 2) float32 visible corners (x, y) px.
+    mean, std : the whole image's grey statistics (the crop is standardised with them).
+    Returns the crop (128, 128) float32 and its target (32, 32, 3) float32.
+    """
+    s = CROP_SIZE
+    if shrink > 0 and rng.random() < shrink:
+        img, pts = halve(img, pts)
+    h, w = img.shape
+    if len(pts) and rng.random() < corner_bias:
+        cx, cy = pts[int(rng.integers(len(pts)))]
+        x0 = int(np.clip(cx - rng.uniform(8, s - 8), 0, w - s))
+        y0 = int(np.clip(cy - rng.uniform(8, s - 8), 0, h - s))
+    else:
+        x0, y0 = int(rng.integers(w - s + 1)), int(rng.integers(h - s + 1))
+    if squeeze > 0 and rng.random() < squeeze:
+        a = squeeze_matrix(rng.uniform(0.0, np.pi), np.exp(rng.uniform(0.0, np.log(max_squeeze))))
+        crop, local = _warp_crop(img, pts, a, (x0 + (s - 1) / 2, y0 + (s - 1) / 2), s)
+    else:
+        crop, local = img[y0 : y0 + s, x0 : x0 + s], pts - np.array([x0, y0], np.float32)
+    crop, local = _dihedral(standardize(crop, mean, std), local, int(rng.integers(8)))
+    if rng.random() < 0.5:
+        crop = -crop
+    return crop, encode_corners(local, (s, s))
 
 
 def _extract_patches(image: np.ndarray, points: np.ndarray) -> np.ndarray:

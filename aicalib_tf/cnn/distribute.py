@@ -1,0 +1,144 @@
+"""Training on several devices or machines with ``tf.distribute`` (``train --strategy``).
+
+* ``default``: one device, as before;
+* ``mirrored``: every local GPU (``tf.distribute.MirroredStrategy``; on a machine without one, its CPU);
+* ``multiworker``: ``tf.distribute.MultiWorkerMirroredStrategy``, the cluster and this process's
+  place in it read from the ``TF_CONFIG`` variable, e.g. for worker 1 of two::
+
+      TF_CONFIG='{"cluster": {"worker": ["host0:12345", "host1:12345"]}, "task": {"type": "worker", "index": 1}}'
+
+  Every worker runs the same command. The chief (the ``chief`` task, else worker 0) writes the run
+  folder; the others write theirs to a temporary folder that is removed at the end. A
+  ``keras.callbacks.BackupAndRestore`` backup (``RUN_DIR/backup``, written by the chief and read
+  by every worker, so RUN_DIR must be on storage all workers see) lets the cluster be restarted
+  after a worker dies: the same commands continue from the last finished epoch.
+
+``--batch-size`` and ``--learning-rate`` are per replica: the global batch is ``batch-size × replicas``
+and the Adam rate ``learning-rate × replicas`` (the linear scaling rule); both are recorded in
+config.json as ``global_batch_size`` and ``global_learning_rate``.
+"""
+
+from __future__ import annotations
+
+import atexit
+import json
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import keras
+import tensorflow as tf
+
+__all__ = ["STRATEGIES", "make_strategy", "is_chief", "worker_dir", "WorkerBackup", "backup_epoch", "build_for_fit",
+           "discard", "BACKUP_DIR"]
+
+STRATEGIES = ("default", "mirrored", "multiworker")
+BACKUP_DIR = "backup"
+
+
+def _check_tf_config() -> None:
+    text = os.environ.get("TF_CONFIG")
+    if not text:
+        raise ValueError("--strategy multiworker needs TF_CONFIG set to the cluster and this worker's task, e.g. "
+                         '{"cluster": {"worker": ["host0:12345", "host1:12345"]}, "task": {"type": "worker", "index": 0}}')
+    try:
+        cfg = json.loads(text)
+        workers = cfg["cluster"]["worker"]
+        task = cfg["task"]
+        ok = isinstance(workers, list) and task["type"] in cfg["cluster"] and 0 <= int(task["index"]) < len(cfg["cluster"][task["type"]])
+    except (ValueError, KeyError, TypeError):
+        ok = False
+    if not ok:
+        raise ValueError(f"TF_CONFIG: not a cluster with this worker's task in it: {text[:200]}")
+
+
+def make_strategy(name: str) -> tf.distribute.Strategy:
+    """The strategy ``name`` (see the module docstring). Call it before any other TensorFlow work."""
+    if name not in STRATEGIES:
+        raise ValueError(f"--strategy: unknown strategy {name!r}; choose from: {', '.join(STRATEGIES)}")
+    if name == "mirrored":
+        return tf.distribute.MirroredStrategy()
+    if name == "multiworker":
+        _check_tf_config()
+        return tf.distribute.MultiWorkerMirroredStrategy()
+    return tf.distribute.get_strategy()
+
+
+def is_chief(strategy: tf.distribute.Strategy) -> bool:
+    """Whether this process writes the run folder: always, except a non-chief worker of a cluster."""
+    resolver = getattr(strategy, "cluster_resolver", None)
+    spec = resolver.cluster_spec().as_dict() if resolver is not None else {}
+    if not spec:
+        return True
+    if resolver.task_type == "chief":
+        return True
+    return resolver.task_type == "worker" and resolver.task_id == 0 and "chief" not in spec
+
+
+def worker_dir(strategy: tf.distribute.Strategy, run: Path) -> Path:
+    """``run`` for the chief; a new temporary folder for any other worker (its logs and files are discarded)."""
+    if is_chief(strategy):
+        return run
+    resolver = strategy.cluster_resolver
+    path = Path(tempfile.mkdtemp(prefix=f"aicalib-{resolver.task_type}{resolver.task_id}-"))
+    atexit.register(shutil.rmtree, path, ignore_errors=True)  # also when training fails
+    return path
+
+
+def backup_epoch(run: Path) -> int:
+    """Epochs finished according to the run's BackupAndRestore backup (0 without one)."""
+    path = Path(run) / BACKUP_DIR / "training_metadata.json"
+    if not path.is_file():
+        return 0
+    try:
+        return int(json.loads(path.read_text())["epoch"])
+    except (ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: not a readable backup ({exc}); delete {path.parent} to start over") from None
+
+
+class WorkerBackup(keras.callbacks.BackupAndRestore):
+    """``BackupAndRestore`` for a cluster: every worker restores from ``backup_dir`` (the chief's);
+    the chief saves there, any other worker into its own ``save_dir`` (removed at the end)."""
+
+    def __init__(self, backup_dir: Path, save_dir: Path):
+        super().__init__(str(backup_dir), save_freq="epoch", double_checkpoint=True, delete_checkpoint=True)
+        self._restore_paths = (self._weights_path, self._training_metadata_path)
+        self._save_paths = (str(Path(save_dir) / "latest.weights.h5"), str(Path(save_dir) / "training_metadata.json"))
+        self._save_dir = str(save_dir)
+
+    def on_train_begin(self, logs=None):
+        self._weights_path, self._training_metadata_path = self._restore_paths
+        super().on_train_begin(logs)
+        self._weights_path, self._training_metadata_path = self._save_paths
+        self._prev_weights_path = f"{self._weights_path}.bkp"
+        self._prev_training_metadata_path = f"{self._training_metadata_path}.bkp"
+        self.backup_dir = self._save_dir
+        self._current_epoch = getattr(self.model, "_initial_epoch", None) or 0
+
+
+def build_for_fit(model: keras.Model) -> None:
+    """Get ``model`` ready for ``fit`` under a strategy: build its loss and metrics from its input
+    and output shapes, skip the build that ``fit`` does from a first batch, and shape the per-step figures so that they
+    can be averaged over the workers. Call it inside ``strategy.scope()``.
+
+    That build reduces the first distributed batch across replicas, which fails under
+    MultiWorkerMirroredStrategy (a batch of PerReplica values cannot be all-reduced), and under
+    any strategy it consumes one batch that training never sees. Building from shapes needs no data.
+    """
+    def spec(shape):
+        return keras.KerasTensor(shape if isinstance(shape, tuple) else tuple(shape), "float32")
+
+    model._symbolic_build(data_batch=(spec(model.input_shape), spec(model.output_shape)))
+    model._maybe_symbolic_build = lambda iterator=None, data_batch=None: None
+    if isinstance(tf.distribute.get_strategy(), tf.distribute.MultiWorkerMirroredStrategy):
+        # fit averages each step's figures over the workers along axis 0, which scalars lack:
+        # give them one (the mean over the replicas is then a scalar again)
+        step = model.train_step
+        model.train_step = lambda data: {k: tf.reshape(v, [1]) for k, v in step(data).items()}
+
+
+def discard(run: Path, out: Path) -> None:
+    """Remove a non-chief worker's temporary folder (``run`` differs from the real ``out``)."""
+    if Path(run).resolve() != Path(out).resolve():
+        shutil.rmtree(run, ignore_errors=True)

@@ -1,0 +1,145 @@
+"""Training on TFRecord shards with tf.distribute: two local workers train like one, and a cluster
+that loses a worker resumes from its BackupAndRestore backup to the same weights.
+
+Every run is tiny (3 epochs of 2 steps on 128×128 crops) and CPU only. Tolerances: the workers
+all-reduce float32 gradients and sum the loss over replicas in another order than one worker's
+batch reduction, so results agree to float32 rounding, not bit for bit (measured: losses within
+1e-7 relative, weights within 3e-7 after 9 Adam steps); we allow 1e-5 relative on losses and
+1e-5 absolute on weights (of size ~0.4), far below what one differing batch would give (~1e-3).
+"""
+
+import csv
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("tensorflow")
+
+from data_gen.dataset import DatasetConfig  # noqa: E402
+from data_gen.shards import ShardConfig, write_shards  # noqa: E402
+
+EPOCHS = 3
+TINY = ["--epochs", str(EPOCHS), "--steps", "2", "--val-images", "1", "--workers", "1", "--seed", "5", "--quiet",
+        "--deterministic"]
+
+
+def _ports(n: int) -> list[int]:
+    socks = [socket.socket() for _ in range(n)]
+    for s in socks:
+        s.bind(("localhost", 0))
+    ports = [s.getsockname()[1] for s in socks]
+    for s in socks:
+        s.close()
+    return ports
+
+
+def _train(*args, tf_config=None) -> subprocess.Popen:
+    env = {**os.environ, "TF_CPP_MIN_LOG_LEVEL": "3"}
+    env.pop("TF_CONFIG", None)
+    if tf_config is not None:
+        env["TF_CONFIG"] = json.dumps(tf_config)
+    return subprocess.Popen([sys.executable, "-m", "aicalib_tf.train", *args], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def _cluster(out: Path, data: str) -> list[subprocess.Popen]:
+    """Two workers on localhost, per-replica batch 2 and rate 1e-3: global batch 4, rate 2e-3."""
+    hosts = [f"localhost:{p}" for p in _ports(2)]
+    return [_train("--strategy", "multiworker", "--out", str(out), "--data", data, "--batch-size", "2",
+                   "--learning-rate", "1e-3", *TINY,
+                   tf_config={"cluster": {"worker": hosts}, "task": {"type": "worker", "index": i}})
+            for i in range(2)]
+
+
+def _finish(procs, timeout=240) -> None:
+    for p in procs:
+        out, _ = p.communicate(timeout=timeout)
+        assert p.returncode == 0, out
+
+
+def _losses(run: Path) -> dict[int, float]:
+    return {int(r["epoch"]): float(r["loss"]) for r in csv.DictReader((run / "log.csv").open())}
+
+
+def _weights(run: Path) -> list:
+    from aicalib_tf.cnn.model import load_model
+
+    return load_model(run / "model.keras").get_weights()
+
+
+def _kill_after_first_backup(out: Path, workers) -> int:
+    """Wait for the cluster's first backup, kill worker 1, then the chief (stuck without it); returns the epochs backed up."""
+    meta = out / "backup" / "training_metadata.json"
+    deadline = time.time() + 240
+    while time.time() < deadline and all(p.poll() is None for p in workers):
+        if meta.is_file() and json.loads(meta.read_text() or "{}").get("epoch", 0) >= 1:
+            break
+        time.sleep(0.05)
+    assert all(p.poll() is None for p in workers), workers[0].communicate()[0]
+    workers[1].send_signal(signal.SIGKILL)  # a worker dies; the chief cannot go on alone
+    time.sleep(2.0)
+    workers[0].send_signal(signal.SIGKILL)
+    for p in workers:
+        p.communicate()
+    return json.loads(meta.read_text())["epoch"]
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """Shards; then, side by side, one worker (batch 4, rate 2e-3), a two-worker cluster, and a
+    second cluster that loses a worker after its first backup and is started again."""
+    root = tmp_path_factory.mktemp("distribute")
+    write_shards(ShardConfig(DatasetConfig(out=root / "shards", count=6, preset="train", seed=2, size=(320, 240)),
+                             shards=2), progress=False)
+    data = str(root / "shards" / "*.tfrecord")
+    one = _train("--out", str(root / "one"), "--data", data, "--batch-size", "4", "--learning-rate", "2e-3", *TINY)
+    cluster = _cluster(root / "two", data)
+    doomed = _cluster(root / "killed", data)
+    backed_up = _kill_after_first_backup(root / "killed", doomed)
+    restarted = _cluster(root / "killed", data)  # the same commands again
+    _finish([one, *cluster, *restarted])
+    return root, backed_up
+
+
+@pytest.mark.slow
+def test_two_workers_give_the_loss_curve_of_one_worker_with_the_same_global_batch(runs):
+    root, _ = runs
+    one, two = _losses(root / "one"), _losses(root / "two")
+    assert sorted(one) == sorted(two) == list(range(EPOCHS))
+    np.testing.assert_allclose([two[e] for e in range(EPOCHS)], [one[e] for e in range(EPOCHS)], rtol=1e-5)
+    for a, b in zip(_weights(root / "two"), _weights(root / "one")):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-5)
+    config = json.loads((root / "two" / "config.json").read_text())
+    assert config["replicas"] == 2 and config["global_batch_size"] == 4 and config["global_learning_rate"] == 2e-3
+    assert not (root / "two" / "backup").exists()  # removed when training ends
+
+
+@pytest.mark.slow
+def test_a_cluster_that_loses_a_worker_resumes_from_its_backup_to_the_same_weights(runs):
+    root, backed_up = runs
+    assert 1 <= backed_up < EPOCHS  # killed mid-run
+    one, resumed = _losses(root / "one"), _losses(root / "killed")
+    assert sorted(resumed) == list(range(EPOCHS))
+    np.testing.assert_allclose([resumed[e] for e in range(EPOCHS)], [one[e] for e in range(EPOCHS)], rtol=1e-5)
+    for a, b in zip(_weights(root / "killed"), _weights(root / "one")):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-5)
+    metrics = json.loads((root / "killed" / "metrics.json").read_text())
+    assert metrics["replicas"] == 2 and metrics["resumed_at_epoch"] == backed_up
+
+
+def test_multiworker_without_tf_config_is_one_line_exit_2(tmp_path, monkeypatch, capsys):
+    from aicalib_tf.train import main
+
+    monkeypatch.delenv("TF_CONFIG", raising=False)
+    assert main(["--strategy", "multiworker", "--out", str(tmp_path / "r"), "--epochs", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: --strategy multiworker needs TF_CONFIG") and len(err.splitlines()) == 1
+    assert not (tmp_path / "r").exists()
