@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import csv
 import itertools
-import json
 import multiprocessing as mp
 import os
 import shutil
@@ -28,6 +27,8 @@ from typing import Callable, Iterable, Iterator
 
 import cv2
 from tqdm import tqdm
+
+from aicalib_tf.jsonio import dumps
 
 from .presets import get_preset
 from .sample import GENERATOR_VERSION, make_sample
@@ -106,7 +107,7 @@ def check_output_dir(out: Path) -> None:
 
 
 def _json_bytes(obj) -> bytes:
-    return (json.dumps(obj, indent=1) + "\n").encode()
+    return (dumps(obj) + "\n").encode()  # strict JSON: a corner the lens does not image is null, never NaN
 
 
 def _render_one(job: tuple) -> list:

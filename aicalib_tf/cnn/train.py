@@ -75,8 +75,9 @@ class TrainConfig:
 
 def _write_json(path: Path, obj) -> None:
     from aicalib_tf.io import atomic_write_text
+    from aicalib_tf.jsonio import dumps
 
-    atomic_write_text(path, json.dumps(obj, indent=2) + "\n")
+    atomic_write_text(path, dumps(obj, indent=2) + "\n")  # strict JSON: a NaN loss is written as null
 
 
 POOL_CACHE_ENV = "AICALIB_POOL_CACHE"
