@@ -2,7 +2,7 @@
 
     python -m data_gen.video --out DIR [--seconds 60] [--fps 30] [--size 1280x720]
         [--lens mild|strong|fisheye150] [--pattern 9x6] [--square 25] [--seed 0]
-        [--shutter 0.0167] [--rolling-shutter 0] [--noise 2] [--format avi|mp4] [--y4m] [--workers N]
+        [--shutter 0.0167] [--rolling-shutter 0] [--noise 2] [--format avi|mp4] [--y4m] [--workers N] [--pace 1]
 
 A board moves along a smooth hand-held path (:mod:`data_gen.path`: rests at poses spread over the
 image with varied tilts, minimum-jerk moves between them, some poses cut by the frame, some out
@@ -73,14 +73,15 @@ class VideoConfig:
     format: str = "avi"
     y4m: bool = False
     workers: int = 1
+    pace: float = 1.0  # the hand's speed: rests and moves last 1/pace as long (short test videos: 3)
 
     def __post_init__(self):
         if self.lens not in LENSES:
             raise ValueError(f"--lens must be one of {', '.join(LENSES)}, got {self.lens!r}")
         if self.format not in ("avi", "mp4"):
             raise ValueError(f"--format must be avi or mp4, got {self.format!r}")
-        if not (self.seconds > 0 and self.fps > 0 and self.shutter >= 0 and self.rolling_shutter >= 0):
-            raise ValueError("--seconds and --fps must be > 0, --shutter and --rolling-shutter >= 0")
+        if not (self.seconds > 0 and self.fps > 0 and self.pace > 0 and self.shutter >= 0 and self.rolling_shutter >= 0):
+            raise ValueError("--seconds, --fps and --pace must be > 0, --shutter and --rolling-shutter >= 0")
         if self.shutter > 1.0 / self.fps:
             raise ValueError(f"--shutter {self.shutter:g} s is longer than a frame (1/{self.fps:g} s)")
 
@@ -114,7 +115,8 @@ def make_scene(cfg: VideoConfig) -> VideoScene:
     cover = lens_coverage(cam)
     if cover is not None:
         bg = (bg * cover + OUTSIDE_CIRCLE * (1.0 - cover)).astype(np.float32)
-    path = hand_path(rng, cam, board, cfg.seconds + 1.0 / cfg.fps)
+    path = hand_path(rng, cam, board, cfg.seconds + 1.0 / cfg.fps, dwell_s=(0.25 / cfg.pace, 0.6 / cfg.pace),
+                     move_s=(0.8 / cfg.pace, 1.8 / cfg.pace))
     w, h = cam.image_size
     xs, ys = np.arange(0, w + _STEP, _STEP, dtype=np.float64), np.arange(0, h + _STEP, _STEP, dtype=np.float64)
     rays = cam.pixel_to_ray(np.stack(np.meshgrid(xs, ys), axis=-1))
@@ -303,6 +305,7 @@ def _parse_args(argv):
     ap.add_argument("--format", default="avi", choices=("avi", "mp4"))
     ap.add_argument("--y4m", action="store_true", help="also write video.y4m (YUV4MPEG2)")
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--pace", type=float, default=1.0, help="hand speed factor (default: %(default)s)")
     ap.add_argument("--quiet", action="store_true")
     return ap.parse_args(argv)
 
@@ -317,7 +320,7 @@ def main(argv: list[str] | None = None) -> int:
         cfg = VideoConfig(out=args.out, seconds=args.seconds, fps=args.fps, size=size, lens=args.lens,
                           pattern=check_pattern(parse_pattern(args.pattern)), square=args.square, seed=args.seed,
                           shutter=args.shutter, rolling_shutter=args.rolling_shutter, noise=args.noise,
-                          format=args.format, y4m=args.y4m, workers=args.workers)
+                          format=args.format, y4m=args.y4m, workers=args.workers, pace=args.pace)
         out = write_video(cfg, progress=not args.quiet)
     except (ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
