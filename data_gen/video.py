@@ -37,6 +37,7 @@ import cv2
 import numpy as np
 
 from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
+from aicalib_tf.geometry.pose import in_frame
 
 from .background import make_background
 from .board import Board
@@ -127,18 +128,19 @@ def make_scene(cfg: VideoConfig) -> VideoScene:
 def _corners_at(scene: VideoScene, t0: float) -> tuple[np.ndarray, np.ndarray]:
     """(corners (N, 2) px, visible (N,)) as the frame starting at ``t0`` s images them: the pose at the
     middle of each corner's row's exposure (rolling shutter: fixed point over the row, 3 rounds)."""
-    cfg, h = scene.cfg, scene.camera.image_size[1]
-    y = np.full(scene.board.cols * scene.board.rows, h / 2.0)
-    for _ in range(3 if cfg.rolling_shutter > 0 else 1):
-        out = np.zeros((len(y), 2))
-        vis = np.zeros(len(y), bool)
-        times = t0 + cfg.shutter / 2 + cfg.rolling_shutter * np.clip(np.nan_to_num(y, nan=h / 2), 0, h) / h
-        for t in np.unique(np.round(times, 6)):
-            pick = np.isclose(np.round(times, 6), t)
-            c, v = corner_visibility(scene.board, *scene.path.pose(t), scene.camera)
-            out[pick], vis[pick] = c[pick], v[pick]
-        y = out[:, 1]
-    return out, vis
+    cfg, cam, board = scene.cfg, scene.camera, scene.board
+    mid = t0 + cfg.shutter / 2
+    if cfg.rolling_shutter <= 0:
+        return corner_visibility(board, *scene.path.pose(mid), cam)
+    h, obj = cam.image_size[1], board.object_points()
+    y = np.full(len(obj), h / 2.0)
+    for _ in range(3):
+        times = mid + cfg.rolling_shutter * np.clip(np.nan_to_num(y, nan=h / 2), 0, h) / h
+        P = np.array([R @ X + t for X, (R, t) in zip(obj, (scene.path.matrix(t) for t in times))])
+        uv = cam.lens.project(P)
+        y = uv[:, 1]
+    visible = cam.imaged(P) & in_frame(uv, cam.image_size, border=0.5)
+    return uv, visible
 
 
 def _plane_map(scene: VideoScene, times: np.ndarray, Rm, tm) -> np.ndarray:
@@ -146,6 +148,9 @@ def _plane_map(scene: VideoScene, times: np.ndarray, Rm, tm) -> np.ndarray:
     grid row) was imaged at the middle pose (Rm, tm); NaN off the plane or not imaged."""
     Hi = np.empty((len(times), 3, 3))
     for k, t in enumerate(times):
+        if k and t == times[k - 1]:  # a global shutter: one pose for every row
+            Hi[k] = Hi[k - 1]
+            continue
         R, tv = scene.path.matrix(t)
         Hi[k] = np.linalg.inv(np.column_stack([R[:, 0], R[:, 1], tv]))
     q = np.einsum("yij,yxj->yxi", Hi, scene.rays)

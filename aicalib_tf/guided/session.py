@@ -58,7 +58,7 @@ class GuidedConfig:
     min_corners: int = 12
     new_cells: int = 3
     min_gain: float = 0.04
-    blur_ratio: float = 1.6
+    blur_ratio: float = 1.5
     blur_min_px: float = 2.5
     gate: bool = True  # the motion gate (False: examine every frame)
     gate_moving: float = 2.0
