@@ -13,7 +13,9 @@ The error is the rotation-fitted projection error against the truth (unproject a
 with the true lens, project with the estimate after the best rotation of the camera frame,
 :func:`aicalib_tf.calib.quality.rotation_compensated_diff`), mean over the cells the used views
 covered ("err px"), and over the image ("image px"). ``cli s`` is the wall time of the whole
-``python -m aicalib_tf.calibrate video.avi`` command (report, half-vs-half check and files too).
+``python -m aicalib_tf.calibrate video.avi`` command (report, half-vs-half check and files too);
+``cpu s`` / ``cli cpu`` the CPU seconds (user + system, all threads) of the same, which a busy
+shared machine does not inflate.
 
     python benchmarks/video_calibration.py --render /tmp/videos [--seconds 60] [--size 1280x720]
     python benchmarks/video_calibration.py --videos /tmp/videos/mild /tmp/videos/fisheye150 [--out video.csv]
@@ -55,7 +57,7 @@ def _error(lab: dict, cal, views) -> tuple[float, float]:
 
 
 def guided(path: Path, target: float) -> dict:
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     session = GuidedCalibration(GuidedConfig(PATTERN, SQUARE, target_px=target), make_detector("cnn", PATTERN))
     with VideoFile(path) as src:
         for frame in src:
@@ -63,9 +65,9 @@ def guided(path: Path, target: float) -> dict:
                 break
     t_loop = time.perf_counter() - t0
     cal = session.result()
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     est = session._s.estimate
-    return {"cal": cal, "views": session.views, "wall_s": wall, "loop_s": t_loop, "frames": session.frames_seen,
+    return {"cal": cal, "views": session.views, "wall_s": wall, "cpu_s": cpu, "loop_s": t_loop, "frames": session.frames_seen,
             "examined": session.examined, "sigma_px": est.sigma_px if est else float("nan")}
 
 
@@ -92,13 +94,18 @@ def fixed(lab: dict, views: list[View]) -> tuple[float, float, int, float]:
     return (*_error(lab, cal, views), len(cal.views), time.perf_counter() - t0)
 
 
-def cli_seconds(path: Path, target: float) -> float:
+def cli_seconds(path: Path, target: float) -> tuple[float, float]:
+    """(wall s, CPU s: user + system of the child) of the whole command."""
+    import resource
+
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
+        r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         subprocess.run([sys.executable, "-m", "aicalib_tf.calibrate", str(path), "--pattern", "9x6", "--square", "25mm",
                         "--out", str(Path(tmp) / "c"), "--target", f"{target}px", "--quiet"], check=True,
                        capture_output=True, cwd=Path(__file__).resolve().parents[1])
-        return time.perf_counter() - t0
+        r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return time.perf_counter() - t0, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
 
 
 def bench(folder: Path, target: float, draws: int, rng) -> list[dict]:
@@ -108,9 +115,10 @@ def bench(folder: Path, target: float, draws: int, rng) -> list[dict]:
     g = guided(video, target)
     err, err_img = _error(lab, g["cal"], g["views"])
     rows = [dict(video=folder.name, method="guided", views=len(g["cal"].views), err_px=err, image_px=err_img,
-                 wall_s=g["wall_s"], note=f"{g['examined']} of {g['frames']} frames examined; loop {g['loop_s']:.1f} s; "
+                 wall_s=g["wall_s"], cpu_s=g["cpu_s"],
+                 note=f"{g['examined']} of {g['frames']} frames examined; loop {g['loop_s']:.1f} s; "
                                           f"predicted σ90 {g['sigma_px']:.3f} px; model {g['cal'].model}")]
-    rows[0]["cli_s"] = cli_seconds(video, target)
+    rows[0]["cli_s"], rows[0]["cli_cpu_s"] = cli_seconds(video, target)
     every = detect_frames(video, range(0, n, 30))
     pool = rng.choice(n, size=min(n, 150), replace=False)
     found = detect_frames(video, pool)
@@ -153,15 +161,19 @@ def main(argv=None) -> int:
     rows = []
     for v in videos:
         rows += bench(v, args.target, args.draws, np.random.default_rng(0))
-    print(f"{'video':<12} {'method':<8} {'views':>5} {'err px':>7} {'image px':>8} {'wall s':>7} {'cli s':>6}  note")
+    nan = float("nan")
+    print(f"{'video':<12} {'method':<8} {'views':>5} {'err px':>7} {'image px':>8} {'wall s':>7} {'cpu s':>6} "
+          f"{'cli s':>6} {'cli cpu':>7}  note")
     for r in rows:
         print(f"{r['video']:<12} {r['method']:<8} {r['views']:>5} {r['err_px']:7.3f} {r['image_px']:8.3f} "
-              f"{r['wall_s']:7.1f} {r.get('cli_s', float('nan')):6.1f}  {r['note']}")
+              f"{r['wall_s']:7.1f} {r.get('cpu_s', nan):6.1f} {r.get('cli_s', nan):6.1f} {r.get('cli_cpu_s', nan):7.1f}  "
+              f"{r['note']}")
     if args.out:
         import csv
 
         with open(args.out, "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=["video", "method", "views", "err_px", "image_px", "wall_s", "cli_s", "note"])
+            w = csv.DictWriter(fh, fieldnames=["video", "method", "views", "err_px", "image_px", "wall_s", "cpu_s", "cli_s",
+                                                   "cli_cpu_s", "note"])
             w.writeheader()
             w.writerows(rows)
     return 0

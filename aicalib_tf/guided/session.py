@@ -113,6 +113,7 @@ class _State:
     since_fit: int = 0
     estimate: Estimate | None = None
     guidance: Suggestion | None = None
+    missing: tuple | None = None
     done: bool = False
 
 
@@ -167,8 +168,9 @@ class GuidedCalibration:
         if not kept:
             self.skipped[reason.split(" (")[0].split(" of frame")[0]] += 1
         s = self._s
-        gone = tuple(missing(s.views, [tilt_of(p) for p in s.poses], self.image_size)) if self.image_size else ()
-        return Update(index, time_s, examined, corners, ids, kept, reason, s.guidance, gone, s.estimate, s.done)
+        if kept or s.missing is None:
+            s.missing = tuple(missing(s.views, [tilt_of(p) for p in s.poses], self.image_size))
+        return Update(index, time_s, examined, corners, ids, kept, reason, s.guidance, s.missing, s.estimate, s.done)
 
     def _consider(self, index, gray, corners, ids, relative) -> tuple[bool, str]:
         cfg, s = self.cfg, self._s

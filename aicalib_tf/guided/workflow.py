@@ -92,7 +92,7 @@ def _loop(session: GuidedCalibration, source, quiet: bool) -> str:
     for frame in source:
         update = session.add(frame)
         if not quiet and (update.kept or time.monotonic() - last_print > 0.5):
-            print("\r" + progress_line(session, session.cfg.target_px), end="", file=sys.stderr, flush=True)
+            print("\r" + progress_line(session, session.cfg.target_px).ljust(96), end="", file=sys.stderr, flush=True)
             last_print = time.monotonic()
         if update.done:
             return "target reached" if len(session.views) < session.cfg.max_views else "--max-views reached"
