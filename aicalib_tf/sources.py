@@ -51,6 +51,20 @@ class Frame:
     gray: np.ndarray
 
 
+def _quiet_capture(open_capture: Callable):
+    """Open a capture with OpenCV's and FFmpeg's own log lines silenced (errors reach the user as ours)."""
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # read when FFmpeg is first used
+    log = getattr(getattr(cv2, "utils", None), "logging", None)
+    level = log.getLogLevel() if log else None
+    if log:
+        log.setLogLevel(log.LOG_LEVEL_SILENT)
+    try:
+        return open_capture()
+    finally:
+        if log:
+            log.setLogLevel(level)
+
+
 def _gray(img: np.ndarray) -> np.ndarray:
     """A decoded frame (H, W) or (H, W, 3|4) uint8/uint16 -> (H, W) uint8 grey."""
     if img.ndim == 3:
@@ -96,7 +110,7 @@ class VideoFile(FrameSource):
         self.name = str(path)
         if not Path(path).is_file():
             raise FileNotFoundError(errno.ENOENT, "no such video file", self.name)
-        self._cap = cv2.VideoCapture(self.name)
+        self._cap = _quiet_capture(lambda: cv2.VideoCapture(self.name))
         ok = self._cap.isOpened()
         first = self._cap.read() if ok else (False, None)
         if not first[0]:
@@ -170,10 +184,11 @@ class LiveSource(FrameSource):
     def __init__(self, device, open_capture: Callable | None = None, timeout_s: float = 5.0):
         self.name = f"camera {device}" if isinstance(device, int) else str(device)
         self.live, self.timeout_s = True, float(timeout_s)
-        self._cap = (open_capture or (lambda: cv2.VideoCapture(device)))()
+        self._cap = _quiet_capture(open_capture or (lambda: cv2.VideoCapture(device)))
         if not self._cap.isOpened():
             self._cap.release()
-            raise OSError(f"{self.name}: cannot open it (no such device, or it is busy)")
+            raise OSError(f"{self.name}: cannot open it (no such device, or it is busy)" if isinstance(device, int)
+                          else f"{self.name}: cannot open the stream (unreachable, or not a video stream)")
         fps = float(getattr(self._cap, "get", lambda _: 0.0)(cv2.CAP_PROP_FPS) or 0.0)
         self.fps = fps if 0 < fps < 1000 else None
         self.read_count = 0
@@ -227,7 +242,7 @@ def is_video(path) -> bool:
         return True
     if ext in IMAGE_EXTENSIONS or any(ch in str(path) for ch in "*?[") or not p.is_file():
         return False
-    cap = cv2.VideoCapture(str(p))
+    cap = _quiet_capture(lambda: cv2.VideoCapture(str(p)))
     try:
         return bool(cap.isOpened() and cap.read()[0])
     finally:

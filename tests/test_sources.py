@@ -71,16 +71,16 @@ class _FakeCamera:
 def test_a_live_source_drops_frames_instead_of_queueing_them():
     cam = _FakeCamera()
     src = LiveSource("fake", open_capture=lambda: cam)
-    got = []
+    got, lag = [], []
     for frame in src:
+        lag.append(src.read_count - 1 - frame.index)  # frames read since this one: a few at most, never a backlog
         got.append(frame.index)
-        time.sleep(0.03)  # a slow consumer: ~15 frames arrive per frame taken
+        time.sleep(0.03)  # a slow consumer: many frames arrive per frame taken
         if len(got) == 6:
             break
-    newest = src.read_count
     src.close()
-    assert src.dropped > 20 and np.all(np.diff(got) > 3), got  # gaps, not a backlog
-    assert newest - got[-1] < 8  # the last frame taken was fresh
+    assert np.all(np.diff(got) >= 2), got  # gaps, not every frame
+    assert src.dropped >= got[-1] - got[0] - 5 > 0 and max(lag) <= 5, (src.dropped, got, lag)
 
 
 def test_live_source_errors_name_it():

@@ -14,7 +14,7 @@ from data_gen.video import main as render
 @pytest.fixture(scope="module")
 def video(tmp_path_factory):
     out = tmp_path_factory.mktemp("vid")
-    assert render(["--out", str(out), "--seconds", "4", "--size", "480x360", "--pace", "3", "--seed", "3", "--quiet"]) == 0
+    assert render(["--out", str(out), "--seconds", "4", "--size", "400x300", "--pace", "3", "--seed", "3", "--quiet"]) == 0
     return out
 
 
@@ -80,3 +80,8 @@ def test_a_stopped_run_saves_only_with_save_partial(video, tmp_path, monkeypatch
     meta = json.loads((tmp_path / "b" / "camera.json").read_text())["meta"]
     assert meta["partial"] is True and meta["stopped"].startswith("stopped early")
     assert "PARTIAL" in (tmp_path / "b" / "report.txt").read_text()
+
+
+def test_a_missing_camera_is_one_line(tmp_path, capsys):
+    assert main(["--camera", "63", "--pattern", "9x6", "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    assert "camera 63: cannot open it" in _one_error_line(capsys)
