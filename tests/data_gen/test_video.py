@@ -13,7 +13,7 @@ from data_gen.video import VideoConfig, main, make_scene, render_frame
 @pytest.fixture(scope="module")
 def video(tmp_path_factory):
     out = tmp_path_factory.mktemp("video")
-    assert main(["--out", str(out), "--seconds", "2", "--size", "320x240", "--pace", "3", "--seed", "5",
+    assert main(["--out", str(out), "--seconds", "1", "--size", "320x240", "--pace", "3", "--seed", "5",
                  "--rolling-shutter", "0.01", "--y4m", "--quiet"]) == 0
     return out
 
@@ -27,19 +27,19 @@ def test_frames_and_labels_round_trip(video):
         if not ok:
             break
         frames.append(img)
-    assert len(frames) == len(labels) == 60 and frames[0].shape[:2] == (240, 320)
-    assert [lab["index"] for lab in labels] == list(range(60))
+    assert len(frames) == len(labels) == 30 and frames[0].shape[:2] == (240, 320)
+    assert [lab["index"] for lab in labels] == list(range(30))
     lab = labels[0]
     assert {"K", "dist", "distortion_model", "rvec", "tvec", "corners", "visible", "time_s", "motion_px"} <= set(lab)
     assert len(lab["corners"]) == 54 and len(lab["visible"]) == 54
-    assert json.loads((video / "meta.json").read_text())["frames"] == 60
+    assert json.loads((video / "meta.json").read_text())["frames"] == 30
 
 
 def test_y4m_has_a_header_and_every_frame(video):
     data = (video / "video.y4m").read_bytes()
     head, _, rest = data.partition(b"\n")
     assert head.startswith(b"YUV4MPEG2 W320 H240 F30:1") and b"C420jpeg" in head
-    assert len(rest) == 60 * (len(b"FRAME\n") + 320 * 240 * 3 // 2)
+    assert len(rest) == 30 * (len(b"FRAME\n") + 320 * 240 * 3 // 2)
 
 
 def test_motion_blur_follows_the_motion():

@@ -14,7 +14,8 @@ from data_gen.video import main as render
 @pytest.fixture(scope="module")
 def video(tmp_path_factory):
     out = tmp_path_factory.mktemp("vid")
-    assert render(["--out", str(out), "--seconds", "4", "--size", "400x300", "--pace", "3", "--seed", "3", "--quiet"]) == 0
+    assert render(["--out", str(out), "--seconds", "3", "--size", "400x300", "--pace", "4", "--seed", "3",
+                  "--shutter", "0.004", "--quiet"]) == 0
     return out
 
 
@@ -30,7 +31,7 @@ def test_a_video_calibrates_end_to_end(video, tmp_path, capsys):
     cam = json.loads((out / "camera.json").read_text())
     truth = json.loads((video / "labels.jsonl").read_text().splitlines()[0])
     meta = cam["meta"]
-    assert meta["kept_frames"] and meta["frames"] == 120 and meta["examined"] < 60 and meta["partial"] is False
+    assert meta["kept_frames"] and meta["frames"] == 90 and meta["examined"] < 45 and meta["partial"] is False
     K = np.array(cam["camera_matrix"]["data"] if isinstance(cam["camera_matrix"], dict) else cam["camera_matrix"])
     assert abs(K.ravel()[0] / truth["K"][0][0] - 1) < 0.03
     assert (out / "report.png").is_file() and "views kept" in capsys.readouterr().out
@@ -68,7 +69,7 @@ def test_a_stopped_run_saves_only_with_save_partial(video, tmp_path, monkeypatch
 
     def stops(self):
         for frame in real(self):
-            if frame.index == 100:
+            if frame.index == 75:
                 raise KeyboardInterrupt
             yield frame
 
