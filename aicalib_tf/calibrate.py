@@ -32,6 +32,20 @@ camera_info per camera with the rectification, rig.json, each camera's own files
 (rectified preview, per-pair epipolar errors, baseline with σ) and report.txt. A rig of three
 or more cameras writes the stereo files per pair with camera 0 (cam0_cam2/...).
 
+A video (a file OpenCV reads: .mp4, .avi, ...), a camera or a stream goes through the guided loop
+(:mod:`aicalib_tf.guided`): frames are examined while the board rests, blurred frames and
+near-duplicates are skipped, and a view is kept when it covers new image area or lowers the
+predicted projection uncertainty; the loop stops at the --target uncertainty (90th percentile
+over the covered area, every image region covered) or at --max-views, and prints where to hold
+the board next. The files are those of the photo path, with the kept frames in camera.json:
+
+    python -m aicalib_tf.calibrate video.mp4 --pattern 9x6 --square 25mm --out calib/ [--target 0.1px]
+        [--max-views 40] [--save-partial]
+    python -m aicalib_tf.calibrate --camera 0 --pattern 9x6 --square 25mm   (or --camera rtsp://...)
+
+A run stopped early (Ctrl-C, a stream that stops) writes nothing unless --save-partial, which
+writes the calibration so far marked partial.
+
 Images of different sizes are an error naming the odd files unless --resize-policy says what to
 do: skip them, crop them to the common size (top-left kept; exact when an image only has extra
 rows or columns at the right or bottom, like 1281x721 among 1280x720), or scale their corners.
@@ -78,6 +92,10 @@ def _parse_args(argv):
     ap.add_argument("--resize-policy", default="error", choices=RESIZE_POLICIES,
                     help="images whose size differs from the most common one (default: %(default)s)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    ap.add_argument("--camera", help="calibrate from a live camera (an index: 0, 1, ...) or a stream URL")
+    ap.add_argument("--target", default="0.1px", help="video/camera: stop at this uncertainty (default: %(default)s)")
+    ap.add_argument("--max-views", type=int, default=40, help="video/camera: keep at most this many views")
+    ap.add_argument("--save-partial", action="store_true", help="video/camera: a run stopped early still writes")
     return ap.parse_args(argv)
 
 
@@ -103,6 +121,15 @@ def _main(args) -> int:
         print(f"error: unknown --model {args.model!r}; choose auto or one of {', '.join(MODELS)}"
               + (" (a comma list, one per camera, goes with --rig)" if not bad else ""), file=sys.stderr)
         return 2
+    from aicalib_tf.guided.workflow import guided_source
+
+    source = guided_source(args.images, args.camera)
+    if source is not None and not args.rig:
+        from aicalib_tf.guided.workflow import GuidedRunConfig, parse_target, run_guided
+
+        return _run(lambda: GuidedRunConfig(source=source, target_px=parse_target(args.target), max_views=args.max_views,
+                                            save_partial=args.save_partial, **_common(args)), run_guided,
+                    "camera.yaml, camera.json (with the kept frames), camera_info.yaml, report.png")
     if bool(args.rig) == bool(args.images):
         print("error: give either images or --rig NAME=GLOB ... (not both)" if args.rig else "error: no images given",
               file=sys.stderr)

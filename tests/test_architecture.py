@@ -1,10 +1,12 @@
 """The layout's rules (docs/architecture.md), checked on the source with ast.
 
 * no import cycles between modules (imports inside functions count too);
-* geometry and calib never import TensorFlow or Keras, and importing them (and fitting a
+* geometry, calib, guided and the frame sources never import TensorFlow or Keras, and importing them (and fitting a
   camera) leaves TensorFlow unloaded;
 * detection never imports the benchmark; data_gen takes only geometry, the image gate, strict JSON and
   the command lines' error path;
+* the frame sources take only the image gate, and the guided loop sits above calib (nothing
+  below it imports it);
 * no module over about 400 lines and no function over about 60 without a ``# size:`` comment
   that says why.
 """
@@ -125,7 +127,7 @@ def test_the_cycle_finder_finds_a_cycle(monkeypatch):
     assert any({"aicalib_tf.calib.fit", "aicalib_tf.geometry.pattern"} <= set(c) for c in cycles), cycles
 
 
-@pytest.mark.parametrize("room", ["aicalib_tf.geometry", "aicalib_tf.calib"])
+@pytest.mark.parametrize("room", ["aicalib_tf.geometry", "aicalib_tf.calib", "aicalib_tf.guided", "aicalib_tf.sources"])
 def test_geometry_and_calib_never_import_tensorflow(room):
     for name in MODULES:
         if _in(name, room):
@@ -160,6 +162,13 @@ def test_detection_never_imports_the_benchmark():
         if _in(name, "aicalib_tf.detect"):
             bench = {m for m in _reach(name) if _in(m, "aicalib_tf.bench")}
             assert not bench, f"{name} reaches {bench}"
+
+
+def test_sources_take_only_the_image_gate_and_guided_sits_above_calib():
+    assert {m for m in _reach("aicalib_tf.sources") if _in(m, "aicalib_tf")} <= {"aicalib_tf", "aicalib_tf.io"}
+    for name in MODULES:
+        if _in(name, "aicalib_tf.calib") or _in(name, "aicalib_tf.detect") or _in(name, "aicalib_tf.geometry"):
+            assert not {m for m in GRAPH[name] if _in(m, "aicalib_tf.guided")}, name
 
 
 def test_data_gen_takes_only_geometry_and_the_image_gate():

@@ -30,9 +30,13 @@ from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.pattern import board_points
 from aicalib_tf.geometry.pose import best_rotation
 
+# size: the uncertainty map, its reusable basis (for guided calibration's many predicted covariances),
+# one view's information and the half-vs-half test share the private Jacobian helpers below.
+
 __all__ = ["lens_of", "grid_points", "coverage_counts", "uncovered_regions", "projection_uncertainty", "verdict",
            "rotation_compensated_diff", "half_difference", "predicted_half_difference", "intrinsics_covariance",
-           "covariance_of", "default_fit", "assess", "SIGMA_LADDER_PX"]
+           "covariance_of", "default_fit", "assess", "SIGMA_LADDER_PX", "view_information", "uncertainty_basis",
+           "sigma_from_basis"]
 
 SIGMA_LADDER_PX = (0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0)  # the verdict's "good to X px" rungs
 _DEFAULT_MODEL = {5: "plumb_bob", 4: "plumb_bob", 8: "rational_polynomial", 12: "thin_prism"}
@@ -286,14 +290,47 @@ def intrinsics_covariance(cal, views) -> np.ndarray:
         P = board_points(v.ids, cal.square_size) @ cv2.Rodrigues(np.asarray(r, np.float64))[0].T + t
         uv = lens.project(P)
         ok = np.all(np.isfinite(uv), axis=1)
-        Ji, Jpose = _frame_basis(lens, P[ok], 1.0)  # the board moves in the camera frame: rotation + translation
-        Jin, Jpose = Ji.reshape(-1, n), Jpose.reshape(-1, 6)
-        Hpp_inv = np.linalg.pinv(Jpose.T @ Jpose)
-        Hip = Jin.T @ Jpose
-        H += Jin.T @ Jin - Hip @ Hpp_inv @ Hip.T
+        H += view_information(lens, P[ok])
         sq += float(np.sum((uv[ok] - v.corners[ok]) ** 2))
         dof += 2 * int(ok.sum()) - 6
     return np.linalg.pinv(H) * (sq / max(dof, 1))
+
+
+def view_information(lens: L.Lens, points_cam: np.ndarray) -> np.ndarray:
+    """(4+n, 4+n) what one view adds to JᵀJ of the intrinsics [fx, fy, cx, cy, *dist], its pose
+    eliminated (Schur complement of the view's 6 pose columns: a small rotation and translation
+    of the board in the camera frame); unscaled by the residual variance.
+
+    points_cam : (N, 3) the view's corners in the camera frame (imaged by ``lens``). Adding it to
+    the inverse of a calibration's covariance / σ² predicts the covariance with the view added
+    (the next-best-view test of Rojtberg & Kuijper, ISMAR 2018).
+    """
+    n = 4 + lens.dist.size
+    Ji, Jpose = _frame_basis(lens, np.asarray(points_cam, np.float64).reshape(-1, 3), 1.0)
+    Jin, Jpose = Ji.reshape(-1, n), Jpose.reshape(-1, 6)
+    Hip = Jin.T @ Jpose
+    return Jin.T @ Jin - Hip @ np.linalg.pinv(Jpose.T @ Jpose) @ Hip.T
+
+
+def uncertainty_basis(cal, grid=(32, 24), fit_mask=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(points (M, 2) px, G (M, 2, 4+n), ok (M,) bool): the rotation-compensated Jacobian that
+    :func:`projection_uncertainty` uses (points at infinity), for evaluating many covariances
+    with :func:`sigma_from_basis` at the cost of one."""
+    lens = lens_of(cal)
+    pts = grid_points(lens.image_size, grid)
+    G, ok = _compensated_jacobian(lens, pts, fit_mask)
+    return pts, G, ok & np.all(np.isfinite(G), axis=(1, 2))
+
+
+def sigma_from_basis(G: np.ndarray, ok: np.ndarray, covariance) -> np.ndarray:
+    """(M,) px: the 1σ projection uncertainty for ``covariance`` ((4+n, 4+n)) from
+    :func:`uncertainty_basis`' G and ok (NaN where not ok); the worst direction, as in
+    :func:`projection_uncertainty`."""
+    Gz = np.nan_to_num(G)
+    C = np.einsum("mij,jk,mlk->mil", Gz, np.asarray(covariance, np.float64), Gz)
+    a, b, d = C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]
+    top = 0.5 * (a + d) + np.sqrt(np.maximum(0.25 * (a - d) ** 2 + b * b, 0.0))  # largest eigenvalue of a 2x2
+    return np.where(ok, np.sqrt(np.maximum(top, 0.0)), np.nan)
 
 
 def covariance_of(cal, views) -> np.ndarray:

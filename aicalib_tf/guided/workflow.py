@@ -1,0 +1,155 @@
+"""From a video, an image sequence, a camera or a stream to a saved calibration, through the guided loop.
+
+The command line is :mod:`aicalib_tf.calibrate` (a video file, ``--camera N`` or a stream URL);
+it writes the files of the photo path (camera.yaml, camera.json, camera_info.yaml, report.png,
+report.txt), with the kept frames' indices and the loop's counts in camera.json's ``meta``. A
+run stopped before its end (Ctrl-C, or a live stream that stops) writes nothing unless
+``save_partial``: then the calibration so far, marked ``"partial": true`` in ``meta``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from aicalib_tf.calib.fit import Calibration, CalibrationError, fit_views
+from aicalib_tf.calib.quality import assess
+from aicalib_tf.guided.session import GuidedCalibration, GuidedConfig
+
+__all__ = ["GuidedRunConfig", "run_guided", "progress_line", "summary_lines", "guided_source", "parse_target"]
+
+
+@dataclass(frozen=True)
+class GuidedRunConfig:
+    """A guided run: ``source`` (a video path, image globs as one string, a camera index or a URL),
+    the board, the loop's settings (:class:`~aicalib_tf.guided.session.GuidedConfig`) and the outputs."""
+
+    source: str
+    pattern: tuple[int, int]
+    square: float = 1.0
+    square_unit: str = ""
+    out: str = "calib"
+    detector: str = "cnn"
+    network: str = "default"
+    model: str = "auto"
+    target_px: float = 0.1
+    max_views: int = 40
+    save_partial: bool = False
+    quiet: bool = False
+    examine_all: bool = False
+    workers: int | None = None  # unused: frames come one at a time
+
+
+def guided_source(images, camera) -> str | None:
+    """The source the guided loop takes from the command line (``--camera``, or one argument that is a
+    video file or a stream URL), or None for photos."""
+    from aicalib_tf.sources import is_video, is_stream
+
+    if camera is not None:
+        return str(camera)
+    if len(images) == 1 and (is_stream(images[0]) or is_video(images[0])):
+        return images[0]
+    return None
+
+
+def parse_target(text: str) -> float:
+    """``"0.1px"`` or ``"0.1"`` -> 0.1 (px, > 0)."""
+    t = str(text).strip().lower().removesuffix("px").strip()
+    try:
+        value = float(t)
+    except ValueError:
+        value = float("nan")
+    if not value > 0 or value == float("inf"):
+        raise ValueError(f"--target must be a positive uncertainty in px such as 0.1px, got {text!r}")
+    return value
+
+
+def progress_line(session: GuidedCalibration, target_px: float) -> str:
+    """One status line: frames seen and examined, views kept, coverage, the predicted uncertainty."""
+    est = session._s.estimate
+    sig = f"σ {est.sigma_px:.3f} px (target {target_px:g})" if est else "σ -"
+    cov = f"covered {100 * est.covered:.0f}%" if est else "covered -"
+    return f"frames {session.frames_seen} | examined {session.examined} | kept {len(session.views)} | {cov} | {sig}"
+
+
+def summary_lines(session: GuidedCalibration, source: str, stopped: str) -> list[str]:
+    """The report's head: what the loop saw and why it stopped."""
+    skipped = ", ".join(f"{n} {why}" for why, n in session.skipped.most_common())
+    lines = [f"{source}: {session.frames_seen} frames, {session.examined} examined, {len(session.views)} views kept "
+             f"({stopped})", f"  frames not kept: {skipped or 'none'}"]
+    last = session._s
+    if last.guidance is not None and not last.done:
+        lines.append(f"  {last.guidance.text}")
+    return lines
+
+
+def _loop(session: GuidedCalibration, source, quiet: bool) -> str:
+    """Feed the source to the session; returns why it stopped ("target reached", "end of the video", ...)."""
+    last_print = 0.0
+    for frame in source:
+        update = session.add(frame)
+        if not quiet and (update.kept or time.monotonic() - last_print > 0.5):
+            print("\r" + progress_line(session, session.cfg.target_px).ljust(96), end="", file=sys.stderr, flush=True)
+            last_print = time.monotonic()
+        if update.done:
+            return "target reached" if len(session.views) < session.cfg.max_views else "--max-views reached"
+    return "end of the stream" if source.live else "end of the video, target not reached"
+
+
+def run_guided(cfg: GuidedRunConfig) -> tuple[Calibration, str]:
+    """Run the loop over the source, calibrate the kept views, write the files; returns (calibration, report).
+
+    Raises OSError / ValueError naming the source for a missing or unreadable one, CalibrationError
+    when no board (or too few views) came out of it; nothing is written then.
+    """
+    from aicalib_tf.calib.workflow import make_detector
+    from aicalib_tf.sources import open_source
+
+    detect = make_detector(cfg.detector, cfg.pattern, cfg.network)
+    session = GuidedCalibration(GuidedConfig(cfg.pattern, cfg.square, cfg.square_unit, cfg.model, cfg.target_px,
+                                             cfg.max_views, gate=not cfg.examine_all), detect)
+    partial = False
+    with open_source(cfg.source) as source:
+        try:
+            stopped = _loop(session, source, cfg.quiet)
+        except (KeyboardInterrupt, OSError) as exc:
+            if not cfg.save_partial:
+                raise
+            partial, stopped = True, f"stopped early: {exc or 'interrupted'}"
+        finally:
+            if not cfg.quiet:
+                print(file=sys.stderr)
+        dropped = source.dropped
+    name = source.name
+    if not session.views and not partial:
+        raise CalibrationError(f"{name}: no {cfg.pattern[0]}x{cfg.pattern[1]} board found in the {session.examined} "
+                               f"frames examined (of {session.frames_seen})")
+    if len(session.views) < 3:
+        raise CalibrationError(f"{name}: only {len(session.views)} usable views of the board; need at least 3")
+    meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
+            "lens_model": cfg.model, "source": name, "frames": session.frames_seen, "examined": session.examined,
+            "dropped": dropped, "kept_frames": session.kept_frames, "target_px": cfg.target_px,
+            "stopped": stopped, "partial": partial}
+    cal = session.result(meta=meta)
+    used = [v for v in session.views if v.name in set(cal.views)]
+    cal = dataclasses.replace(cal, quality=assess(cal, used, fit=fit_views))
+    return cal, _write(cal, used, cfg, summary_lines(session, name, stopped))
+
+
+def _write(cal: Calibration, used, cfg: GuidedRunConfig, head: list[str]) -> str:
+    from aicalib_tf.calib.files import save_calibration
+    from aicalib_tf.calib.report import format_report, report_figure
+    from aicalib_tf.io import atomic_write_bytes, atomic_write_text
+
+    report = "\n".join(head + [format_report(cal, used, skipped={}, total=len(used) + len(cal.rejected))])
+    if cal.meta.get("partial"):
+        report = "PARTIAL calibration (the run was stopped early)\n" + report
+    figure = report_figure(cal, used)
+    out = Path(cfg.out)
+    save_calibration(cal, out)
+    atomic_write_bytes(out / "report.png", figure)
+    atomic_write_text(out / "report.txt", report + "\n")
+    return report
