@@ -134,6 +134,11 @@ def _main(args) -> int:
         print("error: give either images or --rig NAME=GLOB ... (not both)" if args.rig else "error: no images given",
               file=sys.stderr)
         return 2
+    if args.rig and (args.fix_k3 or args.rational or args.resize_policy != "error"):
+        given = [f for f, on in (("--fix-k3", args.fix_k3), ("--rational", args.rational),
+                                 ("--resize-policy", args.resize_policy != "error")) if on]
+        raise ValueError(f"{', '.join(given)} cannot be used with --rig (give --model per camera instead; "
+                         "every image of a camera must have one size)")
     if args.rig:
         from aicalib_tf.calib.rig_workflow import RigConfig, parse_rig, run_rig
 
@@ -157,8 +162,11 @@ def _common(args) -> dict:
 def _run(build, run_fn, wrote: str) -> int:
     """Build the config, run it, print the report; errors reach :func:`aicalib_tf.cli.run_main`."""
     cfg = build()
-    _, report = run_fn(cfg)
+    result, report = run_fn(cfg)
     print(report)
+    if getattr(result, "quality", {}).get("status") == "failed":
+        print(f"wrote {Path(cfg.out)}: rig.json marked failed, each camera's own calibration", file=sys.stderr)
+        return 1
     print(f"wrote {Path(cfg.out)}: {wrote}")
     return 0
 

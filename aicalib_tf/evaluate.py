@@ -70,10 +70,9 @@ from aicalib_tf.detect.batch import default_workers
 
 
 def _parse_args(argv):
-    import argparse
+    from aicalib_tf.cli import parser
 
-    ap = argparse.ArgumentParser(prog="python -m aicalib_tf.evaluate", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = parser("python -m aicalib_tf.evaluate", __doc__)
     ap.add_argument("--out", default=None, help="output folder (default: reports/<YYYYmmdd-HHMMSS>)")
     ap.add_argument("--quick", action="store_true", help="a small suite (about 2 minutes)")
     ap.add_argument("--model", default="default", help="the cnn detector's model: default, default_int8, report or a .tflite/.keras path")
@@ -95,42 +94,47 @@ def main(argv: list[str] | None = None) -> int:
     started = time.perf_counter()
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
     args = _parse_args(argv)
-    try:
-        dets = tuple(d.strip() for d in args.detectors.split(",") if d.strip())
-        bad = [d for d in dets if d not in DETECTORS]
-        if bad or not dets:
-            raise ValueError(f"unknown detector(s) {', '.join(bad) or '(none)'}; choose from {', '.join(DETECTORS)}")
-        if args.workers is not None and args.workers < 1:
-            raise ValueError(f"--workers must be >= 1, got {args.workers}")
-        if args.limit is not None and args.limit < 1:
-            raise ValueError(f"--limit must be >= 1, got {args.limit}")
-        pattern = None
-        if args.images is not None:
-            from aicalib_tf.geometry.pattern import parse_pattern
+    from aicalib_tf.cli import run_main
 
-            if args.pattern is None:
-                raise ValueError("--images needs --pattern COLSxROWS")
-            pattern = parse_pattern(args.pattern)
-            if not Path(args.images).is_dir():
-                raise ValueError(f"--images {args.images}: not a folder")
-            from aicalib_tf.bench.photos import list_images
+    return run_main(lambda: _main(args, argv, started), debug=args.debug)
 
-            list_images(Path(args.images))  # a folder without images is a bad argument
-        elif args.pattern is not None or args.degrade:
-            raise ValueError("--pattern and --degrade go with --images")
-        else:
-            spec, _ = _split_calib(args.conditions)
-            if spec != "":
-                select_conditions(spec)  # unknown names fail here, before any work
-        out = args.out or str(Path("reports") / time.strftime("%Y%m%d-%H%M%S"))
-        cfg = EvalConfig(out=out, quick=args.quick, model=args.model, detectors=dets, conditions=args.conditions,
-                         limit=args.limit, images=args.images, pattern=pattern, degrade=args.degrade, seed=args.seed,
-                         quiet=args.quiet, workers=args.workers or default_workers(), command="python -m aicalib_tf.evaluate " + " ".join(
-                             sys.argv[1:] if argv is None else argv))
-        detectors, info = make_detectors(dets, pattern or PATTERN, args.model)  # a bad model is a bad argument
-    except (ValueError, FileNotFoundError, ImportError) as exc:  # ImportError: a .keras model without TensorFlow
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+
+def _main(args, argv, started: float) -> int:
+    dets = tuple(d.strip() for d in args.detectors.split(",") if d.strip())
+    bad = [d for d in dets if d not in DETECTORS]
+    if bad or not dets:
+        raise ValueError(f"unknown detector(s) {', '.join(bad) or '(none)'}; choose from {', '.join(DETECTORS)}")
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    if args.limit is not None and args.limit < 1:
+        raise ValueError(f"--limit must be >= 1, got {args.limit}")
+    pattern = None
+    if args.images is not None:
+        from aicalib_tf.geometry.pattern import parse_pattern
+
+        if args.pattern is None:
+            raise ValueError("--images needs --pattern COLSxROWS")
+        pattern = parse_pattern(args.pattern)
+        if not Path(args.images).is_dir():
+            raise ValueError(f"--images {args.images}: not a folder")
+        from aicalib_tf.bench.photos import list_images
+
+        list_images(Path(args.images))  # a folder without images is a bad argument
+    elif args.pattern is not None or args.degrade:
+        raise ValueError("--pattern and --degrade go with --images")
+    else:
+        spec, _ = _split_calib(args.conditions)
+        if spec != "":
+            select_conditions(spec)  # unknown names fail here, before any work
+    out = args.out or str(Path("reports") / time.strftime("%Y%m%d-%H%M%S"))
+    from aicalib_tf.outfolder import check_out_path
+
+    check_out_path(out)  # a file, a path under a file, a name too long: refused before any work
+    cfg = EvalConfig(out=out, quick=args.quick, model=args.model, detectors=dets, conditions=args.conditions,
+                     limit=args.limit, images=args.images, pattern=pattern, degrade=args.degrade, seed=args.seed,
+                     quiet=args.quiet, workers=args.workers or default_workers(), command="python -m aicalib_tf.evaluate " + " ".join(
+                         sys.argv[1:] if argv is None else argv))
+    detectors, info = make_detectors(dets, pattern or PATTERN, args.model)  # a bad model is a bad argument
     folder = run(cfg, detectors, info, started=started)
     print(f"report: {folder / 'report.md'}")
     return 0

@@ -1,7 +1,9 @@
 """The one input gate for images, and atomic file writes.
 
 Every image enters through :func:`load_image` (a path or an array; uint8 or uint16; grey, BGR
-or BGRA) and leaves as float32 grey in [0, 1]. Every output file is written through
+or BGRA) and leaves as float32 grey in [0, 1]. A file is read as bytes (any file name works) and
+its pixel count is checked from the header before anything is decoded: an image over
+:data:`MAX_PIXELS` (100 MP; ``AICALIB_MAX_PIXELS`` changes it) is refused without allocating it. Every output file is written through
 :func:`atomic_write_bytes` / :func:`atomic_write_text`: a temporary file in the same folder,
 then ``os.replace``, so a reader never sees half a file.
 """
@@ -15,7 +17,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-__all__ = ["ImageError", "load_image", "to_gray_float", "expand_images", "atomic_write_bytes", "atomic_write_text"]
+__all__ = ["ImageError", "load_image", "to_gray_float", "expand_images", "atomic_write_bytes", "atomic_write_text",
+           "display_name", "max_pixels", "image_size_from_header"]
+
+MAX_PIXELS = 100_000_000  # the largest image accepted (px); the environment's AICALIB_MAX_PIXELS overrides it
+MAX_FILE_BYTES = 2 << 30  # an image file larger than this is refused before it is read
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm", ".pnm", ".jp2", ".exr")
 
 
 class ImageError(ValueError):
@@ -54,24 +61,89 @@ def to_gray_float(image: np.ndarray, name: str = "array") -> np.ndarray:
     return np.clip(a, 0.0, 1.0)
 
 
+def display_name(path) -> str:
+    """A path as text that prints on any terminal (undecodable bytes of a file name shown as \\xNN)."""
+    text = os.fsdecode(path) if isinstance(path, bytes) else str(path)
+    return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
+def max_pixels() -> int:
+    """The pixel cap: :data:`MAX_PIXELS`, or ``AICALIB_MAX_PIXELS`` from the environment."""
+    text = os.environ.get("AICALIB_MAX_PIXELS", "")
+    try:
+        value = int(float(text)) if text else MAX_PIXELS
+    except ValueError:
+        raise ValueError(f"AICALIB_MAX_PIXELS must be a number of pixels, got {text!r}") from None
+    if value < 1:
+        raise ValueError(f"AICALIB_MAX_PIXELS must be positive, got {text!r}")
+    return value
+
+
+def image_size_from_header(data: bytes) -> tuple[int, int] | None:
+    """(width, height) from an image file's header, without decoding its pixels; None if unknown.
+
+    Pillow reads the header of every common format lazily; its own size limit is lifted for the
+    read, because the caller applies :func:`max_pixels`.
+    """
+    import io as _io
+    import warnings
+
+    from PIL import Image
+
+    old = Image.MAX_IMAGE_PIXELS
+    Image.MAX_IMAGE_PIXELS = None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with Image.open(_io.BytesIO(data)) as im:
+                return int(im.size[0]), int(im.size[1])
+    except Exception:  # noqa: BLE001 - any format Pillow does not know: OpenCV decides below
+        return None
+    finally:
+        Image.MAX_IMAGE_PIXELS = old
+
+
+def _read_bytes(path: Path) -> np.ndarray:
+    name = display_name(path)
+    try:
+        if not path.is_file():
+            raise ImageError(f"{name}: {'a folder, not an image' if path.is_dir() else 'no such file'}")
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise ImageError(f"{name}: file of {size / 2**30:.1f} GiB is larger than an image this tool reads")
+        return np.fromfile(path, dtype=np.uint8)
+    except OSError as exc:
+        raise ImageError(f"{name}: {exc.strerror or exc}") from None
+
+
 def load_image(src) -> np.ndarray:
     """Read a path (any format OpenCV reads) or take an array; return (H, W) float32 grey in [0, 1].
 
-    Raises :class:`ImageError` naming the file for a missing, unreadable or corrupt file.
+    Raises :class:`ImageError` naming the file for a missing, unreadable (permissions), corrupt,
+    truncated or too large (over :func:`max_pixels`) file.
     """
-    if isinstance(src, (str, os.PathLike)):
-        path = Path(src)
-        if not path.is_file():
-            raise ImageError(f"{path}: no such file")
-        data = np.fromfile(path, dtype=np.uint8)
+    if isinstance(src, (str, bytes, os.PathLike)):
+        path = Path(os.fsdecode(src))
+        name = display_name(path)
+        data = _read_bytes(path)
         if data.size == 0:
-            raise ImageError(f"{path}: empty file")
-        if _truncated_jpeg(data.tobytes()):
-            raise ImageError(f"{path}: truncated JPEG (the image data ends without an end-of-image marker)")
-        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+            raise ImageError(f"{name}: empty file")
+        raw = data.tobytes()
+        if _truncated_jpeg(raw):
+            raise ImageError(f"{name}: truncated JPEG (the image data ends without an end-of-image marker)")
+        size, cap = image_size_from_header(raw), max_pixels()
+        if size is not None and size[0] * size[1] > cap:
+            raise ImageError(f"{name}: image of {size[0]}x{size[1]} px is over the limit of {cap / 1e6:g} MP "
+                             "(set AICALIB_MAX_PIXELS to allow it)")
+        try:
+            img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        except cv2.error as exc:
+            raise ImageError(f"{name}: not a readable image ({' '.join(str(exc).split())[-120:]})") from None
         if img is None:
-            raise ImageError(f"{path}: not a readable image (corrupt or unsupported format)")
-        return to_gray_float(img, str(path))
+            raise ImageError(f"{name}: not a readable image (corrupt or unsupported format)")
+        if img.shape[0] * img.shape[1] > cap:
+            raise ImageError(f"{name}: image of {img.shape[1]}x{img.shape[0]} px is over the limit of {cap / 1e6:g} MP")
+        return to_gray_float(img, name)
     return to_gray_float(src)
 
 
@@ -91,16 +163,23 @@ def _truncated_jpeg(data: bytes) -> bool:
 def expand_images(patterns) -> list[str]:
     """Paths and glob patterns -> a sorted, de-duplicated list of paths (order of the patterns kept).
 
-    A pattern with ``*``, ``?`` or ``[`` is globbed (``**`` recurses); anything else is taken as a
-    path, whether or not it exists (the loader reports missing files by name).
+    An existing file is taken as it is, even when its name holds ``[`` or ``*``; a folder stands
+    for the image files in it (by suffix, :data:`IMAGE_SUFFIXES`); a pattern with ``*``, ``?`` or
+    ``[`` is globbed (``**`` recurses); anything else is taken as a path, whether or not it exists
+    (the loader reports missing files by name).
     """
     import glob
 
     out: list[str] = []
     seen: set[str] = set()
     for item in [patterns] if isinstance(patterns, (str, os.PathLike)) else patterns:
-        item = str(item)
-        matches = sorted(glob.glob(item, recursive=True)) if any(ch in item for ch in "*?[") else [item]
+        item = os.fspath(item)
+        if os.path.isdir(item):
+            matches = sorted(str(p) for p in Path(item).iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
+        elif os.path.isfile(item) or not any(ch in item for ch in "*?["):
+            matches = [item]
+        else:
+            matches = sorted(glob.glob(item, recursive=True))
         for m in matches:
             if m not in seen:
                 seen.add(m)

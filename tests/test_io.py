@@ -1,5 +1,6 @@
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -63,3 +64,95 @@ def test_expand_images_globs_sorts_and_dedupes(tmp_path):
         (tmp_path / n).write_bytes(b"x")
     got = expand_images([str(tmp_path / "*.jpg"), str(tmp_path / "a.jpg"), str(tmp_path / "missing.png")])
     assert [Path(p).name for p in got] == ["a.jpg", "b.jpg", "missing.png"]
+
+
+# ---- the image gate under hostile input -------------------------------------------------------------
+
+import struct as _struct
+import zlib as _zlib
+
+from hypothesis import given as _given, settings as _settings, strategies as _st
+
+
+def _png_header_only(w: int, h: int) -> bytes:
+    """A PNG whose header claims w x h px, with one tiny compressed row (a decompression bomb's shape)."""
+    def chunk(kind, data):
+        return _struct.pack(">I", len(data)) + kind + data + _struct.pack(">I", _zlib.crc32(kind + data) & 0xFFFFFFFF)
+    ihdr = _struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", _zlib.compress(b"\0" * (w + 1))) + chunk(b"IEND", b"")
+
+
+def test_a_decompression_bomb_is_refused_from_its_header_fast_and_small(tmp_path):
+    import resource
+    import time
+
+    from aicalib_tf.io import ImageError, load_image
+
+    path = tmp_path / "bomb.png"
+    path.write_bytes(_png_header_only(30000, 30000))
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    t0 = time.perf_counter()
+    with pytest.raises(ImageError, match="30000x30000 px is over the limit"):
+        load_image(path)
+    assert time.perf_counter() - t0 < 1.0
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 100 * 1024  # KiB: nothing decoded
+
+
+def test_the_pixel_cap_is_configurable(tmp_path, monkeypatch):
+    from aicalib_tf.io import ImageError, load_image
+
+    path = tmp_path / "small.png"
+    cv2.imwrite(str(path), np.zeros((40, 50), np.uint8))
+    monkeypatch.setenv("AICALIB_MAX_PIXELS", "1000")
+    with pytest.raises(ImageError, match="50x40 px is over the limit of 0.001 MP"):
+        load_image(path)
+    monkeypatch.setenv("AICALIB_MAX_PIXELS", "2000")
+    assert load_image(path).shape == (40, 50)
+
+
+def test_an_unreadable_file_is_an_image_error_naming_it(tmp_path, monkeypatch):
+    from aicalib_tf.io import ImageError, load_image
+
+    path = tmp_path / "locked.png"
+    cv2.imwrite(str(path), np.zeros((4, 4), np.uint8))
+
+    def denied(*a, **k):
+        raise PermissionError(13, "Permission denied", str(path))
+    monkeypatch.setattr(np, "fromfile", denied)
+    with pytest.raises(ImageError, match="locked.png: Permission denied"):
+        load_image(path)
+
+
+@_settings(max_examples=150, deadline=None)
+@_given(data=_st.one_of(
+    _st.binary(max_size=300),
+    _st.builds(lambda w, h, tail: _png_header_only(w, h)[: 33 + tail], _st.integers(1, 70000), _st.integers(1, 70000),
+               _st.integers(0, 60)),
+    _st.builds(lambda cut: cv2.imencode(".jpg", np.full((32, 32), 128, np.uint8))[1].tobytes()[:cut], _st.integers(0, 700)),
+))
+def test_any_bytes_give_a_grey_image_or_an_image_error(tmp_path_factory, data):
+    from aicalib_tf.io import ImageError, load_image
+
+    path = tmp_path_factory.mktemp("fuzz") / "x.img"
+    path.write_bytes(data)
+    try:
+        img = load_image(path)
+    except ImageError as exc:
+        assert "x.img" in str(exc)
+        return
+    assert img.dtype == np.float32 and img.ndim == 2 and np.isfinite(img).all()
+
+
+@_settings(max_examples=60, deadline=None)
+@_given(dtype=_st.sampled_from([np.bool_, np.int8, np.int32, np.int64, np.float16, np.float32, np.float64,
+                                np.complex64, np.uint8, np.uint16]),
+        shape=_st.lists(_st.integers(0, 5), min_size=0, max_size=4))
+def test_any_array_gives_a_grey_image_or_an_image_error(dtype, shape):
+    from aicalib_tf.io import ImageError, load_image
+
+    a = np.zeros(shape, dtype)
+    try:
+        img = load_image(a)
+    except ImageError:
+        return
+    assert img.dtype == np.float32 and img.ndim == 2

@@ -254,6 +254,9 @@ def undistort_camera_matrix(cal: Calibration, alpha: float = 0.0) -> np.ndarray:
     return np.array([[fx, 0.0, (w - 1) / 2], [0.0, fy, (h - 1) / 2], [0.0, 0.0, 1.0]])
 
 
+_REMAP_DTYPES = tuple(np.dtype(t) for t in (np.uint8, np.uint16, np.int16, np.float32, np.float64))  # cv2.remap's
+
+
 def undistort(image: np.ndarray, cal: Calibration, *, alpha: float = 0.0) -> np.ndarray:
     """Remove lens distortion from an image taken by the calibrated camera (any lens model).
 
@@ -262,6 +265,10 @@ def undistort(image: np.ndarray, cal: Calibration, *, alpha: float = 0.0) -> np.
     Returns an array of the same shape and dtype (black where the output pixel has no source:
     bilinear ``cv2.remap`` through :func:`~aicalib_tf.geometry.lens.undistort_maps`).
     """
+    image = np.asarray(image)
+    if image.ndim not in (2, 3) or image.dtype not in _REMAP_DTYPES:
+        raise ValueError(f"undistort takes an (H, W) or (H, W, C) image of uint8, uint16, int16, float32 or float64, "
+                         f"got shape {image.shape} of {image.dtype}")
     h, w = image.shape[:2]
     if (w, h) != tuple(cal.image_size):
         raise ValueError(f"image is {w}x{h} but the calibration is for {cal.image_size[0]}x{cal.image_size[1]}")

@@ -31,13 +31,13 @@ import numpy as np
 from aicalib_tf.calib.bundle import (BundleResult, CalibrationError, bundle_adjust, convert_start, fisheye_start,
                                      param_names, poses_from_rays)
 from aicalib_tf.calib.select import select_model
+from aicalib_tf.calib.view_checks import MIN_VIEW_CORNERS, duplicates, view_problem
 from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens, model_from_ros, project
 from aicalib_tf.geometry.pattern import board_points, check_pattern
 
 __all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "fit_views", "view_rms", "MIN_VIEW_CORNERS",
            "outlier_threshold"]
 
-MIN_VIEW_CORNERS = 6  # and spanning ≥ 2 rows and ≥ 2 columns: a homography needs a 2-D spread
 _CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
 
 
@@ -149,22 +149,6 @@ def view_rms(view: View, K, dist, rvec, tvec, square_size: float, model: str | N
     return float(np.sqrt(np.mean(np.sum(res * res, axis=1)))), res
 
 
-def _usable(view: View, pattern_size: tuple[int, int]) -> str | None:
-    """Why a view cannot be used, or None."""
-    cols, rows = pattern_size
-    if len(view.ids) < MIN_VIEW_CORNERS:
-        return f"only {len(view.ids)} corners (need {MIN_VIEW_CORNERS})"
-    if (view.ids < 0).any() or (view.ids[:, 0] >= cols).any() or (view.ids[:, 1] >= rows).any():
-        return f"corner ids outside the {cols}x{rows} pattern"
-    if len(np.unique(view.ids, axis=0)) != len(view.ids):
-        return "duplicate corner ids"
-    if len(np.unique(view.ids[:, 0])) < 2 or len(np.unique(view.ids[:, 1])) < 2:
-        return "corners on a single line"
-    if not np.isfinite(view.corners).all():
-        return "non-finite corner coordinates"
-    return None
-
-
 def _starts(image_size) -> list:
     """Initial K guesses: OpenCV's own (None) and three pinhole fields of view.
 
@@ -211,8 +195,9 @@ def outlier_threshold(per_view_rms: np.ndarray) -> float:
     return max(3.0 * float(np.median(np.asarray(per_view_rms, dtype=np.float64))), 0.5)
 
 
-def _sort_views(views, pattern_size: tuple[int, int]) -> tuple[list[View], dict[str, str]]:
-    """Split views into the usable ones and {name: why} for the rest; two views of one name are an error."""
+def _sort_views(views, pattern_size: tuple[int, int], image_size=None) -> tuple[list[View], dict[str, str]]:
+    """Split views into the usable ones and {name: why} for the rest (:mod:`~aicalib_tf.calib.view_checks`;
+    a view repeating an earlier one counts once); two views of one name are an error."""
     rejected: dict[str, str] = {}
     usable: list[View] = []
     seen: set[str] = set()
@@ -221,12 +206,15 @@ def _sort_views(views, pattern_size: tuple[int, int]) -> tuple[list[View], dict[
         if view.name in seen:  # per-view results and rejections are keyed by name
             raise ValueError(f"two views are named {view.name!r}; view names must be unique")
         seen.add(view.name)
-        why = _usable(view, pattern_size)
+        why = view_problem(view.corners, view.ids, pattern_size, image_size)
         if why is None:
             usable.append(view)
         else:
             rejected[view.name] = why
-    return usable, rejected
+    repeats = duplicates(usable)
+    for name, first in repeats.items():
+        rejected[name] = f"the same view as {first} (every corner within 1 px): counted once"
+    return [v for v in usable if v.name not in repeats], rejected
 
 
 def _check_args(pattern_size, square_size, image_size, min_views) -> tuple[int, int]:
@@ -240,8 +228,8 @@ def _check_args(pattern_size, square_size, image_size, min_views) -> tuple[int, 
     return pattern_size
 
 
-def _usable_views(views, pattern_size, min_views) -> tuple[list[View], dict[str, str]]:
-    usable, rejected = _sort_views(views, pattern_size)
+def _usable_views(views, pattern_size, min_views, image_size=None) -> tuple[list[View], dict[str, str]]:
+    usable, rejected = _sort_views(views, pattern_size, image_size)
     if len(usable) < min_views:
         raise CalibrationError(f"{len(usable)} usable views; need at least {min_views}"
                                + (f" ({len(rejected)} unusable: " + "; ".join(f"{n}: {r}" for n, r in rejected.items()) + ")"
@@ -282,12 +270,14 @@ def _fit_model(model: str, views: list[View], square_size: float, image_size, st
 
 def _calibration(fit: BundleResult, views, pattern_size, square_size, image_size, rejected, square_unit,
                  meta, table=()) -> Calibration:
+    """The Calibration of a fit made with a unit square: translations scaled to ``square_size`` (the
+    square size only scales the poses, so fitting with 1 keeps the numbers well conditioned for any unit)."""
     std = dict(zip(param_names(fit.model), np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))))
     lens = Lens.from_intrinsics(fit.model, fit.intrinsics, image_size)
     return Calibration(
         K=lens.K, dist=lens.dist, image_size=(int(image_size[0]), int(image_size[1])),
         pattern_size=pattern_size, square_size=float(square_size), rms=fit.rms, views=tuple(v.name for v in views),
-        rvecs=fit.rvecs, tvecs=fit.tvecs, per_view_rms=fit.per_view_rms,
+        rvecs=fit.rvecs, tvecs=fit.tvecs * float(square_size), per_view_rms=fit.per_view_rms,
         corner_counts=np.array([len(v.ids) for v in views]), std={k: float(v) for k, v in std.items()},
         rejected=dict(rejected), square_unit=square_unit, meta=dict(meta or {}, **({"fit_note": fit.note} if fit.note else {})), model=fit.model,
         covariance=fit.covariance, model_table=tuple(table))
@@ -305,8 +295,8 @@ def fit_views(views, pattern_size: tuple[int, int], square_size: float, image_si
     pattern_size = _check_args(pattern_size, square_size, image_size, 3)
     if model not in MODELS:
         raise ValueError(f"unknown lens model {model!r}; choose from {', '.join(MODELS)}")
-    usable, rejected = _usable_views(views, pattern_size, 3)
-    fit = _fit_model(model, usable, square_size, image_size, start, fix_k3, rank_strict=False)
+    usable, rejected = _usable_views(views, pattern_size, 3, image_size)
+    fit = _fit_model(model, usable, 1.0, image_size, start, fix_k3, rank_strict=False)  # a unit square: tvecs scaled last
     return _calibration(fit, usable, pattern_size, square_size, image_size, rejected, square_unit, meta)
 
 
@@ -350,12 +340,12 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
     """
     pattern_size = _check_args(pattern_size, square_size, image_size, min_views)
     model = _resolve_model(model, rational)
-    usable, rejected = _usable_views(views, pattern_size, min_views)
+    usable, rejected = _usable_views(views, pattern_size, min_views, image_size)
     if model == "auto":
         table, model, fit = select_model(
-            usable, square_size, lambda vs, m, start: _fit_model(m, vs, square_size, image_size, start, fix_k3))
+            usable, 1.0, lambda vs, m, start: _fit_model(m, vs, 1.0, image_size, start, fix_k3))
     else:
-        fit = _fit_model(model, usable, square_size, image_size, None, fix_k3, rank_strict=False)
+        fit = _fit_model(model, usable, 1.0, image_size, None, fix_k3, rank_strict=False)  # a unit square: tvecs scaled last
         table = ({"model": model, "n_params": fit.intrinsics.size, "rms": fit.rms, "cv_rms": float("nan"),
                   "cv_se": float("nan"), "chosen": True, "note": "forced"},)
     max_drop = len(usable) // 3
@@ -367,5 +357,5 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
         rejected[usable[worst].name] = f"outlier: RMS {fit.per_view_rms[worst]:.2f} px > {thr:.2f} px"
         usable.pop(worst)
         max_drop -= 1
-        fit = _refit(model, usable, square_size, image_size, fit, fix_k3)
+        fit = _refit(model, usable, 1.0, image_size, fit, fix_k3)
     return _calibration(fit, usable, pattern_size, square_size, image_size, rejected, square_unit, meta, table)

@@ -206,5 +206,6 @@ def calibrate_rig(views, pattern_size, square_size: float, image_sizes, *, names
                                                 groups, reject_outliers=reject_outliers)
     for k, c in enumerate(cals):
         rejected.update({f"{names[k]}/{n}": why for n, why in c.rejected.items()})
-    return rig_result(fit, obs, groups, g_rms, cals, names, pattern_size, square_size, square_unit, rejected,
-                      dict(meta or {}))
+    rig = rig_result(fit, obs, groups, g_rms, cals, names, pattern_size, square_size, square_unit, rejected,
+                     dict(meta or {}))
+    return dataclasses.replace(rig, single=tuple(cals))

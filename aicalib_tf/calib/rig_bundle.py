@@ -203,7 +203,8 @@ def rig_adjust(models, observations, intrinsics, extrinsics, poses, *, free=None
     x, cost, nfev, _ = levenberg_marquardt(prob, x0, max_nfev)
     res, _, _, n_bad = prob._evaluate(x)
     if n_bad or not np.all(np.isfinite(x)):
-        raise CalibrationError(f"rig: the fit diverged ({n_bad} of {prob.N} corners cannot be projected)")
+        raise CalibrationError(f"rig: the fit diverged ({n_bad} of {prob.N} corners cannot be projected); "
+                               "do the images paired as one frame show the board at one moment?")
     _, intr, extr, pose_out = prob.unpack(x)
     res2 = res.reshape(-1, 2)
     parts = np.split(res2, prob.obs_splits)

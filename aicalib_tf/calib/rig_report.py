@@ -8,6 +8,7 @@ import numpy as np
 from aicalib_tf.calib.rig_quality import pair_rectification
 from aicalib_tf.calib.rig_result import RigCalibration
 from aicalib_tf.geometry import lens as L
+from aicalib_tf.io import ImageError, load_image, quantize
 
 __all__ = ["format_rig_report", "rig_figure", "rectify_images"]
 
@@ -67,8 +68,9 @@ def _preview(rig: RigCalibration, pairing):
         paths = [fs.get(rig.names[0]), fs.get(rig.names[1])]
         if None in paths:
             continue
-        imgs = [cv2.imread(p, cv2.IMREAD_GRAYSCALE) for p in paths]
-        if any(im is None for im in imgs):
+        try:
+            imgs = [quantize(load_image(p)) for p in paths]
+        except ImageError:
             continue
         return (name, *rectify_images(rig, imgs))
     return None

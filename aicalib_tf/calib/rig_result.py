@@ -29,6 +29,8 @@ class RigCalibration:
     over all their corners; frame_cameras : per frame, the indices of the cameras that saw it.
     rejected : {"camera/frame" or "frame": reason}. rms : px over every corner of the joint fit.
     quality : filled by :func:`aicalib_tf.calib.rig_quality.assess_rig`. meta : provenance.
+    single : each camera's own calibration (alone, before the joint fit), for the sanity checks
+    of :mod:`aicalib_tf.calib.rig_sanity`; not written to the files.
     """
 
     names: tuple[str, ...]
@@ -46,6 +48,7 @@ class RigCalibration:
     rejected: dict = field(default_factory=dict)
     quality: dict = field(default_factory=dict)
     meta: dict = field(default_factory=dict)
+    single: tuple = ()
 
     @property
     def lenses(self) -> tuple[Lens, ...]:

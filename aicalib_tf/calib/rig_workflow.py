@@ -11,6 +11,7 @@ The command line is ``python -m aicalib_tf.calibrate --rig cam0="left/*.png" cam
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from collections import Counter
 from dataclasses import dataclass
@@ -49,7 +50,9 @@ class Pairing:
 
 
 def _stem(f: str) -> str:
-    return Path(f).stem
+    from aicalib_tf.io import display_name
+
+    return display_name(Path(f).stem)
 
 
 def _number(f: str) -> str | None:
@@ -126,11 +129,41 @@ def _detect_camera(cam, frames, cfg: RigConfig) -> tuple[dict, dict, dict]:
     return views, {f.label: f.size for f in found}, skipped
 
 
+def _save_failed_rig(rig, folder: Path) -> None:
+    """A failed rig's files: rig.json (status "failed", the problems) and each camera's own calibration
+    (alone, never the joint fit's) in a folder of its name; no stereo files to be used by mistake."""
+    from aicalib_tf.calib.files import FILES
+    from aicalib_tf.calib.rig_files import rig_texts
+    from aicalib_tf.io import atomic_write_text
+
+    texts = rig_texts(dataclasses.replace(rig, cameras=rig.single or rig.cameras))
+    for rel, text in texts.items():
+        parts = Path(rel).parts
+        if rel == "rig.json" or (len(parts) == 2 and parts[0] in rig.names and parts[1] in FILES):
+            (folder / rel).parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(folder / rel, text)
+
+
+def _refuse_shared_files(files: dict[str, list[str]]) -> None:
+    """ValueError when two cameras are given the same image files (a rig of one camera with itself)."""
+    import os
+
+    owner: dict[str, str] = {}
+    for cam, fs in files.items():
+        for f in fs:
+            key = os.path.realpath(f)
+            if owner.setdefault(key, cam) != cam:
+                raise ValueError(f"--rig: {owner[key]} and {cam} are given the same image file ({Path(f).name}); "
+                                 "each camera needs its own images")
+
+
 def _check_sizes(cam, views, sizes, frames, skipped) -> tuple[int, int]:
     """The camera's image size (its most common one); a frame of another size is dropped with a message
     naming the pair and both sizes."""
     if not sizes:
-        raise CalibrationError(f"{cam}: none of its images could be read")
+        from aicalib_tf.calib.workflow import unreadable_error
+
+        raise unreadable_error([fs[cam] for _, fs in frames if cam in fs], skipped, f"{cam} images")
     size = Counter(sizes.values()).most_common(1)[0][0]
     files = dict((n, fs) for n, fs in frames)
     for name, s in sizes.items():
@@ -147,12 +180,10 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
 
     Raises ValueError / CalibrationError / FileNotFoundError for bad input, before writing anything.
     """
-    from aicalib_tf.calib.rig import calibrate_rig
     from aicalib_tf.calib.rig_files import save_rig
-    from aicalib_tf.calib.rig_quality import assess_rig
-    from aicalib_tf.calib.rig_report import format_rig_report, rig_figure
     from aicalib_tf.calib.workflow import make_detector
     from aicalib_tf.io import atomic_write_bytes, atomic_write_text, expand_images
+    from aicalib_tf.outfolder import OutputFolder
 
     files = {}
     for name, pattern in cfg.cameras:
@@ -163,8 +194,28 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
     models = cfg.model.split(",")
     if len(models) not in (1, len(names)):
         raise ValueError(f"--model lists {len(models)} lens models for {len(names)} cameras ({', '.join(names)})")
+    _refuse_shared_files(files)
     pairing = pair_images(files)
     detect = make_detector(cfg.detector, cfg.pattern, cfg.network)  # a bad network fails here, before any work
+    with OutputFolder(cfg.out, "rig") as out:  # a bad --out fails here; files are swapped in at the end
+        rig, report, figure = _calibrate_rig_files(files, pairing, detect, models, cfg)
+        if rig.quality.get("status") == "failed":
+            _save_failed_rig(rig, out.path)
+        else:
+            save_rig(rig, out.path)
+        atomic_write_bytes(out.path / "report.png", figure)
+        atomic_write_text(out.path / "report.txt", report + "\n")
+    return rig, report
+
+
+def _calibrate_rig_files(files, pairing, detect, models, cfg: RigConfig):
+    """Detect every camera's images, calibrate and assess the rig; returns (rig, report text, report.png bytes)."""
+    from aicalib_tf.calib.rig import calibrate_rig
+    from aicalib_tf.calib.rig_quality import assess_rig
+    from aicalib_tf.calib.rig_report import format_rig_report, rig_figure
+    from aicalib_tf.calib.rig_sanity import rig_problems
+
+    names = list(files)
     views, sizes, skipped = {}, {}, {}
     for cam in files:
         v, s, sk = _detect_camera(cam, pairing.frames, cfg)
@@ -176,10 +227,10 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
     rig = calibrate_rig([views[c] for c in names], cfg.pattern, cfg.square, [sizes[c] for c in names], names=names,
                         models=models if len(models) > 1 else models[0], square_unit=cfg.square_unit, meta=meta)
     rig = assess_rig(rig, [views[c] for c in names])
+    problems = rig_problems(rig)
+    rig = dataclasses.replace(rig, quality=dict(rig.quality, status="failed" if problems else "ok", problems=problems))
     report = format_rig_report(rig, pairing, skipped)
-    figure = rig_figure(rig, pairing)
-    out = Path(cfg.out)
-    save_rig(rig, out)
-    atomic_write_bytes(out / "report.png", figure)
-    atomic_write_text(out / "report.txt", report + "\n")
-    return rig, report
+    if problems:
+        report += "\n\nFAILED: this is not a usable rig calibration\n" + "\n".join(f"  - {p}" for p in problems) + \
+            "\nrig.json is written with status \"failed\" and each camera's own calibration; no stereo files."
+    return rig, report, rig_figure(rig, pairing)

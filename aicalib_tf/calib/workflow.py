@@ -21,6 +21,7 @@ from aicalib_tf.geometry.lens import MODELS as LENS_MODELS
 __all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "CalibrateConfig", "parse_square", "make_detector", "run", "undistort"]
 
 DETECTORS = ("cnn", "report", "opencv", "opencv-sb")
+PREVIEW_NAME = "undistorted.png"  # one image of the set, undistorted
 RESIZE_POLICIES = ("error", "skip", "crop", "scale")
 _UNITS = {"mm": "mm", "cm": "cm", "m": "m", "in": "in", "inch": "in", "": ""}
 
@@ -103,9 +104,12 @@ class _Found:
 
 
 def _labels(files: list[str]) -> dict[str, str]:
-    """Short names for reports: the file name, or the path where two files share a name."""
+    """Short names for reports: the file name, or the path where two files share a name (printable:
+    undecodable bytes of a name shown as \\xNN)."""
+    from aicalib_tf.io import display_name
+
     counts = Counter(Path(f).name for f in files)
-    return {f: Path(f).name if counts[Path(f).name] == 1 else f for f in files}
+    return {f: display_name(Path(f).name if counts[Path(f).name] == 1 else f) for f in files}
 
 
 def _file_detector(name: str, pattern: tuple[int, int], network: str):
@@ -180,7 +184,7 @@ def _apply_size_policy(found: list[_Found], policy: str, skipped: dict) -> tuple
 
 
 def _preview(cal: Calibration, files: dict[str, str]) -> tuple[str, bytes] | None:
-    """(file name, PNG bytes) of the first used view's image of the calibration's size, undistorted.
+    """(file name, PNG bytes) of the first used view's image of the calibration's size, undistorted (grey).
 
     Images that --resize-policy brought to that size are passed over, so the preview never
     repeats the crop or scale that their corners went through.
@@ -188,15 +192,19 @@ def _preview(cal: Calibration, files: dict[str, str]) -> tuple[str, bytes] | Non
     import cv2
 
     from aicalib_tf.calib.files import undistort as _undistort
+    from aicalib_tf.io import ImageError, load_image, quantize
 
     w, h = cal.image_size
     for name in cal.views:
-        img = cv2.imread(files[name], cv2.IMREAD_COLOR)
-        if img is None or img.shape[:2] != (h, w):
+        try:
+            img = quantize(load_image(files[name]))
+        except ImageError:
+            continue
+        if img.shape[:2] != (h, w):
             continue
         ok, png = cv2.imencode(".png", _undistort(img, cal))
         if ok:
-            return f"undistorted_{Path(name).stem}.png", png.tobytes()
+            return PREVIEW_NAME, png.tobytes()
     return None
 
 
@@ -227,8 +235,8 @@ def run(cfg: CalibrateConfig) -> tuple[Calibration, str]:
     Raises ValueError / CalibrationError / FileNotFoundError for bad input, before writing anything.
     """
     from aicalib_tf.calib.files import save_calibration
-    from aicalib_tf.calib.report import format_report, report_figure
     from aicalib_tf.io import atomic_write_bytes, atomic_write_text, expand_images
+    from aicalib_tf.outfolder import OutputFolder
 
     files = expand_images(cfg.images)
     if not files:
@@ -238,10 +246,31 @@ def run(cfg: CalibrateConfig) -> tuple[Calibration, str]:
     if cfg.model != "auto" and cfg.model not in LENS_MODELS:
         raise ValueError(f"--model must be auto or one of {', '.join(LENS_MODELS)}, got {cfg.model!r}")
     detect = make_detector(cfg.detector, cfg.pattern, cfg.network)  # a bad network fails here, before any work
+    with OutputFolder(cfg.out, "calibration") as out:  # a bad --out fails here; files are swapped in at the end
+        cal, report, figure, preview = _calibrate_files(files, detect, cfg)
+        save_calibration(cal, out.path)
+        atomic_write_bytes(out.path / "report.png", figure)
+        atomic_write_text(out.path / "report.txt", report + "\n")
+        if preview is not None:
+            atomic_write_bytes(out.path / preview[0], preview[1])
+    return cal, report
+
+
+def unreadable_error(files: list[str], skipped: dict[str, str], what: str = "images") -> CalibrationError:
+    """The error for a set none of whose files could be read: the count and the first reasons."""
+    shown = "; ".join(f"{name}: {why}" for name, why in list(skipped.items())[:3])
+    more = f" (and {len(skipped) - 3} more)" if len(skipped) > 3 else ""
+    return CalibrationError(f"none of the {len(files)} {what} could be read: {shown}{more}")
+
+
+def _calibrate_files(files: list[str], detect, cfg: CalibrateConfig):
+    """Detect, calibrate, assess; returns (calibration, report text, report.png bytes, preview or None)."""
+    from aicalib_tf.calib.report import format_report, report_figure
+
     labels = _labels(files)
     found, skipped = _detect_all(files, labels, cfg)
     if not found:
-        raise CalibrationError(f"none of the {len(files)} images could be read")
+        raise unreadable_error(files, skipped)
     found, size = _apply_size_policy(found, cfg.resize_policy, skipped)
     for f in found:
         if f.view is None:
@@ -259,12 +288,4 @@ def run(cfg: CalibrateConfig) -> tuple[Calibration, str]:
     used = [by_name[n] for n in cal.views]
     cal = dataclasses.replace(cal, quality=assess(cal, used, fit=fit_views))
     report = format_report(cal, used, skipped=skipped, total=len(files))
-    figure = report_figure(cal, used)
-    preview = _preview(cal, {labels[f]: f for f in files})
-    out = Path(cfg.out)
-    save_calibration(cal, out)
-    atomic_write_bytes(out / "report.png", figure)
-    atomic_write_text(out / "report.txt", report + "\n")
-    if preview is not None:
-        atomic_write_bytes(out / preview[0], preview[1])
-    return cal, report
+    return cal, report, report_figure(cal, used), _preview(cal, {labels[f]: f for f in files})

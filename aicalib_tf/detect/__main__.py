@@ -40,26 +40,38 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(args) -> int:
-    from pathlib import Path
-
-    from tqdm import tqdm
-
     from aicalib_tf.cnn.model import file_sha256, load_model
-    from aicalib_tf.detect.batch import map_images, worker_count
-    from aicalib_tf.detect.outputs import file_detector, output_stems
-    from aicalib_tf.geometry.pattern import parse_pattern
+    from aicalib_tf.detect.batch import worker_count
+    from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
     from aicalib_tf.io import expand_images
+    from aicalib_tf.outfolder import OutputFolder
 
-    pattern = parse_pattern(args.pattern)
+    pattern = check_pattern(parse_pattern(args.pattern))
     files = expand_images(args.images)
     if not files:
         raise ValueError(f"no images match {' '.join(args.images)}")
     model = load_model(args.model)
     workers = worker_count(args.workers, len(files))
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     sha = file_sha256(model.aicalib_path) if hasattr(model, "aicalib_path") else None
     del model  # each worker (or the one process) loads its own
+    with OutputFolder(args.out, "detections") as folder:  # a bad --out fails here; swapped in at the end
+        counts, reasons, failures = _detect_into(folder.path, files, pattern, sha, workers, args)
+    print(f"{len(files)} images: {counts['complete']} full boards, {counts['partial']} partial (seen corners, ids fixed by the image), "
+          f"{counts['none']} without a board, {counts['failed']} unreadable")
+    for reason, n in reasons.most_common():
+        print(f"  no board in {n}: {reason}")
+    for msg in failures:
+        print(f"  skipped: {msg}")
+    return 0
+
+
+def _detect_into(out, files, pattern, sha, workers, args):
+    """Detect every file, writing its overlay and corners into ``out``; returns (counts, reasons, failures)."""
+    from tqdm import tqdm
+
+    from aicalib_tf.detect.batch import map_images
+    from aicalib_tf.detect.outputs import file_detector, output_stems
+
     counts = {"complete": 0, "partial": 0, "none": 0, "failed": 0}
     reasons: Counter[str] = Counter()
     failures = []
@@ -71,13 +83,7 @@ def _main(args) -> int:
             failures.append(why)
         elif kind == "none":
             reasons[why] += 1
-    print(f"{len(files)} images: {counts['complete']} full boards, {counts['partial']} partial (seen corners, ids fixed by the image), "
-          f"{counts['none']} without a board, {counts['failed']} unreadable")
-    for reason, n in reasons.most_common():
-        print(f"  no board in {n}: {reason}")
-    for msg in failures:
-        print(f"  skipped: {msg}")
-    return 0
+    return counts, reasons, failures
 
 
 if __name__ == "__main__":

@@ -190,8 +190,9 @@ def test_cli_on_opencv_left_matches_the_reference(tmp_path, capsys):
     assert cal.meta["detector"] == "cnn" and len(cal.meta["model_sha256"]) == 64
     files = {p.name for p in (tmp_path / "c").iterdir()}
     assert {"camera.yaml", "camera.json", "camera_info.yaml", "report.png", "report.txt"} <= files
-    assert any(f.startswith("undistorted_") for f in files)
-    assert not any(f.startswith(".") for f in files)  # no temporary files left behind
+    assert "undistorted.png" in files
+    assert not any(f.startswith(".") and f != ".aicalib" for f in files)  # no temporary files left behind
+    assert not list(tmp_path.glob(".aicalib-*.tmp-*"))  # nor a staging folder
     assert cv2.imread(str(tmp_path / "c" / "report.png")).shape[1] > 1000
 
 

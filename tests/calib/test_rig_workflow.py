@@ -92,3 +92,26 @@ def test_rig_cli_bad_input(rig_photos, tmp_path, capsys):
     assert main([f"{root}/left/*.png", "--pattern", "9x6", "--model", "plumb_bob,equidistant"]) == 2
     assert "goes with --rig" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_rig_of_one_camera_with_copies_of_its_images_is_failed_not_good(rig_photos, tmp_path, capsys):
+    """The same photos under two names: no baseline. Exit 1, rig.json says failed, no stereo files."""
+    import shutil
+
+    root, _ = rig_photos
+    shutil.copytree(root / "left", tmp_path / "copy")
+    out = tmp_path / "out"
+    code = main(["--rig", f"cam0={root / 'left' / '*.png'}", f"cam1={tmp_path / 'copy' / '*.png'}", "--pattern", "9x6",
+                 "--square", "25mm", "--model", "plumb_bob", "--out", str(out), "--quiet"])
+    text = capsys.readouterr().out
+    assert code == 1 and "FAILED" in text and "same images" in text
+    rig = json.loads((out / "rig.json").read_text())
+    assert rig["quality"]["status"] == "failed" and rig["quality"]["problems"]
+    assert (out / "cam0" / "camera.yaml").exists() and not (out / "intrinsics.yml").exists()
+
+
+def test_rig_given_one_folder_twice_is_refused(rig_photos, tmp_path, capsys):
+    root, _ = rig_photos
+    pattern = str(root / "left" / "*.png")
+    assert main(["--rig", f"cam0={pattern}", f"cam1={pattern}", "--pattern", "9x6", "--out", str(tmp_path / "o")]) == 2
+    assert "the same image file" in capsys.readouterr().err and not (tmp_path / "o").exists()
