@@ -20,8 +20,10 @@ from __future__ import annotations
 
 import asyncio
 import json
+import sys
 import threading
 import time
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +39,7 @@ COVERAGE_CELLS = (8, 6)  # the coverage map the page draws (cols, rows)
 PAGE = Path(__file__).with_name("page.html")
 MAX_FRAME_BYTES = 8 << 20  # a websocket frame larger than this is refused
 JPEG_QUALITY = 80  # frames sent to the page
+FPS_WINDOW = 30  # frames over which the handled frame rate is measured
 
 
 @dataclass(frozen=True)
@@ -93,6 +96,7 @@ class LiveState:
                                                       cfg.target_px, cfg.max_views, gate=False), detector)
         self.last: dict = {}
         self.index = 0
+        self.times: deque = deque(maxlen=FPS_WINDOW)  # when the last frames were handled (monotonic s)
         self.lock = threading.Lock()  # the session is used from the worker thread only; saves take it too
 
     def add_gray(self, gray: np.ndarray) -> dict:
@@ -102,7 +106,11 @@ class LiveState:
             update = self.session.add((self.index, t, gray))
             self.index += 1
             self.last = update_json(update, self.session)
-            self.last["ms"] = round((time.monotonic() - t) * 1000, 1)
+            now = time.monotonic()
+            self.times.append(now)
+            span = now - self.times[0]
+            self.last["ms"] = round((now - t) * 1000, 1)
+            self.last["fps"] = round((len(self.times) - 1) / span, 1) if span > 0 else None
         return self.last
 
     def add_jpeg(self, data: bytes) -> dict:
@@ -118,7 +126,7 @@ class LiveState:
 
     def save(self) -> tuple[str, str]:
         """Calibrate the kept views and write the files into ``cfg.out``; returns (out, report)."""
-        from aicalib_tf.guided.workflow import save_session
+        from aicalib_tf.guided.save import save_session
 
         meta = {"source": self.cfg.source or "browser camera", "detector": self.cfg.detector,
                 "model": self.detector.info.get("model"), "model_sha256": self.detector.info.get("sha256"),
@@ -198,6 +206,7 @@ def make_app(state: LiveState):
         except Exception as exc:  # noqa: BLE001 - the page shows the reason
             from aicalib_tf.cli import describe_error
 
+            print(f"not saved: {describe_error(exc)}", file=sys.stderr, flush=True)
             return web.json_response({"ok": False, "error": describe_error(exc)})
         print(f"saved the calibration into {out}", flush=True)
         return web.json_response({"ok": True, "out": out, "report": report})
