@@ -1,0 +1,260 @@
+"""The live calibration page's server: frames in, the guided loop, updates out, a save on request.
+
+Two ways frames arrive, one loop (:class:`~aicalib_tf.guided.session.GuidedCalibration`) for both:
+
+* **the browser's camera** (``getUserMedia``): the page sends one JPEG frame over the websocket
+  and sends the next only when the update for it has come back, taking whatever frame its camera
+  shows then. Detection keeps up by skipping frames, never by queueing them;
+* **a server-side source** (a video file, a camera index, a stream URL; :mod:`aicalib_tf.sources`):
+  a reader thread keeps only the newest frame (a video file plays at its own frame rate), the loop
+  takes the newest when it is free, and the page receives each examined frame (JPEG) and its update.
+
+Routes: ``GET /`` the page, ``GET /config`` its settings (JSON), ``GET /ws`` the websocket,
+``GET /state`` the last update (JSON), ``POST /save`` the calibration so far into ``--out``
+(the files of ``python -m aicalib_tf.calibrate``; JSON ``{"ok", "out", "report"}`` or
+``{"ok": false, "error"}``). The server is aiohttp; detection and fitting run in one worker thread
+so that the page stays responsive.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import sys
+import threading
+import time
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from aicalib_tf.calib.quality import coverage_counts
+
+__all__ = ["LiveConfig", "LiveState", "make_app", "update_json", "COVERAGE_CELLS"]
+
+COVERAGE_CELLS = (8, 6)  # the coverage map the page draws (cols, rows)
+PAGE = Path(__file__).with_name("page.html")
+MAX_FRAME_BYTES = 8 << 20  # a websocket frame larger than this is refused
+JPEG_QUALITY = 80  # frames sent to the page
+FPS_WINDOW = 30  # frames over which the handled frame rate is measured
+
+
+@dataclass(frozen=True)
+class LiveConfig:
+    """The page's settings. source : None (the browser's camera) or a video path, camera index or URL."""
+
+    pattern: tuple[int, int]
+    square: float = 1.0
+    square_unit: str = ""
+    out: str = "calib"
+    source: str | None = None
+    detector: str = "cnn"
+    network: str = "default"
+    model: str = "auto"
+    target_px: float = 0.1
+    max_views: int = 40
+
+
+def _finite(x):
+    """A float for JSON, None when not finite (strict JSON has no NaN)."""
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+def update_json(update, session) -> dict:
+    """One update as the page reads it (strict JSON types; no NaN)."""
+    est = update.estimate
+    size = session.image_size or (1, 1)
+    cover = coverage_counts(session.views, size, COVERAGE_CELLS) if session.views else np.zeros(COVERAGE_CELLS[::-1])
+    return {
+        "index": int(update.index), "examined": bool(update.examined), "kept": bool(update.kept),
+        "reason": update.reason, "done": bool(update.done), "image_size": list(size),
+        "corners": [] if update.corners is None else np.round(np.asarray(update.corners), 2).tolist(),
+        "guidance": update.guidance.text if update.guidance is not None else None,
+        "missing": list(update.missing),
+        "estimate": None if est is None else {
+            "model": est.model, "fx": _finite(est.K[0, 0]), "fy": _finite(est.K[1, 1]), "cx": _finite(est.K[0, 2]),
+            "cy": _finite(est.K[1, 2]), "rms": _finite(est.rms), "views": int(est.views),
+            "sigma_px": _finite(est.sigma_px), "covered": _finite(est.covered)},
+        "coverage": cover.astype(int).tolist(),
+        "frames": int(session.frames_seen), "examined_frames": int(session.examined), "views": len(session.views),
+    }
+
+
+class LiveState:
+    """The loop and what the page needs of it; one per server. ``detector`` as for the guided loop."""
+
+    def __init__(self, cfg: LiveConfig, detector):
+        from aicalib_tf.guided.session import GuidedCalibration, GuidedConfig
+
+        self.cfg = cfg
+        self.detector = detector
+        self.session = GuidedCalibration(GuidedConfig(cfg.pattern, cfg.square, cfg.square_unit, cfg.model,
+                                                      cfg.target_px, cfg.max_views, gate=False), detector)
+        self.last: dict = {}
+        self.index = 0
+        self.times: deque = deque(maxlen=FPS_WINDOW)  # when the last frames were handled (monotonic s)
+        self.lock = threading.Lock()  # the session is used from the worker thread only; saves take it too
+
+    def add_gray(self, gray: np.ndarray) -> dict:
+        """Run one (H, W) uint8 frame through the loop; returns its update as JSON-able dict."""
+        with self.lock:
+            t = time.monotonic()
+            update = self.session.add((self.index, t, gray))
+            self.index += 1
+            self.last = update_json(update, self.session)
+            now = time.monotonic()
+            self.times.append(now)
+            span = now - self.times[0]
+            self.last["ms"] = round((now - t) * 1000, 1)
+            self.last["fps"] = round((len(self.times) - 1) / span, 1) if span > 0 else None
+        return self.last
+
+    def add_jpeg(self, data: bytes) -> dict:
+        """Decode one frame the page sent (JPEG or PNG bytes) and run it; ValueError when it is not an image."""
+        from aicalib_tf.io import quantize, to_gray_float
+
+        if len(data) > MAX_FRAME_BYTES:
+            raise ValueError(f"frame of {len(data)} bytes is larger than {MAX_FRAME_BYTES}")
+        img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+        if img is None:
+            raise ValueError("the page sent a frame that is not a JPEG or PNG image")
+        return self.add_gray(quantize(to_gray_float(img, "frame")))
+
+    def save(self) -> tuple[str, str]:
+        """Calibrate the kept views and write the files into ``cfg.out``; returns (out, report)."""
+        from aicalib_tf.guided.save import save_session
+
+        meta = {"source": self.cfg.source or "browser camera", "detector": self.cfg.detector,
+                "model": self.detector.info.get("model"), "model_sha256": self.detector.info.get("sha256"),
+                "lens_model": self.cfg.model, "frames": self.session.frames_seen, "examined": self.session.examined,
+                "kept_frames": self.session.kept_frames, "target_px": self.cfg.target_px, "live": True}
+        with self.lock:
+            report = save_session(self.session, self.cfg.out, meta, head=[f"live page: {meta['source']}"])
+        return self.cfg.out, report
+
+
+def _paced(source, stop: threading.Event):
+    """Frames of ``source`` as a camera would give them: a file plays at its frame rate, and a frame
+    whose time has passed while the loop was busy is dropped (counted), so the loop never lags."""
+    start = time.monotonic()
+    for frame in source:
+        if stop.is_set():
+            return
+        if source.live or not source.fps:
+            yield frame
+            continue
+        ahead = frame.time_s - (time.monotonic() - start)
+        if ahead < -1.0 / source.fps:
+            source.dropped += 1
+            continue
+        if ahead > 0:
+            time.sleep(ahead)
+        yield frame
+
+
+def _source_thread(state: LiveState, loop: asyncio.AbstractEventLoop, queue: asyncio.Queue, stop: threading.Event):
+    """Read the server-side source; run its newest frame whenever the loop is free; push (jpeg, update)."""
+    from aicalib_tf.sources import open_source
+
+    try:
+        with open_source(state.cfg.source) as source:
+            for frame in _paced(source, stop):
+                update = dict(state.add_gray(frame.gray), dropped=int(source.dropped))
+                ok, jpg = cv2.imencode(".jpg", frame.gray, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+                loop.call_soon_threadsafe(_offer, queue, (jpg.tobytes() if ok else b"", update))
+        loop.call_soon_threadsafe(_offer, queue, (b"", dict(state.last, ended=True)))
+    except Exception as exc:  # noqa: BLE001 - reported on the page and the console, one line
+        from aicalib_tf.cli import describe_error
+
+        loop.call_soon_threadsafe(_offer, queue, (b"", {"error": f"{state.cfg.source}: {describe_error(exc)}"}))
+
+
+def _offer(queue: asyncio.Queue, item) -> None:
+    """Put ``item``, dropping the oldest when the page is behind (never a growing queue)."""
+    while queue.full():
+        queue.get_nowait()
+    queue.put_nowait(item)
+
+
+def make_app(state: LiveState):
+    """The aiohttp application serving the page for ``state``."""
+    from aiohttp import WSMsgType, web
+
+    executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="aicalib-live")
+    app = web.Application(client_max_size=MAX_FRAME_BYTES)
+    stop = threading.Event()
+    listeners: set = set()
+
+    async def page(_request):
+        return web.FileResponse(PAGE)
+
+    async def config(_request):
+        cfg = state.cfg
+        return web.json_response({"mode": "server" if cfg.source else "browser", "pattern": list(cfg.pattern),
+                                  "target_px": cfg.target_px, "max_views": cfg.max_views, "out": cfg.out})
+
+    async def last(_request):
+        return web.json_response(state.last)
+
+    async def save(_request):
+        try:
+            out, report = await asyncio.get_running_loop().run_in_executor(executor, state.save)
+        except Exception as exc:  # noqa: BLE001 - the page shows the reason
+            from aicalib_tf.cli import describe_error
+
+            print(f"not saved: {describe_error(exc)}", file=sys.stderr, flush=True)
+            return web.json_response({"ok": False, "error": describe_error(exc)})
+        print(f"saved the calibration into {out}", flush=True)
+        return web.json_response({"ok": True, "out": out, "report": report})
+
+    async def socket(request):
+        ws = web.WebSocketResponse(max_msg_size=MAX_FRAME_BYTES)
+        await ws.prepare(request)
+        listeners.add(ws)
+        try:
+            async for msg in ws:
+                if msg.type != WSMsgType.BINARY or state.cfg.source:
+                    continue
+                try:
+                    update = await asyncio.get_running_loop().run_in_executor(executor, state.add_jpeg, msg.data)
+                except ValueError as exc:
+                    update = {"error": str(exc)}
+                await ws.send_str(json.dumps(update, allow_nan=False))
+        finally:
+            listeners.discard(ws)
+        return ws
+
+    async def pump(app_):
+        if not state.cfg.source:
+            return
+        queue: asyncio.Queue = asyncio.Queue(maxsize=2)
+        threading.Thread(target=_source_thread, args=(state, asyncio.get_running_loop(), queue, stop),
+                         daemon=True).start()
+
+        async def forward():
+            while True:
+                jpg, update = await queue.get()
+                for ws in list(listeners):
+                    if jpg:
+                        await ws.send_bytes(jpg)
+                    await ws.send_str(json.dumps(update, allow_nan=False))
+        app_["pump"] = asyncio.get_running_loop().create_task(forward())
+
+    async def cleanup(app_):
+        stop.set()
+        if "pump" in app_:
+            app_["pump"].cancel()
+        executor.shutdown(wait=False, cancel_futures=True)
+
+    app.router.add_get("/", page)
+    app.router.add_get("/config", config)
+    app.router.add_get("/state", last)
+    app.router.add_post("/save", save)
+    app.router.add_get("/ws", socket)
+    app.on_startup.append(pump)
+    app.on_cleanup.append(cleanup)
+    return app
