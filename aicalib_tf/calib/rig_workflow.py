@@ -17,7 +17,6 @@ from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
-from aicalib_tf.calib.bundle import CalibrationError
 
 __all__ = ["RigConfig", "Pairing", "parse_rig", "pair_images", "run_rig"]
 

@@ -9,14 +9,11 @@ run stopped before its end (Ctrl-C, or a live stream that stops) writes nothing 
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
-from aicalib_tf.calib.fit import Calibration, CalibrationError, fit_views
-from aicalib_tf.calib.quality import assess
+from aicalib_tf.calib.fit import Calibration, CalibrationError
 from aicalib_tf.guided.session import GuidedCalibration, GuidedConfig
 
 __all__ = ["GuidedRunConfig", "run_guided", "progress_line", "summary_lines", "guided_source", "parse_target"]
@@ -102,12 +99,16 @@ def _loop(session: GuidedCalibration, source, quiet: bool) -> str:
 def run_guided(cfg: GuidedRunConfig) -> tuple[Calibration, str]:
     """Run the loop over the source, calibrate the kept views, write the files; returns (calibration, report).
 
-    Raises OSError / ValueError naming the source for a missing or unreadable one, CalibrationError
-    when no board (or too few views) came out of it; nothing is written then.
+    Raises OSError / ValueError naming the source for a missing or unreadable one (or a bad
+    ``out``, before any frame is read), CalibrationError when no board (or too few views) came out
+    of it; nothing is written then.
     """
     from aicalib_tf.calib.workflow import make_detector
+    from aicalib_tf.guided.save import calibrate_session, save_calibration_set
+    from aicalib_tf.outfolder import check_out_path
     from aicalib_tf.sources import open_source
 
+    check_out_path(cfg.out)
     detect = make_detector(cfg.detector, cfg.pattern, cfg.network)
     session = GuidedCalibration(GuidedConfig(cfg.pattern, cfg.square, cfg.square_unit, cfg.model, cfg.target_px,
                                              cfg.max_views, gate=not cfg.examine_all), detect)
@@ -127,29 +128,12 @@ def run_guided(cfg: GuidedRunConfig) -> tuple[Calibration, str]:
     if not session.views and not partial:
         raise CalibrationError(f"{name}: no {cfg.pattern[0]}x{cfg.pattern[1]} board found in the {session.examined} "
                                f"frames examined (of {session.frames_seen})")
-    if len(session.views) < 3:
-        raise CalibrationError(f"{name}: only {len(session.views)} usable views of the board; need at least 3")
     meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
             "lens_model": cfg.model, "source": name, "frames": session.frames_seen, "examined": session.examined,
             "dropped": dropped, "kept_frames": session.kept_frames, "target_px": cfg.target_px,
             "stopped": stopped, "partial": partial}
-    cal = session.result(meta=meta)
-    used = [v for v in session.views if v.name in set(cal.views)]
-    cal = dataclasses.replace(cal, quality=assess(cal, used, fit=fit_views))
-    return cal, _write(cal, used, cfg, summary_lines(session, name, stopped))
-
-
-def _write(cal: Calibration, used, cfg: GuidedRunConfig, head: list[str]) -> str:
-    from aicalib_tf.calib.files import save_calibration
-    from aicalib_tf.calib.report import format_report, report_figure
-    from aicalib_tf.io import atomic_write_bytes, atomic_write_text
-
-    report = "\n".join(head + [format_report(cal, used, skipped={}, total=len(used) + len(cal.rejected))])
-    if cal.meta.get("partial"):
-        report = "PARTIAL calibration (the run was stopped early)\n" + report
-    figure = report_figure(cal, used)
-    out = Path(cfg.out)
-    save_calibration(cal, out)
-    atomic_write_bytes(out / "report.png", figure)
-    atomic_write_text(out / "report.txt", report + "\n")
-    return report
+    try:
+        cal, used = calibrate_session(session, meta)
+    except CalibrationError as exc:
+        raise CalibrationError(f"{name}: {exc}") from None
+    return cal, save_calibration_set(cal, used, cfg.out, summary_lines(session, name, stopped))

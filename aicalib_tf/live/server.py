@@ -19,7 +19,6 @@ so that the page stays responsive.
 from __future__ import annotations
 
 import asyncio
-import json
 import sys
 import threading
 import time
@@ -180,81 +179,109 @@ def _offer(queue: asyncio.Queue, item) -> None:
     queue.put_nowait(item)
 
 
-def make_app(state: LiveState):
-    """The aiohttp application serving the page for ``state``."""
-    from aiohttp import WSMsgType, web
+class _Routes:
+    """The page's request handlers over one :class:`LiveState` (one worker thread runs the loop)."""
 
-    executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="aicalib-live")
-    app = web.Application(client_max_size=MAX_FRAME_BYTES)
-    stop = threading.Event()
-    listeners: set = set()
+    def __init__(self, state: LiveState):
+        self.state = state
+        self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="aicalib-live")
+        self.stop = threading.Event()
+        self.listeners: set = set()
 
-    async def page(_request):
+    async def _in_worker(self, fn, *args):
+        return await asyncio.get_running_loop().run_in_executor(self.executor, fn, *args)
+
+    async def page(self, _request):
+        from aiohttp import web
+
         return web.FileResponse(PAGE)
 
-    async def config(_request):
-        cfg = state.cfg
+    async def config(self, _request):
+        from aiohttp import web
+
+        cfg = self.state.cfg
         return web.json_response({"mode": "server" if cfg.source else "browser", "pattern": list(cfg.pattern),
                                   "target_px": cfg.target_px, "max_views": cfg.max_views, "out": cfg.out})
 
-    async def last(_request):
-        return web.json_response(state.last)
+    async def last(self, _request):
+        from aiohttp import web
 
-    async def save(_request):
+        return web.json_response(self.state.last, dumps=_strict_dumps)
+
+    async def save(self, _request):
+        from aiohttp import web
+
+        from aicalib_tf.cli import describe_error
+
         try:
-            out, report = await asyncio.get_running_loop().run_in_executor(executor, state.save)
-        except Exception as exc:  # noqa: BLE001 - the page shows the reason
-            from aicalib_tf.cli import describe_error
-
+            out, report = await self._in_worker(self.state.save)
+        except Exception as exc:  # noqa: BLE001 - the page and the console show the reason
             print(f"not saved: {describe_error(exc)}", file=sys.stderr, flush=True)
             return web.json_response({"ok": False, "error": describe_error(exc)})
         print(f"saved the calibration into {out}", flush=True)
         return web.json_response({"ok": True, "out": out, "report": report})
 
-    async def socket(request):
+    async def socket(self, request):
+        """The browser's frames in (binary JPEG), one update out per frame (JSON)."""
+        from aiohttp import WSMsgType, web
+
         ws = web.WebSocketResponse(max_msg_size=MAX_FRAME_BYTES)
         await ws.prepare(request)
-        listeners.add(ws)
+        self.listeners.add(ws)
         try:
             async for msg in ws:
-                if msg.type != WSMsgType.BINARY or state.cfg.source:
+                if msg.type != WSMsgType.BINARY or self.state.cfg.source:
                     continue
                 try:
-                    update = await asyncio.get_running_loop().run_in_executor(executor, state.add_jpeg, msg.data)
+                    update = await self._in_worker(self.state.add_jpeg, msg.data)
                 except ValueError as exc:
                     update = {"error": str(exc)}
-                await ws.send_str(json.dumps(update, allow_nan=False))
+                await ws.send_str(_strict_dumps(update))
         finally:
-            listeners.discard(ws)
+            self.listeners.discard(ws)
         return ws
 
-    async def pump(app_):
-        if not state.cfg.source:
+    async def start_source(self, app) -> None:
+        """With a server-side source: its reader thread, and a task forwarding frames and updates to the pages."""
+        if not self.state.cfg.source:
             return
         queue: asyncio.Queue = asyncio.Queue(maxsize=2)
-        threading.Thread(target=_source_thread, args=(state, asyncio.get_running_loop(), queue, stop),
+        threading.Thread(target=_source_thread, args=(self.state, asyncio.get_running_loop(), queue, self.stop),
                          daemon=True).start()
 
         async def forward():
             while True:
                 jpg, update = await queue.get()
-                for ws in list(listeners):
+                for ws in list(self.listeners):
                     if jpg:
                         await ws.send_bytes(jpg)
-                    await ws.send_str(json.dumps(update, allow_nan=False))
-        app_["pump"] = asyncio.get_running_loop().create_task(forward())
+                    await ws.send_str(_strict_dumps(update))
+        app["pump"] = asyncio.get_running_loop().create_task(forward())
 
-    async def cleanup(app_):
-        stop.set()
-        if "pump" in app_:
-            app_["pump"].cancel()
-        executor.shutdown(wait=False, cancel_futures=True)
+    async def cleanup(self, app) -> None:
+        self.stop.set()
+        if "pump" in app:
+            app["pump"].cancel()
+        self.executor.shutdown(wait=False, cancel_futures=True)
 
-    app.router.add_get("/", page)
-    app.router.add_get("/config", config)
-    app.router.add_get("/state", last)
-    app.router.add_post("/save", save)
-    app.router.add_get("/ws", socket)
-    app.on_startup.append(pump)
-    app.on_cleanup.append(cleanup)
+
+def _strict_dumps(obj) -> str:
+    from aicalib_tf.jsonio import dumps
+
+    return dumps(obj, indent=None)
+
+
+def make_app(state: LiveState):
+    """The aiohttp application serving the page for ``state`` (routes in the module docstring)."""
+    from aiohttp import web
+
+    routes = _Routes(state)
+    app = web.Application(client_max_size=MAX_FRAME_BYTES)
+    app.router.add_get("/", routes.page)
+    app.router.add_get("/config", routes.config)
+    app.router.add_get("/state", routes.last)
+    app.router.add_post("/save", routes.save)
+    app.router.add_get("/ws", routes.socket)
+    app.on_startup.append(routes.start_source)
+    app.on_cleanup.append(routes.cleanup)
     return app
