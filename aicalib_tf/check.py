@@ -184,32 +184,16 @@ def _detect_frames(video: str, cal, cfg: CheckConfig):
 
 
 def video_frames(path: str, every: int = 10, limit: int = 200):
-    """(frame index, BGR uint8 frame) for every ``every``-th frame of a video file, at most ``limit``.
+    """(frame index, (H, W) uint8 grey frame) for every ``every``-th frame of a video file, at most
+    ``limit``, through the shared frame iterator (:class:`aicalib_tf.sources.VideoFile`). Raises
+    FileNotFoundError / ValueError naming a file that is missing or not a readable video."""
+    from itertools import islice
 
-    A small local reader with ``cv2.VideoCapture``; a shared frame iterator can replace it.
-    Raises ValueError when the file cannot be opened as a video.
-    """
-    import cv2
+    from aicalib_tf.sources import VideoFile
 
-    if not Path(path).is_file():
-        raise FileNotFoundError(f"{path}: no such video file")
-    cap = cv2.VideoCapture(str(path))
-    try:
-        if not cap.isOpened():
-            raise ValueError(f"{path}: cannot be read as a video")
-        index = taken = 0
-        while taken < limit:
-            ok = cap.grab()
-            if not ok:
-                break
-            if index % every == 0:
-                ok, frame = cap.retrieve()
-                if ok:
-                    taken += 1
-                    yield index, frame
-            index += 1
-    finally:
-        cap.release()
+    with VideoFile(path) as source:
+        for frame in islice((f for f in source if f.index % every == 0), limit):
+            yield frame.index, frame.gray
 
 
 if __name__ == "__main__":
