@@ -233,7 +233,8 @@ def undistort_camera_matrix(cal: Calibration, alpha: float = 0.0) -> np.ndarray:
     """(3, 3) camera matrix of the ideal pinhole image :func:`undistort` produces.
 
     Pinhole models: ``cv2.getOptimalNewCameraMatrix`` (alpha 0 keeps only valid pixels, 1 keeps
-    every source pixel). ``equidistant`` (a pinhole cannot show 180°): the principal point at the
+    every source pixel). The fisheye models (``IS_FISHEYE``: equidistant, ds, eucm; a pinhole
+    cannot show 180°): the principal point at the
     image centre and a focal f = (1 − alpha)·fx + alpha·f₁ (likewise for y), where f₁ makes the
     output's left/right edges see the lens's horizontal half-field, capped at 75°
     (:data:`MAX_FISHEYE_HALF_ANGLE_DEG`): alpha 0 keeps the central magnification and crops the
@@ -244,11 +245,11 @@ def undistort_camera_matrix(cal: Calibration, alpha: float = 0.0) -> np.ndarray:
         raise ValueError(f"alpha must be in [0, 1], got {alpha!r}")
     lens = lens_of(cal)
     w, h = lens.image_size
-    if lens.model != "equidistant":
+    if not lens.spec.IS_FISHEYE:
         new_K, _ = cv2.getOptimalNewCameraMatrix(lens.K, lens.dist, (w, h), a)
         return np.asarray(new_K, np.float64)
-    half = float(np.radians(lens.field_of_view()["horizontal"]) / 2)  # NaN when the edge has no ray
-    half = min(half if np.isfinite(half) else np.pi, np.radians(MAX_FISHEYE_HALF_ANGLE_DEG))
+    half = float(np.radians(lens.field_of_view()["horizontal"]) / 2)
+    half = min(half, np.radians(MAX_FISHEYE_HALF_ANGLE_DEG))
     f1 = 0.5 * w / np.tan(half)
     fx, fy = (1 - a) * lens.fx + a * f1, (1 - a) * lens.fy + a * f1 * lens.fy / lens.fx
     return np.array([[fx, 0.0, (w - 1) / 2], [0.0, fy, (h - 1) / 2], [0.0, 0.0, 1.0]])

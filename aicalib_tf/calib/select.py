@@ -29,12 +29,12 @@ from __future__ import annotations
 import numpy as np
 
 from aicalib_tf.calib.bundle import CalibrationError, solve_pose
-from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens
+from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens, get_model
 from aicalib_tf.geometry.pattern import board_points
 
 __all__ = ["select_model", "cross_validate", "choose", "COMPLEXITY"]
 
-COMPLEXITY = ("plumb_bob", "equidistant", "rational_polynomial", "thin_prism")  # simplest first, see above
+COMPLEXITY = tuple(sorted(MODELS, key=lambda m: get_model(m).RANK))  # simplest first (each model's RANK), see above
 MAX_FOLDS = 5
 MIN_CV_VIEWS = 4  # every fold then leaves at least 3 views to fit
 
@@ -83,6 +83,16 @@ def choose(rows: list[dict]) -> str | None:
     return min(near, key=lambda r: COMPLEXITY.index(r["model"]))["model"]
 
 
+def _fit(fit, views, model, start):
+    """``fit`` from ``start``; from scratch when that start fails."""
+    if start is not None:
+        try:
+            return fit(views, model, start)
+        except CalibrationError:
+            pass
+    return fit(views, model, None)
+
+
 def select_model(views, square_size: float, fit, models=MODELS):
     """Cross-validate each model and choose one: returns (table, chosen model, its all-views fit).
 
@@ -94,11 +104,10 @@ def select_model(views, square_size: float, fit, models=MODELS):
     for model in models:
         row = {"model": model, "n_params": 4 + N_COEFFS[model], "rms": float("nan"), "cv_rms": float("nan"),
                "cv_se": float("nan"), "chosen": False, "note": ""}
-        start = None
-        if model in ("rational_polynomial", "thin_prism") and "plumb_bob" in fits:  # one OpenCV start for the family
-            start = Lens.from_intrinsics("plumb_bob", fits["plumb_bob"].intrinsics, (1, 1))
+        warm = get_model(model).WARM_FROM  # e.g. one OpenCV start for the pinhole family
+        start = Lens.from_intrinsics(warm, fits[warm].intrinsics, (1, 1)) if warm in fits else None
         try:
-            fits[model] = fit(views, model, start)
+            fits[model] = _fit(fit, views, model, start)
             row["rms"] = fits[model].rms
             if len(views) >= MIN_CV_VIEWS:
                 row["cv_rms"], row["cv_se"] = cross_validate(views, square_size, fit, model, fits[model])
