@@ -13,7 +13,7 @@ worst view goes at a time. At most a third of the views are rejected, never belo
 
 The fit is one least-squares bundle over all views (:mod:`aicalib_tf.calib.bundle`). Starts: the
 pinhole models from OpenCV's multi-start plumb_bob fit; the fisheye models (equidistant, ds, eucm) from a grid of focal lengths
-(:func:`~aicalib_tf.calib.bundle.fisheye_start`), so fisheye lenses need no guess. ``model="auto"``
+(:func:`~aicalib_tf.calib.starts.fisheye_start`), so fisheye lenses need no guess. ``model="auto"``
 picks the model by cross-validation over views (:mod:`aicalib_tf.calib.select`).
 
 Parameter standard deviations and the covariance are σ²·(JᵀJ)⁻¹ at the minimum: they describe the
@@ -28,9 +28,9 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from aicalib_tf.calib.bundle import (BundleResult, CalibrationError, bundle_adjust, convert_start, fisheye_start,
-                                     param_names, poses_from_rays)
+from aicalib_tf.calib.bundle import BundleResult, CalibrationError, bundle_adjust, param_names, poses_from_rays
 from aicalib_tf.calib.select import select_model
+from aicalib_tf.calib.starts import convert_start, fisheye_start, widest_angle
 from aicalib_tf.calib.view_checks import MIN_VIEW_CORNERS, duplicates, view_problem
 from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens, get_model, model_from_ros, project
 from aicalib_tf.geometry.pattern import board_points, check_pattern
@@ -244,7 +244,7 @@ def _fit_model(model: str, views: list[View], square_size: float, image_size, st
 
     From scratch, the pinhole models (``START == "opencv"``) start from OpenCV's multi-start
     plumb_bob fit (extra coefficients 0) and the fisheye models from
-    :func:`~aicalib_tf.calib.bundle.fisheye_start`. ``fix_k3`` holds k3 at 0 (models with ``FIX_K3``).
+    :func:`~aicalib_tf.calib.starts.fisheye_start`. ``fix_k3`` holds k3 at 0 (models with ``FIX_K3``).
     Raises CalibrationError naming the model when it cannot be fitted (a rank-deficient fit only
     when ``rank_strict``).
     """
@@ -256,7 +256,7 @@ def _fit_model(model: str, views: list[View], square_size: float, image_size, st
         free[4 + spec.FIX_K3] = False
     if start is not None:
         lens0 = start.lens if isinstance(start, Calibration) else start
-        intr = convert_start(lens0, model)
+        intr = convert_start(lens0, model, widest_angle(lens0, px))
         poses = poses_from_rays(lens0, obj, px)
         if poses is None:
             raise CalibrationError(f"{model}: the start lens sees no board in front of it in some view")

@@ -266,4 +266,4 @@ RATIONAL_POLYNOMIAL = PinholeModel("rational_polynomial", _K + ("k4", "k5", "k6"
                                    warm_from="plumb_bob", extras=("k4", "k5", "k6"), lengths=_OPENCV_LENGTHS,
                                    resolve={4: "plumb_bob", 5: "plumb_bob", 12: "thin_prism", 14: "thin_prism"})
 THIN_PRISM = PinholeModel("thin_prism", _K + ("k4", "k5", "k6", "s1", "s2", "s3", "s4"), "rational_polynomial", 5,
-                          warm_from="plumb_bob", extras=("s1", "s2", "s3", "s4"), lengths=(12, 14))
+                          warm_from="plumb_bob", extras=("k4", "k5", "k6", "s1", "s2", "s3", "s4"), lengths=(12, 14))

@@ -10,14 +10,16 @@ fit, the model choice and the file writers read its attributes (``IS_FISHEYE``, 
 
 from __future__ import annotations
 
+from ._double_sphere import DOUBLE_SPHERE
 from ._equidistant import EQUIDISTANT
+from ._eucm import EUCM
 from ._pinhole import PLUMB_BOB, RATIONAL_POLYNOMIAL, THIN_PRISM
 from .lens_model import LensModel
 
 __all__ = ["REGISTRY", "MODELS", "get_model", "model_from_file_name"]
 
 REGISTRY: dict[str, LensModel] = {m.NAME: m for m in (
-    PLUMB_BOB, RATIONAL_POLYNOMIAL, THIN_PRISM, EQUIDISTANT)}
+    PLUMB_BOB, RATIONAL_POLYNOMIAL, THIN_PRISM, EQUIDISTANT, DOUBLE_SPHERE, EUCM)}
 MODELS = tuple(REGISTRY)
 
 

@@ -21,6 +21,8 @@ DISTS = {
     "rational_polynomial": [0.45, -0.12, 1e-3, -8e-4, 0.02, 0.75, 0.04, 0.012],
     "thin_prism": [0.45, -0.12, 1e-3, -8e-4, 0.02, 0.75, 0.04, 0.012, 1.5e-3, -3e-4, -8e-4, 2e-4],
     "equidistant": [0.02, -0.005, 0.001, -0.0002],
+    "ds": [-0.18, 0.59],
+    "eucm": [0.63, 1.08],
 }
 PINHOLE = ("plumb_bob", "rational_polynomial", "thin_prism")
 
@@ -50,8 +52,9 @@ def _unit(v):
 
 # ----------------------------------------------------------------------------- tables and validation
 def test_tables_are_consistent():
-    assert lens.MODELS == ("plumb_bob", "rational_polynomial", "thin_prism", "equidistant")
-    assert lens.N_COEFFS == {"plumb_bob": 5, "rational_polynomial": 8, "thin_prism": 12, "equidistant": 4}
+    assert lens.MODELS == ("plumb_bob", "rational_polynomial", "thin_prism", "equidistant", "ds", "eucm")
+    assert lens.N_COEFFS == {"plumb_bob": 5, "rational_polynomial": 8, "thin_prism": 12, "equidistant": 4, "ds": 2,
+                             "eucm": 2}
     for m in lens.MODELS:
         assert len(lens.COEFF_NAMES[m]) == lens.N_COEFFS[m]
         assert lens.model_from_ros(lens.ROS_NAMES[m], lens.N_COEFFS[m]) == m
