@@ -2,18 +2,22 @@
 
 ``camera.yaml`` (read it with ``cv2.FileStorage(path, cv2.FILE_STORAGE_READ)``):
 ``camera_matrix`` (3×3), ``distortion_model`` (ROS's name: ``plumb_bob``, ``rational_polynomial``
-or ``equidistant``; the thin prism is ``rational_polynomial`` with OpenCV's 12 coefficients),
+or ``equidistant``; the thin prism is ``rational_polynomial`` with OpenCV's 12 coefficients; Double
+Sphere and EUCM have no OpenCV or ROS name and are written ``ds`` with [ξ, α] and ``eucm`` with
+[α, β], as Kalibr and basalt name them),
 ``distortion_coefficients`` (1×n in OpenCV order), ``image_width``, ``image_height``,
 ``avg_reprojection_error`` (px), ``per_view_reprojection_errors`` (V×1 px),
 ``extrinsic_parameters`` (V×6: rvec, tvec per used view), the board (``board_width``,
 ``board_height`` inner corners, ``square_size``) and ``calibration_time``.
 
 ``camera.json`` holds the same plus what is needed to rerun diagnostics: our model name
-(``model``: plumb_bob, rational_polynomial, thin_prism or equidistant), the intrinsics covariance,
+(``model``: plumb_bob, rational_polynomial, thin_prism, equidistant, ds or eucm), the intrinsics covariance,
 the model-choice table, the quality summary, view names, per-view corner counts, standard
 deviations, rejected views with reasons, the square unit and the provenance in ``meta``.
 :func:`load_calibration` reads it back exactly (floats are written with full precision); it also
 reads ``camera.yaml`` (without view names, covariance or table).
+
+``camchain.yaml`` is Kalibr's camera chain (:mod:`aicalib_tf.calib.kalibr`).
 
 ``camera_info.yaml`` follows ROS's ``sensor_msgs/CameraInfo`` calibration file layout with the same
 ``distortion_model``. Its projection matrix P is the new camera matrix of :func:`undistort` with
@@ -33,6 +37,7 @@ import cv2
 import numpy as np
 
 from aicalib_tf.calib.fit import Calibration
+from aicalib_tf.calib.kalibr import to_camchain_yaml
 from aicalib_tf.calib.quality import lens_of
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.io import atomic_write_text
@@ -130,12 +135,13 @@ def to_camera_info_yaml(cal: Calibration, camera_name: str = "camera", *, R=None
 
 
 def save_calibration(cal: Calibration, folder) -> Path:
-    """Write camera.yaml, camera.json and camera_info.yaml into ``folder``; returns the folder.
+    """Write camera.yaml, camera.json, camera_info.yaml and Kalibr's camchain.yaml into ``folder``; returns the folder.
 
     Every text is produced before anything is written, and each file is replaced atomically.
     """
     folder = Path(folder)
     texts = {"camera.yaml": to_opencv_yaml(cal), "camera.json": to_json(cal), "camera_info.yaml": to_camera_info_yaml(cal)}
+    texts["camchain.yaml"] = to_camchain_yaml(cal)  # Kalibr (calib.kalibr)
     folder.mkdir(parents=True, exist_ok=True)
     for name, text in texts.items():
         atomic_write_text(folder / name, text)

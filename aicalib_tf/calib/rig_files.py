@@ -14,6 +14,7 @@ A rig of two cameras writes them at the top of the output folder; a larger rig w
 per pair with camera 0 (``cam0_cam2/``...). Every rig also gets ``rig.json`` (every camera's full
 calibration as ``camera.json`` holds it, the poses with their covariance, the frames, the quality
 and the rectifications) and each camera's one-camera files in a folder of its name.
+Kalibr's ``camchain.yaml`` (:mod:`aicalib_tf.calib.kalibr`) holds every camera with ``T_cn_cnm1``.
 :func:`load_rig` reads ``rig.json`` back exactly; :func:`load_stereo_yml` reads the YAML pair.
 """
 
@@ -27,6 +28,7 @@ import numpy as np
 
 from aicalib_tf.calib.files import (FILES, calibration_dict, calibration_from_dict, existing_file, jsonable,
                                     to_camera_info_yaml, to_json, to_opencv_yaml)
+from aicalib_tf.calib.kalibr import to_camchain_yaml
 from aicalib_tf.calib.rig_quality import pair_rectification
 from aicalib_tf.calib.rig_result import RigCalibration
 from aicalib_tf.geometry import lens as L
@@ -114,6 +116,7 @@ def save_rig(rig: RigCalibration, folder) -> list[Path]:
     """Write every rig file into ``folder`` (each atomically, all texts made first); returns the paths."""
     folder = Path(folder)
     texts = rig_texts(rig)
+    texts["camchain.yaml"] = to_camchain_yaml(rig)  # Kalibr (calib.kalibr)
     out = []
     for rel, text in texts.items():
         (folder / rel).parent.mkdir(parents=True, exist_ok=True)
