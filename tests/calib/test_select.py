@@ -45,6 +45,20 @@ def test_choose_prefers_a_model_whose_extras_are_determined():
     assert choose(rows) == "ds"  # none determined: the simplest
 
 
+def test_a_held_out_gain_within_its_own_noise_does_not_count():
+    a, b = [0.075, 0.066, 0.078, 0.071, 0.074], [0.068, 0.072, 0.067, 0.074, 0.070]  # plumb_bob, equidistant
+    rows = [dict(_row("plumb_bob", np.mean(a), np.std(a, ddof=1) / np.sqrt(5)), cv_folds=a),
+            dict(_row("equidistant", np.mean(b), np.std(b, ddof=1) / np.sqrt(5)), cv_folds=b)]
+    assert rows[0]["cv_rms"] > rows[1]["cv_rms"] + rows[1]["cv_se"]  # beyond the best's own standard error
+    assert choose(rows) == "plumb_bob"  # but within that of the fold-by-fold gain
+    del rows[0]["cv_folds"]
+    assert choose(rows) == "equidistant"
+    erratic = [0.02, 0.5, 0.02, 0.9, 0.02]  # a model that fails some folds is no alternative
+    rows = [dict(_row("plumb_bob", np.mean(erratic), np.std(erratic, ddof=1) / np.sqrt(5)), cv_folds=erratic),
+            dict(_row("equidistant", 0.0202, 0.0002), cv_folds=[0.0201, 0.0203, 0.02, 0.0204, 0.0202])]
+    assert choose(rows) == "equidistant"
+
+
 def _views_past_90_degrees(lens, n=10, seed=0, noise=0.01):
     """Boards facing the camera with their centres 50–88° off-axis, corners beyond 90° kept."""
     rng = np.random.default_rng(seed)
