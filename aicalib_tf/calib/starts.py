@@ -18,7 +18,8 @@ from aicalib_tf.geometry.lens_convert import fit_lens
 
 __all__ = ["convert_start", "fisheye_start", "widest_angle", "FISHEYE_FOVS"]
 
-FISHEYE_FOVS = (60.0, 90.0, 120.0, 150.0, 180.0, 200.0, 220.0)  # diagonal fields of view tried, degrees
+FISHEYE_FOVS = (60.0, 90.0, 120.0, 150.0, 180.0, 200.0, 220.0, 260.0, 300.0)  # "diagonal fields of view" tried, degrees
+# (past 220°: a circular fisheye whose circle lies inside the frame, the image corners beyond it)
 
 
 def widest_angle(lens: Lens, px) -> float:

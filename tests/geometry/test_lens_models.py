@@ -34,6 +34,15 @@ def test_every_model_has_the_interface():
         get_model("omni")
 
 
+def test_registry_docstring_examples():
+    import doctest
+
+    from aicalib_tf.geometry import lens_registry
+
+    result = doctest.testmod(lens_registry, optionflags=doctest.NORMALIZE_WHITESPACE)
+    assert result.attempted >= 1 and result.failed == 0
+
+
 def test_file_names_of_the_unified_models():
     assert lens.model_from_ros("ds", 2) == "ds" and lens.model_from_ros("double_sphere", 2) == "ds"
     assert lens.model_from_ros("EUCM", 2) == "eucm"
