@@ -1,7 +1,7 @@
 """Calibrate a camera from a folder of chessboard photos.
 
     python -m aicalib_tf.calibrate "photos/*.jpg" --pattern 9x6 --square 25mm [--out calib/]
-        [--model auto|plumb_bob|rational_polynomial|thin_prism|equidistant] [--rational] [--fix-k3]
+        [--model auto|plumb_bob|rational_polynomial|thin_prism|equidistant|ds|eucm] [--rational] [--fix-k3]
         [--detector cnn|report|opencv|opencv-sb] [--network default|report|PATH.keras]
         [--resize-policy error|skip|crop|scale]
 
@@ -16,7 +16,8 @@ value ending in .keras, or "default"/"report", still does (with a note), else us
 It prints a compact report (images used, skipped and rejected with reasons; RMS and worst view;
 K and distortion with ±1σ; field of view; warnings) and writes into --out, atomically:
 camera.yaml (OpenCV FileStorage), camera.json (the same plus board, detector, model sha256 and
-per-view poses), camera_info.yaml (ROS), report.png, and an undistorted preview of one image.
+per-view poses), camera_info.yaml (ROS), camchain.yaml (Kalibr), report.png, and an undistorted
+preview of one image.
 
 A rig (stereo pair or more cameras) takes one NAME=GLOB per camera instead of the images:
 
@@ -143,10 +144,10 @@ def _main(args) -> int:
         from aicalib_tf.calib.rig_workflow import RigConfig, parse_rig, run_rig
 
         return _run(lambda: RigConfig(cameras=tuple(parse_rig(args.rig)), **_common(args)), run_rig,
-                    "rig.json, the stereo YAML files, camera_info per camera, report.png")
+                    "rig.json, the stereo YAML files, camera_info per camera, camchain.yaml, report.png")
     return _run(lambda: CalibrateConfig(images=tuple(args.images), fix_k3=args.fix_k3, rational=args.rational,
                                         resize_policy=args.resize_policy, **_common(args)), run,
-                "camera.yaml, camera.json, camera_info.yaml, report.png")
+                "camera.yaml, camera.json, camera_info.yaml, camchain.yaml, report.png")
 
 
 def _common(args) -> dict:

@@ -1,4 +1,5 @@
-"""Sampling realistic cameras: pinhole lenses with OpenCV's 5 coefficients, and equidistant fisheyes.
+"""Sampling realistic cameras: pinhole lenses with OpenCV's 5 coefficients, and fisheyes (equidistant,
+Double Sphere, Extended Unified).
 
 The lens maths lives in :mod:`aicalib_tf.geometry.lens`; :class:`aicalib_tf.geometry.camera.Camera`
 wraps it with the image circle the renderer needs.
@@ -12,7 +13,7 @@ import numpy as np
 
 from aicalib_tf.geometry.camera import Camera
 
-__all__ = ["sample_camera", "sample_fisheye", "DISTORTION_LEVELS"]
+__all__ = ["sample_camera", "sample_fisheye", "sample_unified_fisheye", "DISTORTION_LEVELS", "UNIFIED_MODELS"]
 
 DISTORTION_LEVELS = ("none", "mild", "strong", "pincushion")
 
@@ -150,3 +151,55 @@ def sample_fisheye(
             continue
         return Camera(K, k, (w, h), model="equidistant", max_theta=edge)
     raise RuntimeError(f"could not sample a fisheye for size {image_size} and fov {fov_deg} in {max_tries} tries")
+
+
+UNIFIED_MODELS = ("ds", "eucm")
+
+
+def _sample_unified(rng: np.random.Generator, model: str) -> np.ndarray:
+    """Coefficients of the size real fits give: DS [ξ, α] (ξ −0.3..0, α 0.5..0.65), EUCM [α, β] (α 0.55..0.7, β 0.9..1.3)."""
+    if model == "ds":
+        return np.array([rng.uniform(-0.3, 0.0), rng.uniform(0.5, 0.65)])
+    if model == "eucm":
+        return np.array([rng.uniform(0.55, 0.7), rng.uniform(0.9, 1.3)])
+    raise ValueError(f"model must be one of {UNIFIED_MODELS}, got {model!r}")
+
+
+def sample_unified_fisheye(
+    rng: np.random.Generator,
+    image_size: tuple[int, int],
+    model: str = "ds",
+    *,
+    fov_deg: tuple[float, float] = (150.0, 200.0),
+    circular_from_deg: float = 175.0,
+    max_tries: int = 100,
+) -> Camera:
+    """Draw a Double Sphere (``model="ds"``) or EUCM (``"eucm"``) fisheye for an image of (w, h) px.
+
+    As :func:`sample_fisheye`: the full field of view from ``fov_deg`` (degrees), full-frame below
+    ``circular_from_deg`` (the image corners see the edge of the field) and circular from it on
+    (the circle's radius 0.90–0.97 of half the shorter side, inside the frame). The coefficients
+    (:func:`_sample_unified`) must image 1.02× the field's half-angle. Returns a :class:`Camera`
+    with ``max_theta`` = half the field of view.
+    """
+    w, h = (int(v) for v in image_size)
+    for _ in range(max_tries):
+        fov = rng.uniform(*fov_deg)
+        theta_max = math.radians(fov) / 2.0
+        d = _sample_unified(rng, model)
+        probe = Camera(np.eye(3), d, (w, h), model=model)
+        if probe.lens.max_angle() < 1.02 * theta_max:
+            continue
+        rd = probe.lens.spec.radius(theta_max, d)
+        circular = fov >= circular_from_deg
+        radius = rng.uniform(0.90, 0.97) * (min(w, h) / 2.0) if circular else math.hypot(w / 2.0, h / 2.0)
+        fx = radius / rd
+        fy = fx * (1.0 + rng.normal(0.0, 0.002))
+        cx = (w - 1) / 2.0 + rng.normal(0.0, 0.003 * w)
+        cy = (h - 1) / 2.0 + rng.normal(0.0, 0.003 * h)
+        if circular and not (cx - fx * rd >= -0.5 and cx + fx * rd <= w - 0.5 and cy - fy * rd >= -0.5
+                             and cy + fy * rd <= h - 0.5):
+            continue
+        K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+        return Camera(K, d, (w, h), model=model, max_theta=theta_max)
+    raise RuntimeError(f"could not sample a {model} fisheye for size {image_size} and fov {fov_deg} in {max_tries} tries")

@@ -15,7 +15,7 @@ __all__ = ["Rule", "Preset", "PRESETS", "get_preset", "COMMON_SIZES", "LENSES"]
 
 COMMON_SIZES = ((640, 480), (800, 600), (1024, 768), (1280, 720), (1280, 960), (1920, 1080))
 INT_PARAMS = {"quality"}
-LENSES = ("pinhole", "fisheye")
+LENSES = ("pinhole", "fisheye", "ds", "eucm")
 
 
 @dataclass(frozen=True)
@@ -37,7 +37,8 @@ class Preset:
 
     lens : "pinhole" (OpenCV's 5 coefficients; ``hfov_deg`` and ``distortion`` apply) or
     "fisheye" (equidistant Kannala–Brandt with full FOV from ``fisheye_fov_deg``, see
-    :func:`data_gen.camera.sample_fisheye`).
+    :func:`data_gen.camera.sample_fisheye`), "ds" or "eucm" (Double Sphere or Extended Unified
+    with full FOV from ``fisheye_fov_deg``, :func:`data_gen.camera.sample_unified_fisheye`).
     """
 
     name: str

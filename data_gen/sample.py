@@ -17,7 +17,7 @@ from aicalib_tf.geometry.camera import Camera
 
 from .background import make_background
 from .board import Board, sample_board
-from .camera import sample_camera, sample_fisheye
+from .camera import UNIFIED_MODELS, sample_camera, sample_fisheye, sample_unified_fisheye
 from .degrade import apply_degradations
 from .occlude import draw_occluders, occluded, sample_occluders
 from .pose import corner_visibility, sample_pose
@@ -78,6 +78,8 @@ def scene_for(preset: Preset, seed: int, camera_id: int, size=None, pattern=None
         size = preset.sizes[int(rng.integers(len(preset.sizes)))]
     if preset.lens == "fisheye":
         cam = sample_fisheye(rng, size, fov_deg=preset.fisheye_fov_deg)
+    elif preset.lens in UNIFIED_MODELS:
+        cam = sample_unified_fisheye(rng, size, preset.lens, fov_deg=preset.fisheye_fov_deg)
     else:
         cam = sample_camera(rng, size, hfov_deg=preset.hfov_deg, distortion=preset.distortion)
     board = sample_board(

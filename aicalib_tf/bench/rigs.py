@@ -74,12 +74,12 @@ def _cv_stereo(lens_a: Lens, lens_b: Lens, va, vb, square) -> tuple[np.ndarray, 
     pairs = [(v, vb_by[v.name]) for v in va if v.name in vb_by]
     obj = [board_points(a.ids, square).astype(np.float64).reshape(-1, 1, 3) for a, _ in pairs]
     size = lens_a.image_size
-    if lens_a.model == lens_b.model == "equidistant":
+    if lens_a.spec.NAMES["opencv"] == lens_b.spec.NAMES["opencv"] == "fisheye":
         out = cv2.fisheye.stereoCalibrate(obj, [a.corners.reshape(-1, 1, 2) for a, _ in pairs],
                                           [b.corners.reshape(-1, 1, 2) for _, b in pairs], lens_a.K.copy(),
                                           lens_a.dist.copy(), lens_b.K.copy(), lens_b.dist.copy(), size, flags=cv2.CALIB_FIX_INTRINSIC, criteria=_CRIT)
         return out[5], out[6].ravel()
-    if lens_a.model == lens_b.model == "plumb_bob":
+    if lens_a.model == lens_b.model and lens_a.spec.NAMES["opencv"] == "calibrateCamera":
         pa = [a.corners.astype(np.float32).reshape(-1, 1, 2) for a, _ in pairs]
         pb = [b.corners.astype(np.float32).reshape(-1, 1, 2) for _, b in pairs]
         out = cv2.stereoCalibrate([o.astype(np.float32) for o in obj], pa, pb, lens_a.K.copy(), lens_a.dist.copy(),

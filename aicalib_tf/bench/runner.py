@@ -27,6 +27,7 @@ from aicalib_tf.bench.detectors import DETECTORS, Found, make_detectors, score_d
 from aicalib_tf.bench.metrics import calibration_errors
 from aicalib_tf.bench.timing import keep_slowest, retime_slowest, time_detector
 from aicalib_tf.detect.batch import worker_pool
+from aicalib_tf.geometry.lens import get_model
 
 __all__ = ["DETECTORS", "EvalConfig", "Found", "make_detectors", "time_detector", "score_detection", "run_synthetic", "calibrate_sequences", "run"]
 
@@ -195,7 +196,7 @@ def calibrate_sequences(seqs, detectors: dict, rows: list, errors: dict, bar=Non
     for cam, samples in seqs:
         views = {d: [] for d in detectors}
         for s in samples:
-            name = "calib" if s.label.get("distortion_model", "plumb_bob") != "equidistant" else s.label["condition"]
+            name = s.label["condition"] if _is_fisheye(s.label) else "calib"
             img_rows, found_by = _detect_sample(name, None, s.label["index"], s, detectors, rows, errors)
             if slowest is not None:
                 keep_slowest(slowest, img_rows, s.image)
@@ -209,9 +210,14 @@ def calibrate_sequences(seqs, detectors: dict, rows: list, errors: dict, bar=Non
     return out
 
 
+def _is_fisheye(lab: dict) -> bool:
+    """Whether a label's lens model images past 90° (``IS_FISHEYE``)."""
+    return get_model(lab.get("distortion_model", "plumb_bob")).IS_FISHEYE
+
+
 def _lens_name(lab: dict) -> str:
     """A sequence's lens in words: "fisheye 185°", "strong barrel" or "mild"."""
-    if lab.get("distortion_model", "plumb_bob") == "equidistant":
+    if _is_fisheye(lab):
         return f"fisheye {2 * lab['max_theta_deg']:.0f}°" if lab.get("max_theta_deg") else "fisheye"
     return "strong barrel" if lab["dist"][0] < -0.2 else "mild"
 

@@ -14,7 +14,7 @@ A corner that the current parameters cannot project (behind a pinhole camera, or
 model's monotonic range) gets a constant residual of ``_PENALTY`` px and a zero Jacobian row, so
 the solver moves away from such parameters; a final fit with any such corner is an error.
 
-Starts: :func:`poses_from_rays` gives every view's pose from a lens guess (rays from
+Starts: :mod:`aicalib_tf.calib.starts` gives the intrinsics; :func:`poses_from_rays` gives every view's pose from a lens guess (rays from
 :func:`~aicalib_tf.geometry.lens.unproject`, turned so that the board lies ahead, then
 ``cv2.solvePnP`` on normalized coordinates with K = I), which works for boards past 90° off-axis.
 """
@@ -29,9 +29,7 @@ import numpy as np
 from aicalib_tf.geometry.lens import COEFF_NAMES, N_COEFFS, Lens, check_model, projection_jacobian
 
 __all__ = ["CalibrationError", "BundleResult", "bundle_adjust", "levenberg_marquardt", "schur_complement", "reduce_blocks",
-           "SchurProblem",
-           "poses_from_rays", "solve_pose", "param_names",
-           "convert_start", "fisheye_start", "FISHEYE_FOVS"]
+           "SchurProblem", "poses_from_rays", "solve_pose", "param_names"]
 
 _PENALTY = 1e3  # px, the residual of a corner the parameters cannot project
 MAX_EVALUATIONS = 200  # a bundle fit's residual evaluations; one that needs more has not converged
@@ -358,43 +356,3 @@ def solve_pose(lens: Lens, obj, px) -> tuple[np.ndarray, np.ndarray, float] | No
     if not np.isfinite(fit.rms):
         return None
     return fit.rvecs[0], fit.tvecs[0], float(fit.rms)
-
-
-FISHEYE_FOVS = (60.0, 90.0, 120.0, 150.0, 180.0, 200.0, 220.0)  # diagonal fields of view tried, degrees
-
-
-def convert_start(lens: Lens, model: str) -> np.ndarray:
-    """A start [fx, fy, cx, cy, *dist] for ``model`` from a lens of any model (coefficients kept within a family)."""
-    if lens.model == model:
-        return lens.intrinsics().copy()
-    d = np.zeros(N_COEFFS[model])
-    if "equidistant" not in (model, lens.model):
-        m = min(d.size, lens.dist.size)
-        d[:m] = lens.dist[:m]
-    return np.concatenate([[lens.fx, lens.fy, lens.cx, lens.cy], d])
-
-
-def fisheye_start(obj, px, image_size, free):
-    """Equidistant start without a guess: (intrinsics (8,), (rvecs (V, 3), tvecs (V, 3))).
-
-    obj, px : lists of (N_v, 3) board points and (N_v, 2) px. image_size : (width, height). free :
-    (8,) bool as :func:`bundle_adjust`. k = 0, principal point at the centre, f = half diagonal / half
-    field of view (equidistant) for each of :data:`FISHEYE_FOVS`, poses by PnP on rays
-    (:func:`poses_from_rays`), then 8 evaluations of the fit; the candidate with the lowest cost wins.
-    """
-    w, h = (float(s) for s in image_size)
-    best = None
-    for fov in FISHEYE_FOVS:
-        f = 0.5 * np.hypot(w, h) / np.radians(fov / 2)
-        lens = Lens("equidistant", [[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]], None, image_size)
-        poses = poses_from_rays(lens, obj, px)
-        if poses is None:
-            continue
-        fit = bundle_adjust("equidistant", obj, px, lens.intrinsics(), *poses, free=free, max_nfev=8,
-                            covariance=False, strict=False)
-        if np.isfinite(fit.cost) and (best is None or fit.cost < best.cost):
-            best = fit
-    if best is None:
-        raise CalibrationError("equidistant: no start focal length (diagonal field of view 60-220 deg) "
-                               "gives a pose for every view")
-    return best.intrinsics, (best.rvecs, best.tvecs)

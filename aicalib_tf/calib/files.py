@@ -2,14 +2,16 @@
 
 ``camera.yaml`` (read it with ``cv2.FileStorage(path, cv2.FILE_STORAGE_READ)``):
 ``camera_matrix`` (3×3), ``distortion_model`` (ROS's name: ``plumb_bob``, ``rational_polynomial``
-or ``equidistant``; the thin prism is ``rational_polynomial`` with OpenCV's 12 coefficients),
+or ``equidistant``; the thin prism is ``rational_polynomial`` with OpenCV's 12 coefficients; Double
+Sphere and EUCM have no OpenCV or ROS name and are written ``ds`` with [ξ, α] and ``eucm`` with
+[α, β], as Kalibr and basalt name them),
 ``distortion_coefficients`` (1×n in OpenCV order), ``image_width``, ``image_height``,
 ``avg_reprojection_error`` (px), ``per_view_reprojection_errors`` (V×1 px),
 ``extrinsic_parameters`` (V×6: rvec, tvec per used view), the board (``board_width``,
 ``board_height`` inner corners, ``square_size``) and ``calibration_time``.
 
 ``camera.json`` holds the same plus what is needed to rerun diagnostics: our model name
-(``model``: plumb_bob, rational_polynomial, thin_prism or equidistant), the intrinsics covariance,
+(``model``: plumb_bob, rational_polynomial, thin_prism, equidistant, ds or eucm), the intrinsics covariance,
 the model-choice table, the quality summary, view names, per-view corner counts, standard
 deviations, rejected views with reasons, the square unit and the provenance in ``meta``.
 :func:`load_calibration` reads it back exactly (floats are written with full precision); it also
@@ -21,6 +23,8 @@ Loading checks every field before a :class:`Calibration` is made (:mod:`aicalib_
 types, shapes, finite values, image size 1..100000 px, board ≥ 2×2 with a positive square, fx, fy
 > 0, the coefficient count of the lens model, the covariance's size); the YAML is checked as text
 before ``cv2.FileStorage`` parses it. A bad file is a ValueError naming the file and the field.
+
+``camchain.yaml`` is Kalibr's camera chain (:mod:`aicalib_tf.calib.kalibr`).
 
 ``camera_info.yaml`` follows ROS's ``sensor_msgs/CameraInfo`` calibration file layout with the same
 ``distortion_model``. Its projection matrix P is the new camera matrix of :func:`undistort` with
@@ -40,6 +44,7 @@ import numpy as np
 
 from aicalib_tf.calib import schema as S
 from aicalib_tf.calib.fit import Calibration
+from aicalib_tf.calib.kalibr import to_camchain_yaml
 from aicalib_tf.calib.quality import lens_of
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.io import atomic_write_text
@@ -126,12 +131,13 @@ def to_camera_info_yaml(cal: Calibration, camera_name: str = "camera", *, R=None
 
 
 def save_calibration(cal: Calibration, folder) -> Path:
-    """Write camera.yaml, camera.json and camera_info.yaml into ``folder``; returns the folder.
+    """Write camera.yaml, camera.json, camera_info.yaml and Kalibr's camchain.yaml into ``folder``; returns the folder.
 
     Every text is produced before anything is written, and each file is replaced atomically.
     """
     folder = Path(folder)
     texts = {"camera.yaml": to_opencv_yaml(cal), "camera.json": to_json(cal), "camera_info.yaml": to_camera_info_yaml(cal)}
+    texts["camchain.yaml"] = to_camchain_yaml(cal)  # Kalibr (calib.kalibr)
     folder.mkdir(parents=True, exist_ok=True)
     for name, text in texts.items():
         atomic_write_text(folder / name, text)
@@ -271,7 +277,8 @@ def undistort_camera_matrix(cal: Calibration, alpha: float = 0.0) -> np.ndarray:
     """(3, 3) camera matrix of the ideal pinhole image :func:`undistort` produces.
 
     Pinhole models: ``cv2.getOptimalNewCameraMatrix`` (alpha 0 keeps only valid pixels, 1 keeps
-    every source pixel). ``equidistant`` (a pinhole cannot show 180°): the principal point at the
+    every source pixel). The fisheye models (``IS_FISHEYE``: equidistant, ds, eucm; a pinhole
+    cannot show 180°): the principal point at the
     image centre and a focal f = (1 − alpha)·fx + alpha·f₁ (likewise for y), where f₁ makes the
     output's left/right edges see the lens's horizontal half-field, capped at 75°
     (:data:`MAX_FISHEYE_HALF_ANGLE_DEG`): alpha 0 keeps the central magnification and crops the
@@ -282,11 +289,11 @@ def undistort_camera_matrix(cal: Calibration, alpha: float = 0.0) -> np.ndarray:
         raise ValueError(f"alpha must be in [0, 1], got {alpha!r}")
     lens = lens_of(cal)
     w, h = lens.image_size
-    if lens.model != "equidistant":
+    if not lens.spec.IS_FISHEYE:
         new_K, _ = cv2.getOptimalNewCameraMatrix(lens.K, lens.dist, (w, h), a)
         return np.asarray(new_K, np.float64)
-    half = float(np.radians(lens.field_of_view()["horizontal"]) / 2)  # NaN when the edge has no ray
-    half = min(half if np.isfinite(half) else np.pi, np.radians(MAX_FISHEYE_HALF_ANGLE_DEG))
+    half = float(np.radians(lens.field_of_view()["horizontal"]) / 2)
+    half = min(half, np.radians(MAX_FISHEYE_HALF_ANGLE_DEG))
     f1 = 0.5 * w / np.tan(half)
     fx, fy = (1 - a) * lens.fx + a * f1, (1 - a) * lens.fy + a * f1 * lens.fy / lens.fx
     return np.array([[fx, 0.0, (w - 1) / 2], [0.0, fy, (h - 1) / 2], [0.0, 0.0, 1.0]])

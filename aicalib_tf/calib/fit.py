@@ -12,8 +12,8 @@ recalibrated. A misordered board sits tens of px off; corners pulled a few px by
 worst view goes at a time. At most a third of the views are rejected, never below ``min_views``.
 
 The fit is one least-squares bundle over all views (:mod:`aicalib_tf.calib.bundle`). Starts: the
-pinhole models from OpenCV's multi-start plumb_bob fit; ``equidistant`` from a grid of focal lengths
-(:func:`~aicalib_tf.calib.bundle.fisheye_start`), so fisheye lenses need no guess. ``model="auto"``
+pinhole models from OpenCV's multi-start plumb_bob fit; the fisheye models (equidistant, ds, eucm) from a grid of focal lengths
+(:func:`~aicalib_tf.calib.starts.fisheye_start`), so fisheye lenses need no guess. ``model="auto"``
 picks the model by cross-validation over views (:mod:`aicalib_tf.calib.select`).
 
 Parameter standard deviations and the covariance are σ²·(JᵀJ)⁻¹ at the minimum: they describe the
@@ -28,11 +28,11 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from aicalib_tf.calib.bundle import (BundleResult, CalibrationError, bundle_adjust, convert_start, fisheye_start,
-                                     param_names, poses_from_rays)
+from aicalib_tf.calib.bundle import BundleResult, CalibrationError, bundle_adjust, param_names, poses_from_rays
 from aicalib_tf.calib.select import select_model
+from aicalib_tf.calib.starts import convert_start, fisheye_start, widest_angle
 from aicalib_tf.calib.view_checks import MIN_VIEW_CORNERS, duplicates, view_problem
-from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens, model_from_ros, project
+from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens, get_model, model_from_ros, project
 from aicalib_tf.geometry.pattern import board_points, check_pattern
 
 __all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "fit_views", "view_rms", "MIN_VIEW_CORNERS",
@@ -71,7 +71,8 @@ class Calibration:
     """A calibrated camera and how well the views support it.
 
     model : the lens model, a :data:`~aicalib_tf.geometry.lens.MODELS` name.
-    K : (3, 3) float64 camera matrix, px. dist : (n,) the model's coefficients (5, 8, 12 or 4), OpenCV order.
+    K : (3, 3) float64 camera matrix, px. dist : (n,) the model's coefficients (5, 8, 12, 4 or 2), OpenCV order
+    (Kalibr's for ds [ξ, α] and eucm [α, β]).
     image_size : (width, height) px. pattern_size : (cols, rows). square_size, square_unit: the
     board's square and its unit ("mm", "m", ... or "" when unitless); tvecs are in that unit.
     rms : overall RMS reprojection error, px (over all corners of the used views).
@@ -140,7 +141,7 @@ def view_rms(view: View, K, dist, rvec, tvec, square_size: float, model: str | N
     """(RMS px, residuals (N, 2) px = detected − projected) of one view under a camera and pose.
 
     model : the lens model of ``dist``; None guesses a pinhole model from its length (4 means
-    plumb_bob here: pass "equidistant" for a fisheye). Unprojectable corners give NaN.
+    plumb_bob here: pass the model for a fisheye). Unprojectable corners give NaN.
     """
     model = model_from_ros("rational_polynomial", np.asarray(dist).size) if model is None else model
     R, _ = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))
@@ -241,24 +242,26 @@ def _fit_model(model: str, views: list[View], square_size: float, image_size, st
                fix_k3: bool = False, rank_strict: bool = True) -> BundleResult:
     """One bundle fit of ``model`` to the views, from ``start`` (a Lens or Calibration) or from scratch.
 
-    From scratch, the pinhole models start from OpenCV's multi-start plumb_bob fit (extra
-    coefficients 0) and ``equidistant`` from :func:`~aicalib_tf.calib.bundle.fisheye_start`. ``fix_k3`` holds k3 at 0
-    (pinhole models). Raises CalibrationError naming the model when it cannot be fitted (a
-    rank-deficient fit only when ``rank_strict``).
+    From scratch, the pinhole models (``START == "opencv"``) start from OpenCV's multi-start
+    plumb_bob fit (extra coefficients 0) and the fisheye models from
+    :func:`~aicalib_tf.calib.starts.fisheye_start`. ``fix_k3`` holds k3 at 0 (models with ``FIX_K3``).
+    Raises CalibrationError naming the model when it cannot be fitted (a rank-deficient fit only
+    when ``rank_strict``).
     """
+    spec = get_model(model)
     obj = [board_points(v.ids, square_size) for v in views]
     px = [v.corners for v in views]
     free = np.ones(4 + N_COEFFS[model], bool)
-    if fix_k3 and model != "equidistant":
-        free[4] = False
+    if fix_k3 and spec.FIX_K3 is not None:
+        free[4 + spec.FIX_K3] = False
     if start is not None:
         lens0 = start.lens if isinstance(start, Calibration) else start
-        intr = convert_start(lens0, model)
+        intr = convert_start(lens0, model, widest_angle(lens0, px))
         poses = poses_from_rays(lens0, obj, px)
         if poses is None:
             raise CalibrationError(f"{model}: the start lens sees no board in front of it in some view")
-    elif model == "equidistant":
-        intr, poses = fisheye_start(obj, px, image_size, free)
+    elif spec.START == "rays":
+        intr, poses = fisheye_start(obj, px, image_size, free, model)
     else:
         K, dist, rvecs, tvecs = _opencv_start(views, square_size, image_size, cv2.CALIB_FIX_K3 if fix_k3 else 0)
         intr = np.zeros(4 + N_COEFFS[model])
@@ -314,7 +317,7 @@ def _refit(model, usable, square_size, image_size, warm: BundleResult, fix_k3) -
     """Refit after a view was dropped: from the last fit, and from scratch for the pinhole models; the lower cost wins."""
     fits = [_fit_model(model, usable, square_size, image_size, Lens.from_intrinsics(model, warm.intrinsics, image_size),
                        fix_k3, rank_strict=False)]
-    if model != "equidistant":
+    if get_model(model).START == "opencv":
         try:
             fits.append(_fit_model(model, usable, square_size, image_size, None, fix_k3, rank_strict=False))
         except CalibrationError:

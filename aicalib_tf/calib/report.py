@@ -30,7 +30,8 @@ __all__ = ["field_of_view", "view_tilts_deg", "coverage_counts", "calibration_wa
 
 def field_of_view(cal: Calibration) -> tuple[float, float]:
     """(horizontal, vertical) field of view in degrees through the lens model
-    (:func:`aicalib_tf.geometry.lens.field_of_view`; NaN where an edge pixel has no ray)."""
+    (:func:`aicalib_tf.geometry.lens.field_of_view`; never NaN: an edge pixel with no ray counts with the
+    widest angle the lens images, the valid region's diameter)."""
     fov = Q.lens_of(cal).field_of_view()
     return fov["horizontal"], fov["vertical"]
 
@@ -88,7 +89,8 @@ def format_report(cal: Calibration, views: list[View], *, skipped: dict | None =
                  + (f"; {partial} partial board{'s' if partial != 1 else ''}" if partial else "")
                  + (f" ({relative} larger than the frame, ids relative to what is seen)" if relative else ""))
     s = cal.std
-    lines.append(f"image {cal.image_size[0]}x{cal.image_size[1]} px, lens model {model} (ROS {L.ROS_NAMES[model]})")
+    names_in = "ROS " if L.get_model(model).NAMES["opencv"] else "files: no OpenCV or ROS name, "
+    lines.append(f"image {cal.image_size[0]}x{cal.image_size[1]} px, lens model {model} ({names_in}{L.ROS_NAMES[model]})")
     lines.extend(_model_table_lines(getattr(cal, "model_table", ()) or ()))
     lines.append(f"fx = {cal.fx:.2f} ± {s.get('fx', 0):.2f}   fy = {cal.fy:.2f} ± {s.get('fy', 0):.2f}   (px)")
     lines.append(f"cx = {cal.cx:.2f} ± {s.get('cx', 0):.2f}   cy = {cal.cy:.2f} ± {s.get('cy', 0):.2f}   (px)")

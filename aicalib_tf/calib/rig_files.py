@@ -18,6 +18,7 @@ and the rectifications) and each camera's one-camera files in a folder of its na
 check every field (:mod:`aicalib_tf.calib.schema`: at least one camera, rotations orthonormal with
 det +1, finite values, shapes) and raise a ValueError naming the file and the field. ``rig.json`` is
 strict JSON (a missing number, such as a frame RMS that could not be measured, is ``null``).
+Kalibr's ``camchain.yaml`` (:mod:`aicalib_tf.calib.kalibr`) holds every camera with ``T_cn_cnm1``.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import numpy as np
 from aicalib_tf.calib import schema as S
 from aicalib_tf.calib.files import (FILES, calibration_dict, calibration_from_dict, existing_file, to_camera_info_yaml,
                                     to_json, to_opencv_yaml)
+from aicalib_tf.calib.kalibr import to_camchain_yaml
 from aicalib_tf.calib.rig_quality import pair_rectification
 from aicalib_tf.calib.rig_result import RigCalibration
 from aicalib_tf.geometry import lens as L
@@ -159,6 +161,7 @@ def save_rig(rig: RigCalibration, folder) -> list[Path]:
     """Write every rig file into ``folder`` (each atomically, all texts made first); returns the paths."""
     folder = Path(folder)
     texts = rig_texts(rig)
+    texts["camchain.yaml"] = to_camchain_yaml(rig)  # Kalibr (calib.kalibr)
     out = []
     for rel, text in texts.items():
         (folder / rel).parent.mkdir(parents=True, exist_ok=True)

@@ -1,6 +1,6 @@
-"""Equidistant (Kannala–Brandt) fisheye maths, valid beyond 90 degrees off-axis.
+"""The equidistant (Kannala–Brandt) fisheye model, valid beyond 90 degrees off-axis.
 
-Private helper of :mod:`aicalib_tf.geometry.lens` (the public front; use that). For a camera
+Reached through :mod:`aicalib_tf.geometry.lens` (the public front; use that). For a camera
 point (X, Y, Z), r = hypot(X, Y) and θ = atan2(r, Z) (so rays at and behind 90° work);
 ``θ_d = θ·(1 + k1·θ² + k2·θ⁴ + k3·θ⁶ + k4·θ⁸)`` and the normalized image point is
 ``(θ_d·X/r, θ_d·Y/r)``, as ``cv2.fisheye`` (which takes θ = atan(r/Z), valid for Z > 0 only).
@@ -12,6 +12,11 @@ import functools
 import math
 
 import numpy as np
+
+from .lens_model import LensModel
+
+__all__ = ["EQUIDISTANT", "EquidistantModel", "theta_d", "dtheta_d", "monotonic_limit", "project", "project_jac",
+           "unproject"]
 
 THETA_CAP = math.pi
 _LUT_SIZE = 2048
@@ -124,3 +129,36 @@ def unproject(a, b, k, *, tol: float = 1e-12, max_iter: int = 50):
     rays = np.stack([a * s, b * s, np.cos(theta)], axis=-1)
     rays[outside | (theta > lim) | ~np.all(np.isfinite(rays), axis=-1)] = np.nan
     return rays
+
+
+class EquidistantModel(LensModel):
+    """Kannala–Brandt [k1, k2, k3, k4] as ``cv2.fisheye`` (ROS ``equidistant``, Kalibr ``pinhole-equi``)."""
+
+    NAME = "equidistant"
+    COEFF_NAMES = ("k1", "k2", "k3", "k4")
+    NAMES = {"opencv": "fisheye", "ros": "equidistant", "kalibr": ("pinhole", "equidistant")}
+    ALIASES = ("fisheye",)
+    IS_FISHEYE = True
+    MAX_ANGLE = THETA_CAP
+    RANK = 1
+    START = "rays"
+    DEFAULT = FIT_START = (0.0, 0.0, 0.0, 0.0)
+    FAMILY = "equidistant"
+
+    def max_angle(self, d):
+        return monotonic_limit(tuple(float(v) for v in d))
+
+    def radius(self, theta, d):
+        return float(theta_d(min(float(theta), self.max_angle(d)), d))
+
+    def project(self, P, d):
+        return project(P, d)
+
+    def project_jac(self, P, d):
+        return project_jac(P, d)
+
+    def unproject(self, a, b, d):
+        return unproject(a, b, d)
+
+
+EQUIDISTANT = EquidistantModel()

@@ -1,6 +1,7 @@
-"""Pinhole-family lens maths: OpenCV's 12-coefficient model, its derivatives and exact inverse.
+"""Pinhole-family lens models (plumb_bob, rational_polynomial, thin_prism): OpenCV's 12-coefficient
+model, its derivatives and exact inverse, and the three models of :mod:`~aicalib_tf.geometry.lens_registry`.
 
-Private helper of :mod:`aicalib_tf.geometry.lens` (the public front; use that). Every
+Reached through :mod:`aicalib_tf.geometry.lens` (the public front; use that). Every
 coefficient vector here is the full 12-vector ``c = [k1, k2, p1, p2, k3, k4, k5, k6, s1, s2,
 s3, s4]`` (plumb_bob and rational_polynomial zero-padded). With undistorted normalized
 coordinates (x, y) = (X/Z, Y/Z), r² = x² + y² and the radial gain
@@ -18,6 +19,11 @@ import functools
 import math
 
 import numpy as np
+
+from .lens_model import LensModel
+
+__all__ = ["PinholeModel", "PLUMB_BOB", "RATIONAL_POLYNOMIAL", "THIN_PRISM", "full", "distort", "distort_jac",
+           "coeff_jac", "monotonic_limit", "undistort"]
 
 N_FULL = 12
 RADIUS_CAP = 20.0  # normalized radius beyond which we never look (~87 degrees off-axis)
@@ -175,3 +181,89 @@ def undistort(xd, yd, c, *, tol: float = 1e-9, max_iter: int = 30):
     x[invalid] = np.nan
     y[invalid] = np.nan
     return x, y
+
+
+# ----------------------------------------------------------------------------- the models
+_OPENCV_LENGTHS = (4, 5, 8, 12, 14)  # the lengths cv2 accepts for the pinhole family
+
+
+class PinholeModel(LensModel):
+    """One member of OpenCV's pinhole family: the first ``n`` of the 12 coefficients."""
+
+    IS_FISHEYE = False
+    MAX_ANGLE = math.pi / 2
+    START = "opencv"
+    FAMILY = "opencv"
+    FIX_K3 = 4  # [k1, k2, p1, p2, k3, ...]
+
+    def __init__(self, name, coeff_names, ros, rank, *, warm_from=None, extras=(), lengths=None, resolve=None):
+        self.NAME, self.COEFF_NAMES, self.RANK = name, tuple(coeff_names), rank
+        self.NAMES = {"opencv": "calibrateCamera", "ros": ros,
+                      "kalibr": ("pinhole", "radtan") if name == "plumb_bob" else None}
+        self.WARM_FROM, self.EXTRA_COEFFS = warm_from, {e: 0.0 for e in extras}
+        self.DEFAULT = self.FIT_START = (0.0,) * len(self.COEFF_NAMES)
+        self._lengths = lengths or (len(self.COEFF_NAMES),)
+        self._resolve = resolve or {}
+
+    def coerce(self, d):
+        n = self.n_coeffs
+        if d.size == n:
+            return d
+        if self.NAME == "plumb_bob" and d.size == 4:
+            return np.append(d, 0.0)
+        if d.size > n and d.size in _OPENCV_LENGTHS:
+            if np.any(d[n:]):
+                raise ValueError(f"dist for {self.NAME!r} must have {n} coefficients [{', '.join(self.COEFF_NAMES)}]; "
+                                 f"got {d.size} with non-zero extras {d[n:].tolist()} (a different model?)")
+            return d[:n]
+        return None
+
+    def resolve(self, n):
+        return self._resolve.get(n, self.NAME if n in self._lengths else None)
+
+    def monotonic_limit(self, d):
+        return monotonic_limit(tuple(float(v) for v in full(d)))
+
+    def max_angle(self, d):
+        return math.atan(self.monotonic_limit(d))
+
+    def project(self, P, d):
+        c = full(d)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            valid = P[..., 2] > 0
+            z = np.where(valid, P[..., 2], 1.0)
+            x, y = P[..., 0] / z, P[..., 1] / z
+            a, b = distort(x, y, c)
+            if np.any(c):
+                lim = monotonic_limit(tuple(float(v) for v in c))
+                valid = valid & (x * x + y * y <= lim * lim)
+        return a, b, valid
+
+    def project_jac(self, P, d):
+        c = full(d)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            valid = P[:, 2] > 0
+            iz = 1.0 / np.where(valid, P[:, 2], 1.0)
+            x, y = P[:, 0] * iz, P[:, 1] * iz
+            a, b, j11, j12, j21, j22 = distort_jac(x, y, c)
+        if np.any(c):
+            lim = monotonic_limit(tuple(float(v) for v in c))
+            valid &= x * x + y * y <= lim * lim
+        Jn = np.empty((P.shape[0], 2, 3))
+        Jn[:, 0, 0], Jn[:, 0, 1], Jn[:, 0, 2] = j11 * iz, j12 * iz, -(j11 * x + j12 * y) * iz
+        Jn[:, 1, 0], Jn[:, 1, 1], Jn[:, 1, 2] = j21 * iz, j22 * iz, -(j21 * x + j22 * y) * iz
+        return a, b, valid, Jn, coeff_jac(x, y, c)[..., :d.size]
+
+    def unproject(self, a, b, d):
+        x, y = undistort(a, b, full(d))
+        rays = np.stack([x, y, np.ones_like(x)], axis=-1)
+        return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+
+
+_K = ("k1", "k2", "p1", "p2", "k3")
+PLUMB_BOB = PinholeModel("plumb_bob", _K, "plumb_bob", 0, lengths=_OPENCV_LENGTHS)
+RATIONAL_POLYNOMIAL = PinholeModel("rational_polynomial", _K + ("k4", "k5", "k6"), "rational_polynomial", 4,
+                                   warm_from="plumb_bob", extras=("k4", "k5", "k6"), lengths=_OPENCV_LENGTHS,
+                                   resolve={4: "plumb_bob", 5: "plumb_bob", 12: "thin_prism", 14: "thin_prism"})
+THIN_PRISM = PinholeModel("thin_prism", _K + ("k4", "k5", "k6", "s1", "s2", "s3", "s4"), "rational_polynomial", 5,
+                          warm_from="plumb_bob", extras=("k4", "k5", "k6", "s1", "s2", "s3", "s4"), lengths=(12, 14))

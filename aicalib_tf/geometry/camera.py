@@ -4,8 +4,8 @@ All lens maths lives in :mod:`aicalib_tf.geometry.lens` (one implementation per 
 module only adds what data generation needs on top of it:
 
 * pixel -> ray (:meth:`Camera.pixel_to_ray`), the ray a renderer intersects with the board
-  plane. Pinhole models return (x/z, y/z, 1) (so today's renders stay bit-for-bit), the
-  ``equidistant`` (Kannala–Brandt) model returns unit rays, valid beyond 90° off-axis;
+  plane. Pinhole models return (x/z, y/z, 1) (so today's renders stay bit-for-bit), the fisheye
+  models (``IS_FISHEYE``: equidistant, ds, eucm) return unit rays, valid beyond 90° off-axis;
 * the image circle of a fisheye: ``max_theta`` (radians off-axis) bounds what the lens images,
   so a 185° lens sees up to 92.5° and pixels beyond its circle are dark;
 * what is imaged (:meth:`Camera.imaged`): in front of the lens, inside the model's monotonic
@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from aicalib_tf.geometry import lens as _lens
-from aicalib_tf.geometry._equidistant import theta_d as _theta_d
 
 __all__ = ["Camera", "distort_normalized", "undistort_normalized", "monotonic_radius", "normalized_rays",
            "distortion_field", "model_for_dist"]
@@ -99,7 +98,7 @@ class Camera:
         For a fisheye it sets the image circle (radius ``f·θ_d(max_theta)`` px).
     lens : the :class:`~aicalib_tf.geometry.lens.Lens` (derived).
     r_mono : :func:`aicalib_tf.geometry.lens.monotonic_limit` (normalized radius for pinhole
-        models, θ in radians for equidistant; derived).
+        models, θ in radians for the fisheye models; derived).
     """
 
     K: np.ndarray
@@ -130,22 +129,19 @@ class Camera:
 
     @property
     def fisheye(self) -> bool:
-        """True for the equidistant (Kannala–Brandt) model."""
-        return self.model == "equidistant"
+        """True for a model that images rays at and beyond 90° (``IS_FISHEYE``: equidistant, ds, eucm)."""
+        return self.lens.spec.IS_FISHEYE
 
     def theta_limit(self) -> float:
         """Largest imaged off-axis angle, radians: ``max_theta`` or the model's domain (pinhole: < π/2)."""
-        if self.fisheye:
-            lim = self.r_mono
-        else:
-            lim = math.atan(self.r_mono)
+        lim = self.lens.max_angle()
         return lim if self.max_theta is None else min(lim, self.max_theta)
 
     def circle_radius(self) -> float:
         """The image circle's radius in normalized distorted units (px = this·fx, ·fy); inf for pinhole."""
         if not self.fisheye:
             return math.inf
-        return float(_theta_d(self.theta_limit(), self.dist))
+        return self.lens.spec.radius(self.theta_limit(), self.dist)
 
     def inside_circle(self, uv: np.ndarray) -> np.ndarray:
         """(...,) bool: pixels (..., 2) inside the image circle (always True for pinhole models)."""
@@ -158,7 +154,7 @@ class Camera:
     def pixel_to_ray(self, uv: np.ndarray) -> np.ndarray:
         """(..., 2) px -> (..., 3) rays, NaN where not imaged.
 
-        Pinhole models: (x/z, y/z, 1). Equidistant: unit rays (any direction up to ``max_theta``).
+        Pinhole models: (x/z, y/z, 1). Fisheye models: unit rays (any direction up to ``max_theta``).
         """
         uv = np.asarray(uv, dtype=np.float64)
         if not self.fisheye:

@@ -9,92 +9,75 @@ points are (X, Y, Z) with Z along the optical axis. Coefficients are in OpenCV's
 * ``thin_prism``: [k1, ..., k6, s1, s2, s3, s4] (``CALIB_THIN_PRISM_MODEL``; in ROS files it
   is written as ``rational_polynomial`` with 12 coefficients);
 * ``equidistant``: Kannala–Brandt [k1, k2, k3, k4] as ``cv2.fisheye``, with θ = atan2(r, Z) so
-  that lenses of 180–200° work.
+  that lenses of 180–200° work;
+* ``ds``: Double Sphere [ξ, α] and ``eucm``: Extended Unified [α, β], as Kalibr and basalt name
+  and order them (neither has an OpenCV or ROS name; files call them ``ds`` and ``eucm``).
 
-Each model is valid only where its radial map is increasing (:func:`monotonic_limit`); beyond
-that, :func:`project` and :func:`unproject` return NaN. :func:`unproject` is the exact inverse
-of :func:`project` (Newton iterations, not OpenCV's fixed-point ``undistortPoints``).
+Each model is one module behind one interface (:mod:`~aicalib_tf.geometry.lens_model`), listed
+in :mod:`~aicalib_tf.geometry.lens_registry`; this module validates inputs, applies K and
+dispatches. Each model is valid only in its domain (:func:`monotonic_limit`); beyond it,
+:func:`project` and :func:`unproject` return NaN. :func:`unproject` is the exact inverse of
+:func:`project` (Newton iterations or closed form, not OpenCV's fixed-point ``undistortPoints``).
 """
 
-# size: the public front of four lens models: each entry validates its input and dispatches to
-# _pinhole or _equidistant, and the Lens class wraps them; the maths lives in those two modules.
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from . import _equidistant as _eq
-from . import _pinhole as _ph
+from .lens_model import LensModel, pixel_jacobians
+from .lens_registry import MODELS, REGISTRY, get_model, model_from_file_name
 
 __all__ = [
-    "MODELS", "N_COEFFS", "COEFF_NAMES", "ROS_NAMES", "Lens", "check_model", "model_from_ros",
-    "project", "project_normalized", "unproject", "monotonic_limit", "distortion_field",
+    "MODELS", "N_COEFFS", "COEFF_NAMES", "ROS_NAMES", "Lens", "check_model", "model_from_ros", "get_model",
+    "project", "project_normalized", "unproject", "monotonic_limit", "max_angle", "distortion_field",
     "field_of_view", "undistort_maps", "projection_jacobian",
 ]
 
-MODELS = ("plumb_bob", "rational_polynomial", "thin_prism", "equidistant")
-COEFF_NAMES = {
-    "plumb_bob": ("k1", "k2", "p1", "p2", "k3"),
-    "rational_polynomial": ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"),
-    "thin_prism": ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4"),
-    "equidistant": ("k1", "k2", "k3", "k4"),
-}
+COEFF_NAMES = {m: spec.COEFF_NAMES for m, spec in REGISTRY.items()}
 N_COEFFS = {m: len(names) for m, names in COEFF_NAMES.items()}
-ROS_NAMES = {"plumb_bob": "plumb_bob", "rational_polynomial": "rational_polynomial",
-             "thin_prism": "rational_polynomial", "equidistant": "equidistant"}
-_OPENCV_LENGTHS = (4, 5, 8, 12, 14)  # the lengths cv2 accepts for the pinhole family
+ROS_NAMES = {m: spec.NAMES["ros"] for m, spec in REGISTRY.items()}
 
 
 # ----------------------------------------------------------------------------- validation
 def check_model(model: str, dist) -> tuple[str, np.ndarray]:
     """Validate a model name and its coefficients; return (model, dist (n,) float64 copy).
 
-    ``dist=None`` means all zeros. An OpenCV-length vector longer than a pinhole model's count
-    is accepted when the extra coefficients are all zero (they are dropped); plumb_bob also
-    accepts OpenCV's 4-vector [k1, k2, p1, p2] (k3 = 0). Raises ValueError otherwise.
+    ``dist=None`` means the model's undistorted case (all zeros; EUCM [0, 1]). An OpenCV-length
+    vector longer than a pinhole model's count is accepted when the extra coefficients are all
+    zero (they are dropped); plumb_bob also accepts OpenCV's 4-vector [k1, k2, p1, p2] (k3 = 0).
+    Coefficients outside the model's range (DS ξ ∈ (−1, 1], α ∈ [0, 1]; EUCM α ∈ [0, 1], β > 0)
+    are refused. Raises ValueError otherwise.
     """
-    if not isinstance(model, str) or model not in MODELS:
+    if not isinstance(model, str) or model not in REGISTRY:
         raise ValueError(f"unknown lens model {model!r}; expected one of {MODELS}")
-    n = N_COEFFS[model]
+    spec = REGISTRY[model]
     if dist is None:
-        return model, np.zeros(n)
+        return model, np.array(spec.DEFAULT, dtype=np.float64)
     d = np.asarray(dist, dtype=np.float64).ravel().copy()
     if not np.all(np.isfinite(d)):
         raise ValueError(f"dist for {model!r} must be finite, got {d.tolist()}")
-    names = ", ".join(COEFF_NAMES[model])
-    if d.size == n:
-        return model, d
-    if model == "plumb_bob" and d.size == 4:
-        return model, np.append(d, 0.0)
-    if model != "equidistant" and d.size > n and d.size in _OPENCV_LENGTHS:
-        if np.any(d[n:]):
-            raise ValueError(f"dist for {model!r} must have {n} coefficients [{names}]; got {d.size} "
-                             f"with non-zero extras {d[n:].tolist()} (a different model?)")
-        return model, d[:n]
-    raise ValueError(f"dist for {model!r} must have {n} coefficients [{names}], got {d.size}")
+    out = spec.coerce(d)
+    if out is None:
+        raise ValueError(f"dist for {model!r} must have {spec.n_coeffs} coefficients [{', '.join(spec.COEFF_NAMES)}], "
+                         f"got {d.size}")
+    why = spec.range_problem(out)
+    if why is not None:
+        raise ValueError(f"dist for {model!r}: {why}")
+    return model, out
 
 
 def model_from_ros(name: str, n_coeffs: int) -> str:
-    """Our model name for a ROS ``distortion_model`` string and its coefficient count.
+    """Our model name for a file's ``distortion_model`` string and its coefficient count.
 
     ``rational_polynomial`` with 12 (or 14, OpenCV's tilt terms) coefficients is ``thin_prism``,
-    with 4 or 5 it is ``plumb_bob``; ``fisheye`` is an alias of ``equidistant``. Counts longer
-    than the model's are allowed for OpenCV lengths; :func:`check_model` then requires the
-    extras to be zero. Raises ValueError for unknown names and impossible counts.
+    with 4 or 5 it is ``plumb_bob``; ``fisheye`` is an alias of ``equidistant``; ``ds`` and ``eucm``
+    (also ``double_sphere``, ``extended_unified``) take 2. Counts longer than the model's are
+    allowed for OpenCV lengths; :func:`check_model` then requires the extras to be zero. Raises
+    ValueError for unknown names and impossible counts.
     """
-    key = str(name).strip().lower()
-    n = int(n_coeffs)
-    if key in ("equidistant", "fisheye") and n == 4:
-        return "equidistant"
-    if key == "plumb_bob" and n in _OPENCV_LENGTHS:
-        return "plumb_bob"
-    if key == "rational_polynomial" and n in _OPENCV_LENGTHS:
-        return {4: "plumb_bob", 5: "plumb_bob", 8: "rational_polynomial"}.get(n, "thin_prism")
-    if key == "thin_prism" and n in (12, 14):
-        return "thin_prism"
-    raise ValueError(f"cannot map ROS distortion_model {name!r} with {n_coeffs} coefficients to a "
-                     f"lens model (known: plumb_bob, rational_polynomial, equidistant/fisheye)")
+    return model_from_file_name(name, n_coeffs)
 
 
 def _check_K(K, what: str = "K") -> np.ndarray:
@@ -129,49 +112,48 @@ def _check_points(points, dim: int, what: str) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- the maps
 def monotonic_limit(model: str, dist) -> float:
-    """Where the model's radial map stops increasing (cached).
+    """Where the model's map stops being valid (cached per coefficient vector).
 
     Pinhole models: the largest undistorted normalized radius r (= tan of the off-axis angle)
     up to which r -> r·g(r²) increases, capped at 20.0. Equidistant: the largest θ (radians,
-    capped at π) up to which θ -> θ_d(θ) increases.
+    capped at π) up to which θ -> θ_d(θ) increases. DS and EUCM: the largest off-axis angle of
+    their valid-projection domain, radians.
     """
     model, d = check_model(model, dist)
-    if model == "equidistant":
-        return _eq.monotonic_limit(tuple(float(v) for v in d))
-    return _ph.monotonic_limit(tuple(float(v) for v in _ph.full(d)))
+    return REGISTRY[model].monotonic_limit(d)
 
 
-def _distort_pinhole(x, y, d):
-    """Pinhole family: undistorted normalized -> distorted, NaN beyond the monotonic radius."""
-    c = _ph.full(d)
-    xd, yd = _ph.distort(x, y, c)
-    if np.any(c):
-        lim = _ph.monotonic_limit(tuple(float(v) for v in c))
-        bad = ~(x * x + y * y <= lim * lim)
-        xd, yd = np.where(bad, np.nan, xd), np.where(bad, np.nan, yd)
-    return xd, yd
+def max_angle(model: str, dist) -> float:
+    """The widest off-axis angle (radians) the model images with these coefficients (< π/2 for pinholes)."""
+    model, d = check_model(model, dist)
+    return REGISTRY[model].max_angle(d)
+
+
+def _project_normalized(P: np.ndarray, spec: LensModel, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(a, b) normalized, NaN where the model does not image the point."""
+    a, b, valid = spec.project(P, d)
+    return np.where(valid, a, np.nan), np.where(valid, b, np.nan)
 
 
 def project_normalized(xy, model: str, dist) -> np.ndarray:
-    """Distort normalized pinhole coordinates (x/z, y/z) -> (..., 2) float64 normalized.
+    """Project the rays (x, y, 1) to normalized image coordinates: (..., 2) float64.
 
-    For the pinhole models the result is K⁻¹ of the pixel (NaN beyond the monotonic radius);
-    for ``equidistant`` the input means the ray (x, y, 1) and the result is (θ_d·x/r, θ_d·y/r).
+    For the pinhole models the result is the distorted (x/z, y/z), K⁻¹ of the pixel (NaN beyond
+    the monotonic radius); for the other models K⁻¹ of the pixel of the ray (x, y, 1), e.g.
+    ``equidistant``'s (θ_d·x/r, θ_d·y/r).
     """
     model, d = check_model(model, dist)
     xy = _check_points(xy, 2, "xy")
-    if model == "equidistant":
-        a, b, valid = _eq.project(np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1), d)
-        return np.where(valid[..., None], np.stack([a, b], axis=-1), np.nan)
-    return np.stack(_distort_pinhole(xy[..., 0], xy[..., 1], d), axis=-1)
+    P = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
+    return np.stack(_project_normalized(P, REGISTRY[model], d), axis=-1)
 
 
 def project(points, model: str, K, dist) -> np.ndarray:
     """Project camera-frame points to pixels.
 
     points : (..., 3) float, camera frame, any scale. K : (3, 3). dist : (n,) as ``model``.
-    Returns (..., 2) float64 pixels (x, y); NaN where Z <= 0 (pinhole models) or beyond the
-    model's monotonic range (:func:`monotonic_limit`).
+    Returns (..., 2) float64 pixels (x, y); NaN where Z <= 0 (pinhole models) or outside the
+    model's domain (:func:`monotonic_limit`).
 
     >>> K = np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]])
     >>> project([0.0, 0.0, 2.0], "plumb_bob", K, [-0.3, 0.1, 0.0, 0.0, 0.0])
@@ -183,15 +165,7 @@ def project(points, model: str, K, dist) -> np.ndarray:
     model, d = check_model(model, dist)
     K = _check_K(K)
     P = _check_points(points, 3, "points")
-    if model == "equidistant":
-        a, b, valid = _eq.project(P, d)
-        a, b = np.where(valid, a, np.nan), np.where(valid, b, np.nan)
-    else:
-        with np.errstate(invalid="ignore", divide="ignore"):
-            front = P[..., 2] > 0
-            z = np.where(front, P[..., 2], 1.0)
-            a, b = _distort_pinhole(P[..., 0] / z, P[..., 1] / z, d)
-        a, b = np.where(front, a, np.nan), np.where(front, b, np.nan)
+    a, b = _project_normalized(P, REGISTRY[model], d)
     return np.stack([K[0, 0] * a + K[0, 2], K[1, 1] * b + K[1, 2]], axis=-1)
 
 
@@ -199,7 +173,7 @@ def unproject(pixels, model: str, K, dist) -> np.ndarray:
     """Pixels -> unit rays in the camera frame, the exact inverse of :func:`project`.
 
     pixels : (..., 2) float (x, y) px. Returns (..., 3) float64 rays of norm 1; NaN rows where
-    the pixel is not the image of any ray inside the model's monotonic domain.
+    the pixel is not the image of any ray inside the model's domain.
 
     >>> K = np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]])
     >>> unproject([320.0, 240.0], "equidistant", K, [0.01, 0.0, 0.0, 0.0])
@@ -213,11 +187,7 @@ def unproject(pixels, model: str, K, dist) -> np.ndarray:
     shape = px.shape[:-1]
     a = ((px[..., 0] - K[0, 2]) / K[0, 0]).ravel()
     b = ((px[..., 1] - K[1, 2]) / K[1, 1]).ravel()
-    if model == "equidistant":
-        return _eq.unproject(a, b, d).reshape(shape + (3,))
-    x, y = _ph.undistort(a, b, _ph.full(d))
-    rays = np.stack([x, y, np.ones_like(x)], axis=-1)
-    return (rays / np.linalg.norm(rays, axis=-1, keepdims=True)).reshape(shape + (3,))
+    return REGISTRY[model].unproject(a, b, d).reshape(shape + (3,))
 
 
 def distortion_field(pixels, model: str, K, dist) -> tuple[np.ndarray, np.ndarray]:
@@ -239,12 +209,13 @@ def distortion_field(pixels, model: str, K, dist) -> tuple[np.ndarray, np.ndarra
 
 
 def field_of_view(model: str, K, dist, image_size) -> dict:
-    """Full fields of view in degrees: {"horizontal", "vertical", "diagonal"}.
+    """Full fields of view in degrees: {"horizontal", "vertical", "diagonal"}; never NaN.
 
     Each is the sum of the two half-angles from the optical axis of opposite edge rays (so it
     exceeds 180° for a wide fisheye): the image edges x = -0.5 and w - 0.5 at y = cy, likewise
-    vertically through cx, and the larger of the two corner diagonals. NaN where an edge pixel
-    does not unproject.
+    vertically through cx, and the larger of the two corner diagonals. An edge pixel with no ray
+    (beyond a circular fisheye's valid region, or a pinhole's monotonic radius) counts with the
+    widest angle the model images (:func:`max_angle`): the valid region's diameter.
     """
     K = _check_K(K)
     w, h = _check_size(image_size)
@@ -253,9 +224,9 @@ def field_of_view(model: str, K, dist, image_size) -> dict:
     pts = np.array([[lo, cy], [hx, cy], [cx, lo], [cx, hy], [lo, lo], [hx, hy], [hx, lo], [lo, hy]])
     rays = unproject(pts, model, K, dist)
     half = np.degrees(np.arctan2(np.hypot(rays[:, 0], rays[:, 1]), rays[:, 2]))
+    half = np.where(np.isnan(half), np.degrees(max_angle(model, dist)), half)
     diag = max(half[4] + half[5], half[6] + half[7])
-    diag = float("nan") if np.isnan(half[4:]).any() else float(diag)
-    return {"horizontal": float(half[0] + half[1]), "vertical": float(half[2] + half[3]), "diagonal": diag}
+    return {"horizontal": float(half[0] + half[1]), "vertical": float(half[2] + half[3]), "diagonal": float(diag)}
 
 
 def undistort_maps(model: str, K, dist, image_size, *, new_K=None, R=None,
@@ -291,29 +262,8 @@ def projection_jacobian(points, model: str, K, dist) -> tuple[np.ndarray, np.nda
     model, d = check_model(model, dist)
     K = _check_K(K)
     P = _check_points(points, 3, "points").reshape(-1, 3)
-    fx, fy = K[0, 0], K[1, 1]
-    n = d.size
-    if model == "equidistant":
-        a, b, valid, Jn, Jc = _eq.project_jac(P, d)
-    else:
-        c = _ph.full(d)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            valid = P[:, 2] > 0
-            iz = 1.0 / np.where(valid, P[:, 2], 1.0)
-            x, y = P[:, 0] * iz, P[:, 1] * iz
-            a, b, j11, j12, j21, j22 = _ph.distort_jac(x, y, c)
-        if np.any(c):
-            lim = _ph.monotonic_limit(tuple(float(v) for v in c))
-            valid &= x * x + y * y <= lim * lim
-        Jn = np.empty((P.shape[0], 2, 3))
-        Jn[:, 0, 0], Jn[:, 0, 1], Jn[:, 0, 2] = j11 * iz, j12 * iz, -(j11 * x + j12 * y) * iz
-        Jn[:, 1, 0], Jn[:, 1, 1], Jn[:, 1, 2] = j21 * iz, j22 * iz, -(j21 * x + j22 * y) * iz
-        Jc = _ph.coeff_jac(x, y, c)[..., :n]
-    uv = np.stack([fx * a + K[0, 2], fy * b + K[1, 2]], axis=-1)
-    J_points = Jn * np.array([fx, fy])[:, None]
-    J_intr = np.zeros((P.shape[0], 2, 4 + n))
-    J_intr[:, 0, 0], J_intr[:, 1, 1], J_intr[:, 0, 2], J_intr[:, 1, 3] = a, b, 1.0, 1.0
-    J_intr[:, :, 4:] = Jc * np.array([fx, fy])[:, None]
+    a, b, valid, Jn, Jc = REGISTRY[model].project_jac(P, d)
+    uv, J_points, J_intr = pixel_jacobians(a, b, Jn, Jc, K)
     bad = ~valid
     uv[bad], J_points[bad], J_intr[bad] = np.nan, np.nan, np.nan
     return uv, J_points, J_intr
@@ -328,7 +278,7 @@ class Lens:
     ----------
     model : one of :data:`MODELS`.
     K : (3, 3) float64 camera matrix, px (read-only).
-    dist : (n,) float64 coefficients in OpenCV order for ``model`` (read-only).
+    dist : (n,) float64 coefficients for ``model``, in OpenCV's (Kalibr's for ds, eucm) order (read-only).
     image_size : (width, height) px.
     """
 
@@ -389,6 +339,15 @@ class Lens:
     def monotonic_limit(self) -> float:
         """See :func:`monotonic_limit`."""
         return monotonic_limit(self.model, self.dist)
+
+    def max_angle(self) -> float:
+        """See :func:`max_angle` (radians)."""
+        return max_angle(self.model, self.dist)
+
+    @property
+    def spec(self) -> LensModel:
+        """The lens model's implementation and attributes (:class:`~aicalib_tf.geometry.lens_model.LensModel`)."""
+        return REGISTRY[self.model]
 
     def intrinsics(self) -> np.ndarray:
         """(4 + n,) float64 vector [fx, fy, cx, cy, *dist]."""

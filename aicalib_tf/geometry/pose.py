@@ -18,14 +18,14 @@ def project_points(points: np.ndarray, rvec, tvec, camera: Camera) -> np.ndarray
     """(N, 3) board points -> (N, 2) float64 pixels.
 
     Pinhole models go through ``cv2.projectPoints`` (finite even where the lens does not image
-    the point, as today's labels have it); ``equidistant`` through
+    the point, as today's labels have it); the fisheye models (``IS_FISHEYE``) through
     :func:`aicalib_tf.geometry.lens.project`, valid past 90° off-axis, with points the model
     cannot project (beyond its monotonic range) at -1e6 px, far outside any image.
     """
     P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     rvec = np.asarray(rvec, dtype=np.float64).reshape(3, 1)
     tvec = np.asarray(tvec, dtype=np.float64).reshape(3, 1)
-    if camera.model != "equidistant":
+    if not camera.fisheye:
         pts, _ = cv2.projectPoints(P.reshape(-1, 1, 3), rvec, tvec, camera.K, camera.dist)
         return pts.reshape(-1, 2)
     R, _ = cv2.Rodrigues(rvec)

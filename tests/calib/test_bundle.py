@@ -6,7 +6,8 @@ import cv2
 import numpy as np
 import pytest
 
-from aicalib_tf.calib.bundle import CalibrationError, bundle_adjust, fisheye_start, poses_from_rays, solve_pose
+from aicalib_tf.calib.bundle import CalibrationError, bundle_adjust, poses_from_rays, solve_pose
+from aicalib_tf.calib.starts import fisheye_start
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.pattern import board_points
 from tests.calib.synthetic import SQUARE, synthetic_views
@@ -34,6 +35,18 @@ def test_fisheye_start_and_fit_recover_a_185_degree_lens_without_a_guess():
     np.testing.assert_allclose(fit.intrinsics[:4], FISHEYE.intrinsics()[:4], atol=1e-4)
     np.testing.assert_allclose(fit.intrinsics[4:], FISHEYE.dist, atol=1e-6)
     assert fit.rms < 1e-6 and fit.note == ""
+
+
+@pytest.mark.parametrize("model, dist", [("ds", [-0.2, 0.6]), ("eucm", [0.62, 1.15])])
+def test_ds_and_eucm_fits_recover_the_lens_without_a_guess(model, dist):
+    true = L.Lens(model, [[250.0, 0, 641.5], [0, 249.6, 478.2], [0, 0, 1]], dist, FISHEYE_SIZE)
+    views = synthetic_views(true, 12, 0.01, seed=5, distance=(0.15, 0.4))
+    obj, px = _problem(views)
+    intr0, poses = fisheye_start(obj, px, FISHEYE_SIZE, np.ones(6, bool), model)
+    fit = bundle_adjust(model, obj, px, intr0, *poses)
+    sd = np.sqrt(np.diag(fit.covariance))
+    assert np.all(np.abs(fit.intrinsics - true.intrinsics()) < 4 * sd), (fit.intrinsics, sd)
+    assert abs(fit.rms - 0.01 * np.sqrt(2)) < 0.003
 
 
 def test_plumb_bob_fit_reaches_opencvs_minimum_and_its_standard_deviations():

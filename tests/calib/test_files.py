@@ -19,7 +19,7 @@ SIZE = (640, 480)
 DIST = {"plumb_bob": [-0.2, 0.05, 0.001, -0.002, 0.01],
         "rational_polynomial": [-0.2, 0.05, 0.001, -0.002, 0.01, 0.02, -0.01, 0.003],
         "thin_prism": [-0.2, 0.05, 0.001, -0.002, 0.01, 0.02, -0.01, 0.003, 1e-4, -2e-4, 3e-4, 1e-5],
-        "equidistant": [0.05, -0.01, 0.002, -0.0003]}
+        "equidistant": [0.05, -0.01, 0.002, -0.0003], "ds": [-0.2, 0.6], "eucm": [0.62, 1.1]}
 HAS_MODEL = "model" in {f.name for f in dataclasses.fields(Calibration)}
 
 
@@ -33,7 +33,7 @@ def _cal(model: str) -> Calibration:
                  "quality": {"verdict": "good to 0.1 px (1σ) over 80% of the image"}}
     elif model not in ("plumb_bob", "rational_polynomial"):
         pytest.skip(f"this build's Calibration cannot hold a {model} lens (no model field yet)")
-    f = 300.0 if model == "equidistant" else 520.0
+    f = 300.0 if L.get_model(model).IS_FISHEYE else 520.0
     return Calibration(K=np.array([[f, 0, 321.5], [0, f * 1.01, 238.25], [0, 0, 1]]), dist=np.array(DIST[model]),
                        image_size=SIZE, pattern_size=(9, 6), square_size=25.0, rms=0.123456789012,
                        views=("a.png", "b.png"), rvecs=np.array([[0.1, -0.2, 0.3], [0.0, 0.1, -0.05]]),

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import dataclasses
 
+import cv2
 import numpy as np
 import pytest
 
 from aicalib_tf.calib.bundle import CalibrationError
 from aicalib_tf.calib.fit import _fit_model, calibrate_camera
-from aicalib_tf.calib.select import COMPLEXITY, choose, cross_validate
+from aicalib_tf.calib.fit import View
+from aicalib_tf.calib.select import COMPLEXITY, choose, cross_validate, select_model, widest_ray_deg
+from aicalib_tf.geometry.pattern import board_points
 from aicalib_tf.geometry import lens as L
 from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views
 
@@ -31,6 +34,62 @@ def test_choose_takes_the_simplest_model_within_one_standard_error():
     assert choose(rows) == "rational_polynomial"
     assert choose([_row("plumb_bob", float("nan"), float("nan"))]) is None
     assert set(COMPLEXITY) == set(L.MODELS)
+
+
+def test_choose_prefers_a_model_whose_extras_are_determined():
+    rows = [_row("plumb_bob", 0.5, 0.01), _row("ds", 0.100, 0.01), _row("eucm", 0.101, 0.01)]
+    assert choose(rows) == "ds"
+    rows[1]["determined"] = False  # ξ within 2σ of 0: DS is no more than the unified model
+    assert choose(rows) == "eucm"
+    rows[2]["determined"] = False
+    assert choose(rows) == "ds"  # none determined: the simplest
+
+
+def test_a_held_out_gain_within_its_own_noise_does_not_count():
+    a, b = [0.075, 0.066, 0.078, 0.071, 0.074], [0.068, 0.072, 0.067, 0.074, 0.070]  # plumb_bob, equidistant
+    rows = [dict(_row("plumb_bob", np.mean(a), np.std(a, ddof=1) / np.sqrt(5)), cv_folds=a),
+            dict(_row("equidistant", np.mean(b), np.std(b, ddof=1) / np.sqrt(5)), cv_folds=b)]
+    assert rows[0]["cv_rms"] > rows[1]["cv_rms"] + rows[1]["cv_se"]  # beyond the best's own standard error
+    assert choose(rows) == "plumb_bob"  # but within that of the fold-by-fold gain
+    del rows[0]["cv_folds"]
+    assert choose(rows) == "equidistant"
+    erratic = [0.02, 0.5, 0.02, 0.9, 0.02]  # a model that fails some folds is no alternative
+    rows = [dict(_row("plumb_bob", np.mean(erratic), np.std(erratic, ddof=1) / np.sqrt(5)), cv_folds=erratic),
+            dict(_row("equidistant", 0.0202, 0.0002), cv_folds=[0.0201, 0.0203, 0.02, 0.0204, 0.0202])]
+    assert choose(rows) == "equidistant"
+
+
+def _views_past_90_degrees(lens, n=10, seed=0, noise=0.01):
+    """Boards facing the camera with their centres 50–88° off-axis, corners beyond 90° kept."""
+    rng = np.random.default_rng(seed)
+    ids = np.stack(np.meshgrid(np.arange(9), np.arange(6)), -1).reshape(-1, 2)
+    X = board_points(ids, SQUARE) - [4 * SQUARE, 2.5 * SQUARE, 0.0]
+    views = []
+    while len(views) < n:
+        t, phi = np.radians(rng.uniform(50.0, 88.0)), rng.uniform(0, 2 * np.pi)
+        c = np.array([np.sin(t) * np.cos(phi), np.sin(t) * np.sin(phi), np.cos(t)])
+        z = -c  # the board faces the camera, turned by up to 30°
+        x = np.cross([0.3, 0.5, 0.8], z)
+        x /= np.linalg.norm(x)
+        R = cv2.Rodrigues(rng.uniform(-0.5, 0.5, 3))[0] @ np.stack([x, np.cross(z, x), z], axis=1)
+        uv = lens.project(X @ R.T + c * rng.uniform(0.2, 0.35))
+        w, h = lens.image_size
+        ok = np.isfinite(uv).all(1) & (uv[:, 0] > 0) & (uv[:, 0] < w - 1) & (uv[:, 1] > 0) & (uv[:, 1] < h - 1)
+        if ok.sum() >= 20:
+            views.append(View(f"v{len(views):02d}", uv[ok] + noise * rng.standard_normal((int(ok.sum()), 2)), ids[ok]))
+    return views
+
+
+def test_auto_picks_a_fisheye_model_for_a_185_degree_lens_and_skips_the_pinholes():
+    views = _views_past_90_degrees(FISHEYE, 10)
+    fit = lambda vs, m, start: _fit_model(m, vs, SQUARE, FISHEYE.image_size, start)  # noqa: E731
+    table, chosen, best = select_model(views, SQUARE, fit)
+    assert chosen == "equidistant" and widest_ray_deg(best, views) > 90.0
+    rows = {r["model"]: r for r in table}
+    assert [r["model"] for r in table] == list(L.MODELS)
+    for m in ("plumb_bob", "rational_polynomial", "thin_prism"):
+        assert "images less than 90°" in rows[m]["note"] and not np.isfinite(rows[m]["cv_rms"])
+    assert all(np.isfinite(rows[m]["cv_rms"]) or rows[m]["note"] for m in ("equidistant", "ds", "eucm"))
 
 
 def test_auto_picks_equidistant_for_a_185_degree_fisheye():
@@ -55,7 +114,7 @@ def test_a_model_that_cannot_be_fitted_gets_a_note_and_auto_goes_on():
     cal = calibrate_camera(views, PATTERN, SQUARE, MILD.image_size, reject_outliers=False)
     table = {r["model"]: r for r in cal.model_table}
     assert table["thin_prism"]["note"].startswith("thin_prism: ") and not table["thin_prism"]["chosen"]
-    assert cal.model in ("plumb_bob", "equidistant")
+    assert table[cal.model]["chosen"] and np.isfinite(table[cal.model]["cv_rms"])
 
 
 def test_forced_model_and_bad_model_name():

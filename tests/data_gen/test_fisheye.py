@@ -72,3 +72,19 @@ def test_fisheye_render_matches_brute_force_past_90_degrees():
     diff = np.abs(img - ref) / (board.white - board.black)
     assert (img != BACKGROUND).sum() > 200  # the board is really there
     assert diff.max() < 1 / 16 + 1 / 89 and diff.mean() < 3e-3
+
+
+def test_ds_and_eucm_lenses_render_with_exact_labels():
+    for model, fov in (("ds", 190.0), ("eucm", 170.0)):
+        preset = get_preset("fisheye", lens=model, fisheye_fov_deg=(fov, fov), sizes=((160, 120),),
+                            partial_probability=0.0, rules=())
+        s = make_sample(preset, 5, 0, pattern=(9, 6))
+        lab = s.label
+        assert lab["distortion_model"] == model and len(lab["dist"]) == 2
+        R = np.array(__import__("cv2").Rodrigues(np.array(lab["rvec"]))[0])
+        cam_pts = Board((9, 6), lab["square_size"]).object_points() @ R.T + np.array(lab["tvec"])
+        uv = lens.project(cam_pts, model, np.array(lab["K"]), lab["dist"])
+        np.testing.assert_allclose(s.corners[s.visible], uv[s.visible], atol=1e-9)
+        assert s.visible.sum() >= 6 and s.image.std() > 10  # a board is drawn
+        cam = Camera(np.array(lab["K"]), lab["dist"], (160, 120), model=model, max_theta=math.radians(fov / 2))
+        assert cam.fisheye and abs(cam.diagonal_fov_deg() - fov) < 1.5 + (fov >= 175) * 40

@@ -21,6 +21,8 @@ DISTS = {
     "rational_polynomial": [0.45, -0.12, 1e-3, -8e-4, 0.02, 0.75, 0.04, 0.012],
     "thin_prism": [0.45, -0.12, 1e-3, -8e-4, 0.02, 0.75, 0.04, 0.012, 1.5e-3, -3e-4, -8e-4, 2e-4],
     "equidistant": [0.02, -0.005, 0.001, -0.0002],
+    "ds": [-0.18, 0.59],
+    "eucm": [0.63, 1.08],
 }
 PINHOLE = ("plumb_bob", "rational_polynomial", "thin_prism")
 
@@ -36,7 +38,7 @@ def _random_points(rng, model, n=500, max_angle_deg=60.0):
     """Points in front of the camera up to max_angle_deg off-axis and inside the monotonic range."""
     lim = lens.monotonic_limit(model, DISTS[model])
     max_r = math.tan(math.radians(max_angle_deg))
-    if model != "equidistant":
+    if not lens.get_model(model).IS_FISHEYE:
         max_r = min(max_r, 0.9 * lim)
     r = max_r * np.sqrt(rng.uniform(0.0, 1.0, n))
     phi = rng.uniform(0.0, 2.0 * np.pi, n)
@@ -50,8 +52,9 @@ def _unit(v):
 
 # ----------------------------------------------------------------------------- tables and validation
 def test_tables_are_consistent():
-    assert lens.MODELS == ("plumb_bob", "rational_polynomial", "thin_prism", "equidistant")
-    assert lens.N_COEFFS == {"plumb_bob": 5, "rational_polynomial": 8, "thin_prism": 12, "equidistant": 4}
+    assert lens.MODELS == ("plumb_bob", "rational_polynomial", "thin_prism", "equidistant", "ds", "eucm")
+    assert lens.N_COEFFS == {"plumb_bob": 5, "rational_polynomial": 8, "thin_prism": 12, "equidistant": 4, "ds": 2,
+                             "eucm": 2}
     for m in lens.MODELS:
         assert len(lens.COEFF_NAMES[m]) == lens.N_COEFFS[m]
         assert lens.model_from_ros(lens.ROS_NAMES[m], lens.N_COEFFS[m]) == m
@@ -304,10 +307,12 @@ def test_field_of_view_200_degree_fisheye():
     assert fov["diagonal"] == pytest.approx(200.0 * math.sqrt(2), abs=1e-6)
 
 
-def test_field_of_view_nan_when_edge_not_imaged():
-    fov = lens.field_of_view("plumb_bob", np.array([[200.0, 0, 319.5], [0, 200, 239.5], [0, 0, 1]]),
-                             [-0.35, 0, 0, 0, 0], (640, 480))
-    assert math.isnan(fov["horizontal"]) and math.isnan(fov["diagonal"])
+def test_field_of_view_is_the_valid_region_when_edge_not_imaged():
+    d = [-0.35, 0, 0, 0, 0]
+    fov = lens.field_of_view("plumb_bob", np.array([[200.0, 0, 319.5], [0, 200, 239.5], [0, 0, 1]]), d, (640, 480))
+    full = 2 * math.degrees(math.atan(lens.monotonic_limit("plumb_bob", d)))  # the monotonic radius' diameter
+    assert fov["horizontal"] == pytest.approx(full) and fov["diagonal"] == pytest.approx(full)
+    assert lens.max_angle("plumb_bob", d) == pytest.approx(math.radians(full / 2))
 
 
 def test_distortion_field_matches_opencv_undistort_points():
@@ -369,7 +374,7 @@ def test_undistort_maps_identity_without_distortion():
 def _jac_points(model):
     rng = np.random.default_rng(5)
     P = _random_points(rng, model, n=60, max_angle_deg=60.0)
-    if model == "equidistant":
+    if lens.get_model(model).IS_FISHEYE:
         P = np.vstack([P, _rays_at(100.0, 8, rho=3.0), _rays_at(89.9, 4), [[0.0, 0.0, 2.0]]])
     return P
 
