@@ -1,0 +1,190 @@
+"""ChArUco boards: the chessboard pipeline's lattice, named by the markers in its white squares.
+
+The X-junctions of a ChArUco board are chessboard corners: the CNN, the saddle refinement and the
+grid assembly of :mod:`aicalib_tf.detect.pipeline` find them as on a chessboard (the markers are
+clutter the grid leaves out), with lattice ids (a, b) that keep the grid's shape but not its
+place on the board. The markers then fix the place. Each marker, read by OpenCV's detector or
+from its bits sampled through the lattice (:mod:`aicalib_tf.detect.markers`), lies in one lattice
+cell and says which board square that cell is and how the board's axes run: one hypothesis
+board (c, r) = A·(a, b) + t. The hypothesis with the most markers wins when it has at least two,
+or one with none against it, and no more than a third as many against it.
+
+Every returned corner carries its board id, and an id must be decided: a corner is kept only
+when a marker of the winning hypothesis lies within :data:`SUPPORT` squares of it, no marker of
+another hypothesis lies within twice that, and its id falls on the board. So a corner whose
+markers are all unreadable (hidden, far out of focus) is left out rather than guessed.
+
+Several boards in one image are several grids of corners, each named on its own. Boards with
+different dictionaries or id ranges are told apart by their markers; two boards with the same ids come back as two detections,
+both flagged ``duplicate``, never merged.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from aicalib_tf.detect.markers import Placed, aruco_markers, decode_cells, place_marker
+from aicalib_tf.geometry.charuco import CharucoBoard
+
+__all__ = ["CharucoDetection", "SUPPORT", "name_lattice", "detect_charuco_boards", "outside_markers"]
+
+SUPPORT = 1.5  # squares from a corner to a marker that names it (Chebyshev, marker centre)
+
+
+@dataclass(frozen=True)
+class CharucoDetection:
+    """One ChArUco board found in an image.
+
+    board : its description. corners : (N, 2) float32 (x, y) px, ordered by id (row-major).
+    ids : (N, 2) int32 (col, row) on the board; ``charuco_ids`` (N,) = row·cols + col (OpenCV's).
+    marker_ids : (M,) int64 markers that named the board; marker_corners (M, 4, 2) float64 px.
+    complete : every inner corner found. duplicate : another board in the image has the same ids.
+    image_size : (width, height) px.
+    """
+
+    board: CharucoBoard
+    corners: np.ndarray
+    ids: np.ndarray
+    marker_ids: np.ndarray
+    marker_corners: np.ndarray
+    complete: bool
+    image_size: tuple[int, int]
+    duplicate: bool = False
+
+    @property
+    def charuco_ids(self) -> np.ndarray:
+        return (self.ids[:, 1] * self.board.pattern_size[0] + self.ids[:, 0]).astype(np.int64)
+
+    @property
+    def found(self) -> bool:
+        return len(self.corners) > 0
+
+
+def _hypothesis(m: Placed, board: CharucoBoard) -> tuple[tuple, np.ndarray]:
+    """(key, t) of board (c, r) = A·(a, b) + t: the marker's cell centre goes to its square's centre."""
+    i, j = board.marker_square_of()[m.id]
+    t = np.array([i - 0.5, j - 0.5]) - m.A @ (np.asarray(m.cell, np.float64) + 0.5)
+    t = np.rint(t).astype(np.int64)
+    return (tuple(m.A.ravel()), tuple(t)), t
+
+
+def _markers(gray: np.ndarray, gray_u8: np.ndarray, ids: np.ndarray, pts: np.ndarray,
+             board: CharucoBoard, read: tuple[np.ndarray, np.ndarray]) -> list[Placed]:
+    """The board's markers on this lattice: OpenCV's where it read them, the lattice decoder's elsewhere."""
+    placed = []
+    for mid, corners in zip(*read):
+        m = place_marker(ids, pts, int(mid), corners, board)
+        if m is not None:
+            placed.append(m)
+    taken = {m.cell for m in placed}
+    return placed + decode_cells(gray, ids, pts, board, skip=taken)
+
+
+def _winner(markers: list[Placed], board: CharucoBoard):
+    """(key, A, t, supporting markers, opposing markers) of the best hypothesis, or None."""
+    votes = defaultdict(list)
+    for m in markers:
+        key, t = _hypothesis(m, board)
+        votes[key].append(m)
+    if not votes:
+        return None
+    key = max(votes, key=lambda k: (len(votes[k]), -sum(m.errors for m in votes[k])))
+    support = votes[key]
+    against = [m for k, ms in votes.items() if k != key for m in ms]
+    if len(support) < 2 and against or 3 * len(against) > len(support):
+        return None
+    A = np.array(key[0], np.int64).reshape(2, 2)
+    return A, np.array(key[1], np.int64), support, against
+
+
+def name_lattice(gray: np.ndarray, gray_u8: np.ndarray, ids: np.ndarray, pts: np.ndarray,
+                 board: CharucoBoard, read=None) -> CharucoDetection | None:
+    """Board ids for a lattice of corners (ids (N, 2) lattice coordinates, pts (N, 2) px), or None.
+
+    gray : (H, W) float32 in [0, 1]; gray_u8 the same as uint8. read : OpenCV's markers
+    (:func:`aicalib_tf.detect.markers.aruco_markers`) when the caller has them.
+    """
+    ids = np.asarray(ids, np.int64).reshape(-1, 2)
+    pts = np.asarray(pts, np.float64).reshape(-1, 2)
+    read = aruco_markers(gray_u8, board) if read is None else read
+    win = _winner(_markers(gray, gray_u8, ids, pts, board, read), board)
+    if win is None:
+        return None
+    A, t, support, against = win
+    named = ids @ A.T + t
+    cols, rows = board.pattern_size
+    keep = (named[:, 0] >= 0) & (named[:, 0] < cols) & (named[:, 1] >= 0) & (named[:, 1] < rows)
+    keep &= _near(ids, support, SUPPORT) & ~_near(ids, against, 2 * SUPPORT)
+    if not keep.any():
+        return None
+    order = np.lexsort((named[keep, 0], named[keep, 1]))
+    h, w = gray.shape
+    mk = sorted(support, key=lambda m: m.id)
+    return CharucoDetection(board, pts[keep][order].astype(np.float32), named[keep][order].astype(np.int32),
+                            np.array([m.id for m in mk], np.int64),
+                            np.array([m.corners for m in mk], np.float64).reshape(-1, 4, 2),
+                            bool(keep.sum() == cols * rows), (w, h))
+
+
+def _near(ids: np.ndarray, markers: list[Placed], radius: float) -> np.ndarray:
+    """(N,) bool: a lattice corner within ``radius`` cells (Chebyshev) of a marker's cell centre."""
+    if not markers:
+        return np.zeros(len(ids), bool)
+    centres = np.array([m.cell for m in markers], np.float64) + 0.5
+    d = np.abs(ids[:, None, :].astype(np.float64) - centres[None]).max(axis=2)
+    return (d <= radius).any(axis=1)
+
+
+def outside_markers(points: np.ndarray, marker_corners: np.ndarray, shrink: float = 1.15) -> np.ndarray:
+    """(N,) bool: points (N, 2) px outside every marker (corners (M, 4, 2) px, each shrunk by
+    ``shrink`` about its centre: a little larger, to take in the junctions of its outline). A marker's bits make X-junctions of their own; none is a board corner."""
+    keep = np.ones(len(points), bool)
+    for quad in marker_corners:
+        c = quad.mean(axis=0)
+        poly = (c + shrink * (quad - c)).astype(np.float32).reshape(-1, 1, 2)
+        for k in np.nonzero(keep)[0]:
+            if cv2.pointPolygonTest(poly, (float(points[k, 0]), float(points[k, 1])), False) >= 0:
+                keep[k] = False
+    return keep
+
+
+def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], find_lattices) -> list[CharucoDetection]:
+    """Every ChArUco board of ``boards`` among the lattices found in the image, largest first.
+
+    gray : (H, W) float32 in [0, 1]. find_lattices : ``f(keep=None) -> [(ids (N, 2) int, pts (N, 2) px)]``,
+    the grids of chessboard corners with lattice ids among the candidates that ``keep(points)``
+    admits (:func:`aicalib_tf.detect.pipeline.detect_charuco`); candidates inside the markers
+    OpenCV reads are left out. Each lattice is named by the board whose markers decide the most
+    of its corners.
+    """
+    from aicalib_tf.io import quantize
+
+    u8 = quantize(gray)
+    reads = {b: aruco_markers(u8, b) for b in dict.fromkeys(boards)}
+    quads = np.concatenate([r[1] for r in reads.values()]) if reads else np.zeros((0, 4, 2))
+    found = []
+    for ids, pts in find_lattices(keep=lambda p: outside_markers(p, quads)):
+        best = None
+        for board in reads:
+            if len(ids) < 4:
+                continue
+            det = name_lattice(gray, u8, ids, pts, board, reads[board])
+            if det is not None and (best is None or len(det.corners) > len(best.corners)):
+                best = det
+        if best is not None:
+            found.append(best)
+    return _flag_duplicates(sorted(found, key=lambda d: -len(d.corners)))
+
+
+def _flag_duplicates(found: list[CharucoDetection]) -> list[CharucoDetection]:
+    """Flag detections of boards with the same description (same ids): reported, never merged."""
+    from dataclasses import replace
+
+    count = defaultdict(int)
+    for d in found:
+        count[d.board] += 1
+    return [replace(d, duplicate=count[d.board] > 1) for d in found]
