@@ -24,13 +24,12 @@ from __future__ import annotations
 from collections import defaultdict
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from aicalib_tf.detect.markers import Placed, aruco_markers, decode_cells, place_marker
 from aicalib_tf.geometry.charuco import CharucoBoard
 
-__all__ = ["CharucoDetection", "SUPPORT", "name_lattice", "detect_charuco_boards", "outside_markers"]
+__all__ = ["CharucoDetection", "SUPPORT", "name_lattice", "detect_charuco_boards", "square_lattice"]
 
 SUPPORT = 1.5  # squares from a corner to a marker that names it (Chebyshev, marker centre)
 
@@ -139,45 +138,67 @@ def _near(ids: np.ndarray, markers: list[Placed], radius: float) -> np.ndarray:
     return (d <= radius).any(axis=1)
 
 
-def outside_markers(points: np.ndarray, marker_corners: np.ndarray, shrink: float = 1.15) -> np.ndarray:
-    """(N,) bool: points (N, 2) px outside every marker (corners (M, 4, 2) px, each shrunk by
-    ``shrink`` about its centre: a little larger, to take in the junctions of its outline). A marker's bits make X-junctions of their own; none is a board corner."""
-    keep = np.ones(len(points), bool)
-    for quad in marker_corners:
-        c = quad.mean(axis=0)
-        poly = (c + shrink * (quad - c)).astype(np.float32).reshape(-1, 1, 2)
-        for k in np.nonzero(keep)[0]:
-            if cv2.pointPolygonTest(poly, (float(points[k, 0]), float(points[k, 1])), False) >= 0:
-                keep[k] = False
-    return keep
+def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], model, threshold: float = 0.5) -> list[CharucoDetection]:
+    """Every ChArUco board of ``boards`` in the image, largest first.
 
-
-def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], find_lattices) -> list[CharucoDetection]:
-    """Every ChArUco board of ``boards`` among the lattices found in the image, largest first.
-
-    gray : (H, W) float32 in [0, 1]. find_lattices : ``f(keep=None) -> [(ids (N, 2) int, pts (N, 2) px)]``,
-    the grids of chessboard corners with lattice ids among the candidates that ``keep(points)``
-    admits (:func:`aicalib_tf.detect.pipeline.detect_charuco`); candidates inside the markers
-    OpenCV reads are left out. Each lattice is named by the board whose markers decide the most
-    of its corners.
+    gray : (H, W) float32 in [0, 1]. model : the corner network. The grids of corners come from
+    :func:`aicalib_tf.detect.charuco_grid.lattices`, with the markers OpenCV reads for every board's
+    dictionary left out; each grid is named by the board whose markers decide the most of its
+    corners (a grid whose steps are not the squares', as the grid assembly sometimes builds on a
+    ChArUco board, is read in squares first: :func:`square_lattice`). Grids of one board
+    that share its markers at the same places are merged; corners beside the markers are then
+    looked for where the markers put them (:mod:`aicalib_tf.detect.charuco_complete`).
     """
+    from aicalib_tf.detect.charuco_complete import complete_from_markers, merge_same_board
+    from aicalib_tf.detect.charuco_grid import lattices
     from aicalib_tf.io import quantize
 
     u8 = quantize(gray)
     reads = {b: aruco_markers(u8, b) for b in dict.fromkeys(boards)}
-    quads = np.concatenate([r[1] for r in reads.values()]) if reads else np.zeros((0, 4, 2))
+    quads = np.concatenate([r[1] for r in reads.values()])
+    ratio = min((b.square - b.marker) / (2.0 * b.marker) for b in reads)
+    limit = max(max(b.pattern_size) for b in reads) + 1
     found = []
-    for ids, pts in find_lattices(keep=lambda p: outside_markers(p, quads)):
+    for ids, pts in lattices(model, gray, threshold, quads, ratio, limit):
         best = None
+        lat = square_lattice(ids, pts, quads, min(b.marker / b.square for b in reads))
         for board in reads:
-            if len(ids) < 4:
-                continue
-            det = name_lattice(gray, u8, ids, pts, board, reads[board])
+            det = name_lattice(gray, u8, lat, pts, board, reads[board]) if lat is not None and len(ids) >= 4 else None
             if det is not None and (best is None or len(det.corners) > len(best.corners)):
                 best = det
         if best is not None:
             found.append(best)
+    found = merge_same_board(found)
+    found = [complete_from_markers(gray, d, reads[d.board]) for d in found]
     return _flag_duplicates(sorted(found, key=lambda d: -len(d.corners)))
+
+
+def square_lattice(ids: np.ndarray, pts: np.ndarray, quads: np.ndarray, side: float) -> np.ndarray | None:
+    """Lattice ids (N, 2) in steps of one square: a grid assembled on every other corner (steps of
+    two squares, or of a square's diagonal) is turned back, by the markers' sides measured in its own
+    steps. side : marker / square. Returns ids (N, 2) int64 (``ids`` when the steps are squares
+    already or no marker tells), None when the markers tell no whole-number change of steps.
+    """
+    from aicalib_tf.detect.markers import lattice_coords
+
+    axes = []
+    for quad in quads:
+        lat = lattice_coords(ids, pts, quad)
+        if lat is None:
+            continue
+        centre = lat.mean(axis=0)
+        if (centre < ids.min(axis=0) - 1).any() or (centre > ids.max(axis=0) + 1).any():
+            continue
+        axes.append(np.column_stack([lat[1] - lat[0], lat[3] - lat[0]]) / side)
+    if not axes:
+        return ids
+    steps = np.median(np.array(axes), axis=0)  # columns: one square along board x, y, in grid steps
+    if np.abs(np.abs(np.linalg.det(steps)) - 1.0) < 0.25:
+        return ids
+    M = np.linalg.inv(steps)
+    if np.abs(M - np.rint(M)).max() > 0.2:
+        return None
+    return ids @ np.rint(M).astype(np.int64).T
 
 
 def _flag_duplicates(found: list[CharucoDetection]) -> list[CharucoDetection]:

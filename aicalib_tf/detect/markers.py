@@ -24,7 +24,7 @@ import numpy as np
 
 from aicalib_tf.geometry.charuco import CharucoBoard, dictionary
 
-__all__ = ["Placed", "READINGS", "aruco_markers", "place_marker", "decode_cells", "MAX_BIT_ERRORS", "MIN_BIT_MARGIN"]
+__all__ = ["Placed", "READINGS", "aruco_markers", "lattice_coords", "place_marker", "decode_cells", "MAX_BIT_ERRORS", "MIN_BIT_MARGIN"]
 
 MAX_BIT_ERRORS = 1
 MIN_BIT_MARGIN = 4
@@ -78,7 +78,7 @@ def aruco_markers(gray_u8: np.ndarray, board: CharucoBoard) -> tuple[np.ndarray,
     return ids[keep], corners[keep]
 
 
-def _to_lattice(ids: np.ndarray, pts: np.ndarray, xy: np.ndarray, k: int = 12) -> np.ndarray | None:
+def lattice_coords(ids: np.ndarray, pts: np.ndarray, xy: np.ndarray, k: int = 12) -> np.ndarray | None:
     """Image points xy (M, 2) -> lattice coordinates (M, 2), by a homography of the k corners nearest
     their mean; None when fewer than 4 corners or a degenerate fit."""
     if len(ids) < 4:
@@ -96,7 +96,7 @@ def place_marker(ids: np.ndarray, pts: np.ndarray, marker_id: int, corners: np.n
 
     None when it does not sit in the middle of one cell with its sides along the lattice.
     """
-    lat = _to_lattice(ids, pts, corners)
+    lat = lattice_coords(ids, pts, corners)
     if lat is None:
         return None
     centre = lat.mean(axis=0)

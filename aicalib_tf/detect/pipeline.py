@@ -252,7 +252,7 @@ def _zoomed(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: f
 
 
 def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed: Smoothed | None = None,
-                   min_points: int = 0, keep=None) -> tuple[np.ndarray, np.ndarray]:
+                   min_points: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """The detector's corner candidates: the CNN's points, refined on the image, duplicates merged.
 
     gray : (H, W) float32 or uint8. The network's points (:func:`aicalib_tf.cnn.inference.corner_points`,
@@ -261,16 +261,11 @@ def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed:
     whose fit fails are dropped, and of points that meet within 1.5 px the strongest stays.
     smoothed : the image's :class:`~aicalib_tf.detect.refine.Smoothed` when the caller has it.
     min_points : fewer network points than this give no candidates (nothing is refined).
-    keep : ``f(points (N, 2)) -> (N,) bool``, the network's points that may be corners (None: all);
-    the others are dropped before refinement (a ChArUco marker's own junctions, say).
     Returns points (N, 2) float32 (x, y) px and weights (N,) float32, strongest first.
     """
     from aicalib_tf.cnn.inference import corner_points
 
     pts, scores = corner_points(model, gray, threshold)
-    if keep is not None and len(pts):
-        ok = keep(pts)
-        pts, scores = pts[ok], scores[ok]
     pts, scores = pts[:MAX_CANDIDATES], scores[:MAX_CANDIDATES]  # strongest first; bounds the N² steps
     if len(pts) < max(min_points, 1):
         return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
@@ -364,8 +359,7 @@ def detect_charuco(image, boards, *, model=None, threshold: float = 0.5) -> list
 
     image : path or array (the image gate). boards : CharucoBoards or their descriptions
     (``charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100``). The corners are the chessboard
-    search's (CNN, saddle refinement, grid assembly; corners off their neighbours' lattice dropped),
-    their ids come from the markers. Returns a list of
+    stages' (CNN, saddle refinement, grid assembly), their ids come from the markers. Returns a list of
     :class:`~aicalib_tf.detect.charuco.CharucoDetection`, largest first (empty when none).
     """
     from aicalib_tf.detect.charuco import detect_charuco_boards
@@ -375,33 +369,7 @@ def detect_charuco(image, boards, *, model=None, threshold: float = 0.5) -> list
     if not boards or any(b is None for b in boards):
         raise ValueError("boards must be ChArUco boards or descriptions such as charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100")
     model = model if model is not None else _default_model()
-    limit = max(max(b.pattern_size) for b in boards) + 1
-    return detect_charuco_boards(gray, boards, bind(_lattices, gray, model, threshold, limit))
-
-
-def _lattices(gray: np.ndarray, model, threshold: float, limit: int, keep=None) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Every grid of chessboard corners in gray (H, W) float32: [(lattice ids (N, 2), pts (N, 2) px)],
-    corners off their neighbours' lattice dropped (:func:`aicalib_tf.detect.lattice.drop_outliers`).
-    keep : ``f(points (N, 2)) -> (N,) bool``, the candidates that may be corners (None: all)."""
-    smoothed = Smoothed(gray)
-    refined, scores = refined_points(model, gray, threshold, smoothed=smoothed, min_points=MIN_CORNERS, keep=keep)
-    if keep is not None and len(refined):  # a refinement may have moved a point into a marker
-        ok = keep(refined)
-        refined, scores = refined[ok], scores[ok]
-    if len(refined) < MIN_CORNERS:
-        return []
-    smooth = smoothed.sigma(1.0)
-    amp, _ = ring_symmetry(smooth, refined.astype(np.float64), 0.3 * nearest_spacing(refined))
-    propose = proposer(smoothed, smooth, float(np.median(amp[: max(MIN_CORNERS, len(amp) // 2)])))
-    grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit)
-    if not grids:
-        grids = assemble_grids(refined, scores, gray=smooth, limit=limit, strips=True)
-    out = []
-    for grid in grids:
-        kept = drop_outliers(grid.ij, grid.points, grid.index)
-        if kept is not None:
-            out.append((np.asarray(kept[0], np.int64), np.asarray(kept[1], np.float64)))
-    return out
+    return detect_charuco_boards(gray, boards, model, threshold)
 
 
 def find_chessboard_corners(image, pattern_size: tuple[int, int], *, model=None) -> tuple[bool, np.ndarray | None]:

@@ -1,0 +1,146 @@
+"""A named ChArUco board, made whole: grids of one board merged, corners beside markers added.
+
+Merging: two detections of the same board description are one board when the markers both
+placed sit at the same image places (within :data:`SAME_PLACE_PX`) and their corners have no id in
+common; otherwise they stay two (two printed copies of a board have the same ids).
+
+Completion: a marker read by OpenCV fixes its square's four corners through the homography of its
+own corners (square corner = marker corner × square / marker about the centre). A marker is used
+only when the board's corners already found put its square's centre within a quarter square of the
+marker's centre (so a second copy of the board elsewhere never adds corners). A missing corner is
+looked for where its markers put it (their predictions within a tenth of a marker side of each
+other): a saddle fit with a window inside the white margin must land within
+:data:`MAX_SHIFT_MARGIN` of the margin of the prediction. Passes repeat while corners are added.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import replace
+
+import cv2
+import numpy as np
+
+from aicalib_tf.detect.lattice import predict_ids
+from aicalib_tf.detect.refine import Smoothed, refine_windowed
+
+__all__ = ["SAME_PLACE_PX", "MAX_SHIFT_MARGIN", "merge_same_board", "complete_from_markers", "square_corners"]
+
+SAME_PLACE_PX = 2.0
+MAX_SHIFT_MARGIN = 0.5
+PASSES = 3
+
+
+def _same_board(a, b) -> bool:
+    if a.board != b.board or set(map(tuple, a.ids.tolist())) & set(map(tuple, b.ids.tolist())):
+        return False
+    shared = set(a.marker_ids.tolist()) & set(b.marker_ids.tolist())
+    if not shared:
+        return False
+    for k in shared:
+        ca = a.marker_corners[list(a.marker_ids).index(k)].mean(axis=0)
+        cb = b.marker_corners[list(b.marker_ids).index(k)].mean(axis=0)
+        if np.linalg.norm(ca - cb) > SAME_PLACE_PX:
+            return False
+    return True
+
+
+def _union(a, b):
+    """One detection of the corners and markers of a and b (same board, disjoint ids)."""
+    ids = np.concatenate([a.ids, b.ids])
+    pts = np.concatenate([a.corners, b.corners])
+    order = np.lexsort((ids[:, 0], ids[:, 1]))
+    mk = dict(zip(b.marker_ids.tolist(), b.marker_corners))
+    mk.update(zip(a.marker_ids.tolist(), a.marker_corners))
+    keys = sorted(mk)
+    cols, rows = a.board.pattern_size
+    return replace(a, corners=pts[order], ids=ids[order], marker_ids=np.array(keys, np.int64),
+                   marker_corners=np.array([mk[k] for k in keys], np.float64).reshape(-1, 4, 2),
+                   complete=len(ids) == cols * rows)
+
+
+def merge_same_board(found: list) -> list:
+    """Merge detections that are parts of one board (module docstring); the others are kept as they are."""
+    out = []
+    for det in found:
+        for k, kept in enumerate(out):
+            if _same_board(kept, det):
+                out[k] = _union(kept, det)
+                break
+        else:
+            out.append(det)
+    return out
+
+
+def square_corners(board, marker_id: int, quad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The four corners of a marker's square: ids (4, 2) (col, row) and px (4, 2), from the
+    marker's corners ``quad`` (4, 2) px in OpenCV's order."""
+    i, j = board.marker_square_of()[int(marker_id)]
+    h = board.marker / board.square / 2.0
+    src = np.array([[-h, -h], [h, -h], [h, h], [-h, h]], np.float64)
+    H = cv2.getPerspectiveTransform(src.astype(np.float32), np.asarray(quad, np.float32))
+    unit = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
+    px = cv2.perspectiveTransform(unit.reshape(-1, 1, 2), H).reshape(4, 2)
+    ids = np.array([[i - 1, j - 1], [i, j - 1], [i, j], [i - 1, j]], np.int64)
+    return ids, px
+
+
+def _agreeing(det, read) -> list[tuple[int, np.ndarray]]:
+    """The markers of ``read`` (ids (M,), corners (M, 4, 2)) where det's corners put their squares."""
+    out = []
+    if len(det.ids) < 4:
+        return out
+    for k, quad in zip(*read):
+        i, j = det.board.marker_square_of()[int(k)]
+        centre = predict_ids(det.ids.astype(np.float64), det.corners.astype(np.float64), np.array([[i - 0.5, j - 0.5]]))[0]
+        side = np.linalg.norm(np.diff(np.concatenate([quad, quad[:1]]), axis=0), axis=1).mean()
+        if np.isfinite(centre).all() and np.linalg.norm(centre - quad.mean(axis=0)) < 0.25 * side * det.board.square / det.board.marker:
+            out.append((int(k), quad))
+    return out
+
+
+def _predictions(det, markers) -> dict[tuple[int, int], tuple[np.ndarray, float]]:
+    """{missing corner id: (mean predicted px, marker side px)} where the markers agree."""
+    cols, rows = det.board.pattern_size
+    have = set(map(tuple, det.ids.tolist()))
+    preds = defaultdict(list)
+    for k, quad in markers:
+        side = np.linalg.norm(np.diff(np.concatenate([quad, quad[:1]]), axis=0), axis=1).mean()
+        for cid, px in zip(*square_corners(det.board, k, quad)):
+            c = (int(cid[0]), int(cid[1]))
+            if 0 <= c[0] < cols and 0 <= c[1] < rows and c not in have:
+                preds[c].append((px, side))
+    out = {}
+    for c, ps in preds.items():
+        pts = np.array([p for p, _ in ps])
+        side = float(np.mean([sd for _, sd in ps]))
+        if np.linalg.norm(pts - pts.mean(axis=0), axis=1).max() <= 0.1 * side:
+            out[c] = (pts.mean(axis=0), side)
+    return out
+
+
+def complete_from_markers(gray: np.ndarray, det, read):
+    """det with the corners its agreeing markers fix added (module docstring).
+
+    gray : (H, W) float32. read : OpenCV's markers of det's board (ids (M,), corners (M, 4, 2) px).
+    """
+    smoothed = None
+    margin_ratio = (det.board.square - det.board.marker) / (2.0 * det.board.marker)
+    h, w = gray.shape
+    for _ in range(PASSES):
+        preds = _predictions(det, _agreeing(det, read))
+        if not preds:
+            break
+        smoothed = smoothed or Smoothed(gray)
+        keys = list(preds)
+        at = np.array([preds[c][0] for c in keys], np.float64)
+        margin = np.array([preds[c][1] * margin_ratio for c in keys])
+        spacing = np.maximum(0.8 * margin, 2.0) / 0.45
+        got, ok = refine_windowed(smoothed, at, spacing, max_shift=MAX_SHIFT_MARGIN * margin + 0.5,
+                                  shadow_gate=lambda idx, saddles: np.zeros(len(idx), bool))
+        ok &= (got[:, 0] >= 0) & (got[:, 0] <= w - 1) & (got[:, 1] >= 0) & (got[:, 1] <= h - 1)
+        if not ok.any():
+            break
+        add = replace(det, corners=got[ok].astype(np.float32), ids=np.array(keys, np.int32)[ok])
+        det = _union(det, add)
+    return det
