@@ -46,8 +46,16 @@ def _layout(board, paper: str) -> tuple[tuple[float, float], tuple[float, float]
 
 
 def _board_pixels(board, square_px: int) -> np.ndarray:
+    """(Y·p, X·p) uint8 board drawn by OpenCV, p = ``square_px`` or the nearest size OpenCV draws
+    (``generateImage`` refuses a few sizes; a PDF places the bitmap at the exact size anyway)."""
     X, Y = board.squares
-    return board.to_opencv().generateImage((X * square_px, Y * square_px), marginSize=0, borderBits=1)
+    cv = board.to_opencv()
+    for p in sorted(range(max(square_px - 3, 1), square_px + 4), key=lambda q: abs(q - square_px)):
+        try:
+            return cv.generateImage((X * p, Y * p), marginSize=0, borderBits=1)
+        except cv2.error:
+            continue
+    raise ValueError(f"OpenCV cannot draw this board at {square_px} px per square; try another --dpi")
 
 
 def page_image(board, paper: str = "A4", dpi: int = 300) -> np.ndarray:

@@ -170,6 +170,13 @@ def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], model, t
             found.append(best)
     found = merge_same_board(found)
     found = [complete_from_markers(gray, d, reads[d.board]) for d in found]
+    h, w = gray.shape
+    for board in (b for b in reads if b not in {d.board for d in found} and len(reads[b][0]) >= 2):
+        seed = CharucoDetection(board, np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32),
+                                reads[board][0], reads[board][1], False, (w, h))
+        seed = complete_from_markers(gray, seed, reads[board])
+        if len(seed.corners) >= 4:
+            found.append(seed)
     return _flag_duplicates(sorted(found, key=lambda d: -len(d.corners)))
 
 

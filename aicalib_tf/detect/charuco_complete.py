@@ -10,7 +10,9 @@ only when the board's corners already found put its square's centre within a qua
 marker's centre (so a second copy of the board elsewhere never adds corners). A missing corner is
 looked for where its markers put it (their predictions within a tenth of a marker side of each
 other): a saddle fit with a window inside the white margin must land within
-:data:`MAX_SHIFT_MARGIN` of the margin of the prediction. Passes repeat while corners are added.
+:data:`MAX_SHIFT_MARGIN` of the margin of the prediction. Passes repeat while corners are added. A board that no grid of corners found is seeded by its
+markers alone (:func:`complete_from_markers` on a detection with no corners): then each corner needs
+two markers whose predictions agree, and the board at least 4 corners.
 """
 
 from __future__ import annotations
@@ -86,10 +88,11 @@ def square_corners(board, marker_id: int, quad: np.ndarray) -> tuple[np.ndarray,
 
 
 def _agreeing(det, read) -> list[tuple[int, np.ndarray]]:
-    """The markers of ``read`` (ids (M,), corners (M, 4, 2)) where det's corners put their squares."""
+    """The markers of ``read`` (ids (M,), corners (M, 4, 2)) where det's corners put their squares
+    (all of them while det has fewer than 4 corners: a seed, whose corners need two markers each)."""
     out = []
     if len(det.ids) < 4:
-        return out
+        return [(int(k), q) for k, q in zip(*read)]
     for k, quad in zip(*read):
         i, j = det.board.marker_square_of()[int(k)]
         centre = predict_ids(det.ids.astype(np.float64), det.corners.astype(np.float64), np.array([[i - 0.5, j - 0.5]]))[0]
@@ -111,7 +114,10 @@ def _predictions(det, markers) -> dict[tuple[int, int], tuple[np.ndarray, float]
             if 0 <= c[0] < cols and 0 <= c[1] < rows and c not in have:
                 preds[c].append((px, side))
     out = {}
+    votes = 2 if len(have) < 4 else 1  # a seed's corners need two markers that agree
     for c, ps in preds.items():
+        if len(ps) < votes:
+            continue
         pts = np.array([p for p, _ in ps])
         side = float(np.mean([sd for _, sd in ps]))
         if np.linalg.norm(pts - pts.mean(axis=0), axis=1).max() <= 0.1 * side:
