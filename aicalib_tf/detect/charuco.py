@@ -149,7 +149,7 @@ def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], model, t
     that share its markers at the same places are merged; corners beside the markers are then
     looked for where the markers put them (:mod:`aicalib_tf.detect.charuco_complete`).
     """
-    from aicalib_tf.detect.charuco_complete import complete_from_markers, merge_same_board
+    from aicalib_tf.detect.charuco_complete import complete_from_markers, merge_same_board, polish
     from aicalib_tf.detect.charuco_grid import lattices
     from aicalib_tf.io import quantize
 
@@ -177,6 +177,7 @@ def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], model, t
         seed = complete_from_markers(gray, seed, reads[board])
         if len(seed.corners) >= 4:
             found.append(seed)
+    found = [polish(gray, d) for d in found]
     return _flag_duplicates(sorted(found, key=lambda d: -len(d.corners)))
 
 

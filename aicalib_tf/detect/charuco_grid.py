@@ -53,7 +53,7 @@ def _window_spacing(pts: np.ndarray, quads: np.ndarray, margin_ratio: float) -> 
     spacing = nearest_spacing(pts).astype(np.float64)
     if len(quads):
         centres = quads.mean(axis=1)
-        side = np.linalg.norm(np.diff(np.concatenate([quads, quads[:, :1]], axis=1), axis=2), axis=2).mean(axis=1)
+        side = np.linalg.norm(np.diff(np.concatenate([quads, quads[:, :1]], axis=1), axis=1), axis=2).mean(axis=1)
         near = np.argmin(np.linalg.norm(pts[:, None] - centres[None], axis=2), axis=1)
         spacing = np.maximum(side[near] * margin_ratio * 0.8, 2.0) / 0.45
     return spacing
