@@ -138,7 +138,8 @@ def _near(ids: np.ndarray, markers: list[Placed], radius: float) -> np.ndarray:
     return (d <= radius).any(axis=1)
 
 
-def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], model, threshold: float = 0.5) -> list[CharucoDetection]:
+def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], model, threshold: float = 0.5,
+                          more_lattices=None) -> list[CharucoDetection]:
     """Every ChArUco board of ``boards`` in the image, largest first.
 
     gray : (H, W) float32 in [0, 1]. model : the corner network. The grids of corners come from
@@ -148,6 +149,9 @@ def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], model, t
     ChArUco board, is read in squares first: :func:`square_lattice`). Grids of one board
     that share its markers at the same places are merged; corners beside the markers are then
     looked for where the markers put them (:mod:`aicalib_tf.detect.charuco_complete`).
+    more_lattices : ``f(pattern_size) -> [(ids, pts)]``, asked for a board none of these grids
+    names (the chessboard pipeline's own search, whose pyramid and partial-board growth reach
+    boards whose markers OpenCV cannot read, e.g. under heavy noise).
     """
     from aicalib_tf.detect.charuco_complete import complete_from_markers, merge_same_board, polish
     from aicalib_tf.detect.charuco_grid import lattices
@@ -158,16 +162,10 @@ def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], model, t
     quads = np.concatenate([r[1] for r in reads.values()])
     ratio = min((b.square - b.marker) / (2.0 * b.marker) for b in reads)
     limit = max(max(b.pattern_size) for b in reads) + 1
-    found = []
-    for ids, pts in lattices(model, gray, threshold, quads, ratio, limit):
-        best = None
-        lat = square_lattice(ids, pts, quads, min(b.marker / b.square for b in reads))
-        for board in reads:
-            det = name_lattice(gray, u8, lat, pts, board, reads[board]) if lat is not None and len(ids) >= 4 else None
-            if det is not None and (best is None or len(det.corners) > len(best.corners)):
-                best = det
-        if best is not None:
-            found.append(best)
+    found = _name_all(gray, u8, reads, lattices(model, gray, threshold, quads, ratio, limit))
+    if more_lattices is not None:
+        for board in [b for b in reads if b not in {d.board for d in found}]:
+            found += _name_all(gray, u8, {board: reads[board]}, more_lattices(board.pattern_size))
     found = merge_same_board(found)
     found = [complete_from_markers(gray, d, reads[d.board]) for d in found]
     h, w = gray.shape
@@ -179,6 +177,23 @@ def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], model, t
             found.append(seed)
     found = [polish(gray, d) for d in found]
     return _flag_duplicates(sorted(found, key=lambda d: -len(d.corners)))
+
+
+def _name_all(gray: np.ndarray, u8: np.ndarray, reads: dict, grids: list) -> list[CharucoDetection]:
+    """Each grid [(ids, pts)] named by the board of ``reads`` ({board: OpenCV's markers}) whose
+    markers decide the most of its corners; grids no board names are left out."""
+    quads = np.concatenate([r[1] for r in reads.values()])
+    found = []
+    for ids, pts in grids:
+        best = None
+        lat = square_lattice(ids, pts, quads, min(b.marker / b.square for b in reads))
+        for board in reads:
+            det = name_lattice(gray, u8, lat, pts, board, reads[board]) if lat is not None and len(ids) >= 4 else None
+            if det is not None and (best is None or len(det.corners) > len(best.corners)):
+                best = det
+        if best is not None:
+            found.append(best)
+    return found
 
 
 def square_lattice(ids: np.ndarray, pts: np.ndarray, quads: np.ndarray, side: float) -> np.ndarray | None:

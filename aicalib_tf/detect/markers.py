@@ -29,7 +29,8 @@ __all__ = ["Placed", "READINGS", "aruco_markers", "lattice_coords", "place_marke
 MAX_BIT_ERRORS = 1
 MIN_BIT_MARGIN = 4
 MIN_CONTRAST = 0.06  # white margin minus border, on the [0, 1] scale
-MAX_OFF_CENTRE = 0.25  # a marker's centre within this of its cell's centre (in cells)
+MAX_OFF_CENTRE = 0.25
+READ_SIGMA = 1.0  # a marker's centre within this of its cell's centre (in cells)
 
 
 def _readings() -> tuple[np.ndarray, ...]:
@@ -61,21 +62,32 @@ class Placed:
     errors: int = 0
 
 
-def aruco_markers(gray_u8: np.ndarray, board: CharucoBoard) -> tuple[np.ndarray, np.ndarray]:
-    """OpenCV's marker detector (default parameters, sub-pixel corners) on the board's dictionary.
-
-    Returns ids (M,) int64 inside the board's id range and corners (M, 4, 2) float64 px.
-    """
-    params = cv2.aruco.DetectorParameters()
-    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-    det = cv2.aruco.ArucoDetector(dictionary(board.dictionary), params)
-    corners, ids, _ = det.detectMarkers(gray_u8)
+def _read(det, img: np.ndarray, board: CharucoBoard) -> tuple[np.ndarray, np.ndarray]:
+    corners, ids, _ = det.detectMarkers(img)
     if ids is None or len(ids) == 0:
         return np.zeros(0, np.int64), np.zeros((0, 4, 2))
     ids = ids.ravel().astype(np.int64)
     corners = np.asarray(corners, np.float64).reshape(-1, 4, 2)
     keep = (ids >= board.first_id) & (ids < board.first_id + board.n_markers)
     return ids[keep], corners[keep]
+
+
+def aruco_markers(gray_u8: np.ndarray, board: CharucoBoard) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV's marker detector (default parameters, sub-pixel corners) on the board's dictionary,
+    on the image and on the image smoothed (Gaussian σ :data:`READ_SIGMA` px; noise breaks the
+    markers' outlines apart): a marker read in both keeps the first reading.
+
+    Returns ids (M,) int64 inside the board's id range and corners (M, 4, 2) float64 px.
+    """
+    params = cv2.aruco.DetectorParameters()
+    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    det = cv2.aruco.ArucoDetector(dictionary(board.dictionary), params)
+    ids, corners = _read(det, gray_u8, board)
+    ids2, corners2 = _read(det, cv2.GaussianBlur(gray_u8, (0, 0), READ_SIGMA), board)
+    centres = corners.mean(axis=1)
+    new = [k for k in range(len(ids2))
+           if not len(ids) or np.linalg.norm(centres - corners2[k].mean(axis=0), axis=1).min() > 2.0]
+    return np.concatenate([ids, ids2[new]]), np.concatenate([corners, corners2[new]])
 
 
 def lattice_coords(ids: np.ndarray, pts: np.ndarray, xy: np.ndarray, k: int = 12) -> np.ndarray | None:

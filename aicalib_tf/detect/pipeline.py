@@ -369,7 +369,11 @@ def detect_charuco(image, boards, *, model=None, threshold: float = 0.5) -> list
     if not boards or any(b is None for b in boards):
         raise ValueError("boards must be ChArUco boards or descriptions such as charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100")
     model = model if model is not None else _default_model()
-    return detect_charuco_boards(gray, boards, model, threshold)
+
+    def chessboard_search(pattern):  # the chessboard search's grid, ids relative to it allowed
+        det = detect_corners(gray, pattern, model=model, threshold=threshold, relative=True)
+        return [(det.ids.astype(np.int64), det.corners.astype(np.float64))] if det.found else []
+    return detect_charuco_boards(gray, boards, model, threshold, more_lattices=chessboard_search)
 
 
 def find_chessboard_corners(image, pattern_size: tuple[int, int], *, model=None) -> tuple[bool, np.ndarray | None]:
