@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aicalib_tf.detect.markers import Placed, aruco_markers, decode_cells, place_marker
+from aicalib_tf.detect.markers import Placed, aruco_markers, decode_cells, place_marker, verify_cells
 from aicalib_tf.geometry.charuco import CharucoBoard
 
 __all__ = ["CharucoDetection", "SUPPORT", "name_lattice", "detect_charuco_boards", "square_lattice"]
@@ -114,6 +114,7 @@ def name_lattice(gray: np.ndarray, gray_u8: np.ndarray, ids: np.ndarray, pts: np
     if win is None:
         return None
     A, t, support, against = win
+    support = support + verify_cells(gray, ids, pts, board, A, t, skip={m.cell for m in support + against})
     named = ids @ A.T + t
     cols, rows = board.pattern_size
     keep = (named[:, 0] >= 0) & (named[:, 0] < cols) & (named[:, 1] >= 0) & (named[:, 1] < rows)

@@ -24,13 +24,14 @@ import numpy as np
 
 from aicalib_tf.geometry.charuco import CharucoBoard, dictionary
 
-__all__ = ["Placed", "READINGS", "aruco_markers", "lattice_coords", "place_marker", "decode_cells", "MAX_BIT_ERRORS", "MIN_BIT_MARGIN"]
+__all__ = ["Placed", "READINGS", "aruco_markers", "lattice_coords", "place_marker", "decode_cells", "verify_cells", "MAX_BIT_ERRORS", "MIN_BIT_MARGIN"]
 
 MAX_BIT_ERRORS = 1
 MIN_BIT_MARGIN = 4
 MIN_CONTRAST = 0.06  # white margin minus border, on the [0, 1] scale
 MAX_OFF_CENTRE = 0.25
-READ_SIGMA = 1.0  # a marker's centre within this of its cell's centre (in cells)
+READ_SIGMA = 1.0
+MAX_VERIFY_ERRORS = 3  # bit errors (border included) allowed when a named lattice predicts the marker  # a marker's centre within this of its cell's centre (in cells)
 
 
 def _readings() -> tuple[np.ndarray, ...]:
@@ -63,7 +64,9 @@ class Placed:
 
 
 def _read(det, img: np.ndarray, board: CharucoBoard) -> tuple[np.ndarray, np.ndarray]:
-    corners, ids, _ = det.detectMarkers(img)
+    corners, ids, rejected = det.detectMarkers(img)
+    if ids is not None and len(ids) >= 2:  # the board's layout finds markers among the rejected outlines
+        corners, ids, _, _ = det.refineDetectedMarkers(img, board.to_opencv(), corners, ids, rejected)
     if ids is None or len(ids) == 0:
         return np.zeros(0, np.int64), np.zeros((0, 4, 2))
     ids = ids.ravel().astype(np.int64)
@@ -73,7 +76,9 @@ def _read(det, img: np.ndarray, board: CharucoBoard) -> tuple[np.ndarray, np.nda
 
 
 def aruco_markers(gray_u8: np.ndarray, board: CharucoBoard) -> tuple[np.ndarray, np.ndarray]:
-    """OpenCV's marker detector (default parameters, sub-pixel corners) on the board's dictionary,
+    """OpenCV's marker detector (sub-pixel corners; more thresholds, smaller markers and rounder
+    outlines than its defaults; outlines it rejected looked at again where the read markers and the
+    board's layout put a marker) on the board's dictionary,
     on the image and on the image smoothed (Gaussian σ :data:`READ_SIGMA` px; noise breaks the
     markers' outlines apart): a marker read in both keeps the first reading.
 
@@ -81,6 +86,9 @@ def aruco_markers(gray_u8: np.ndarray, board: CharucoBoard) -> tuple[np.ndarray,
     """
     params = cv2.aruco.DetectorParameters()
     params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    params.adaptiveThreshWinSizeMax = 53  # more thresholds, smaller and rounder markers than the defaults
+    params.minMarkerPerimeterRate = 0.01
+    params.polygonalApproxAccuracyRate = 0.05
     det = cv2.aruco.ArucoDetector(dictionary(board.dictionary), params)
     ids, corners = _read(det, gray_u8, board)
     ids2, corners2 = _read(det, cv2.GaussianBlur(gray_u8, (0, 0), READ_SIGMA), board)
@@ -163,7 +171,8 @@ def _board_codes(board: CharucoBoard) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([board.square_bits(int(k))[1:-1, 1:-1] for k in ids]), ids
 
 
-def _match(bits: np.ndarray, board: CharucoBoard) -> tuple[int, np.ndarray, int] | None:
+def _match(bits: np.ndarray, board: CharucoBoard, max_errors: int = MAX_BIT_ERRORS,
+           margin: int = MIN_BIT_MARGIN) -> tuple[int, np.ndarray, int] | None:
     """Inner bits (n, n) sampled in lattice axes (rows along b) -> (marker id, A, errors) or None."""
     codes, ids = _board_codes(board)
     n = bits.shape[0]
@@ -178,9 +187,24 @@ def _match(bits: np.ndarray, board: CharucoBoard) -> tuple[int, np.ndarray, int]
         scored += [(int(d[m]), int(ids[m]), A) for m in range(len(ids))]
     scored.sort(key=lambda s: s[0])
     best, second = scored[0], scored[1]
-    if best[0] > MAX_BIT_ERRORS or second[0] < best[0] + MIN_BIT_MARGIN:
+    if best[0] > max_errors or second[0] < best[0] + margin:
         return None
     return best[1], best[2], best[0]
+
+
+def _cell_bits(gray: np.ndarray, quad: np.ndarray, board: CharucoBoard, bit_pts, ring_pts) -> np.ndarray | None:
+    """(n + 2, n + 2) uint8 bits of a cell's marker (1 white), lattice axes; None without contrast."""
+    vals = _sample(gray, quad, bit_pts).mean(axis=-1)  # (n, n)
+    border = np.concatenate([vals[0], vals[-1], vals[1:-1, 0], vals[1:-1, -1]])
+    white = float(np.median(_sample(gray, quad, ring_pts)))
+    black = float(np.median(border))
+    if white - black < MIN_CONTRAST:
+        return None
+    return (vals > (white + black) / 2.0).astype(np.uint8)
+
+
+def _border_errors(bits: np.ndarray) -> int:
+    return int(bits[0].sum() + bits[-1].sum() + bits[1:-1, 0].sum() + bits[1:-1, -1].sum())
 
 
 def decode_cells(gray: np.ndarray, ids: np.ndarray, pts: np.ndarray, board: CharucoBoard,
@@ -190,26 +214,40 @@ def decode_cells(gray: np.ndarray, ids: np.ndarray, pts: np.ndarray, board: Char
     gray : (H, W) float32 in [0, 1]. ids (N, 2) int lattice coordinates, pts (N, 2) px.
     """
     bit_pts, ring_pts = _bit_positions(board)
-    n = board.bits + 2
     out = []
     for cell, quad in _cell_quads(ids, pts).items():
         if skip and cell in skip:
             continue
-        vals = _sample(gray, quad, bit_pts).mean(axis=-1)  # (n, n)
-        border = np.concatenate([vals[0], vals[-1], vals[1:-1, 0], vals[1:-1, -1]])
-        white = float(np.median(_sample(gray, quad, ring_pts)))
-        black = float(np.median(border))
-        if white - black < MIN_CONTRAST:
-            continue
-        bits = (vals > (white + black) / 2.0).astype(np.uint8)
-        if bits[0].any() or bits[-1].any() or bits[:, 0].any() or bits[:, -1].any():
+        bits = _cell_bits(gray, quad, board, bit_pts, ring_pts)
+        if bits is None or _border_errors(bits):
             continue
         hit = _match(bits[1:-1, 1:-1], board)
-        if hit is None:
+        if hit is not None:
+            out.append(Placed(hit[0], cell, hit[1], _sample_corners(quad, board, hit[1]), "lattice", hit[2]))
+    return out
+
+
+def verify_cells(gray: np.ndarray, ids: np.ndarray, pts: np.ndarray, board: CharucoBoard, A: np.ndarray,
+                 t: np.ndarray, skip: set | None = None) -> list[Placed]:
+    """The markers a named lattice (board (c, r) = A·(a, b) + t) predicts in its cells, where the bits
+    seen are that marker, in that reading, within :data:`MAX_VERIFY_ERRORS` of the marker's
+    (n + 2)² bits, and every other marker or reading at least :data:`MIN_BIT_MARGIN` − 1 bits further.
+    A check of one expected marker, so it holds where a blind reading (:func:`decode_cells`) cannot."""
+    bit_pts, ring_pts = _bit_positions(board)
+    square_of = {v: k for k, v in board.marker_square_of().items()}
+    out = []
+    for cell, quad in _cell_quads(ids, pts).items():
+        c, r = A @ (np.asarray(cell, np.float64) + 0.5) + t  # the square's centre, (i − ½, j − ½)
+        expected = square_of.get((int(round(c + 0.5)), int(round(r + 0.5))))
+        if expected is None or (skip and cell in skip):
             continue
-        centre = np.array([[0.5, 0.5]])
-        corners = _sample_corners(quad, board, hit[1])
-        out.append(Placed(hit[0], cell, hit[1], corners if corners is not None else centre, "lattice", hit[2]))
+        bits = _cell_bits(gray, quad, board, bit_pts, ring_pts)
+        if bits is None:
+            continue
+        hit = _match(bits[1:-1, 1:-1], board, MAX_VERIFY_ERRORS - min(_border_errors(bits), MAX_VERIFY_ERRORS),
+                     MIN_BIT_MARGIN - 1)
+        if hit is not None and hit[0] == expected and (hit[1] == A).all():
+            out.append(Placed(expected, cell, A, _sample_corners(quad, board, A), "verified", hit[2]))
     return out
 
 
