@@ -176,7 +176,7 @@ def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], model, t
         seed = complete_from_markers(gray, seed, reads[board])
         if len(seed.corners) >= 4:
             found.append(seed)
-    found = [polish(gray, d) for d in found]
+    found = [d for d in (polish(gray, d) for d in found) if len(d.corners)]
     return _flag_duplicates(sorted(found, key=lambda d: -len(d.corners)))
 
 

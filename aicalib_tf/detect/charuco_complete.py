@@ -12,7 +12,7 @@ looked for where its markers put it (their predictions within a tenth of a marke
 other): a saddle fit with a window inside the white margin must land within
 :data:`MAX_SHIFT_MARGIN` of the margin of the prediction. Passes repeat while corners are added. Last, every corner is refined once more from where it is
 (:func:`polish`): a saddle fit that started a pixel or two off, from the network's point, has not
-always reached the saddle. A board that no grid of corners found is seeded by its
+always reached the saddle; corners then off their neighbours' lattice are dropped. A board that no grid of corners found is seeded by its
 markers alone (:func:`complete_from_markers` on a detection with no corners): then each corner needs
 two markers whose predictions agree, and the board at least 4 corners.
 """
@@ -25,7 +25,7 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
-from aicalib_tf.detect.lattice import predict_ids
+from aicalib_tf.detect.lattice import curved_residuals, drop_outliers, lattice_residuals, predict_ids
 from aicalib_tf.detect.refine import Smoothed, refine_windowed
 
 __all__ = ["SAME_PLACE_PX", "MAX_SHIFT_MARGIN", "merge_same_board", "complete_from_markers", "square_corners", "polish"]
@@ -170,4 +170,26 @@ def polish(gray: np.ndarray, det, max_move: float = 1.5):
         radius = np.maximum(0.8 * side[near] * ratio, 2.0)
     got, ok = refine_windowed(Smoothed(gray), pts, radius / 0.45, max_shift=np.full(len(pts), max_move),
                               shadow_gate=lambda idx, saddles: np.zeros(len(idx), bool))
-    return replace(det, corners=np.where(ok[:, None], got, pts).astype(np.float32))
+    return _on_lattice(replace(det, corners=np.where(ok[:, None], got, pts).astype(np.float32)))
+
+
+def _on_lattice(det):
+    """det without corners that have no neighbour (8-connected in ids) and without those off their
+    neighbours' lattice by more than ``MAX_RESIDUAL`` of a step
+    (a corner pulled by the edge of an object in front, or by the paper's edge), worst first; a
+    quadratic in the ids predicts each corner where there are enough (a strong lens bends the lattice)."""
+    ids = det.ids.astype(np.int64)
+    cheb = np.abs(ids[:, None] - ids[None]).max(axis=2)
+    np.fill_diagonal(cheb, 99)
+    alone = cheb.min(axis=1) > 1 if len(ids) > 1 else np.ones(len(ids), bool)
+    det = replace(det, corners=det.corners[~alone], ids=det.ids[~alone])  # no neighbour to check it by
+    n = len(det.corners)
+    if n < 5:
+        return det
+    measure = curved_residuals if n > 12 else lattice_residuals
+    kept = drop_outliers(det.ids, det.corners.astype(np.float64), np.arange(n), free=np.ones(n, bool), residuals=measure)
+    if kept is None:
+        return replace(det, corners=det.corners[:0], ids=det.ids[:0], complete=False)
+    idx = np.sort(kept[2])
+    cols, rows = det.board.pattern_size
+    return replace(det, corners=det.corners[idx], ids=det.ids[idx], complete=len(idx) == cols * rows)

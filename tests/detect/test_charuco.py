@@ -81,3 +81,19 @@ def test_two_boards_told_apart_and_same_ids_reported(model):
 def test_no_board_no_corners(model):
     s = make_sample("clutter", 1, 0, size=(320, 240))
     assert detect_charuco(s.image, [B], model=model) == []
+
+
+def test_detect_cli_takes_a_board(tmp_path, capsys):
+    import json
+
+    from aicalib_tf.detect.__main__ import main
+
+    s = make_sample(get_preset("clean", board=B), 5, 2, size=(800, 600))
+    cv2.imwrite(str(tmp_path / "a.png"), s.image)
+    out = tmp_path / "out"
+    assert main([str(tmp_path / "a.png"), "--board", B, "--out", str(out), "--workers", "1", "--quiet"]) == 0
+    rec = json.loads((out / "a.json").read_text())
+    assert rec["board"] == B and rec["pattern_size"] == [10, 7] and len(rec["ids"]) >= 66
+    assert main([str(tmp_path / "a.png"), "--board", "charuco:11x8,square=3,marker=4,dict=DICT_5X5_100",
+                 "--out", str(tmp_path / "o2")]) == 2
+    assert "smaller than square" in capsys.readouterr().err
