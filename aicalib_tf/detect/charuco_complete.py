@@ -25,14 +25,14 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
-from aicalib_tf.detect.lattice import curved_residuals, drop_outliers, lattice_residuals, predict_ids
+from aicalib_tf.detect.lattice import MAX_RESIDUAL, curved_residuals, lattice_residuals, predict_ids
 from aicalib_tf.detect.refine import Smoothed, refine_windowed
 
 __all__ = ["SAME_PLACE_PX", "MAX_SHIFT_MARGIN", "merge_same_board", "complete_from_markers", "square_corners", "polish"]
 
 SAME_PLACE_PX = 2.0
 MAX_SHIFT_MARGIN = 0.5
-PASSES = 3
+PASSES = 4
 
 
 def _same_board(a, b) -> bool:
@@ -144,8 +144,12 @@ def complete_from_markers(gray: np.ndarray, det, read):
         at = np.array([preds[c][0] for c in keys], np.float64)
         margin = np.array([preds[c][1] * margin_ratio for c in keys])
         spacing = np.maximum(0.8 * margin, 2.0) / 0.45
-        got, ok = refine_windowed(smoothed, at, spacing, max_shift=MAX_SHIFT_MARGIN * margin + 0.5,
-                                  shadow_gate=lambda idx, saddles: np.zeros(len(idx), bool))
+        no_shadow = lambda idx, saddles: np.zeros(len(idx), bool)  # noqa: E731 - the saddle stands
+        got, ok = refine_windowed(smoothed, at, spacing, max_shift=MAX_SHIFT_MARGIN * margin + 0.5, shadow_gate=no_shadow)
+        if (~ok).any():  # the smallest window where the margin's failed (a steep view thins the margin)
+            again, ok2 = refine_windowed(smoothed, at[~ok], np.full(int((~ok).sum()), 2.0 / 0.45),
+                                         max_shift=MAX_SHIFT_MARGIN * margin[~ok] + 0.5, shadow_gate=no_shadow)
+            got[~ok], ok[~ok] = again, ok2
         ok &= (got[:, 0] >= 0) & (got[:, 0] <= w - 1) & (got[:, 1] >= 0) & (got[:, 1] <= h - 1)
         if not ok.any():
             break
@@ -186,10 +190,16 @@ def _on_lattice(det):
     n = len(det.corners)
     if n < 5:
         return det
-    measure = curved_residuals if n > 12 else lattice_residuals
-    kept = drop_outliers(det.ids, det.corners.astype(np.float64), np.arange(n), free=np.ones(n, bool), residuals=measure)
-    if kept is None:
-        return replace(det, corners=det.corners[:0], ids=det.ids[:0], complete=False)
-    idx = np.sort(kept[2])
+    keep = np.arange(n)
+    while True:  # the worst first, as lattice.drop_outliers; fewer than 5 left: none is trusted
+        measure = curved_residuals if len(keep) > 12 else lattice_residuals
+        res = measure(det.ids[keep], det.corners[keep].astype(np.float64))
+        if res.max() <= MAX_RESIDUAL:
+            break
+        keep = np.delete(keep, int(np.argmax(res)))
+        if len(keep) < 5:
+            keep = keep[:0]
+            break
+    idx = keep
     cols, rows = det.board.pattern_size
     return replace(det, corners=det.corners[idx], ids=det.ids[idx], complete=len(idx) == cols * rows)
