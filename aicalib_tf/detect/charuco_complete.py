@@ -139,7 +139,7 @@ def complete_from_markers(gray: np.ndarray, det, read):
         preds = _predictions(det, _agreeing(det, read))
         if not preds:
             break
-        smoothed = smoothed or Smoothed(gray)
+        smoothed = Smoothed(gray) if smoothed is None else smoothed
         keys = list(preds)
         at = np.array([preds[c][0] for c in keys], np.float64)
         margin = np.array([preds[c][1] * margin_ratio for c in keys])
