@@ -187,7 +187,9 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
 
     image : path or array (see :func:`aicalib_tf.io.load_image`).
     pattern_size : (cols, rows) inner corners; None returns the largest complete grid found, with
-        ids relative to it.
+        ids relative to it. A ChArUco board (a :class:`~aicalib_tf.geometry.charuco.CharucoBoard` or
+        its ``charuco:...`` description) returns the largest such board found (:func:`detect_charuco`),
+        each corner's id decided by its markers.
     model : a loaded corner model (default: the shipped ``models/default.keras``).
     threshold : CNN corner weight above which a peak is a candidate.
     relative : with ``pattern_size``, a grid whose place on the pattern the image leaves open (a
