@@ -2,9 +2,11 @@
 
 Usage:
   python -m data_gen --out DIR --count N --preset NAME --seed S [--size WxH] [--pattern CxR] [--workers K]
+      [--board charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100]
 
 Writes DIR/index.csv, DIR/images/*.png, DIR/labels/*.json and DIR/meta.json (format in
-DESIGN.md). The same arguments give byte-identical files whatever --workers is.
+DESIGN.md). The same arguments give byte-identical files whatever --workers is. --board renders a
+ChArUco board instead of the preset's chessboards (labels then hold the markers' ids and corners).
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ def parse_args(argv=None) -> tuple[DatasetConfig, bool]:
     ap.add_argument("--size", help="WIDTHxHEIGHT (default: the preset's sizes)")
     ap.add_argument("--pattern", help="COLSxROWS inner corners (default: the preset's)")
     ap.add_argument("--workers", type=int, default=1, help="processes (output does not depend on it)")
+    ap.add_argument("--board", help="a ChArUco board instead of chessboards: charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100")
     ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     a = ap.parse_args(argv)
     if a.count < 1:
@@ -53,8 +56,13 @@ def parse_args(argv=None) -> tuple[DatasetConfig, bool]:
         raise ValueError(f"unknown --preset {a.preset!r}; choose from: {', '.join(PRESETS)}")
     size = _parse_size(a.size) if a.size else None
     pattern = check_pattern(parse_pattern(a.pattern)) if a.pattern else None
+    if a.board:
+        from aicalib_tf.geometry.charuco import parse_board
+
+        parse_board(a.board)  # a bad description is a bad argument
     check_output_dir(a.out)
-    cfg = DatasetConfig(out=a.out, count=a.count, preset=a.preset, seed=a.seed, size=size, pattern=pattern, workers=a.workers)
+    cfg = DatasetConfig(out=a.out, count=a.count, preset=a.preset, seed=a.seed, size=size, pattern=pattern, workers=a.workers,
+                        board=a.board)
     return cfg, not a.no_progress
 
 

@@ -51,3 +51,19 @@ def test_chessboard_presets_are_unchanged():
 def test_bad_board_in_a_preset_is_an_error():
     with pytest.raises(ValueError, match="smaller than square"):
         get_preset("clean", board="charuco:5x4,square=30mm,marker=40mm,dict=DICT_4X4_50")
+
+
+def test_data_gen_cli_takes_a_board(tmp_path, capsys):
+    import json
+
+    from data_gen.__main__ import main
+
+    out = tmp_path / "ds"
+    assert main(["--out", str(out), "--count", "2", "--preset", "clean", "--size", "160x120", "--board", B,
+                 "--no-progress"]) == 0
+    label = json.loads((out / "labels" / "000001.json").read_text())
+    assert label["board"]["description"] == B and "markers" in label
+    assert json.loads((out / "meta.json").read_text())["preset_config"]["board"] == B
+    assert main(["--out", str(tmp_path / "x"), "--count", "1", "--preset", "clean",
+                 "--board", "charuco:5x4,square=30mm,marker=30mm,dict=DICT_4X4_50"]) == 2
+    assert "smaller than square" in capsys.readouterr().err
