@@ -51,6 +51,9 @@ Images of different sizes are an error naming the odd files unless --resize-poli
 do: skip them, crop them to the common size (top-left kept; exact when an image only has extra
 rows or columns at the right or bottom, like 1281x721 among 1280x720), or scale their corners.
 
+A ChArUco board replaces --pattern and --square: ``--board charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100``
+(every view is partial by nature; each corner's id comes from the markers beside it).
+
 Exit codes: 0 success; 2 bad input (no images, bad --pattern or --square, a bad model, no board
 found, fewer than 3 usable views, mixed sizes); nothing is written on failure.
 """
@@ -78,7 +81,9 @@ def _parse_args(argv):
     ap.add_argument("images", nargs="*", help="image files or glob patterns (quote globs)")
     ap.add_argument("--rig", nargs="+", metavar="NAME=GLOB",
                     help='calibrate a rig: one NAME=GLOB per camera, e.g. cam0="left/*.png" cam1="right/*.png"')
-    ap.add_argument("--pattern", required=True, help="inner corners, COLSxROWS, e.g. 9x6")
+    ap.add_argument("--pattern", help="inner corners, COLSxROWS, e.g. 9x6 (or --board)")
+    ap.add_argument("--board", help="a ChArUco board instead of --pattern and --square: "
+                                    "charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100[,legacy][,first=0]")
     ap.add_argument("--square", default="1", help="square size with unit, e.g. 25mm (default: 1, unitless)")
     ap.add_argument("--out", default="calib", help="output folder (default: %(default)s)")
     ap.add_argument("--detector", default="cnn", choices=DETECTORS, help="corner detector (default: %(default)s)")
@@ -154,6 +159,17 @@ def _common(args) -> dict:
     """The options one camera and a rig share, parsed (ValueError for a bad --pattern or --square)."""
     from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
 
+    if args.board:
+        if args.rig:
+            raise ValueError("--board takes one camera's images; --rig reads chessboards (--pattern)")
+        from aicalib_tf.geometry.charuco import parse_board
+
+        board = parse_board(args.board)
+        return dict(pattern=board.pattern_size, square=board.square, square_unit=board.unit, board=args.board,
+                    out=args.out, detector=args.detector, network=args.network,
+                    model="rational_polynomial" if args.rational else args.model, quiet=args.quiet, workers=args.workers)
+    if not args.pattern:
+        raise ValueError("give --pattern COLSxROWS (a chessboard) or --board charuco:... (a ChArUco board)")
     square, unit = parse_square(args.square)
     return dict(pattern=check_pattern(parse_pattern(args.pattern)), square=square, square_unit=unit, out=args.out,
                 detector=args.detector, network=args.network,

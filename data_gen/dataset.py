@@ -50,6 +50,11 @@ class DatasetConfig:
     size: tuple[int, int] | None = None
     pattern: tuple[int, int] | None = None
     workers: int = 1
+    board: str | None = None  # a ChArUco description replacing the preset's chessboards
+
+    def recipe(self):
+        """The preset, with the board replaced when ``board`` is given."""
+        return get_preset(self.preset, board=self.board) if self.board else get_preset(self.preset)
 
     def to_meta(self) -> dict:
         return {
@@ -60,7 +65,7 @@ class DatasetConfig:
             "seed": self.seed,
             "size": list(self.size) if self.size else None,
             "pattern": list(self.pattern) if self.pattern else None,
-            "preset_config": get_preset(self.preset).to_dict(),
+            "preset_config": self.recipe().to_dict(),
         }
 
 
@@ -149,7 +154,8 @@ def write_dataset(cfg: DatasetConfig, *, progress: bool = True) -> Path:
     try:
         (stage / "images").mkdir()
         (stage / "labels").mkdir()
-        jobs = ((str(stage), cfg.preset, cfg.seed, i, cfg.size, cfg.pattern) for i in range(cfg.count))
+        preset = cfg.recipe() if cfg.board else cfg.preset  # a Preset travels to the workers as it is
+        jobs = ((str(stage), preset, cfg.seed, i, cfg.size, cfg.pattern) for i in range(cfg.count))
         bar = tqdm(total=cfg.count, desc=f"data_gen {cfg.preset}", unit="img", disable=not progress)
         with open(stage / "index.csv", "w", newline="") as f:
             writer = csv.writer(f, lineterminator="\n")

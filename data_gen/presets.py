@@ -39,6 +39,8 @@ class Preset:
     "fisheye" (equidistant Kannala–Brandt with full FOV from ``fisheye_fov_deg``, see
     :func:`data_gen.camera.sample_fisheye`), "ds" or "eucm" (Double Sphere or Extended Unified
     with full FOV from ``fisheye_fov_deg``, :func:`data_gen.camera.sample_unified_fisheye`).
+    board : None (chessboards, sized by ``pattern`` or the ranges) or a ChArUco description,
+    ``charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100`` (:mod:`aicalib_tf.geometry.charuco`).
     """
 
     name: str
@@ -60,10 +62,15 @@ class Preset:
     views_per_camera: int = 1
     lens: str = "pinhole"
     fisheye_fov_deg: tuple[float, float] = (150.0, 200.0)
+    board: str | None = None
 
     def __post_init__(self):
         if self.lens not in LENSES:
             raise ValueError(f"preset {self.name!r}: lens must be one of {LENSES}, got {self.lens!r}")
+        if self.board is not None:
+            from aicalib_tf.geometry.charuco import parse_board
+
+            parse_board(self.board)  # a bad description fails here, before anything is drawn
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -188,8 +188,8 @@ def render_board(
     # must agree in class *and* in square/paper cell along both board axes (a square thinner
     # than a pixel, or a paper corner poking in, can hide between corners of equal class).
     px0, py0, px1, py1 = board.paper_bounds()
-    cross_x = _board_cell_span(X, board.square_size, (px0, px1)) & _corner_range_meets(Y, py0, py1)
-    cross_y = _board_cell_span(Y, board.square_size, (py0, py1)) & _corner_range_meets(X, px0, px1)
+    cross_x = _board_cell_span(X, board, (px0, px1)) & _corner_range_meets(Y, py0, py1)
+    cross_y = _board_cell_span(Y, board, (py0, py1)) & _corner_range_meets(X, px0, px1)
     uniform = ~(_corner_span(cls) | cross_x | cross_y)
     # Where two edges meet (X-junctions, paper corners) thin wedges need more samples, in a
     # 1-px ring, on a denser lattice: 89 points alias up to ~8% of the contrast there.
@@ -232,13 +232,17 @@ def _corner_range_meets(A: np.ndarray, lo: float, hi: float) -> np.ndarray:
         return (np.fmax.reduce(q) >= lo) & (np.fmin.reduce(q) <= hi)
 
 
-def _board_cell_span(A: np.ndarray, square: float, paper: tuple[float, float]) -> np.ndarray:
+def _board_cell_span(A: np.ndarray, board, paper: tuple[float, float]) -> np.ndarray:
     """(H, W) bool: does a pixel's corner set straddle a grid line or a paper edge along one axis?
 
-    A : (H+1, W+1) board coordinate (X or Y) at pixel corners, NaN where not imaged.
+    A : (H+1, W+1) board coordinate (X or Y) at pixel corners, NaN where not imaged. A board with
+    finer print than its squares (:class:`data_gen.charuco.CharucoTarget`) numbers its own 1-D
+    cells (``axis_cells``); a chessboard's are its squares.
     """
+    cells = getattr(board, "axis_cells", None)
     with np.errstate(invalid="ignore"):
-        cell = np.nan_to_num(np.floor(A / square), nan=-1e9) * 4.0 + (A >= paper[0]) + 2.0 * (A >= paper[1])
+        base = cells(A) if cells is not None else np.nan_to_num(np.floor(A / board.square_size), nan=-1e9)
+        cell = base * 4.0 + (A >= paper[0]) + 2.0 * (A >= paper[1])
     return _corner_span(cell)
 
 

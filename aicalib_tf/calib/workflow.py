@@ -62,6 +62,8 @@ def make_detector(name: str, pattern_size: tuple[int, int], model: str = "defaul
 
     if name not in DETECTORS:
         raise ValueError(f"unknown detector {name!r}; choose from {', '.join(DETECTORS)}")
+    if hasattr(pattern_size, "marker_ids"):  # a ChArUco board (aicalib_tf.geometry.charuco)
+        return _charuco_detector(name, pattern_size, model)
     detectors, info = make_detectors([name], tuple(pattern_size), model, relative=True)
     found_by = detectors[name]
 
@@ -72,6 +74,26 @@ def make_detector(name: str, pattern_size: tuple[int, int], model: str = "defaul
         return (found.corners, found.ids) if len(found.corners) else None
 
     detect.info, detect.why, detect.relative = info.get(name, {}), "", False
+    return detect
+
+
+def _charuco_detector(name: str, board, model: str):
+    """make_detector for a ChArUco board: the largest board found whose ids no other board in the
+    image shares (:func:`aicalib_tf.detect.pipeline.detect_charuco`); the CNN detectors only."""
+    from aicalib_tf.cnn.model import file_sha256, load_model
+    from aicalib_tf.detect.pipeline import detect_charuco
+
+    if name not in ("cnn", "report"):
+        raise ValueError(f"--detector {name} reads chessboards only; ChArUco boards take cnn or report")
+    net = load_model(model if name == "cnn" else "report")
+
+    def detect(gray):
+        found = [d for d in detect_charuco(gray, [board], model=net) if not d.duplicate]
+        detect.why = "" if found else "no ChArUco board whose markers decide its corners (or two with the same ids)"
+        return (found[0].corners, found[0].ids) if found else None
+
+    detect.info = {"model": str(net.aicalib_path), "sha256": file_sha256(net.aicalib_path), "board": board.describe()}
+    detect.why, detect.relative = "", False
     return detect
 
 
@@ -92,6 +114,7 @@ class CalibrateConfig:
     resize_policy: str = "error"
     quiet: bool = False
     workers: int | None = None  # detection processes (None: aicalib_tf.detect.batch.worker_count's default)
+    board: str | None = None  # a ChArUco description (pattern and square then follow from it)
 
 
 @dataclass
@@ -136,7 +159,7 @@ def _detect_all(files: list[str], labels: dict[str, str], cfg: "CalibrateConfig"
     from aicalib_tf.detect.batch import map_images
 
     found, skipped = [], {}
-    results = map_images(files, _file_detector, (cfg.detector, cfg.pattern, cfg.network), workers=cfg.workers)
+    results = map_images(files, _file_detector, (cfg.detector, _target(cfg), cfg.network), workers=cfg.workers)
     for f, res in zip(files, tqdm(results, total=len(files), desc="detect", unit="img", disable=cfg.quiet)):
         if isinstance(res, str):
             skipped[labels[f]] = res.removeprefix(f"{f}: ")
@@ -145,6 +168,15 @@ def _detect_all(files: list[str], labels: dict[str, str], cfg: "CalibrateConfig"
         found.append(_Found(labels[f], f, size, View(labels[f], *hit, relative=relative) if hit is not None else None,
                             "" if hit is not None else why))
     return found, skipped
+
+
+def _target(cfg: "CalibrateConfig"):
+    """What the detector looks for: the ChArUco board of ``cfg.board``, else the pattern."""
+    if cfg.board:
+        from aicalib_tf.geometry.charuco import parse_board
+
+        return parse_board(cfg.board)
+    return cfg.pattern
 
 
 def _apply_size_policy(found: list[_Found], policy: str, skipped: dict) -> tuple[list[_Found], tuple[int, int]]:
@@ -245,7 +277,7 @@ def run(cfg: CalibrateConfig) -> tuple[Calibration, str]:
         raise ValueError(f"--resize-policy must be one of {', '.join(RESIZE_POLICIES)}, got {cfg.resize_policy!r}")
     if cfg.model != "auto" and cfg.model not in LENS_MODELS:
         raise ValueError(f"--model must be auto or one of {', '.join(LENS_MODELS)}, got {cfg.model!r}")
-    detect = make_detector(cfg.detector, cfg.pattern, cfg.network)  # a bad network fails here, before any work
+    detect = make_detector(cfg.detector, _target(cfg), cfg.network)  # a bad network or board fails here, before any work
     with OutputFolder(cfg.out, "calibration") as out:  # a bad --out fails here; files are swapped in at the end
         cal, report, figure, preview = _calibrate_files(files, detect, cfg)
         save_calibration(cal, out.path)
@@ -281,7 +313,7 @@ def _calibrate_files(files: list[str], detect, cfg: CalibrateConfig):
         raise CalibrationError(f"no {cfg.pattern[0]}x{cfg.pattern[1]} board found in any of the {len(files)} images{hint}")
     meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
             "rational": cfg.rational, "lens_model": cfg.model, "fix_k3": cfg.fix_k3, "resize_policy": cfg.resize_policy,
-            "images": len(files)}
+            "images": len(files), **({"board": cfg.board} if cfg.board else {})}
     cal = calibrate_camera(views, cfg.pattern, cfg.square, size, model=cfg.model, rational=cfg.rational,
                            fix_k3=cfg.fix_k3, square_unit=cfg.square_unit, meta=meta)
     by_name = {v.name: v for v in views}

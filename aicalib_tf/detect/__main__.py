@@ -6,7 +6,8 @@ atomically, and ends with the counts: full boards, partial boards, no board (wit
 and unreadable files. ``--workers N`` (default: one per core, one per 8 images at most) detects and writes N images at a time
 in worker processes that each load the model once (:mod:`aicalib_tf.detect.batch`); the files
 and counts are the same as with ``--workers 1``, which runs in this process. An unreadable file
-is counted and named at the end; the batch goes on. Exit codes: 0 done; 2 bad arguments or model.
+is counted and named at the end; the batch goes on. ``--board charuco:...`` finds a ChArUco board
+instead (its corners named by its markers, :mod:`aicalib_tf.detect.charuco`). Exit codes: 0 done; 2 bad arguments or model.
 """
 
 from __future__ import annotations
@@ -20,7 +21,8 @@ def _parse_args(argv):
 
     ap = parser("python -m aicalib_tf.detect", __doc__)
     ap.add_argument("images", nargs="+", help="image files or glob patterns (** recurses; each file once)")
-    ap.add_argument("--pattern", required=True, help="inner corners, COLSxROWS, e.g. 9x6")
+    ap.add_argument("--pattern", help="inner corners, COLSxROWS, e.g. 9x6 (or --board)")
+    ap.add_argument("--board", help="a ChArUco board instead of --pattern: charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100")
     ap.add_argument("--out", required=True, help="folder for <image>.png overlays and <image>.json corners")
     ap.add_argument("--model", default="default", help="default, default_int8 (int8, about 2x faster), report, or a .tflite/.keras path (default: %(default)s)")
     ap.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core, but one per 8 images at most)")
@@ -46,7 +48,14 @@ def _main(args) -> int:
     from aicalib_tf.io import expand_images
     from aicalib_tf.outfolder import OutputFolder
 
-    pattern = check_pattern(parse_pattern(args.pattern))
+    if args.board:  # detect_corners dispatches on a ChArUco board
+        from aicalib_tf.geometry.charuco import parse_board
+
+        pattern = parse_board(args.board)
+    elif args.pattern:
+        pattern = check_pattern(parse_pattern(args.pattern))
+    else:
+        raise ValueError("give --pattern COLSxROWS (a chessboard) or --board charuco:... (a ChArUco board)")
     files = expand_images(args.images)
     if not files:
         raise ValueError(f"no images match {' '.join(args.images)}")

@@ -38,10 +38,12 @@ def write_detection(out: Path, f, stem: str, gray, det, pattern, *, model: str, 
     ok, png = cv2.imencode(".png", draw_detection(gray, det))
     atomic_write_bytes(out / f"{stem}.png", png.tobytes())
     record = {
-        "file": str(f), "image_size": list(det.image_size), "pattern_size": list(pattern),
+        "file": str(f), "image_size": list(det.image_size), "pattern_size": list(getattr(pattern, "pattern_size", pattern)),
         "found": det.found, "complete": det.complete, "reason": det.reason, "corners": det.corners.tolist(),
         "ids": det.ids.tolist(), "scores": det.scores.tolist(), "model": model, "model_sha256": sha,
     }
+    if hasattr(pattern, "describe"):  # a ChArUco board
+        record["board"] = pattern.describe()
     atomic_write_text(out / f"{stem}.json", dumps(record) + "\n")
 
 

@@ -99,7 +99,7 @@ from aicalib_tf.detect.refine import Smoothed, refine_windowed
 from aicalib_tf.detect.zoom import from_zoom, zoom_box, zoom_in
 from aicalib_tf.io import load_image
 
-__all__ = ["Detection", "detect_corners", "find_chessboard_corners", "order_full_board", "refined_points"]
+__all__ = ["Detection", "detect_corners", "detect_charuco", "find_chessboard_corners", "order_full_board", "refined_points"]
 
 
 @dataclass(frozen=True)
@@ -187,7 +187,9 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
 
     image : path or array (see :func:`aicalib_tf.io.load_image`).
     pattern_size : (cols, rows) inner corners; None returns the largest complete grid found, with
-        ids relative to it.
+        ids relative to it. A ChArUco board (a :class:`~aicalib_tf.geometry.charuco.CharucoBoard` or
+        its ``charuco:...`` description) returns the largest such board found (:func:`detect_charuco`),
+        each corner's id decided by its markers.
     model : a loaded corner model (default: the shipped ``models/default.keras``).
     threshold : CNN corner weight above which a peak is a candidate.
     relative : with ``pattern_size``, a grid whose place on the pattern the image leaves open (a
@@ -200,6 +202,9 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     """
     gray = load_image(image)
     h, w = gray.shape
+    if _charuco_board(pattern_size) is not None:  # a ChArUco board: the largest one found
+        found = detect_charuco(gray, [_charuco_board(pattern_size)], model=model, threshold=threshold)
+        return _as_detection(found[0] if found else None, _charuco_board(pattern_size), (w, h))
     if pattern_size is not None:
         from aicalib_tf.geometry.pattern import check_pattern
 
@@ -332,6 +337,45 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     else:
         det = replace(empty, reason=UNDECIDED if undecided else NO_MATCH)
     return look if look is not None and len(look.corners) > len(det.corners) else det
+
+
+def _charuco_board(board):
+    """The :class:`~aicalib_tf.geometry.charuco.CharucoBoard` that ``board`` is or describes, else None."""
+    from aicalib_tf.geometry.charuco import CharucoBoard, is_charuco, parse_board
+
+    if isinstance(board, CharucoBoard):
+        return board
+    return parse_board(board) if is_charuco(board) else None
+
+
+def _as_detection(det, board, size: tuple[int, int]) -> Detection:
+    """A ChArUco detection (or None) as a :class:`Detection` of the board's inner corners."""
+    if det is None:
+        return Detection(np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
+                         board.pattern_size, False, size, "no ChArUco board whose markers decide its corners")
+    return Detection(det.corners, det.ids, np.ones(len(det.corners), np.float32), board.pattern_size, det.complete, size)
+
+
+def detect_charuco(image, boards, *, model=None, threshold: float = 0.5) -> list:
+    """Every ChArUco board of ``boards`` in the image (:mod:`aicalib_tf.detect.charuco`).
+
+    image : path or array (the image gate). boards : CharucoBoards or their descriptions
+    (``charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100``). The corners are the chessboard
+    stages' (CNN, saddle refinement, grid assembly), their ids come from the markers. Returns a list of
+    :class:`~aicalib_tf.detect.charuco.CharucoDetection`, largest first (empty when none).
+    """
+    from aicalib_tf.detect.charuco import detect_charuco_boards
+
+    gray = load_image(image)
+    boards = [_charuco_board(b) for b in ([boards] if isinstance(boards, str) or not hasattr(boards, "__iter__") else boards)]
+    if not boards or any(b is None for b in boards):
+        raise ValueError("boards must be ChArUco boards or descriptions such as charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100")
+    model = model if model is not None else _default_model()
+
+    def chessboard_search(pattern):  # the chessboard search's grid, ids relative to it allowed
+        det = detect_corners(gray, pattern, model=model, threshold=threshold, relative=True)
+        return [(det.ids.astype(np.int64), det.corners.astype(np.float64))] if det.found else []
+    return detect_charuco_boards(gray, boards, model, threshold, more_lattices=chessboard_search)
 
 
 def find_chessboard_corners(image, pattern_size: tuple[int, int], *, model=None) -> tuple[bool, np.ndarray | None]:

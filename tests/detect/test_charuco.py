@@ -1,0 +1,99 @@
+"""ChArUco detection: rendered boards with exact truth, every returned id right (0 wrong ids)."""
+
+from dataclasses import replace
+
+import cv2
+import numpy as np
+import pytest
+
+from aicalib_tf.cnn.model import load_model
+from aicalib_tf.detect.pipeline import detect_charuco, detect_corners
+from aicalib_tf.geometry.charuco import parse_board
+from data_gen.pose import PoseConfig
+from data_gen.presets import get_preset
+from data_gen.sample import make_sample
+
+B = "charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100"
+B4 = "charuco:7x5,square=30mm,marker=22mm,dict=DICT_4X4_50"
+
+
+@pytest.fixture(scope="module")
+def model():
+    return load_model("default")
+
+
+def _check(det, sample, tol=1.0):
+    """Every corner within tol px of its id's true corner; returns the share of visible corners named."""
+    err = np.linalg.norm(det.corners - sample.corners[det.charuco_ids], axis=1)
+    assert err.max() < tol, f"{int((err >= tol).sum())} corners off their ids"
+    assert sample.visible[det.charuco_ids].all()
+    return len(det.corners) / sample.visible.sum()
+
+
+@pytest.mark.parametrize("index", [1, 2, 4])
+def test_clean_boards_found_with_exact_ids(model, index):
+    s = make_sample(get_preset("clean", board=B), 5, index, size=(800, 600))
+    found = detect_charuco(s.image, [B], model=model)
+    assert len(found) == 1 and not found[0].duplicate
+    assert _check(found[0], s, tol=0.3) >= 0.95
+    assert len(found[0].marker_ids) >= 30
+
+
+def test_detect_corners_dispatches_on_a_board(model):
+    s = make_sample(get_preset("clean", board=B), 5, 2, size=(800, 600))
+    det = detect_corners(s.image, parse_board(B), model=model)
+    assert det.found and det.pattern_size == (10, 7)
+    assert np.abs(det.corners - s.corners[det.ids[:, 1] * 10 + det.ids[:, 0]]).max() < 0.3
+
+
+def test_partial_board_gets_the_right_ids(model):
+    p = replace(get_preset("partial", board=B), pose=PoseConfig(tilt_max_deg=30.0, fill=(0.7, 1.0), framing="partial"))
+    for i in range(2):
+        s = make_sample(p, 41, i, size=(640, 480))
+        assert not s.visible.all()
+        found = detect_charuco(s.image, [B], model=model)
+        assert found and _check(found[0], s) >= 0.9
+
+
+def test_an_unreadable_marker_leaves_the_corners_other_markers_decide(model):
+    s = make_sample(get_preset("clean", board=B), 5, 2, size=(800, 600))
+    img = s.image.copy()
+    quad = np.asarray(s.label["markers"]["corners"][17])  # a marker in the middle: square (3, 3)
+    cv2.fillConvexPoly(img, np.round(quad).astype(np.int32), 200)  # hide its bits (not the square's corners)
+    found = detect_charuco(img, [B], model=model)
+    assert found and 17 not in found[0].marker_ids.tolist()
+    assert _check(found[0], s, tol=0.3) >= 0.95
+    i, j = parse_board(B).marker_square_of()[17]
+    around = {(i - 1, j - 1), (i, j - 1), (i, j), (i - 1, j)}  # its square's corners, decided by the neighbours
+    assert around <= set(map(tuple, found[0].ids.tolist()))
+
+
+def test_two_boards_told_apart_and_same_ids_reported(model):
+    a = make_sample(get_preset("clean", board=B4), 3, 1, size=(480, 480)).image
+    b = make_sample(get_preset("clean", board=B4.replace("DICT_4X4_50", "DICT_6X6_50")), 3, 2, size=(480, 480)).image
+    two = detect_charuco(np.hstack([a, b]), [B4, B4.replace("DICT_4X4_50", "DICT_6X6_50")], model=model)
+    assert sorted(d.board.dictionary for d in two) == ["DICT_4X4_50", "DICT_6X6_50"]
+    assert not any(d.duplicate for d in two) and all(d.corners[:, 0].min() >= 480 or d.corners[:, 0].max() < 480 for d in two)
+    same = detect_charuco(np.hstack([a, a]), [B4], model=model)
+    assert len(same) == 2 and all(d.duplicate for d in same)
+
+
+def test_no_board_no_corners(model):
+    s = make_sample("clutter", 1, 0, size=(320, 240))
+    assert detect_charuco(s.image, [B], model=model) == []
+
+
+def test_detect_cli_takes_a_board(tmp_path, capsys):
+    import json
+
+    from aicalib_tf.detect.__main__ import main
+
+    s = make_sample(get_preset("clean", board=B), 5, 2, size=(800, 600))
+    cv2.imwrite(str(tmp_path / "a.png"), s.image)
+    out = tmp_path / "out"
+    assert main([str(tmp_path / "a.png"), "--board", B, "--out", str(out), "--workers", "1", "--quiet"]) == 0
+    rec = json.loads((out / "a.json").read_text())
+    assert rec["board"] == B and rec["pattern_size"] == [10, 7] and len(rec["ids"]) >= 66
+    assert main([str(tmp_path / "a.png"), "--board", "charuco:11x8,square=3,marker=4,dict=DICT_5X5_100",
+                 "--out", str(tmp_path / "o2")]) == 2
+    assert "smaller than square" in capsys.readouterr().err
