@@ -8,7 +8,7 @@ so that the ratios hold on a shared machine whose absolute times drift:
 
 * the images of ``evaluate --quick`` at 640×480 (its named conditions and sweep levels, rendered
   once, fixed seeds) and its 1920×1080 images: ``detect_corners`` as it is ("cnn") and, unless
-  ``--no-before``, without the quick pass ("cnn-before": :func:`aicalib_tf.detect.pyramid.quick_scale`
+  ``--no-before``, without the quick pass ("cnn-before": :func:`aicalib_tf.detect.pyramid.quick_scales`
   switched off, the search of the previous release); each image is timed ``--repeat`` times, round
   robin over the detectors, and keeps its least time. Reported: the median over conditions of
   each condition's median ms (and its ratio to OpenCV's), the mean over images, and clean images;
@@ -188,11 +188,11 @@ def main(argv=None) -> int:
         return d.corners if d.complete else None
 
     def before(img):
-        quick, pipeline.quick_scale = pipeline.quick_scale, lambda w, h: None
+        quick, pipeline.quick_scales = pipeline.quick_scales, lambda w, h: []
         try:
             return cnn(img)
         finally:
-            pipeline.quick_scale = quick
+            pipeline.quick_scales = quick
 
     def cv(img):
         ok, c = opencv_classic(img, PATTERN)

@@ -53,10 +53,11 @@ the candidates are assembled again from 3×2 seeds (:func:`aicalib_tf.detect.gri
 ``strips``, growing by candidates only; the partial board then grows as above): strips of a board
 2 corners wide, between objects or around one, hold no 3×3 block.
 
-With ``pattern_size``, a quick pass comes first (:func:`aicalib_tf.detect.pyramid.quick_scale`): the
-image at half the coarsest scale below (640×480 at 320×240, 1920×1080 at 480×270), for a full
-board only, its corners refined on the full image as below; the search goes on as below when it
-finds none (small squares, a board cut by the frame or hidden), for about a quarter more time.
+With ``pattern_size``, quick passes come first (:func:`aicalib_tf.detect.pyramid.quick_scales`): the
+image at one or two scales coarser than the coarsest below (640×480 at 320×240; 1920×1080 at
+240×135, then 480×270), for a full board only, its corners refined on the full image as below;
+the search goes on as below when they find none (small squares, a board cut by the frame or
+hidden), for about a quarter more time.
 
 Large images (longer side ≥ 1600 px) are searched coarse to fine (:mod:`aicalib_tf.detect.pyramid`):
 first at a reduced scale (block means, the longer side kept ≥ 800 px), the corners found there
@@ -99,7 +100,7 @@ from aicalib_tf.detect.grid import MIN_CORNERS, Grid, assemble_grids, full_subgr
 from aicalib_tf.detect.junctions import dedupe, nearest_spacing, proposer, ring_symmetry
 from aicalib_tf.detect.lattice import drop_outliers
 from aicalib_tf.detect.partial import partial_board, relative_board
-from aicalib_tf.detect.pyramid import downscale, quick_scale, refine_full, scales, to_full
+from aicalib_tf.detect.pyramid import downscale, quick_scales, refine_full, scales, to_full
 from aicalib_tf.detect.refine import Smoothed, refine_windowed
 from aicalib_tf.detect.zoom import from_zoom, zoom_box, zoom_in
 from aicalib_tf.io import load_image
@@ -211,11 +212,11 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
         check_pattern(pattern_size)
     model = model if model is not None else _default_model()
     best, reason = None, REASONS[0]
-    quick = quick_scale(w, h) if pattern_size is not None else None
-    for f in ([quick] if quick else []) + scales(w, h):
+    quick = quick_scales(w, h) if pattern_size is not None else []
+    for f in quick + scales(w, h):
         look = bind(_zoomed, gray, pattern_size, model, threshold) if f == 1 and pattern_size is not None else None
         det = _detect_at(downscale(gray, f), pattern_size, model, threshold, second_look=look, relative=relative,
-                         full_only=f == quick)
+                         full_only=f in quick)
         if det.found and f > 1:
             corners, ok = refine_full(gray, to_full(det.corners, f))
             if not ok.all():  # a corner left at its coarse place may be px off: try the finer scales
@@ -224,7 +225,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
             det = replace(det, corners=corners, image_size=(w, h))
         if det.complete and pattern_size is not None:
             return det
-        if f == quick:  # the quick pass counts only with a complete board
+        if f in quick:  # a quick pass counts only with a complete board
             continue
         if not det.found:
             reason = max(reason, det.reason, key=REASONS.index)

@@ -1,21 +1,22 @@
-"""The quick first pass (aicalib_tf.detect.pyramid.quick_scale) and tracking through frames (aicalib_tf.detect.track)."""
+"""The quick passes (aicalib_tf.detect.pyramid.quick_scales) and tracking through frames (aicalib_tf.detect.track)."""
 
 import numpy as np
 import pytest
 
 from aicalib_tf.detect import pipeline
 from aicalib_tf.detect.pipeline import detect_corners
-from aicalib_tf.detect.pyramid import quick_scale
+from aicalib_tf.detect.pyramid import quick_scales
 from aicalib_tf.detect.track import Tracker, follow, lattice_bent, search_box
 from aicalib_tf.detect.warm import synthetic_board
 
 PATTERN = (9, 6)
 
 
-@pytest.mark.parametrize("size, want", [((640, 480), 2), ((1920, 1080), 4), ((1280, 720), 2), ((639, 479), None),
-                                        ((320, 240), None), ((1, 1), None), ((8000, 1), None), ((640, 15), None)])
-def test_quick_scale_halves_the_coarsest_scale_where_enough_pixels_are_left(size, want):
-    assert quick_scale(*size) == want
+@pytest.mark.parametrize("size, want", [((640, 480), [2]), ((1920, 1080), [8, 4]), ((1280, 720), [4, 2]),
+                                        ((479, 479), []), ((320, 240), []), ((1, 1), []), ((8000, 1), []),
+                                        ((640, 15), []), ((8000, 6000), [32, 16])])
+def test_quick_scales_go_coarser_than_the_coarsest_scale_while_enough_pixels_are_left(size, want):
+    assert quick_scales(*size) == want
 
 
 def _scales_used(monkeypatch, image, quick=True):
@@ -24,7 +25,7 @@ def _scales_used(monkeypatch, image, quick=True):
     down = pipeline.downscale
     monkeypatch.setattr(pipeline, "downscale", lambda g, f: seen.append(f) or down(g, f))
     if not quick:
-        monkeypatch.setattr(pipeline, "quick_scale", lambda w, h: None)
+        monkeypatch.setattr(pipeline, "quick_scales", lambda w, h: [])
     det = detect_corners(image, PATTERN)
     monkeypatch.undo()
     return det, seen
