@@ -1,6 +1,7 @@
 """Detector speed beside OpenCV's classic detector, in one run: 640×480 conditions, 1920×1080, tracked video.
 
     python benchmarks/detector_speed.py [--repeat 2] [--limit N] [--threads 1] [--frames 60] [--no-before]
+        [--model default_int8]
 
 Three parts, every figure beside ``cv2.findChessboardCorners`` + ``cornerSubPix``
 (:func:`aicalib_tf.detect.opencv.opencv_classic`) timed on the same image in the same process,
@@ -168,6 +169,7 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", type=int, default=None, help="OpenCV's and the interpreter's threads")
     ap.add_argument("--frames", type=int, default=60)
     ap.add_argument("--no-before", action="store_true", help="leave out the search without the quick pass")
+    ap.add_argument("--model", default="default", help="default, default_int8 or a .tflite path")
     a = ap.parse_args(argv)
     import cv2
 
@@ -179,7 +181,7 @@ def main(argv=None) -> int:
     from aicalib_tf.detect.opencv import opencv_classic
     from aicalib_tf.detect.warm import warm
 
-    model = load_model("default")
+    model = load_model(a.model)
     for size in ((640, 480), (1920, 1080), (1280, 720)):
         warm(model, size)
 
@@ -203,7 +205,7 @@ def main(argv=None) -> int:
     images = quick_images(a.limit)
     frames = video_frames(a.frames)
     print(f"{len(images)} images, {len(frames)} frames rendered in {time.time() - t0:.0f} s; "
-          f"threads: {a.threads or 'default'}; load average {os.getloadavg()[0]:.1f}", flush=True)
+          f"model {a.model}; threads: {a.threads or 'default'}; load average {os.getloadavg()[0]:.1f}", flush=True)
     rec = time_images(images, detectors, a.repeat)
     print("\n".join(summarise(rec) + [""] + summarise(rec, "cpu")), flush=True)
     print("\n".join(time_video(frames, model)))
