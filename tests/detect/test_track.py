@@ -115,3 +115,15 @@ def test_a_board_whose_corners_slid_by_one_square_bends_its_lattice():
     slid = corners.copy()
     slid[13] = corners[14]  # one corner refined onto its neighbour
     assert lattice_bent(slid, PATTERN) > 0.9
+
+
+def test_the_tracker_takes_colour_frames_and_paths(tmp_path):
+    import cv2
+
+    frames = [cv2.cvtColor(f, cv2.COLOR_GRAY2BGR) for f in _frames([(0.0, 0.0), (2.0, 1.0), (4.0, 2.0)], (640, 480))]
+    cv2.imwrite(str(tmp_path / "f2.png"), frames[2])
+    track = Tracker(PATTERN)
+    got = [track(frames[0]), track(frames[1]), track(str(tmp_path / "f2.png"))]
+    assert all(d.complete for d in got) and track.how == "follow"
+    want = detect_corners(frames[2], PATTERN)
+    assert np.abs(got[2].corners - want.corners).max() < 0.05
