@@ -50,6 +50,22 @@ def test_the_quick_pass_falls_back_to_full_size_on_small_squares(monkeypatch):
     np.testing.assert_array_equal(fast.corners, full.corners)
 
 
+@pytest.mark.parametrize("size", [(643, 487), (481, 641)])
+def test_the_quick_pass_on_odd_sizes_maps_corners_back_exactly(monkeypatch, size):
+    img = synthetic_board(PATTERN, square=30, size=size, angle=20.0)
+    fast, seen = _scales_used(monkeypatch, img)
+    full, _ = _scales_used(monkeypatch, img, quick=False)
+    assert seen == [2] and fast.complete and fast.image_size == size
+    assert np.abs(fast.corners - full.corners).max() < 0.05
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (2, 641), (479, 9), (17, 640), (480, 640)])
+def test_the_quick_pass_on_tiny_or_empty_images_is_no_board_not_a_crash(shape):
+    for pattern in (PATTERN, (3, 3)):
+        det = detect_corners(np.full(shape, 128, np.uint8), pattern)
+        assert not det.found and det.image_size == shape[::-1] and det.reason
+
+
 def test_the_quick_pass_keeps_partial_boards_to_the_full_size_search(monkeypatch):
     img = synthetic_board(PATTERN, square=36, shift=(230.0, 0.0))  # cut by the frame
     fast, seen = _scales_used(monkeypatch, img)
