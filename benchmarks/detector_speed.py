@@ -1,7 +1,7 @@
 """Detector speed beside OpenCV's classic detector, in one run: 640×480 conditions, 1920×1080, tracked video.
 
-    python benchmarks/detector_speed.py [--repeat 2] [--limit N] [--threads 1] [--frames 60] [--no-before]
-        [--model default_int8]
+    python benchmarks/detector_speed.py [--repeat 2] [--limit N] [--threads 1] [--frames 60] [--hd 2]
+        [--no-before] [--model default_int8]
 
 Three parts, every figure beside ``cv2.findChessboardCorners`` + ``cornerSubPix``
 (:func:`aicalib_tf.detect.opencv.opencv_classic`) timed on the same image in the same process,
@@ -41,11 +41,12 @@ from aicalib_tf.bench.metrics import WRONG_PX, board_detection_outcome  # noqa: 
 from aicalib_tf.bench.runner import QUICK_COUNTS  # noqa: E402
 
 
-def quick_images(limit: int | None) -> list[tuple[str, np.ndarray, np.ndarray | None]]:
-    """(condition, uint8 image, true corners or None) of evaluate --quick's conditions."""
+def quick_images(limit: int | None, hd: int = QUICK_COUNTS["hd"]) -> list[tuple[str, np.ndarray, np.ndarray | None]]:
+    """(condition, uint8 image, true corners or None) of evaluate --quick's conditions, with ``hd``
+    images at 1920×1080."""
     out = []
     for cond in select_conditions(None):
-        n = QUICK_COUNTS["sweep"] if cond.sweep else QUICK_COUNTS["hd"] if cond.size[0] > 1000 else QUICK_COUNTS["named"]
+        n = QUICK_COUNTS["sweep"] if cond.sweep else hd if cond.size[0] > 1000 else QUICK_COUNTS["named"]
         n = min(n, limit) if limit else n
         for _, s in condition_samples(cond, n):
             truth = np.asarray(s.label["corners"], np.float64) if s.label["has_board"] else None
@@ -168,6 +169,7 @@ def main(argv=None) -> int:
     ap.add_argument("--limit", type=int, default=None, help="images per condition at most")
     ap.add_argument("--threads", type=int, default=None, help="OpenCV's and the interpreter's threads")
     ap.add_argument("--frames", type=int, default=60)
+    ap.add_argument("--hd", type=int, default=QUICK_COUNTS["hd"], help="1920x1080 images (evaluate --quick's 2)")
     ap.add_argument("--no-before", action="store_true", help="leave out the search without the quick pass")
     ap.add_argument("--model", default="default", help="default, default_int8 or a .tflite path")
     a = ap.parse_args(argv)
@@ -202,7 +204,7 @@ def main(argv=None) -> int:
 
     detectors = {"cnn": cnn, "opencv": cv} if a.no_before else {"cnn": cnn, "cnn-before": before, "opencv": cv}
     t0 = time.time()
-    images = quick_images(a.limit)
+    images = quick_images(a.limit, a.hd)
     frames = video_frames(a.frames)
     print(f"{len(images)} images, {len(frames)} frames rendered in {time.time() - t0:.0f} s; "
           f"model {a.model}; threads: {a.threads or 'default'}; load average {os.getloadavg()[0]:.1f}", flush=True)
