@@ -57,7 +57,7 @@ With ``pattern_size``, quick passes come first (:func:`aicalib_tf.detect.pyramid
 image at one or two scales coarser than the coarsest below (640×480 at 320×240; 1920×1080 at
 240×135, then 480×270), for a full board only, its corners refined on the full image as below;
 the search goes on as below when they find none (small squares, a board cut by the frame or
-hidden), for about a quarter more time.
+hidden), at 1.2–1.5× the time it took without them (evaluate's 640×480 images).
 
 Large images (longer side ≥ 1600 px) are searched coarse to fine (:mod:`aicalib_tf.detect.pyramid`):
 first at a reduced scale (block means, the longer side kept ≥ 800 px), the corners found there
