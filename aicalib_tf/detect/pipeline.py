@@ -55,8 +55,8 @@ the candidates are assembled again from 3×2 seeds (:func:`aicalib_tf.detect.gri
 
 With ``pattern_size``, quick passes come first (:func:`aicalib_tf.detect.pyramid.quick_scales`): the
 image at one or two scales coarser than the coarsest below (640×480 at 320×240; 1920×1080 at
-240×135, then 480×270), for a full board only, its corners refined on the full image as below;
-the search goes on as below when they find none (small squares, a board cut by the frame or
+240×135, then 480×270), for a full board only, its corners refined on the full image as below
+(none may move more than :func:`aicalib_tf.detect.pyramid.quick_shift`); the search goes on as below when they find none (small squares, a board cut by the frame or
 hidden), at 1.2–1.5× the time it took without them (evaluate's 640×480 images).
 
 Large images (longer side ≥ 1600 px) are searched coarse to fine (:mod:`aicalib_tf.detect.pyramid`):
@@ -100,7 +100,7 @@ from aicalib_tf.detect.grid import MIN_CORNERS, Grid, assemble_grids, full_subgr
 from aicalib_tf.detect.junctions import dedupe, nearest_spacing, proposer, ring_symmetry
 from aicalib_tf.detect.lattice import drop_outliers
 from aicalib_tf.detect.partial import partial_board, relative_board
-from aicalib_tf.detect.pyramid import downscale, quick_scales, refine_full, scales, to_full
+from aicalib_tf.detect.pyramid import downscale, quick_scales, quick_shift, refine_full, scales, to_full
 from aicalib_tf.detect.refine import Smoothed, refine_windowed
 from aicalib_tf.detect.zoom import from_zoom, zoom_box, zoom_in
 from aicalib_tf.io import load_image
@@ -218,7 +218,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
         det = _detect_at(downscale(gray, f), pattern_size, model, threshold, second_look=look, relative=relative,
                          full_only=f in quick)
         if det.found and f > 1:
-            corners, ok = refine_full(gray, to_full(det.corners, f))
+            corners, ok = refine_full(gray, to_full(det.corners, f), max_shift=quick_shift(f) if f in quick else 2.0)
             if not ok.all():  # a corner left at its coarse place may be px off: try the finer scales
                 reason = max(reason, NO_MATCH, key=REASONS.index)
                 continue

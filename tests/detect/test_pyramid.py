@@ -135,8 +135,8 @@ def test_a_board_whose_corner_the_full_image_refinement_cannot_place_is_searched
     s = make_sample("clean", 4, 0, size=(1920, 1080), pattern=(9, 6))
     real = detect.refine_full
 
-    def one_fails(gray, pts):
-        out, ok = real(gray, pts)
+    def one_fails(gray, pts, max_shift=2.0):
+        out, ok = real(gray, pts, max_shift)
         ok[7] = False
         return out, ok
 
