@@ -126,7 +126,8 @@ def summarise(rec: dict, key: str = "ms", ref: str = "opencv") -> list[str]:
                        np.median(ms[hd]) if hd.any() else np.nan, int(np.sum(r["hit"])))
     for name, (c, m, cl, hd, hits) in stats.items():
         o = stats[ref]
-        lines.append(f"| {name} | {c:.2f} | {c / o[0]:.2f}× | {m:.2f} | {m / o[1]:.2f}× | {cl:.2f} | {cl / o[2]:.2f}× "
+        lines.append(f"| {name} | {c:.2f} | {c / o[0]:.2f}× | {m:.2f} | {m / o[1]:.2f}× "
+                     f"| {cl:.2f} | {cl / o[2]:.2f}× "
                      f"| {hd:.2f} | {hd / o[3]:.2f}× | {hits} |")
     return lines
 
@@ -153,7 +154,8 @@ def time_video(frames, model) -> list[str]:
         if k:
             how[tracker.how or "none"] += 1
     o, oc = np.mean(ms["opencv"]), np.mean(cpu["opencv"])
-    lines = ["| 1280×720 video, per frame | mean ms | ratio | median ms | max ms | CPU mean ms | ratio | full boards |",
+    lines = ["| 1280×720 video, per frame | mean ms | ratio | median ms | max ms | CPU mean ms | ratio "
+             "| full boards |",
              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for name, v in ms.items():
         c = np.mean(cpu[name])

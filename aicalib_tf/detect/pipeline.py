@@ -56,8 +56,9 @@ the candidates are assembled again from 3×2 seeds (:func:`aicalib_tf.detect.gri
 With ``pattern_size``, quick passes come first (:func:`aicalib_tf.detect.pyramid.quick_scales`): the
 image at one or two scales coarser than the coarsest below (640×480 at 320×240; 1920×1080 at
 240×135, then 480×270), for a full board only, its corners refined on the full image as below
-(none may move more than :func:`aicalib_tf.detect.pyramid.quick_shift`); the search goes on as below when they find none (small squares, a board cut by the frame or
-hidden), at 1.2–1.5× the time it took without them (evaluate's 640×480 images).
+(none may move more than :func:`aicalib_tf.detect.pyramid.quick_shift`); the search goes on as
+below when they find none (small squares, a board cut by the frame or hidden), at 1.2–1.5× the
+time it took without them (evaluate's 640×480 images).
 
 Large images (longer side ≥ 1600 px) are searched coarse to fine (:mod:`aicalib_tf.detect.pyramid`):
 first at a reduced scale (block means, the longer side kept ≥ 800 px), the corners found there
@@ -220,7 +221,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
         if det.found and f > 1:
             corners, ok = refine_full(gray, to_full(det.corners, f), max_shift=quick_shift(f) if f in quick else 2.0)
             if not ok.all():  # a corner left at its coarse place may be px off: try the finer scales
-                reason = max(reason, NO_MATCH, key=REASONS.index)
+                reason = reason if f in quick else max(reason, NO_MATCH, key=REASONS.index)
                 continue
             det = replace(det, corners=corners, image_size=(w, h))
         if det.complete and pattern_size is not None:
