@@ -6,6 +6,7 @@ Public API (this package imports without TensorFlow; Keras loads only where a mo
 * :class:`ImageError` — raised for unusable images, naming the file.
 * :func:`detect_corners` -> :class:`Detection` — a chessboard's inner corners, full or partial.
 * :func:`find_chessboard_corners` — a drop-in for ``cv2.findChessboardCorners``.
+* :class:`Tracker` — detection through a stream of video frames, searching near the last board first.
 * :func:`calibrate_camera` (:class:`View` in) -> :class:`Calibration`;
   :func:`save_calibration` / :func:`load_calibration` write and read its files.
 * :func:`undistort` — remove lens distortion with a calibration.
@@ -36,11 +37,12 @@ _LAZY = {
     "calibrate_camera": "calib.fit", "undistort": "calib.files", "save_calibration": "calib.files",
     "load_calibration": "calib.files", "check_calibration": "calib.check",
     "Detection": "detect.pipeline", "detect_corners": "detect.pipeline", "find_chessboard_corners": "detect.pipeline",
+    "Tracker": "detect.track",
 }
 
 __all__ = [
-    "Calibration", "CalibrationError", "Detection", "ImageError", "View", "calibrate_camera", "check_calibration",
-    "detect_corners",
+    "Calibration", "CalibrationError", "Detection", "ImageError", "Tracker", "View", "calibrate_camera",
+    "check_calibration", "detect_corners",
     "find_chessboard_corners", "load_calibration", "load_image", "load_model", "save_calibration", "undistort",
     "__version__",
 ]

@@ -13,5 +13,6 @@ from aicalib_tf.detect.pipeline import (
     detect_corners,
     find_chessboard_corners,
 )
+from aicalib_tf.detect.track import Tracker
 
-__all__ = ["Detection", "detect_corners", "draw_detection", "find_chessboard_corners"]
+__all__ = ["Detection", "Tracker", "detect_corners", "draw_detection", "find_chessboard_corners"]

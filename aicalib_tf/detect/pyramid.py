@@ -20,9 +20,13 @@ from aicalib_tf.detect.junctions import nearest_spacing
 from aicalib_tf.detect.refine import Smoothed, refine_windowed, window_radius
 from aicalib_tf.geometry.pose import in_frame
 
-__all__ = ["MIN_SIDE", "scales", "downscale", "to_full", "refine_full"]
+__all__ = ["MIN_SIDE", "QUICK_SIDE", "QUICK_LEVELS", "scales", "quick_scales", "quick_shift", "downscale", "to_full",
+           "refine_full"]
 
 MIN_SIDE = 800  # px: a reduced scale keeps at least this many pixels along the image's longer side
+QUICK_SIDE = 240  # px: a quick pass keeps at least this many pixels along the image's longer side
+QUICK_LEVELS = 2  # quick passes at most (measured on evaluate --quick: 640x480 at 160x120 found no clean board,
+# 1920x1080 at 240x135 found all)
 
 
 def scales(width: int, height: int, min_side: int = MIN_SIDE) -> list[int]:
@@ -39,6 +43,38 @@ def scales(width: int, height: int, min_side: int = MIN_SIDE) -> list[int]:
         out.append(f)
         f //= 2
     return out
+
+
+def quick_scales(width: int, height: int, min_side: int = QUICK_SIDE, levels: int = QUICK_LEVELS) -> list[int]:
+    """The factors of the quick passes, coarsest first: up to ``levels`` powers of two beyond the
+    coarsest of :func:`scales`, each keeping at least ``min_side`` px along the longer side and 8
+    along the shorter.
+
+    Only a complete board found by a quick pass counts (the caller goes on to :func:`scales`
+    otherwise): a board's squares are mostly large enough for the CNN (about 4 px and more) at a
+    coarser scale, where it costs 1/f² as much. [2] for 640×480, [4, 2] for 1280×720, [8, 4] for
+    1920×1080, [] for 320×240.
+    """
+    w, h = int(width), int(height)
+    f = scales(w, h)[0]
+    out = []
+    while len(out) < levels and max(w, h) // (2 * f) >= min_side and min(w, h) // (2 * f) >= 8:
+        f *= 2
+        out.insert(0, f)
+    return out
+
+
+def quick_shift(factor: int) -> float:
+    """px: the furthest a quick pass's corner may move when it is refined on the full image
+    (:func:`refine_full`): 0.6·f, at most 2.
+
+    A corner found at factor f is good to about 0.3 of a reduced pixel, 0.6 px at f = 2 (evaluate's
+    640×480 boards: 90% within 0.5 px, 99% within 1.3). One that moves further was placed
+    poorly there or is pulled on the full image (heavy noise, a shadow edge), so the board is
+    left to the finer scales: data_gen ``hard`` seed 5 #39 had one corner moved 1.6 px, to 2.1
+    px from the truth, where the full-size search finds a partial board without it.
+    """
+    return min(2.0, 0.6 * float(factor))
 
 
 def downscale(gray: np.ndarray, factor: int) -> np.ndarray:
@@ -63,13 +99,13 @@ def to_full(points: np.ndarray, factor: int) -> np.ndarray:
     return (np.asarray(points, np.float64) * f + (f - 1.0) / 2.0).astype(np.float32)
 
 
-def refine_full(gray: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def refine_full(gray: np.ndarray, points: np.ndarray, max_shift: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
     """Refine corners found at a reduced scale on the full image (saddle fit, :mod:`aicalib_tf.detect.refine`).
 
     gray : (H, W) full image. points : (N, 2) px on it (from :func:`to_full`), N ≥ 2, of one board.
     Only the board's bounding box (plus the largest window) is smoothed. Returns refined (N, 2)
-    float32 and ok (N,) bool; a point whose refinement fails, moves more than 2 px or would leave
-    the image keeps its given position, with ok False (at a factor f that position is only good
+    float32 and ok (N,) bool; a point whose refinement fails, moves more than ``max_shift`` px or would
+    leave the image keeps its given position, with ok False (at a factor f that position is only good
     to a fraction of f px, so the caller should not trust the board).
     """
     pts = np.asarray(points, np.float32).reshape(-1, 2)
@@ -80,7 +116,8 @@ def refine_full(gray: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.nd
     x1, y1 = np.minimum(np.ceil(pts.max(axis=0)).astype(int) + margin + 1, [w, h])
     crop = np.ascontiguousarray(gray[y0:y1, x0:x1], dtype=np.float32)
     offset = np.array([x0, y0], np.float32)
-    refined, ok = refine_windowed(Smoothed(crop), pts - offset, spacing, max_shift=np.full(len(pts), 2.0))
+    shift = np.full(len(pts), float(max_shift))
+    refined, ok = refine_windowed(Smoothed(crop), pts - offset, spacing, max_shift=shift)
     refined = refined + offset
     ok &= in_frame(refined, (w, h))
     return np.where(ok[:, None], refined, pts).astype(np.float32), ok

@@ -1,4 +1,4 @@
-"""Coarse-to-fine detection on large images (aicalib_tf.detect.pyramid and its use in detect_corners)."""
+"""Coarse-to-fine detection (aicalib_tf.detect.pyramid and its use in detect_corners: quick passes, then the scales)."""
 
 import numpy as np
 import pytest
@@ -88,7 +88,7 @@ def test_without_a_pattern_a_coarse_scales_sub_grid_does_not_hide_the_whole_boar
     assert np.abs(np.sort(det.corners, axis=0) - np.sort(truth, axis=0)).max() < 0.5
 
 
-def test_a_large_image_is_detected_at_half_scale_as_accurately_as_at_full(monkeypatch):
+def test_a_large_image_is_detected_at_a_coarse_scale_as_accurately_as_at_full(monkeypatch):
     import aicalib_tf.detect.pipeline as detect
 
     s = make_sample("clean", 4, 0, size=(1920, 1080), pattern=(9, 6))
@@ -97,7 +97,7 @@ def test_a_large_image_is_detected_at_half_scale_as_accurately_as_at_full(monkey
     monkeypatch.setattr(detect, "_detect_at", lambda g, *a, **k: tried.append(g.shape) or real(g, *a, **k))
     det = detect.detect_corners(s.image, (9, 6))
     assert det.complete and det.image_size == (1920, 1080)
-    assert tried == [(540, 960)]  # found at the coarse scale: full size never searched
+    assert tried == [(135, 240)]  # found by the first quick pass (factor 8): full size never searched
     from aicalib_tf.bench.metrics import board_detection_outcome
 
     outcome, err = board_detection_outcome(det.corners, s.corners, (9, 6))
@@ -121,7 +121,7 @@ def test_a_board_too_small_for_the_coarse_scale_is_found_at_full_size(monkeypatc
     real = detect._detect_at
     monkeypatch.setattr(detect, "_detect_at", lambda g, *a, **k: tried.append(g.shape) or real(g, *a, **k))
     det = detect.detect_corners(frame, (9, 6))
-    assert tried == [(540, 960), (1080, 1920)]
+    assert tried == [(135, 240), (270, 480), (540, 960), (1080, 1920)]  # the quick passes, then the scales
     assert det.complete
     truth = (s.corners + 0.5) * (280 / 640) - 0.5 + [800, 400]
     from aicalib_tf.bench.metrics import board_detection_outcome
@@ -135,8 +135,8 @@ def test_a_board_whose_corner_the_full_image_refinement_cannot_place_is_searched
     s = make_sample("clean", 4, 0, size=(1920, 1080), pattern=(9, 6))
     real = detect.refine_full
 
-    def one_fails(gray, pts):
-        out, ok = real(gray, pts)
+    def one_fails(gray, pts, max_shift=2.0):
+        out, ok = real(gray, pts, max_shift)
         ok[7] = False
         return out, ok
 
@@ -145,4 +145,5 @@ def test_a_board_whose_corner_the_full_image_refinement_cannot_place_is_searched
     monkeypatch.setattr(detect, "refine_full", one_fails)
     monkeypatch.setattr(detect, "_detect_at", lambda g, *a, **k: tried.append(g.shape) or real_at(g, *a, **k))
     det = detect.detect_corners(s.image, (9, 6))
-    assert tried == [(540, 960), (1080, 1920)] and det.complete  # found again at full size
+    # the quick passes (factors 8 and 4) and the coarse scale all fail the refinement: found again at full size
+    assert tried == [(135, 240), (270, 480), (540, 960), (1080, 1920)] and det.complete
