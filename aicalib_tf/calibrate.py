@@ -96,6 +96,10 @@ def _parse_args(argv):
     ap.add_argument("--target", default="0.1px", help="video/camera: stop at this uncertainty (default: %(default)s)")
     ap.add_argument("--max-views", type=int, default=40, help="video/camera: keep at most this many views")
     ap.add_argument("--save-partial", action="store_true", help="video/camera: a run stopped early still writes")
+    ap.add_argument("--sync-tolerance", default="10ms",
+                    help="rig videos: pair frames whose timestamps are this close (default: %(default)s)")
+    ap.add_argument("--pair-by", default="time", choices=("time", "index"),
+                    help="rig videos: pair the cameras' frames by timestamp or by frame number (default: %(default)s)")
     return ap.parse_args(argv)
 
 
@@ -141,12 +145,25 @@ def _main(args) -> int:
                          "every image of a camera must have one size)")
     if args.rig:
         from aicalib_tf.calib.rig_workflow import RigConfig, parse_rig, run_rig
+        from aicalib_tf.guided.rig_video import is_rig_video, run_rig_video
 
-        return _run(lambda: RigConfig(cameras=tuple(parse_rig(args.rig)), **_common(args)), run_rig,
-                    "rig.json, the stereo YAML files, camera_info per camera, report.png")
+        cameras = tuple(parse_rig(args.rig))
+        wrote = "rig.json, the stereo YAML files, camera_info per camera, report.png"
+        if is_rig_video(cameras):
+            return _run(lambda: _rig_video_config(args, cameras), run_rig_video, wrote)
+        return _run(lambda: RigConfig(cameras=cameras, **_common(args)), run_rig, wrote)
     return _run(lambda: CalibrateConfig(images=tuple(args.images), fix_k3=args.fix_k3, rational=args.rational,
                                         resize_policy=args.resize_policy, **_common(args)), run,
                 "camera.yaml, camera.json, camera_info.yaml, report.png")
+
+
+def _rig_video_config(args, cameras):
+    """The rig-video run's config from the command line (ValueError for a bad --target or --sync-tolerance)."""
+    from aicalib_tf.guided.rig_video import RigVideoConfig, parse_tolerance
+    from aicalib_tf.guided.workflow import parse_target
+
+    return RigVideoConfig(cameras=cameras, target_px=parse_target(args.target), max_views=args.max_views,
+                          sync_tolerance_s=parse_tolerance(args.sync_tolerance), pair_by=args.pair_by, **_common(args))
 
 
 def _common(args) -> dict:
