@@ -46,6 +46,16 @@ the board next. The files are those of the photo path, with the kept frames in c
 A run stopped early (Ctrl-C, a stream that stops) writes nothing unless --save-partial, which
 writes the calibration so far marked partial.
 
+A rig filmed on video (every --rig item a video file or a stream) goes through the same loop per
+camera (:mod:`aicalib_tf.guided.rig_video`): each camera keeps its informative frames, and every
+frame either camera keeps is paired with the other cameras' frame of that instant (by timestamp
+within --sync-tolerance, or --pair-by index), detected there, and shared by the rig. Unpaired
+frames are reported; cameras that drift out of sync are refused with the measured offset. The
+files are those of the photo rig above, with each camera's kept frames in rig.json:
+
+    python -m aicalib_tf.calibrate --rig cam0=left.mp4 cam1=right.mp4 --pattern 9x6 --square 25mm --out rig/
+        [--sync-tolerance 10ms] [--pair-by time|index] [--target 0.1px] [--max-views 40]
+
 Images of different sizes are an error naming the odd files unless --resize-policy says what to
 do: skip them, crop them to the common size (top-left kept; exact when an image only has extra
 rows or columns at the right or bottom, like 1281x721 among 1280x720), or scale their corners.

@@ -114,6 +114,8 @@ def _take(cams: list[_Camera], k: int, frame, cfg: RigVideoConfig, window: float
     cam.indices.append(frame.index)
     cam.times.append(frame.time_s)
     cam.recent.append(frame)
+    while _key(cam.recent[0], cfg.pair_by) < t - window - 1e-9:
+        cam.recent.popleft()
     cam.wants = [w for w in cam.wants if w >= t - window - 1e-9]
     if any(abs(t - w) <= window + 1e-9 for w in cam.wants):
         cam.held[frame.index] = frame.gray
