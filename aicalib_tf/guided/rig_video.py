@@ -34,7 +34,7 @@ import numpy as np
 from aicalib_tf.calib.fit import CalibrationError, View
 from aicalib_tf.guided.session import GuidedCalibration, GuidedConfig
 
-__all__ = ["RigVideoConfig", "run_rig_video", "is_rig_video", "parse_tolerance", "SYNC_CHECK_EVERY"]
+__all__ = ["RigVideoConfig", "run_rig_video", "is_rig_video", "parse_tolerance", "pair_overlap", "SYNC_CHECK_EVERY"]
 
 SYNC_CHECK_EVERY = 30  # frames of camera 0 between two checks of the cameras' sync
 _RECENT = 64  # frames each camera keeps back for the partners of the others' kept frames, at most
@@ -97,6 +97,7 @@ class _Camera:
     recent: deque = field(default_factory=lambda: deque(maxlen=_RECENT))
     held: dict = field(default_factory=dict)
     wants: list = field(default_factory=list)
+    found: dict = field(default_factory=dict)  # {index: (corners, ids, relative) or None} of the frames examined
 
     def stopped(self, max_examined: int) -> bool:
         """The camera examines no more frames (its stop rule, or the cap)."""
@@ -119,7 +120,13 @@ def _take(cams: list[_Camera], k: int, frame, cfg: RigVideoConfig, window: float
     cam.wants = [w for w in cam.wants if w >= t - window - 1e-9]
     if any(abs(t - w) <= window + 1e-9 for w in cam.wants):
         cam.held[frame.index] = frame.gray
-    if cam.stopped(cfg.max_examined) or not cam.session.add(frame).kept:
+    if cam.stopped(cfg.max_examined):
+        return
+    update = cam.session.add(frame)
+    if update.examined:
+        cam.found[frame.index] = None if update.corners is None else (
+            update.corners, update.ids, bool(getattr(cam.session.detect, "relative", False)))
+    if not update.kept:
         return
     cam.held[frame.index] = frame.gray
     for other in cams:
@@ -128,16 +135,35 @@ def _take(cams: list[_Camera], k: int, frame, cfg: RigVideoConfig, window: float
             other.held.update({f.index: f.gray for f in other.recent if abs(_key(f, cfg.pair_by) - t) <= window + 1e-9})
 
 
-def _check_sync(cams: list[_Camera], cfg: RigVideoConfig) -> list:
-    """Each camera paired with camera 0 (:class:`aicalib_tf.sources.Pairing`); ValueError naming the
-    sources when they are out of sync."""
-    from aicalib_tf.sources import pair_frames
+def pair_overlap(times_a, times_b, *, by: str = "time", tolerance_s: float = 0.010, names=("cam0", "cam1")):
+    """:func:`aicalib_tf.sources.pair_frames` over the span both cameras recorded (by time: a camera that
+    started earlier or ran longer is not out of sync for it); the frames outside it are unpaired.
+    times_a, times_b : (Na,), (Nb,) s. Returns a :class:`aicalib_tf.sources.Pairing` indexing the full arrays."""
+    from aicalib_tf.sources import Pairing, pair_frames
 
+    a, b = np.asarray(times_a, np.float64), np.asarray(times_b, np.float64)
+    if by != "time" or not len(a) or not len(b):
+        return pair_frames(a, b, by=by, tolerance_s=tolerance_s, names=names)
+    lo, hi = max(a.min(), b.min()) - tolerance_s, min(a.max(), b.max()) + tolerance_s
+    ia, ib = np.flatnonzero((a >= lo) & (a <= hi)), np.flatnonzero((b >= lo) & (b <= hi))
+    if not len(ia) or not len(ib):
+        raise ValueError(f"{names[0]} and {names[1]} never recorded at the same time ({a.min():.2f}-{a.max():.2f} s "
+                         f"against {b.min():.2f}-{b.max():.2f} s)")
+    p = pair_frames(a[ia], b[ib], by=by, tolerance_s=tolerance_s, names=names)
+    pairs = [(int(ia[i]), int(ib[j])) for i, j in p.pairs]
+    used_a, used_b = {i for i, _ in pairs}, {j for _, j in pairs}
+    return Pairing(pairs, [i for i in range(len(a)) if i not in used_a], [j for j in range(len(b)) if j not in used_b],
+                   p.offset_s)
+
+
+def _check_sync(cams: list[_Camera], cfg: RigVideoConfig) -> list:
+    """Each camera paired with camera 0 (:func:`pair_overlap`); ValueError naming the sources when they
+    are out of sync."""
     out = []
     for cam in cams[1:]:
         try:
-            out.append(pair_frames(cams[0].times, cam.times, by=cfg.pair_by, tolerance_s=cfg.sync_tolerance_s,
-                                   names=(f"{cams[0].name} ({cams[0].source.name})", f"{cam.name} ({cam.source.name})")))
+            out.append(pair_overlap(cams[0].times, cam.times, by=cfg.pair_by, tolerance_s=cfg.sync_tolerance_s,
+                                    names=(f"{cams[0].name} ({cams[0].source.name})", f"{cam.name} ({cam.source.name})")))
         except ValueError as exc:
             raise ValueError(f"--rig: {exc}") from None
     return out
@@ -183,18 +209,25 @@ def _groups(cams: list[_Camera], pairings: list) -> tuple[list, dict]:
     return [(n, frames[n]) for n in order], solo
 
 
-def _partner_view(cam: _Camera, name: str, gray, detect, min_corners: int) -> tuple[View | None, str]:
-    """A partner frame's view (detected now), or (None, why not)."""
-    if gray is None:
-        return None, "the frame was not held (the cameras' clocks disagree?)"
-    hit = detect(gray)
-    if hit is None:
-        why = getattr(detect, "why", "")
-        return None, "no board found" + (f": {why}" if why else "")
-    corners, ids = np.asarray(hit[0], np.float64), np.asarray(hit[1])
-    if len(ids) < min_corners:
-        return None, f"too few corners ({len(ids)})"
-    return View(name, corners, ids, relative=bool(getattr(detect, "relative", False))), ""
+def _partner_view(cam: _Camera, name: str, idx: int, detect) -> tuple[View | None, str, bool]:
+    """A partner frame's view (its loop's detection, or detected now), or None and why not; and whether
+    the detector ran."""
+    ran = idx not in cam.found
+    if ran:
+        gray = cam.held.get(idx)
+        if gray is None:
+            return None, "the frame was not held (the cameras' clocks disagree?)", False
+        hit = detect(gray)
+        if hit is None:
+            why = getattr(detect, "why", "")
+            return None, "no board found" + (f": {why}" if why else ""), True
+        cam.found[idx] = (np.asarray(hit[0], np.float64), np.asarray(hit[1]), bool(getattr(detect, "relative", False)))
+    if cam.found[idx] is None:
+        return None, "no board found", False
+    corners, ids, relative = cam.found[idx]
+    if len(ids) < cam.session.cfg.min_corners:
+        return None, f"too few corners ({len(ids)})", ran
+    return View(name, corners, ids, relative=relative), "", ran
 
 
 def _views(cams: list[_Camera], groups: list, detect, cfg: RigVideoConfig):
@@ -207,8 +240,8 @@ def _views(cams: list[_Camera], groups: list, detect, cfg: RigVideoConfig):
             cam, idx = cams[k], cams[k].indices[p]
             view = own[k].get(idx)
             if view is None:
-                detected += 1
-                view, why = _partner_view(cam, name, cam.held.get(idx), detect, cam.session.cfg.min_corners)
+                view, why, ran = _partner_view(cam, name, idx, detect)
+                detected += ran
                 if view is None:
                     skipped[f"{cam.name}/{name}"] = f"partner frame {idx}: {why}"
                     continue
@@ -221,8 +254,15 @@ def _views(cams: list[_Camera], groups: list, detect, cfg: RigVideoConfig):
 
 def _open(cfg: RigVideoConfig, detect, models: list[str]) -> list[_Camera]:
     """Each camera's source and loop (the camera's lens model, or the one for all)."""
-    from aicalib_tf.sources import open_source
+    import os
 
+    from aicalib_tf.sources import is_stream, open_source
+
+    owner: dict[str, str] = {}
+    for name, spec in cfg.cameras:
+        if not is_stream(spec) and owner.setdefault(os.path.realpath(spec), name) != name:
+            raise ValueError(f"--rig: {owner[os.path.realpath(spec)]} and {name} are given the same video ({spec}); "
+                             "each camera needs its own")
     cams = []
     try:
         for k, (name, spec) in enumerate(cfg.cameras):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from aicalib_tf.calibrate import main
-from aicalib_tf.guided.rig_video import is_rig_video, parse_tolerance
+from aicalib_tf.guided.rig_video import is_rig_video, pair_overlap, parse_tolerance
 from data_gen.video import main as render
 
 
@@ -71,6 +71,8 @@ def test_a_missing_or_mixed_input_is_one_line(pair, tmp_path, capsys):
     assert "missing.mp4" in _one_error_line(capsys)
     assert main(_args(pair / "video_cam0.avi", tmp_path / "*.png", out)) == 2
     assert "give every camera a video" in _one_error_line(capsys)
+    assert main(_args(pair / "video_cam0.avi", pair / "video_cam0.avi", out)) == 2
+    assert "the same video" in _one_error_line(capsys)
     assert not out.exists()
 
 
@@ -80,3 +82,13 @@ def test_tolerance_and_dispatch():
     with pytest.raises(ValueError, match="--sync-tolerance"):
         parse_tolerance("fast")
     assert is_rig_video([("a", "l.mp4"), ("b", "rtsp://x/y")]) and not is_rig_video([("a", "l/*.png"), ("b", "r/*.png")])
+
+
+def test_a_camera_that_ran_longer_is_not_out_of_sync():
+    a, b = np.arange(100) / 30.0, 0.002 + np.arange(160) / 30.0  # b kept recording for 2 s more
+    p = pair_overlap(a, b, tolerance_s=0.01)
+    assert len(p.pairs) == 100 and p.unpaired_b == list(range(100, 160)) and abs(p.offset_s - 0.002) < 1e-9
+    with pytest.raises(ValueError, match="out of sync"):
+        pair_overlap(a, 0.05 + b, tolerance_s=0.01)
+    with pytest.raises(ValueError, match="never recorded at the same time"):
+        pair_overlap(a, 10 + b, tolerance_s=0.01)
