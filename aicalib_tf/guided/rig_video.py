@@ -183,9 +183,9 @@ def _read(cams: list[_Camera], cfg: RigVideoConfig) -> str:
         if not cfg.quiet and k == 0 and len(cams[0].times) % 10 == 0:
             print("\r" + " | ".join(f"{c.name}: frames {len(c.times)}, examined {c.session.examined}, kept "
                                     f"{len(c.session.views)}" for c in cams).ljust(96), end="", file=sys.stderr)
-        if all(c.stopped(cfg.max_examined) for c in cams) and not any(c.wants for c, h in zip(cams, heads) if h):
+        if all(c.stopped(cfg.max_examined) for c in cams) and not any(c.wants for c, h in zip(cams, heads) if h is not None):
             return "every camera reached its target, --max-views or the cap on frames examined"
-    return "end of the videos"
+    return "end of the streams" if any(c.source.live for c in cams) else "end of the videos"
 
 
 def _groups(cams: list[_Camera], pairings: list) -> tuple[list, dict]:
