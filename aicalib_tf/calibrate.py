@@ -47,6 +47,16 @@ the board next. The files are those of the photo path, with the kept frames in c
 A run stopped early (Ctrl-C, a stream that stops) writes nothing unless --save-partial, which
 writes the calibration so far marked partial.
 
+A rig filmed on video (every --rig item a video file or a stream) goes through the same loop per
+camera (:mod:`aicalib_tf.guided.rig_video`): each camera keeps its informative frames, and every
+frame either camera keeps is paired with the other cameras' frame of that instant (by timestamp
+within --sync-tolerance, or --pair-by index), detected there, and shared by the rig. Unpaired
+frames are reported; cameras that drift out of sync are refused with the measured offset. The
+files are those of the photo rig above, with each camera's kept frames in rig.json:
+
+    python -m aicalib_tf.calibrate --rig cam0=left.mp4 cam1=right.mp4 --pattern 9x6 --square 25mm --out rig/
+        [--sync-tolerance 10ms] [--pair-by time|index] [--target 0.1px] [--max-views 40]
+
 Images of different sizes are an error naming the odd files unless --resize-policy says what to
 do: skip them, crop them to the common size (top-left kept; exact when an image only has extra
 rows or columns at the right or bottom, like 1281x721 among 1280x720), or scale their corners.
@@ -102,6 +112,10 @@ def _parse_args(argv):
     ap.add_argument("--target", default="0.1px", help="video/camera: stop at this uncertainty (default: %(default)s)")
     ap.add_argument("--max-views", type=int, default=40, help="video/camera: keep at most this many views")
     ap.add_argument("--save-partial", action="store_true", help="video/camera: a run stopped early still writes")
+    ap.add_argument("--sync-tolerance", default="10ms",
+                    help="rig videos: pair frames whose timestamps are this close (default: %(default)s)")
+    ap.add_argument("--pair-by", default="time", choices=("time", "index"),
+                    help="rig videos: pair the cameras' frames by timestamp or by frame number (default: %(default)s)")
     return ap.parse_args(argv)
 
 
@@ -147,12 +161,25 @@ def _main(args) -> int:
                          "every image of a camera must have one size)")
     if args.rig:
         from aicalib_tf.calib.rig_workflow import RigConfig, parse_rig, run_rig
+        from aicalib_tf.guided.rig_video import is_rig_video, run_rig_video
 
-        return _run(lambda: RigConfig(cameras=tuple(parse_rig(args.rig)), **_common(args)), run_rig,
-                    "rig.json, the stereo YAML files, camera_info per camera, camchain.yaml, report.png")
+        cameras = tuple(parse_rig(args.rig))
+        wrote = "rig.json, the stereo YAML files, camera_info per camera, camchain.yaml, report.png"
+        if is_rig_video(cameras):
+            return _run(lambda: _rig_video_config(args, cameras), run_rig_video, wrote)
+        return _run(lambda: RigConfig(cameras=cameras, **_common(args)), run_rig, wrote)
     return _run(lambda: CalibrateConfig(images=tuple(args.images), fix_k3=args.fix_k3, rational=args.rational,
                                         resize_policy=args.resize_policy, **_common(args)), run,
                 "camera.yaml, camera.json, camera_info.yaml, camchain.yaml, report.png")
+
+
+def _rig_video_config(args, cameras):
+    """The rig-video run's config from the command line (ValueError for a bad --target or --sync-tolerance)."""
+    from aicalib_tf.guided.rig_video import RigVideoConfig, parse_tolerance
+    from aicalib_tf.guided.workflow import parse_target
+
+    return RigVideoConfig(cameras=cameras, target_px=parse_target(args.target), max_views=args.max_views,
+                          sync_tolerance_s=parse_tolerance(args.sync_tolerance), pair_by=args.pair_by, **_common(args))
 
 
 def _common(args) -> dict:

@@ -22,7 +22,7 @@ from aicalib_tf.geometry.camera import Camera
 from .board import Board
 from .pose import PoseConfig, corner_visibility, sample_pose
 
-__all__ = ["HandPath", "hand_path", "HAND_POSES"]
+__all__ = ["HandPath", "RigPath", "hand_path", "HAND_POSES"]
 
 HAND_POSES = PoseConfig(tilt_max_deg=50.0, fill=(0.3, 0.7), framing="inside", roll_deg=(-25.0, 25.0))
 
@@ -72,6 +72,26 @@ class HandPath:
         amp, freq, phase = self.tremor[..., 0], self.tremor[..., 1], self.tremor[..., 2]
         wobble = np.sum(amp * np.sin(2.0 * math.pi * freq * t + phase), axis=1)  # (6,)
         return cv2.Rodrigues(wobble[:3])[0] @ R, tv + wobble[3:]
+
+
+@dataclass(frozen=True)
+class RigPath:
+    """A hand path seen from another camera of a rig: every pose (board to camera 0) mapped by
+    X_k = R·X_0 + T (R (3, 3), T (3,) board units); :meth:`pose` and :meth:`matrix` as :class:`HandPath`'s."""
+
+    path: HandPath
+    R: np.ndarray
+    T: np.ndarray
+
+    def matrix(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(R (3, 3), t (3,)) of the board in this camera at time ``t`` s."""
+        R0, t0 = self.path.matrix(t)
+        return self.R @ R0, self.R @ t0 + self.T
+
+    def pose(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(rvec (3,), tvec (3,)) at time ``t`` s."""
+        R, tv = self.matrix(t)
+        return cv2.Rodrigues(R)[0].ravel(), tv
 
 
 def _out_of_view(camera: Camera, board: Board, R: np.ndarray, t: np.ndarray, rng) -> np.ndarray | None:

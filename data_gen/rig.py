@@ -33,7 +33,7 @@ from .pose import PoseConfig, corner_visibility, sample_pose
 from .render import lens_coverage, render_board
 from .sample import OUTSIDE_CIRCLE, Sample
 
-__all__ = ["RigTruth", "sample_rig", "rig_frame_poses", "make_rig_sequence", "RIG_LENSES"]
+__all__ = ["RigTruth", "sample_rig", "rig_placement", "rig_frame_poses", "make_rig_sequence", "RIG_LENSES"]
 
 RIG_LENSES = ("pinhole", "fisheye")
 _POSE = PoseConfig(tilt_max_deg=45.0, fill=(0.25, 0.6), framing="inside")
@@ -61,6 +61,21 @@ def _camera(rng, lens: str, size) -> Camera:
     raise ValueError(f"rig lens must be one of {RIG_LENSES}, got {lens!r}")
 
 
+def rig_placement(rng: np.random.Generator, count: int, baseline: float, vergence_deg=(0.0, 10.0)):
+    """(R (C, 3, 3), T (C, 3)) of ``count`` cameras in a row, ``baseline`` apart (board units) along
+    camera 0's x axis, converging by up to ``vergence_deg`` in all (module docstring); R[0] = I, T[0] = 0."""
+    R, T = np.zeros((count, 3, 3)), np.zeros((count, 3))
+    R[0] = np.eye(3)
+    verge = math.radians(rng.uniform(*vergence_deg))
+    b = float(baseline)
+    for k in range(1, count):
+        centre = np.array([k * b, rng.normal(0, 0.02 * b), rng.normal(0, 0.02 * b)])
+        turn = np.array([rng.normal(0, 0.005), verge * k / (count - 1), rng.normal(0, 0.005)])  # converge: turn left
+        R[k] = cv2.Rodrigues(turn)[0]
+        T[k] = -R[k] @ centre
+    return R, T
+
+
 def sample_rig(rng: np.random.Generator, lenses=("pinhole", "pinhole"), size=(1280, 960), *,
                baseline=(50.0, 500.0), vergence_deg=(0.0, 10.0), pattern=(9, 6)) -> RigTruth:
     """Draw a rig of len(lenses) cameras (module docstring); baseline in mm (the board's unit), degrees."""
@@ -69,14 +84,7 @@ def sample_rig(rng: np.random.Generator, lenses=("pinhole", "pinhole"), size=(12
         raise ValueError(f"a rig has at least 2 cameras, got {C}")
     b = float(rng.uniform(*baseline))
     cams = tuple(_camera(rng, lens, size) for lens in lenses)
-    R, T = np.zeros((C, 3, 3)), np.zeros((C, 3))
-    R[0] = np.eye(3)
-    verge = math.radians(rng.uniform(*vergence_deg))
-    for k in range(1, C):
-        centre = np.array([k * b, rng.normal(0, 0.02 * b), rng.normal(0, 0.02 * b)])
-        turn = np.array([rng.normal(0, 0.005), verge * k / (C - 1), rng.normal(0, 0.005)])  # converge: turn left
-        R[k] = cv2.Rodrigues(turn)[0]
-        T[k] = -R[k] @ centre
+    R, T = rig_placement(rng, C, b, vergence_deg)
     board = replace(sample_board(rng, pattern_size=pattern), square_size=float(np.clip(b / 8.0, 15.0, 60.0)))
     return RigTruth(cams, R, T, board)
 

@@ -3,6 +3,7 @@
     python -m data_gen.video --out DIR [--seconds 60] [--fps 30] [--size 1280x720]
         [--lens mild|strong|fisheye150] [--pattern 9x6] [--square 25] [--seed 0]
         [--shutter 0.0167] [--rolling-shutter 0] [--noise 2] [--format avi|mp4] [--y4m] [--workers N] [--pace 1]
+        [--rig-baseline MM]
 
 A board moves along a smooth hand-held path (:mod:`data_gen.path`: rests at poses spread over the
 image with varied tilts, minimum-jerk moves between them, some poses cut by the frame, some out
@@ -23,6 +24,13 @@ corners (every inner corner in OpenCV order, null where the lens does not image 
 shutter, where each corner's row was read), visible, motion_px (the fastest corner's motion
 during the exposure) and subframes) and meta.json (the arguments). Frames are rendered in
 ``--workers`` processes; the same arguments give the same frames whatever their number.
+
+``--rig-baseline B`` renders a synchronized stereo pair instead: camera 0 as above and a second
+camera ``B`` board units to its right, converging by a few degrees (placed as
+:func:`data_gen.rig.rig_placement` places a rig's cameras, its own lens drawn alike), seeing the
+same board path at the same instants. It writes video_cam0/video_cam1 and labels_cam0/labels_cam1
+(the same fields, each in its camera's frame), and meta.json's ``rig`` holds R (2, 3, 3) and T
+(2, 3) with X_k = R_k·X_0 + T_k (board units) and the baseline |T_1|.
 """
 
 from __future__ import annotations
@@ -43,12 +51,13 @@ from .background import make_background
 from .board import Board
 from .camera import sample_camera, sample_fisheye
 from .degrade import gaussian_blur, gaussian_noise
-from .path import HandPath, hand_path
+from .path import HandPath, RigPath, hand_path
 from .pose import corner_visibility
 from .render import lens_coverage, render_board
+from .rig import rig_placement
 from .sample import OUTSIDE_CIRCLE
 
-__all__ = ["VideoConfig", "VideoScene", "make_scene", "render_frame", "write_video", "write_y4m_header",
+__all__ = ["VideoConfig", "VideoScene", "make_scene", "rig_pose", "render_frame", "write_video", "write_y4m_header",
            "y4m_frame", "LENSES", "main"]
 
 LENSES = ("mild", "strong", "fisheye150")
@@ -75,14 +84,17 @@ class VideoConfig:
     y4m: bool = False
     workers: int = 1
     pace: float = 1.0  # the hand's speed: rests and moves last 1/pace as long (short test videos: 3)
+    rig_baseline: float = 0.0  # board units between two cameras (0: one camera)
 
     def __post_init__(self):
         if self.lens not in LENSES:
             raise ValueError(f"--lens must be one of {', '.join(LENSES)}, got {self.lens!r}")
         if self.format not in ("avi", "mp4"):
             raise ValueError(f"--format must be avi or mp4, got {self.format!r}")
-        if not (self.seconds > 0 and self.fps > 0 and self.pace > 0 and self.shutter >= 0 and self.rolling_shutter >= 0):
-            raise ValueError("--seconds, --fps and --pace must be > 0, --shutter and --rolling-shutter >= 0")
+        if not (self.seconds > 0 and self.fps > 0 and self.pace > 0 and self.shutter >= 0 and self.rolling_shutter >= 0
+                and self.rig_baseline >= 0):
+            raise ValueError("--seconds, --fps and --pace must be > 0, --shutter, --rolling-shutter and "
+                             "--rig-baseline >= 0")
         if self.shutter > 1.0 / self.fps:
             raise ValueError(f"--shutter {self.shutter:g} s is longer than a frame (1/{self.fps:g} s)")
 
@@ -107,17 +119,31 @@ def _camera(lens: str, size, rng):
     return sample_camera(rng, size, hfov_deg=(55.0, 75.0) if lens == "mild" else (80.0, 100.0), distortion=lens)
 
 
-def make_scene(cfg: VideoConfig) -> VideoScene:
-    """The video's camera, board, background and path, from ``cfg.seed`` alone."""
+def rig_pose(cfg: VideoConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(R (2, 3, 3), T (2, 3)) of the stereo pair ``cfg.rig_baseline`` apart, from ``cfg.seed`` alone."""
+    return rig_placement(np.random.default_rng([cfg.seed, 17]), 2, cfg.rig_baseline, (2.0, 6.0))
+
+
+def _background(rng, cam) -> np.ndarray:
+    bg = make_background(rng, cam.image_size, clutter=0.3, checker_distractors=0.0)
+    cover = lens_coverage(cam)
+    return bg if cover is None else (bg * cover + OUTSIDE_CIRCLE * (1.0 - cover)).astype(np.float32)
+
+
+def make_scene(cfg: VideoConfig, camera: int = 0) -> VideoScene:
+    """The video's camera, board, background and path, from ``cfg.seed`` alone; ``camera`` 1: the
+    second camera of the stereo pair (``cfg.rig_baseline``), its own lens and background, the same path."""
     rng = np.random.default_rng([cfg.seed, 11])
     cam = _camera(cfg.lens, cfg.size, rng)
     board = Board(check_pattern(cfg.pattern), float(cfg.square))
-    bg = make_background(rng, cam.image_size, clutter=0.3, checker_distractors=0.0)
-    cover = lens_coverage(cam)
-    if cover is not None:
-        bg = (bg * cover + OUTSIDE_CIRCLE * (1.0 - cover)).astype(np.float32)
+    bg = _background(rng, cam)
     path = hand_path(rng, cam, board, cfg.seconds + 1.0 / cfg.fps, dwell_s=(0.25 / cfg.pace, 0.6 / cfg.pace),
                      move_s=(0.8 / cfg.pace, 1.8 / cfg.pace))
+    if camera:
+        R, T = rig_pose(cfg)
+        other = np.random.default_rng([cfg.seed, 19])
+        cam = _camera(cfg.lens, cfg.size, other)
+        bg, path = _background(other, cam), RigPath(path, R[1], T[1])
     w, h = cam.image_size
     xs, ys = np.arange(0, w + _STEP, _STEP, dtype=np.float64), np.arange(0, h + _STEP, _STEP, dtype=np.float64)
     rays = cam.pixel_to_ray(np.stack(np.meshgrid(xs, ys), axis=-1))
@@ -235,36 +261,33 @@ def y4m_frame(gray: np.ndarray) -> bytes:
 _SCENE: VideoScene | None = None
 
 
-def _init_worker(cfg: VideoConfig) -> None:
+def _init_worker(cfg: VideoConfig, camera: int) -> None:
     global _SCENE
-    _SCENE = make_scene(cfg)
+    _SCENE = make_scene(cfg, camera)
 
 
 def _work(index: int):
     return render_frame(_SCENE, index)
 
 
-def _frames(cfg: VideoConfig, count: int):
+def _frames(cfg: VideoConfig, count: int, camera: int = 0):
     if cfg.workers <= 1:
-        scene = make_scene(cfg)
+        scene = make_scene(cfg, camera)
         return (render_frame(scene, i) for i in range(count))
     import multiprocessing as mp
 
-    pool = mp.get_context("spawn").Pool(cfg.workers, initializer=_init_worker, initargs=(cfg,))
+    pool = mp.get_context("spawn").Pool(cfg.workers, initializer=_init_worker, initargs=(cfg, camera))
     return pool.imap(_work, range(count), chunksize=4)
 
 
-def write_video(cfg: VideoConfig, *, progress: bool = True) -> Path:
-    """Render every frame and write DIR/video.avi|mp4, labels.jsonl, meta.json (and video.y4m); returns DIR."""
+def _write_camera(cfg: VideoConfig, out: Path, count: int, camera: int, suffix: str, progress: bool) -> str:
+    """Render one camera's frames into out/video{suffix}.avi|mp4, labels{suffix}.jsonl (and .y4m); returns the video's name."""
     from tqdm import tqdm
 
     from aicalib_tf.io import atomic_write_text
 
-    out = Path(cfg.out)
-    out.mkdir(parents=True, exist_ok=True)
     w, h = cfg.size
-    count = int(round(cfg.seconds * cfg.fps))
-    name = out / f"video.{cfg.format}"
+    name = out / f"video{suffix}.{cfg.format}"
     writer = cv2.VideoWriter(str(name), cv2.VideoWriter_fourcc(*("MJPG" if cfg.format == "avi" else "mp4v")),
                              cfg.fps, (w, h))
     if not writer.isOpened():
@@ -272,11 +295,12 @@ def write_video(cfg: VideoConfig, *, progress: bool = True) -> Path:
     if cfg.format == "avi":
         writer.set(cv2.VIDEOWRITER_PROP_QUALITY, 95)
     labels = []
-    y4m = open(out / "video.y4m", "wb") if cfg.y4m else None
+    y4m = open(out / f"video{suffix}.y4m", "wb") if cfg.y4m else None
     try:
         if y4m:
             write_y4m_header(y4m, (w, h), cfg.fps)
-        for gray, label in tqdm(_frames(cfg, count), total=count, desc="render", unit="frame", disable=not progress):
+        for gray, label in tqdm(_frames(cfg, count, camera), total=count, desc=f"render{suffix}", unit="frame",
+                                disable=not progress):
             writer.write(cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR))
             if y4m:
                 y4m.write(y4m_frame(gray))
@@ -285,8 +309,25 @@ def write_video(cfg: VideoConfig, *, progress: bool = True) -> Path:
         writer.release()
         if y4m:
             y4m.close()
-    atomic_write_text(out / "labels.jsonl", "\n".join(labels) + "\n")
-    meta = dict(asdict(VideoConfig(**{**asdict(cfg), "out": str(out)})), frames=count, video=name.name)
+    atomic_write_text(out / f"labels{suffix}.jsonl", "\n".join(labels) + "\n")
+    return name.name
+
+
+def write_video(cfg: VideoConfig, *, progress: bool = True) -> Path:
+    """Render every frame and write DIR/video.avi|mp4, labels.jsonl, meta.json (and video.y4m); returns DIR.
+    With ``cfg.rig_baseline``: video_cam0/video_cam1, labels_cam0/labels_cam1 and the rig in meta.json."""
+    from aicalib_tf.io import atomic_write_text
+
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    count = int(round(cfg.seconds * cfg.fps))
+    meta = dict(asdict(VideoConfig(**{**asdict(cfg), "out": str(out)})), frames=count)
+    if cfg.rig_baseline > 0:
+        R, T = rig_pose(cfg)
+        meta["videos"] = [_write_camera(cfg, out, count, k, f"_cam{k}", progress) for k in (0, 1)]
+        meta["rig"] = {"R": R.tolist(), "T": T.tolist(), "baseline": float(np.linalg.norm(T[1]))}
+    else:
+        meta["video"] = _write_camera(cfg, out, count, 0, "", progress)
     atomic_write_text(out / "meta.json", json.dumps(meta, indent=1, allow_nan=False) + "\n")
     return out
 
@@ -311,6 +352,8 @@ def _parse_args(argv):
     ap.add_argument("--y4m", action="store_true", help="also write video.y4m (YUV4MPEG2)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--pace", type=float, default=1.0, help="hand speed factor (default: %(default)s)")
+    ap.add_argument("--rig-baseline", type=float, default=0.0,
+                    help="render a stereo pair this many board units apart (default: one camera)")
     ap.add_argument("--quiet", action="store_true")
     return ap.parse_args(argv)
 
@@ -325,12 +368,15 @@ def main(argv: list[str] | None = None) -> int:
         cfg = VideoConfig(out=args.out, seconds=args.seconds, fps=args.fps, size=size, lens=args.lens,
                           pattern=check_pattern(parse_pattern(args.pattern)), square=args.square, seed=args.seed,
                           shutter=args.shutter, rolling_shutter=args.rolling_shutter, noise=args.noise,
-                          format=args.format, y4m=args.y4m, workers=args.workers, pace=args.pace)
+                          format=args.format, y4m=args.y4m, workers=args.workers, pace=args.pace,
+                          rig_baseline=args.rig_baseline)
         out = write_video(cfg, progress=not args.quiet)
     except (ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print(f"wrote {out}: video.{cfg.format}, labels.jsonl, meta.json" + (", video.y4m" if cfg.y4m else ""))
+    names = ("video_cam0", "video_cam1") if cfg.rig_baseline > 0 else ("video",)
+    print(f"wrote {out}: " + ", ".join(f"{n}.{cfg.format}" for n in names) + ", labels, meta.json"
+          + (", y4m" if cfg.y4m else ""))
     return 0
 
 

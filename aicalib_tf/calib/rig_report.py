@@ -61,12 +61,12 @@ def rectify_images(rig: RigCalibration, images, i: int = 0, j: int = 1) -> tuple
 
 
 def _preview(rig: RigCalibration, pairing):
-    """(frame name, rectified image 0, rectified image 1) of the first kept frame both files of which load, or None."""
+    """(frame name, rectified image 0, rectified image 1) of the first kept frame both images of which load, or None."""
     files = dict(pairing.frames)
     for name in rig.frames:
         fs = files.get(name, {})
-        paths = [fs.get(rig.names[0]), fs.get(rig.names[1])]
-        if None in paths:
+        paths = [fs.get(rig.names[0]), fs.get(rig.names[1])]  # file paths, or (H, W) frames of a video
+        if any(p is None for p in paths):
             continue
         try:
             imgs = [quantize(load_image(p)) for p in paths]

@@ -7,6 +7,8 @@ wins. When no name is shared and every camera has as many images, they are paire
 order. Images left without a partner are reported; they still serve their own camera's lens.
 
 The command line is ``python -m aicalib_tf.calibrate --rig cam0="left/*.png" cam1="right/*.png"``.
+Videos of a rig come through :mod:`aicalib_tf.guided.rig_video`, which selects the frames and then
+calls the same :func:`calibrate_views` and :func:`write_rig_files`.
 """
 
 from __future__ import annotations
@@ -18,7 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 
-__all__ = ["RigConfig", "Pairing", "parse_rig", "pair_images", "run_rig"]
+__all__ = ["RigConfig", "Pairing", "parse_rig", "pair_images", "run_rig", "rig_models", "calibrate_views",
+           "write_rig_files"]
 
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
 
@@ -179,9 +182,8 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
 
     Raises ValueError / CalibrationError / FileNotFoundError for bad input, before writing anything.
     """
-    from aicalib_tf.calib.rig_files import save_rig
     from aicalib_tf.calib.workflow import make_detector
-    from aicalib_tf.io import atomic_write_bytes, atomic_write_text, expand_images
+    from aicalib_tf.io import expand_images
     from aicalib_tf.outfolder import OutputFolder
 
     files = {}
@@ -189,40 +191,62 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
         files[name] = expand_images([pattern])
         if not files[name]:
             raise ValueError(f"{name}: no images match {pattern}")
-    names = list(files)
-    models = cfg.model.split(",")
-    if len(models) not in (1, len(names)):
-        raise ValueError(f"--model lists {len(models)} lens models for {len(names)} cameras ({', '.join(names)})")
+    models = rig_models(cfg.model, list(files))
     _refuse_shared_files(files)
     pairing = pair_images(files)
     detect = make_detector(cfg.detector, cfg.pattern, cfg.network)  # a bad network fails here, before any work
     with OutputFolder(cfg.out, "rig") as out:  # a bad --out fails here; files are swapped in at the end
-        rig, report, figure = _calibrate_rig_files(files, pairing, detect, models, cfg)
-        if rig.quality.get("status") == "failed":
-            _save_failed_rig(rig, out.path)
-        else:
-            save_rig(rig, out.path)
-        atomic_write_bytes(out.path / "report.png", figure)
-        atomic_write_text(out.path / "report.txt", report + "\n")
+        views, sizes, skipped = {}, {}, {}
+        for cam in files:
+            v, s, sk = _detect_camera(cam, pairing.frames, cfg)
+            sizes[cam] = _check_sizes(cam, v, s, pairing.frames, sk)
+            views[cam] = [v[n] for n, _ in pairing.frames if n in v]
+            skipped.update({f"{cam}/{n}": why for n, why in sk.items()})
+        meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
+                "lens_model": cfg.model, "pairing": pairing.rule, "images": {c: len(f) for c, f in files.items()}}
+        rig, report, figure = calibrate_views(views, sizes, pairing, skipped, cfg, models, meta)
+        write_rig_files(out.path, rig, report, figure)
     return rig, report
 
 
-def _calibrate_rig_files(files, pairing, detect, models, cfg: RigConfig):
-    """Detect every camera's images, calibrate and assess the rig; returns (rig, report text, report.png bytes)."""
+def rig_models(model: str, names: list[str]) -> list[str]:
+    """``--model`` (one lens model or auto, or a comma list) -> one per camera or one for all; ValueError
+    when the list's length is neither 1 nor the number of cameras."""
+    models = model.split(",")
+    if len(models) not in (1, len(names)):
+        raise ValueError(f"--model lists {len(models)} lens models for {len(names)} cameras ({', '.join(names)})")
+    return models
+
+
+def write_rig_files(folder: Path, rig, report: str, figure: bytes) -> None:
+    """Write a calibrated rig's files into ``folder`` (an :class:`~aicalib_tf.outfolder.OutputFolder`'s
+    staging path): every file of :func:`~aicalib_tf.calib.rig_files.save_rig`, or only rig.json and each
+    camera's own files for a failed rig; report.png and report.txt."""
+    from aicalib_tf.calib.rig_files import save_rig
+    from aicalib_tf.io import atomic_write_bytes, atomic_write_text
+
+    if rig.quality.get("status") == "failed":
+        _save_failed_rig(rig, folder)
+    else:
+        save_rig(rig, folder)
+    atomic_write_bytes(folder / "report.png", figure)
+    atomic_write_text(folder / "report.txt", report + "\n")
+
+
+def calibrate_views(views: dict, sizes: dict, pairing, skipped: dict, cfg, models: list[str], meta: dict):
+    """Calibrate the rig from each camera's views named by frame, assess it and run the sanity checks;
+    returns (rig, report text, report.png bytes).
+
+    views : {camera: [View]} (a frame's views share its name across cameras); sizes : {camera: (w, h)};
+    pairing : a :class:`Pairing` ({camera: file path or (H, W) image} per frame, for the preview);
+    skipped : {"camera/frame": why}; cfg : pattern, square, square_unit (:class:`RigConfig` or alike).
+    """
     from aicalib_tf.calib.rig import calibrate_rig
     from aicalib_tf.calib.rig_quality import assess_rig
     from aicalib_tf.calib.rig_report import format_rig_report, rig_figure
     from aicalib_tf.calib.rig_sanity import rig_problems
 
-    names = list(files)
-    views, sizes, skipped = {}, {}, {}
-    for cam in files:
-        v, s, sk = _detect_camera(cam, pairing.frames, cfg)
-        sizes[cam] = _check_sizes(cam, v, s, pairing.frames, sk)
-        views[cam] = [v[n] for n, _ in pairing.frames if n in v]
-        skipped.update({f"{cam}/{n}": why for n, why in sk.items()})
-    meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
-            "lens_model": cfg.model, "pairing": pairing.rule, "images": {c: len(f) for c, f in files.items()}}
+    names = list(views)
     rig = calibrate_rig([views[c] for c in names], cfg.pattern, cfg.square, [sizes[c] for c in names], names=names,
                         models=models if len(models) > 1 else models[0], square_unit=cfg.square_unit, meta=meta)
     rig = assess_rig(rig, [views[c] for c in names])
