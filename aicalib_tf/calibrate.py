@@ -70,7 +70,8 @@ from aicalib_tf.calib.workflow import (
 from aicalib_tf.geometry.lens import MODELS
 
 
-def _parse_args(argv):
+def build_parser():
+    """The command line's parser (docs/cli.md is generated from it)."""
     from aicalib_tf.cli import parser
 
     ap = parser("python -m aicalib_tf.calibrate", __doc__)
@@ -96,7 +97,11 @@ def _parse_args(argv):
     ap.add_argument("--target", default="0.1px", help="video/camera: stop at this uncertainty (default: %(default)s)")
     ap.add_argument("--max-views", type=int, default=40, help="video/camera: keep at most this many views")
     ap.add_argument("--save-partial", action="store_true", help="video/camera: a run stopped early still writes")
-    return ap.parse_args(argv)
+    return ap
+
+
+def _parse_args(argv):
+    return build_parser().parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:

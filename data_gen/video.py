@@ -291,7 +291,8 @@ def write_video(cfg: VideoConfig, *, progress: bool = True) -> Path:
     return out
 
 
-def _parse_args(argv):
+def build_parser():
+    """The command line's parser (docs/cli.md is generated from it)."""
     import argparse
 
     ap = argparse.ArgumentParser(prog="python -m data_gen.video", description=__doc__,
@@ -312,7 +313,11 @@ def _parse_args(argv):
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--pace", type=float, default=1.0, help="hand speed factor (default: %(default)s)")
     ap.add_argument("--quiet", action="store_true")
-    return ap.parse_args(argv)
+    return ap
+
+
+def _parse_args(argv):
+    return build_parser().parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
