@@ -84,7 +84,8 @@ from aicalib_tf.calib.workflow import (
 from aicalib_tf.geometry.lens import MODELS
 
 
-def _parse_args(argv):
+def build_parser():
+    """The command line's parser (docs/cli.md is generated from it)."""
     from aicalib_tf.cli import parser
 
     ap = parser("python -m aicalib_tf.calibrate", __doc__)
@@ -116,7 +117,11 @@ def _parse_args(argv):
                     help="rig videos: pair frames whose timestamps are this close (default: %(default)s)")
     ap.add_argument("--pair-by", default="time", choices=("time", "index"),
                     help="rig videos: pair the cameras' frames by timestamp or by frame number (default: %(default)s)")
-    return ap.parse_args(argv)
+    return ap
+
+
+def _parse_args(argv):
+    return build_parser().parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -52,7 +52,8 @@ class CheckConfig:
     out: str | None = None
 
 
-def _parse_args(argv):
+def build_parser():
+    """The command line's parser (docs/cli.md is generated from it)."""
     from aicalib_tf.calib.workflow import DETECTORS
     from aicalib_tf.cli import parser
 
@@ -68,7 +69,11 @@ def _parse_args(argv):
     ap.add_argument("--every", type=int, default=10, help="video: use every Nth frame (default: %(default)s)")
     ap.add_argument("--max-frames", type=int, default=200, help="video: at most this many frames (default: %(default)s)")
     ap.add_argument("--workers", type=int, default=None, help="detection processes for photos (default: one per core)")
-    return ap.parse_args(argv)
+    return ap
+
+
+def _parse_args(argv):
+    return build_parser().parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -69,7 +69,8 @@ from aicalib_tf.bench.runner import EvalConfig, _split_calib, run
 from aicalib_tf.detect.batch import default_workers
 
 
-def _parse_args(argv):
+def build_parser():
+    """The command line's parser (docs/cli.md is generated from it)."""
     from aicalib_tf.cli import parser
 
     ap = parser("python -m aicalib_tf.evaluate", __doc__)
@@ -86,7 +87,11 @@ def _parse_args(argv):
     ap.add_argument("--workers", type=int, default=None,
                     help="processes rendering the images (default: one per core); detection is timed in one process")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
-    return ap.parse_args(argv)
+    return ap
+
+
+def _parse_args(argv):
+    return build_parser().parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -17,11 +17,16 @@ import sys
 INT8_CHECK_IMAGES = 6  # images per named condition on which the int8 model's detections are compared (as evaluate --quick)
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's parser (docs/cli.md is generated from it)."""
     ap = argparse.ArgumentParser(prog="python -m aicalib_tf.export", description=__doc__.split("\n\n")[0])
     ap.add_argument("--warm", action="store_true",
                     help="only compile the kernels (ahead of time, and numba's caches) and detect three synthetic boards; export nothing")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     if args.warm:
         import subprocess
 

@@ -55,7 +55,8 @@ from aicalib_tf.cli import debug_flag, parser, run_main
 from aicalib_tf.cnn.train import TrainConfig, train
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's parser (docs/cli.md is generated from it)."""
     ap = parser("python -m aicalib_tf.train", __doc__)
     d = TrainConfig(out="")
     ap.add_argument("--out", required=True, metavar="RUN_DIR", help="run folder (created)")
@@ -95,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(argv: list[str] | None) -> int:
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     d = TrainConfig(out="")
     cfg = TrainConfig(
         out=args.out, arch=args.arch, epochs=args.epochs if args.epochs is not None else d.epochs, steps=args.steps, batch_size=args.batch_size,

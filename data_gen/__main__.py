@@ -47,8 +47,8 @@ def _parse_shard(text: str) -> tuple[int, int]:
     return int(i), int(n)
 
 
-def parse_args(argv=None) -> tuple[DatasetConfig | ShardConfig, bool]:
-    """Parse and validate the command line; raises ``ValueError`` with a one-line message."""
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's parser (docs/cli.md is generated from it)."""
     ap = argparse.ArgumentParser(prog="python -m data_gen", description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", required=True, type=Path, help="output folder (must not exist or be empty)")
     ap.add_argument("--count", required=True, type=int, help="number of images")
@@ -62,7 +62,12 @@ def parse_args(argv=None) -> tuple[DatasetConfig | ShardConfig, bool]:
     ap.add_argument("--format", choices=("folder", "tfrecord"), default="folder", help="(default: %(default)s)")
     ap.add_argument("--shards", type=int, help="tfrecord: number of files (default: files of about 200 MB)")
     ap.add_argument("--shard", help="tfrecord: render only shard i of N, given as i/N")
-    a = ap.parse_args(argv)
+    return ap
+
+
+def parse_args(argv=None) -> tuple[DatasetConfig | ShardConfig, bool]:
+    """Parse and validate the command line; raises ``ValueError`` with a one-line message."""
+    a = build_parser().parse_args(argv)
     if a.format == "folder":
         if a.shards is not None or a.shard is not None:
             raise ValueError("--shards and --shard need --format tfrecord")

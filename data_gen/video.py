@@ -332,7 +332,8 @@ def write_video(cfg: VideoConfig, *, progress: bool = True) -> Path:
     return out
 
 
-def _parse_args(argv):
+def build_parser():
+    """The command line's parser (docs/cli.md is generated from it)."""
     import argparse
 
     ap = argparse.ArgumentParser(prog="python -m data_gen.video", description=__doc__,
@@ -355,7 +356,11 @@ def _parse_args(argv):
     ap.add_argument("--rig-baseline", type=float, default=0.0,
                     help="render a stereo pair this many board units apart (default: one camera)")
     ap.add_argument("--quiet", action="store_true")
-    return ap.parse_args(argv)
+    return ap
+
+
+def _parse_args(argv):
+    return build_parser().parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -156,14 +156,19 @@ def with_runtime_section(card: str, section: str) -> str:
     return card[:start] + section + (card[end + 1:] if end >= 0 else "")
 
 
-def main(argv: list[str] | None = None) -> int:
-    """CLI entry (see the module docstring); returns the process exit code (2 on bad arguments)."""
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's parser (docs/cli.md is generated from it)."""
     ap = argparse.ArgumentParser(prog="python -m aicalib_tf.cnn.model_card", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("runs", nargs="+", type=Path, help="run folders of python -m aicalib_tf.train")
     ap.add_argument("--out", type=Path, default=Path("models"))
     ap.add_argument("--intro", type=Path, help="Markdown put before the per-model sections")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    """CLI entry (see the module docstring); returns the process exit code (2 on bad arguments)."""
+    args = build_parser().parse_args(argv)
     runs = []
     for run in args.runs:  # check every run before writing anything
         try:

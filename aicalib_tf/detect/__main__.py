@@ -16,7 +16,8 @@ import sys
 from collections import Counter
 
 
-def _parse_args(argv):
+def build_parser():
+    """The command line's parser (docs/cli.md is generated from it)."""
     from aicalib_tf.cli import parser
 
     ap = parser("python -m aicalib_tf.detect", __doc__)
@@ -27,7 +28,11 @@ def _parse_args(argv):
     ap.add_argument("--model", default="default", help="default, default_int8 (int8, about 2x faster), report, or a .tflite/.keras path (default: %(default)s)")
     ap.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core, but one per 8 images at most)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
-    return ap.parse_args(argv)
+    return ap
+
+
+def _parse_args(argv):
+    return build_parser().parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:

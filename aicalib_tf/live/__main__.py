@@ -24,7 +24,8 @@ import sys
 DEFAULT_PORT = 8765
 
 
-def _parse_args(argv):
+def build_parser():
+    """The command line's parser (docs/cli.md is generated from it)."""
     from aicalib_tf.calib.workflow import DETECTORS
     from aicalib_tf.cli import parser
 
@@ -41,7 +42,11 @@ def _parse_args(argv):
     ap.add_argument("--network", default="default", help="the cnn detector's network (default: %(default)s)")
     ap.add_argument("--target", default="0.1px", help="stop when the predicted uncertainty reaches this (default: %(default)s)")
     ap.add_argument("--max-views", type=int, default=40, help="stop after this many kept views (default: %(default)s)")
-    return ap.parse_args(argv)
+    return ap
+
+
+def _parse_args(argv):
+    return build_parser().parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
