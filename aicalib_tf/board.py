@@ -89,7 +89,8 @@ def page_pdf(board, paper: str = "A4", dpi: int = 300) -> bytes:
     return buf.getvalue()
 
 
-def _parse_args(argv):
+def build_parser():
+    """The command line's parser (also read by :mod:`aicalib_tf.docs`)."""
     from aicalib_tf.cli import parser
 
     ap = parser("python -m aicalib_tf.board", __doc__)
@@ -97,7 +98,11 @@ def _parse_args(argv):
     ap.add_argument("--out", required=True, help="board.pdf or board.png")
     ap.add_argument("--paper", default="A4", help=f"one of {', '.join(PAPERS)} (default: %(default)s)")
     ap.add_argument("--dpi", type=int, default=300, help="pixels per inch of the board bitmap (default: %(default)s)")
-    return ap.parse_args(argv)
+    return ap
+
+
+def _parse_args(argv):
+    return build_parser().parse_args(argv)
 
 
 def _main(args) -> int:
