@@ -170,9 +170,10 @@ def _detect_all(files: list[str], labels: dict[str, str], cfg: "CalibrateConfig"
     return found, skipped
 
 
-def _target(cfg: "CalibrateConfig"):
-    """What the detector looks for: the ChArUco board of ``cfg.board``, else the pattern."""
-    if cfg.board:
+def _target(cfg):
+    """What the detector looks for: the ChArUco board of ``cfg.board``, else the pattern (a rig's
+    config, which has no board, always the pattern)."""
+    if getattr(cfg, "board", None):
         from aicalib_tf.geometry.charuco import parse_board
 
         return parse_board(cfg.board)
