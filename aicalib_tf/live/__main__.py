@@ -92,7 +92,12 @@ def _main(args) -> int:
         from aicalib_tf.sources import open_source
 
         open_source(cfg.source).close()  # a source that cannot be opened fails here, with its name
-    state = LiveState(cfg, make_detector(cfg.detector, cfg.pattern, cfg.network))
+    from aicalib_tf.live.server import tracking_detector
+
+    detector = make_detector(cfg.detector, cfg.pattern, cfg.network)
+    if cfg.detector == "cnn":  # a stream: follow the board from frame to frame
+        detector = tracking_detector(cfg.pattern, cfg.network, detector)
+    state = LiveState(cfg, detector)
     try:
         asyncio.run(_serve(make_app(state), args.host, args.port))
     except KeyboardInterrupt:

@@ -32,7 +32,7 @@ import numpy as np
 
 from aicalib_tf.calib.quality import coverage_counts
 
-__all__ = ["LiveConfig", "LiveState", "make_app", "update_json", "COVERAGE_CELLS"]
+__all__ = ["LiveConfig", "LiveState", "make_app", "update_json", "tracking_detector", "COVERAGE_CELLS"]
 
 COVERAGE_CELLS = (8, 6)  # the coverage map the page draws (cols, rows)
 PAGE = Path(__file__).with_name("page.html")
@@ -81,6 +81,25 @@ def update_json(update, session) -> dict:
         "coverage": cover.astype(int).tolist(),
         "frames": int(session.frames_seen), "examined_frames": int(session.examined), "views": len(session.views),
     }
+
+
+def tracking_detector(pattern: tuple[int, int], network: str, base):
+    """The guided loop's detector for a stream: a :class:`~aicalib_tf.detect.track.Tracker`, which
+    refines the last board's corners where they moved to before it runs the network, and searches
+    near the last board before the whole frame. ``base`` (:func:`aicalib_tf.calib.workflow.make_detector`'s
+    CNN detector) gives the model's ``info``. Same interface: (H, W) uint8 -> (corners, ids) or None."""
+    from aicalib_tf.cnn.model import load_model
+    from aicalib_tf.detect.track import Tracker
+
+    tracker = Tracker(tuple(pattern), model=load_model(network))
+
+    def detect(gray):
+        det = tracker(gray)
+        detect.why, detect.relative = det.reason, det.relative
+        return (det.corners, det.ids) if len(det.corners) else None
+
+    detect.info, detect.why, detect.relative = base.info, "", False
+    return detect
 
 
 class LiveState:
