@@ -17,6 +17,29 @@ from aicalib_tf.geometry.pattern import board_points, check_pattern, pattern_ids
 __all__ = ["Board", "sample_board"]
 
 
+def paper_bounds(cols: int, rows: int, square: float, margin: float) -> tuple[float, float, float, float]:
+    """(x0, y0, x1, y1) of the paper, board units, for ``cols`` × ``rows`` inner corners (the squares
+    run from −square to cols·square) and a white ``margin`` in squares around them."""
+    m = margin * square
+    return (-square - m, -square - m, cols * square + m, rows * square + m)
+
+
+def grid_centre(cols: int, rows: int, square: float) -> np.ndarray:
+    """(3,) centre of the inner-corner grid, board units."""
+    return np.array([(cols - 1) * square / 2.0, (rows - 1) * square / 2.0, 0.0])
+
+
+def paper_masks(X: np.ndarray, Y: np.ndarray, cols: int, rows: int, square: float,
+                margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """(on the paper, on the squares) boolean masks of board-plane points X, Y (...) in board units
+    (NaN: not on the plane, in neither)."""
+    x0, y0, x1, y1 = paper_bounds(cols, rows, square, margin)
+    with np.errstate(invalid="ignore"):
+        on_paper = (X >= x0) & (X < x1) & (Y >= y0) & (Y < y1)
+        on_squares = on_paper & (X >= -square) & (X < cols * square) & (Y >= -square) & (Y < rows * square)
+    return on_paper, on_squares
+
+
 @dataclass(frozen=True)
 class Board:
     """A chessboard target.
@@ -58,14 +81,11 @@ class Board:
 
     def paper_bounds(self) -> tuple[float, float, float, float]:
         """(x0, y0, x1, y1) of the paper in board units."""
-        s = self.square_size
-        m = self.margin * s
-        return (-s - m, -s - m, self.cols * s + m, self.rows * s + m)
+        return paper_bounds(self.cols, self.rows, self.square_size, self.margin)
 
     def centre(self) -> np.ndarray:
         """(3,) centre of the inner-corner grid, board units."""
-        s = self.square_size
-        return np.array([(self.cols - 1) * s / 2.0, (self.rows - 1) * s / 2.0, 0.0])
+        return grid_centre(self.cols, self.rows, self.square_size)
 
     def classify(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
         """Class of board-plane points: 0 black square, 1 white (square or margin), 2 off the paper.
@@ -73,10 +93,8 @@ class Board:
         X, Y : (...) float arrays in board units (NaN = not on the plane). Returns (...) uint8.
         """
         s = self.square_size
-        x0, y0, x1, y1 = self.paper_bounds()
+        on_paper, in_squares = paper_masks(X, Y, self.cols, self.rows, s, self.margin)
         with np.errstate(invalid="ignore"):
-            on_paper = (X >= x0) & (X < x1) & (Y >= y0) & (Y < y1)
-            in_squares = on_paper & (X >= -s) & (X < self.cols * s) & (Y >= -s) & (Y < self.rows * s)
             # Square (floor(X/s), floor(Y/s)); the one at (-1, -1) is black, so black <=> even sum.
             parity = (np.floor(X / s) + np.floor(Y / s))[in_squares].astype(np.int64) & 1
         out = np.full(np.shape(X), 2, dtype=np.uint8)

@@ -18,6 +18,8 @@ import numpy as np
 from aicalib_tf.geometry.charuco import CharucoBoard
 from aicalib_tf.geometry.pose import project_points
 
+from .board import grid_centre, paper_bounds, paper_masks
+
 __all__ = ["CharucoTarget", "sample_charuco", "marker_truth"]
 
 
@@ -68,13 +70,12 @@ class CharucoTarget:
         return self.board.object_points()
 
     def paper_bounds(self) -> tuple[float, float, float, float]:
-        s = self.square_size
-        m = self.margin * s
-        return (-s - m, -s - m, self.cols * s + m, self.rows * s + m)
+        """(x0, y0, x1, y1) of the paper in board units."""
+        return paper_bounds(self.cols, self.rows, self.square_size, self.margin)
 
     def centre(self) -> np.ndarray:
-        s = self.square_size
-        return np.array([(self.cols - 1) * s / 2.0, (self.rows - 1) * s / 2.0, 0.0])
+        """(3,) centre of the inner-corner grid, board units."""
+        return grid_centre(self.cols, self.rows, self.square_size)
 
     # --- colours ----------------------------------------------------------------------------
     @property
@@ -108,11 +109,7 @@ class CharucoTarget:
 
         X, Y : (...) float arrays in board units (NaN = not on the plane). Returns (...) uint8.
         """
-        s = self.square_size
-        x0, y0, x1, y1 = self.paper_bounds()
-        with np.errstate(invalid="ignore"):
-            on_paper = (X >= x0) & (X < x1) & (Y >= y0) & (Y < y1)
-            inside = on_paper & (X >= -s) & (X < self.cols * s) & (Y >= -s) & (Y < self.rows * s)
+        on_paper, inside = paper_masks(X, Y, self.cols, self.rows, self.square_size, self.margin)
         k = self._per_square
         cx = (self.axis_cells(X[inside]) + k).astype(np.int64)  # square −1 is the table's column 0
         cy = (self.axis_cells(Y[inside]) + k).astype(np.int64)
