@@ -22,13 +22,13 @@ import math
 
 import numpy as np
 
-from .lens_model import LensModel
+from .lens_model import LensModel, unified_w
 
 __all__ = ["DOUBLE_SPHERE", "DoubleSphereModel"]
 
 
 def _w2(xi: float, alpha: float) -> float:
-    w1 = alpha / (1.0 - alpha) if alpha <= 0.5 else (1.0 - alpha) / alpha
+    w1 = unified_w(alpha)
     return (w1 + xi) / math.sqrt(2.0 * w1 * xi + xi * xi + 1.0)
 
 

@@ -19,13 +19,9 @@ import math
 
 import numpy as np
 
-from .lens_model import LensModel
+from .lens_model import LensModel, unified_w
 
 __all__ = ["EUCM", "EUCMModel"]
-
-
-def _w(alpha: float) -> float:
-    return alpha / (1.0 - alpha) if alpha <= 0.5 else (1.0 - alpha) / alpha
 
 
 class EUCMModel(LensModel):
@@ -53,7 +49,7 @@ class EUCMModel(LensModel):
         return None
 
     def max_angle(self, d):
-        w, beta = _w(float(d[0])), float(d[1])
+        w, beta = unified_w(float(d[0])), float(d[1])
         if w >= 1.0:
             return math.pi
         if w <= 0.0:
@@ -67,7 +63,7 @@ class EUCMModel(LensModel):
         rho = np.sqrt(beta * r2 + z * z)
         n = alpha * rho + (1.0 - alpha) * z
         with np.errstate(invalid="ignore"):
-            valid = (z > -_w(alpha) * rho) & (n > 0) & (rho > 0)
+            valid = (z > -unified_w(alpha) * rho) & (n > 0) & (rho > 0)
         nn = np.where(valid, n, 1.0)
         return x, y, z, r2, rho, nn, valid
 
@@ -99,7 +95,7 @@ class EUCMModel(LensModel):
             rays = np.stack([a, b, z], axis=-1)
             rays = rays / np.linalg.norm(rays, axis=-1, keepdims=True)
             rho = np.sqrt(beta * (rays[..., 0] ** 2 + rays[..., 1] ** 2) + rays[..., 2] ** 2)
-            bad = ~(q >= 0) | ~(rays[..., 2] > -_w(alpha) * rho - 1e-12) | ~np.all(np.isfinite(rays), axis=-1)
+            bad = ~(q >= 0) | ~(rays[..., 2] > -unified_w(alpha) * rho - 1e-12) | ~np.all(np.isfinite(rays), axis=-1)
         rays[bad] = np.nan
         return rays
 

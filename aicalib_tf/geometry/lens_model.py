@@ -35,7 +35,7 @@ import math
 
 import numpy as np
 
-__all__ = ["LensModel", "pixel_jacobians"]
+__all__ = ["LensModel", "pixel_jacobians", "unified_w"]
 
 
 class LensModel:
@@ -116,3 +116,9 @@ def pixel_jacobians(a, b, Jn, Jc, K):
     J_intr[:, 0, 0], J_intr[:, 1, 1], J_intr[:, 0, 2], J_intr[:, 1, 3] = a, b, 1.0, 1.0
     J_intr[:, :, 4:] = Jc * np.array([fx, fy])[:, None]
     return uv, J_points, J_intr
+
+
+def unified_w(alpha: float) -> float:
+    """The unified models' bound on the valid projections, w = α/(1−α) for α ≤ ½ else (1−α)/α
+    (Usenko et al. 2018: EUCM's w, Double Sphere's w₁)."""
+    return alpha / (1.0 - alpha) if alpha <= 0.5 else (1.0 - alpha) / alpha
