@@ -20,15 +20,8 @@ models, poses), :mod:`~aicalib_tf.cnn` (the network; the only TensorFlow user),
 ``detect`` are the command lines.
 """
 
-import os as _os
-
-# Before OpenCV loads: its decoders' own pixel cap (a backstop for formats whose header the image
-# gate cannot read; aicalib_tf.io.MAX_PIXELS is the real one), and no decoder warnings on stderr
-# (an unreadable image is reported once, by the gate, naming the file).
-_os.environ.setdefault("OPENCV_IO_MAX_IMAGE_PIXELS", str(100_000_000))
-_os.environ.setdefault("OPENCV_LOG_LEVEL", "FATAL")
-
-from aicalib_tf.io import ImageError, load_image  # noqa: E402
+# importing the image gate first sets OpenCV's pixel cap and log level before OpenCV loads
+from aicalib_tf.io import ImageError, load_image
 
 # Loaded on first use, so that ``import aicalib_tf`` stays light (no numba kernels, no OpenCV
 # calibration code) until a name is asked for.

@@ -27,13 +27,11 @@ images, fewer than 3 usable views, images of another size than the calibration's
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 import sys
 from collections import Counter
 from pathlib import Path
 
-VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -103,7 +101,8 @@ def run_check(cfg: CheckConfig):
     """
     from aicalib_tf.calib.check import MIN_CHECK_VIEWS, check_calibration, format_check
     from aicalib_tf.calib.fit import CalibrationError
-    from aicalib_tf.calib.files import jsonable, load_calibration
+    from aicalib_tf.calib.files import load_calibration
+    from aicalib_tf.jsonio import dumps
     from aicalib_tf.io import atomic_write_text, expand_images
 
     if not 0.0 < cfg.alpha < 0.5:
@@ -126,28 +125,31 @@ def run_check(cfg: CheckConfig):
     if cfg.out:
         doc = {"calibration": str(cfg.calibration), "sources": list(cfg.sources), "detector": cfg.detector,
                **result.to_dict()}
-        atomic_write_text(Path(cfg.out), json.dumps(jsonable(doc), indent=1, allow_nan=False) + "\n")
+        atomic_write_text(Path(cfg.out), dumps(doc) + "\n")
     return result, report
 
 
 def _detect(files: list[str], cal, cfg: CheckConfig):
     """Views of the calibration's board in every photo and sampled video frame; (views, {label: why skipped})."""
     from aicalib_tf.calib.fit import View
+    from aicalib_tf.calib.workflow import _file_detector
     from aicalib_tf.detect.batch import map_images
+    from aicalib_tf.io import display_name
+    from aicalib_tf.sources import is_video
 
-    videos = [f for f in files if Path(f).suffix.lower() in VIDEO_SUFFIXES]
+    videos = [f for f in files if is_video(f)]
     photos = [f for f in files if f not in videos]
     views, skipped = [], {}
     cols, rows = cal.pattern_size
-    found = list(zip(photos, map_images(photos, _photo_detector, (cfg.detector, tuple(cal.pattern_size), cfg.network),
+    found = list(zip(photos, map_images(photos, _file_detector, (cfg.detector, tuple(cal.pattern_size), cfg.network),
                                         workers=cfg.workers))) if photos else []
     for video in videos:
         found += list(_detect_frames(video, cal, cfg))
     names = Counter(Path(label).name for label, _ in found)
-    for label, res in found:
-        label = Path(label).name if names[Path(label).name] == 1 else label
+    for source, res in found:
+        label = Path(source).name if names[Path(source).name] == 1 else source
         if isinstance(res, str):
-            skipped[label] = res
+            skipped[label] = res.removeprefix(f"{display_name(source)}: ")
         elif res[0] != tuple(cal.image_size):
             skipped[label] = (f"image is {res[0][0]}x{res[0][1]}, the calibration is for "
                               f"{cal.image_size[0]}x{cal.image_size[1]}")
@@ -158,26 +160,9 @@ def _detect(files: list[str], cal, cfg: CheckConfig):
     return views, skipped
 
 
-def _photo_detector(name: str, pattern: tuple[int, int], network: str):
-    """``file -> (size (w, h), (corners, ids) or None, why, relative)`` or the image error's text
-    (a module-level setup for :func:`aicalib_tf.detect.batch.map_images`)."""
-    from aicalib_tf.calib.workflow import make_detector
-    from aicalib_tf.io import ImageError, load_image
-
-    detect = make_detector(name, pattern, network)
-
-    def work(f):
-        try:
-            gray = load_image(f)
-        except ImageError as exc:
-            return str(exc).removeprefix(f"{f}: ")
-        hit = detect(gray)
-        return gray.shape[::-1], hit, detect.why, detect.relative
-    return work
-
-
 def _detect_frames(video: str, cal, cfg: CheckConfig):
-    """(label, detection as :func:`_photo_detector`'s work returns) per sampled frame of a video."""
+    """(label, detection as :func:`aicalib_tf.calib.workflow._file_detector`'s work returns) per sampled
+    frame of a video."""
     from aicalib_tf.calib.workflow import make_detector
     from aicalib_tf.io import load_image
 

@@ -41,7 +41,10 @@ def parser(prog: str, doc: str | None) -> argparse.ArgumentParser:
 
 
 def describe_error(exc: BaseException) -> str:
-    """One line for an expected error: ``<what>: <why>`` where the exception knows both."""
+    """One line for an expected error: ``<what>: <why>`` where the exception knows both (printable:
+    undecodable bytes of a file name shown as \\xNN, :func:`aicalib_tf.io.display_name`)."""
+    from aicalib_tf.io import display_name as _printable
+
     if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
         name = os.fsdecode(exc.filename) if isinstance(exc.filename, bytes) else str(exc.filename)
         why = exc.strerror
@@ -52,11 +55,6 @@ def describe_error(exc: BaseException) -> str:
     if isinstance(exc, KeyError):  # str(KeyError('x')) is "'x'"
         text = f"missing field {text}"
     return _printable(" ".join(text.split()))
-
-
-def _printable(text: str) -> str:
-    """Text safe to print on any terminal: undecodable bytes (surrogate escapes) shown as \\xNN."""
-    return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
 
 
 def _expected(exc: BaseException) -> bool:

@@ -14,15 +14,21 @@ import os
 import tempfile
 from pathlib import Path
 
-import cv2
-import numpy as np
+MAX_PIXELS = 100_000_000  # the largest image accepted (px); the environment's AICALIB_MAX_PIXELS overrides it
+# Before OpenCV loads: its decoders' own pixel cap (a backstop for formats whose header the gate
+# cannot read), and no decoder warnings on stderr (the gate reports an unreadable image once, by name).
+os.environ.setdefault("OPENCV_IO_MAX_IMAGE_PIXELS", str(MAX_PIXELS))
+os.environ.setdefault("OPENCV_LOG_LEVEL", "FATAL")
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
 
 __all__ = ["ImageError", "load_image", "to_gray_float", "expand_images", "atomic_write_bytes", "atomic_write_text",
-           "display_name", "max_pixels", "image_size_from_header"]
+           "display_name", "max_pixels", "image_size_from_header", "IMAGE_SUFFIXES", "MAX_PIXELS"]
 
-MAX_PIXELS = 100_000_000  # the largest image accepted (px); the environment's AICALIB_MAX_PIXELS overrides it
 MAX_FILE_BYTES = 2 << 30  # an image file larger than this is refused before it is read
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm", ".pnm", ".jp2", ".exr")
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm", ".pbm", ".pnm", ".jp2",
+                  ".exr", ".hdr", ".sr", ".ras", ".pxm", ".pfm")  # what OpenCV decodes; a folder stands for these
 
 
 class ImageError(ValueError):

@@ -31,13 +31,14 @@ from typing import Callable, Iterator
 import cv2
 import numpy as np
 
+from aicalib_tf.io import IMAGE_SUFFIXES
+
 __all__ = ["Frame", "FrameSource", "VideoFile", "ImageSequence", "LiveSource", "open_source", "is_video",
            "pair_frames", "Pairing", "is_stream", "VIDEO_EXTENSIONS", "IMAGE_EXTENSIONS"]
 
 VIDEO_EXTENSIONS = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".y4m", ".mpg", ".mpeg", ".wmv", ".mjpeg",
                     ".mjpg", ".ts", ".flv", ".3gp")
-IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pbm", ".webp", ".jp2", ".exr",
-                    ".hdr", ".pnm", ".sr", ".ras", ".pxm", ".pfm")
+IMAGE_EXTENSIONS = IMAGE_SUFFIXES  # the image gate's: a file of these is never taken for a video
 _STREAM_PREFIXES = ("rtsp://", "rtmp://", "http://", "https://", "udp://", "tcp://", "srt://")
 
 
@@ -147,13 +148,7 @@ class ImageSequence(FrameSource):
         from aicalib_tf.io import expand_images
 
         items = [patterns] if isinstance(patterns, (str, os.PathLike)) else list(patterns)
-        expanded = []
-        for p in items:
-            if Path(p).is_dir():
-                expanded += sorted(str(f) for f in Path(p).iterdir() if f.suffix.lower() in IMAGE_EXTENSIONS)
-            else:
-                expanded.append(p)
-        self.files = expand_images(expanded)
+        self.files = expand_images(items)  # a folder stands for its images
         self.name = " ".join(str(p) for p in items)
         if not self.files:
             raise ValueError(f"{self.name}: no images found")

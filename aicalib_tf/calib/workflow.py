@@ -157,12 +157,13 @@ def _detect_all(files: list[str], labels: dict[str, str], cfg: "CalibrateConfig"
     from tqdm import tqdm
 
     from aicalib_tf.detect.batch import map_images
+    from aicalib_tf.io import display_name
 
     found, skipped = [], {}
     results = map_images(files, _file_detector, (cfg.detector, _target(cfg), cfg.network), workers=cfg.workers)
     for f, res in zip(files, tqdm(results, total=len(files), desc="detect", unit="img", disable=cfg.quiet)):
         if isinstance(res, str):
-            skipped[labels[f]] = res.removeprefix(f"{f}: ")
+            skipped[labels[f]] = res.removeprefix(f"{display_name(f)}: ")
             continue
         size, hit, why, relative = res
         found.append(_Found(labels[f], f, size, View(labels[f], *hit, relative=relative) if hit is not None else None,
