@@ -268,8 +268,7 @@ def run(cfg: CalibrateConfig) -> tuple[Calibration, str]:
 
     Raises ValueError / CalibrationError / FileNotFoundError for bad input, before writing anything.
     """
-    from aicalib_tf.calib.files import save_calibration
-    from aicalib_tf.io import atomic_write_bytes, atomic_write_text, expand_images
+    from aicalib_tf.io import expand_images
     from aicalib_tf.outfolder import OutputFolder
 
     files = expand_images(cfg.images)
@@ -282,12 +281,22 @@ def run(cfg: CalibrateConfig) -> tuple[Calibration, str]:
     detect = make_detector(cfg.detector, _target(cfg), cfg.network)  # a bad network or board fails here, before any work
     with OutputFolder(cfg.out, "calibration") as out:  # a bad --out fails here; files are swapped in at the end
         cal, report, figure, preview = _calibrate_files(files, detect, cfg)
-        save_calibration(cal, out.path)
-        atomic_write_bytes(out.path / "report.png", figure)
-        atomic_write_text(out.path / "report.txt", report + "\n")
-        if preview is not None:
-            atomic_write_bytes(out.path / preview[0], preview[1])
+        write_calibration_files(out.path, cal, report, figure, preview)
     return cal, report
+
+
+def write_calibration_files(folder: Path, cal: Calibration, report: str, figure: bytes, preview=None) -> None:
+    """A calibration's set of files in ``folder`` (an :class:`~aicalib_tf.outfolder.OutputFolder`'s
+    staging path): :func:`~aicalib_tf.calib.files.save_calibration`'s files, report.png (``figure``,
+    PNG bytes), report.txt and, when given, the preview ((file name, PNG bytes))."""
+    from aicalib_tf.calib.files import save_calibration
+    from aicalib_tf.io import atomic_write_bytes, atomic_write_text
+
+    save_calibration(cal, folder)
+    atomic_write_bytes(folder / "report.png", figure)
+    atomic_write_text(folder / "report.txt", report + "\n")
+    if preview is not None:
+        atomic_write_bytes(folder / preview[0], preview[1])
 
 
 def unreadable_error(files: list[str], skipped: dict[str, str], what: str = "images") -> CalibrationError:

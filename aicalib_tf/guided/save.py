@@ -31,9 +31,8 @@ def calibrate_session(session, meta: dict) -> tuple[Calibration, list]:
 
 def save_calibration_set(cal: Calibration, used, out, head=()) -> str:
     """Write the calibration's files into ``out`` (replaced as a whole); returns the report text."""
-    from aicalib_tf.calib.files import save_calibration
     from aicalib_tf.calib.report import format_report, report_figure
-    from aicalib_tf.io import atomic_write_bytes, atomic_write_text
+    from aicalib_tf.calib.workflow import write_calibration_files
     from aicalib_tf.outfolder import OutputFolder
 
     report = "\n".join([*head, format_report(cal, used, skipped={}, total=len(used) + len(cal.rejected))])
@@ -41,9 +40,7 @@ def save_calibration_set(cal: Calibration, used, out, head=()) -> str:
         report = "PARTIAL calibration (the run was stopped early)\n" + report
     figure = report_figure(cal, used)
     with OutputFolder(out, "calibration") as folder:
-        save_calibration(cal, folder.path)
-        atomic_write_bytes(folder.path / "report.png", figure)
-        atomic_write_text(folder.path / "report.txt", report + "\n")
+        write_calibration_files(folder.path, cal, report, figure)
     return report
 
 
