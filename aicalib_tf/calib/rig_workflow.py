@@ -115,6 +115,7 @@ class RigConfig:
     model: str = "auto"  # one lens model (or auto) for every camera, or a comma list, one per camera
     quiet: bool = False
     workers: int | None = None  # detection processes (None: aicalib_tf.detect.batch's default)
+    board: str | None = None  # chessboards only for a rig (the command line refuses --board with --rig)
 
 
 def _detect_camera(cam, frames, cfg: RigConfig) -> tuple[dict, dict, dict]:

@@ -172,9 +172,8 @@ def _detect_all(files: list[str], labels: dict[str, str], cfg: "CalibrateConfig"
 
 
 def _target(cfg):
-    """What the detector looks for: the ChArUco board of ``cfg.board``, else the pattern (a rig's
-    config, which has no board, always the pattern)."""
-    if getattr(cfg, "board", None):
+    """What the detector looks for: the ChArUco board of ``cfg.board``, else the pattern."""
+    if cfg.board:
         from aicalib_tf.geometry.charuco import parse_board
 
         return parse_board(cfg.board)
