@@ -44,8 +44,8 @@ the board next. The files are those of the photo path, with the kept frames in c
         [--max-views 40] [--save-partial]
     python -m aicalib_tf.calibrate --camera 0 --pattern 9x6 --square 25mm   (or --camera rtsp://...)
 
-A run stopped early (Ctrl-C, a stream that stops) writes nothing unless --save-partial, which
-writes the calibration so far marked partial.
+A run stopped early (Ctrl-C, a stream that stops), of one camera or of a rig, writes nothing
+unless --save-partial, which writes the calibration so far marked partial.
 
 A rig filmed on video (every --rig item a video file or a stream) goes through the same loop per
 camera (:mod:`aicalib_tf.guided.rig_video`): each camera keeps its informative frames, and every
@@ -112,7 +112,7 @@ def build_parser():
     ap.add_argument("--camera", help="calibrate from a live camera (an index: 0, 1, ...) or a stream URL")
     ap.add_argument("--target", default="0.1px", help="video/camera: stop at this uncertainty (default: %(default)s)")
     ap.add_argument("--max-views", type=int, default=40, help="video/camera: keep at most this many views")
-    ap.add_argument("--save-partial", action="store_true", help="video/camera: a run stopped early still writes")
+    ap.add_argument("--save-partial", action="store_true", help="video/camera (one or a rig): a run stopped early still writes, marked partial")
     ap.add_argument("--sync-tolerance", default="10ms",
                     help="rig videos: pair frames whose timestamps are this close (default: %(default)s)")
     ap.add_argument("--pair-by", default="time", choices=("time", "index"),
@@ -184,7 +184,8 @@ def _rig_video_config(args, cameras):
     from aicalib_tf.guided.workflow import parse_target
 
     return RigVideoConfig(cameras=cameras, target_px=parse_target(args.target), max_views=args.max_views,
-                          sync_tolerance_s=parse_tolerance(args.sync_tolerance), pair_by=args.pair_by, **_common(args))
+                          sync_tolerance_s=parse_tolerance(args.sync_tolerance), pair_by=args.pair_by,
+                          save_partial=args.save_partial, **_common(args))
 
 
 def _common(args) -> dict:

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from aicalib_tf.calib.fit import CalibrationError, View
+from aicalib_tf.guided.save import PARTIAL_HEAD
 from aicalib_tf.guided.session import GuidedCalibration, GuidedConfig
 
 __all__ = ["RigVideoConfig", "run_rig_video", "is_rig_video", "parse_tolerance", "pair_overlap", "SYNC_CHECK_EVERY"]
@@ -58,6 +59,7 @@ class RigVideoConfig:
     max_examined: int = 300  # detections per camera at most (the motion gate picks which frames)
     sync_tolerance_s: float = 0.010
     pair_by: str = "time"
+    save_partial: bool = False  # a reading stopped early (Ctrl-C, a stream that fails) still calibrates
     quiet: bool = False
     workers: int | None = None  # unused: frames come one at a time
 
@@ -291,7 +293,9 @@ def run_rig_video(cfg: RigVideoConfig) -> tuple[object, str]:
 
     Raises OSError / ValueError naming a source that is missing or unreadable, ValueError for cameras
     out of sync (the measured offset) or a bad ``out`` (before any frame is read), CalibrationError when
-    a camera gives too few views; nothing is written then.
+    a camera gives too few views; nothing is written then. A reading stopped early (Ctrl-C, a stream
+    that fails) writes nothing unless ``save_partial``: then the rig from the frames read so far,
+    ``"partial": true`` in rig.json's ``meta`` and PARTIAL at the top of the report.
     """
     from aicalib_tf.calib.rig_workflow import Pairing, calibrate_views, rig_models, write_rig_files
     from aicalib_tf.calib.workflow import make_detector
@@ -301,8 +305,13 @@ def run_rig_video(cfg: RigVideoConfig) -> tuple[object, str]:
     detect = make_detector(cfg.detector, cfg.pattern, cfg.network)
     with OutputFolder(cfg.out, "rig") as out:
         cams = _open(cfg, detect, models)
+        partial = False
         try:
             stopped = _read(cams, cfg)
+        except (KeyboardInterrupt, OSError) as exc:
+            if not cfg.save_partial:
+                raise
+            partial, stopped = True, f"stopped early: {exc or 'interrupted'}"
         finally:
             for c in cams:
                 c.source.close()
@@ -322,9 +331,11 @@ def run_rig_video(cfg: RigVideoConfig) -> tuple[object, str]:
                 "frames": {c.name: len(c.times) for c in cams}, "examined": {c.name: c.session.examined for c in cams},
                 "kept_frames": {c.name: c.session.kept_frames for c in cams}, "frames_used": [n for n, _ in groups],
                 "offset_s": {c.name: p.offset_s if np.isfinite(p.offset_s) else None for c, p in zip(cams[1:], pairings)},
-                "stopped": stopped}
+                "stopped": stopped, "partial": partial}
         sizes = {c.name: c.session.image_size for c in cams}
         rig, report, figure = calibrate_views(views, sizes, Pairing(images, rule, solo), skipped, cfg, models, meta)
         report = "\n".join([*_summary(cams, pairings, stopped, detected), report])
+        if partial:
+            report = PARTIAL_HEAD + report
         write_rig_files(out.path, rig, report, figure)
     return rig, report

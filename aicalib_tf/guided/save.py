@@ -13,7 +13,9 @@ import dataclasses
 from aicalib_tf.calib.fit import Calibration, CalibrationError, fit_views
 from aicalib_tf.calib.quality import assess
 
-__all__ = ["calibrate_session", "save_calibration_set", "save_session", "MIN_SAVED_VIEWS"]
+__all__ = ["calibrate_session", "save_calibration_set", "save_session", "MIN_SAVED_VIEWS", "PARTIAL_HEAD"]
+
+PARTIAL_HEAD = "PARTIAL calibration (the run was stopped early)\n"  # the report's first line for a partial run
 
 MIN_SAVED_VIEWS = 3  # a calibration needs at least this many kept views
 
@@ -37,7 +39,7 @@ def save_calibration_set(cal: Calibration, used, out, head=()) -> str:
 
     report = "\n".join([*head, format_report(cal, used, skipped={}, total=len(used) + len(cal.rejected))])
     if cal.meta.get("partial"):
-        report = "PARTIAL calibration (the run was stopped early)\n" + report
+        report = PARTIAL_HEAD + report
     figure = report_figure(cal, used)
     with OutputFolder(out, "calibration") as folder:
         write_calibration_files(folder.path, cal, report, figure)

@@ -92,3 +92,25 @@ def test_a_camera_that_ran_longer_is_not_out_of_sync():
         pair_overlap(a, 0.05 + b, tolerance_s=0.01)
     with pytest.raises(ValueError, match="never recorded at the same time"):
         pair_overlap(a, 10 + b, tolerance_s=0.01)
+
+
+def test_a_stopped_rig_run_saves_only_with_save_partial(pair, tmp_path, monkeypatch, capsys):
+    from aicalib_tf import sources
+
+    real = sources.VideoFile.__iter__
+
+    def stops(self):
+        for frame in real(self):
+            if frame.index == 40 and self.name.endswith("video_cam1.avi"):
+                raise KeyboardInterrupt
+            yield frame
+
+    monkeypatch.setattr(sources.VideoFile, "__iter__", stops)
+    assert main(_args(pair / "video_cam0.avi", pair / "video_cam1.avi", tmp_path / "a")) == 130
+    assert not (tmp_path / "a").exists()
+    out = tmp_path / "b"
+    assert main(_args(pair / "video_cam0.avi", pair / "video_cam1.avi", out) + ["--save-partial"]) == 0
+    meta = json.loads((out / "rig.json").read_text())["meta"]
+    assert meta["partial"] is True and meta["stopped"].startswith("stopped early")
+    assert 35 <= meta["frames"]["cam1"] < 45  # the reading stopped at cam1's frame 40
+    assert (out / "report.txt").read_text().startswith("PARTIAL")
