@@ -4,10 +4,16 @@ Videos come from ``python -m data_gen.video`` (60 s, 30 fps, 1280×720 by defaul
 one 150° fisheye), rendered here with ``--render`` or given as folders with ``--videos``. Per video:
 
 * ``guided``: the loop of :mod:`aicalib_tf.guided` (motion gate, blur, duplicates, the keep rule,
-  refits, the stop rule at ``--target``), then the full ``auto`` model choice over the kept views;
-  wall time includes decoding every frame and detecting the examined ones;
+  refits, the stop rule at ``--target``), then the full ``auto`` model choice over its final views
+  (the fewest of the views seen whose design reaches the target); wall time includes decoding
+  every frame and detecting the examined ones; ``kept`` is the same with the views the loop kept,
+  as it kept them;
+* ``design``: the first k of the loop's ranked views (:meth:`GuidedCalibration.ranked_views`, the
+  backward-elimination design over the views it saw), for k in ``--views``;
 * ``every30``: the detections of frames 0, 30, 60, ..., calibrated with the first k of them;
-* ``random``: k frames drawn at random (``--draws`` draws, the median error reported).
+* ``random``: k frames drawn at random from the whole video (``--draws`` draws, the median error
+  reported); ``random-seen``: k drawn among the views the guided loop saw (the same candidates the
+  design chose from).
 
 The error is the rotation-fitted projection error against the truth (unproject a 32×24 pixel grid
 with the true lens, project with the estimate after the best rotation of the camera frame,
@@ -64,11 +70,13 @@ def guided(path: Path, target: float) -> dict:
             if session.add(frame).done:
                 break
     t_loop = time.perf_counter() - t0
-    cal = session.result()
+    final = session.final_views()
+    cal = session.result(views=final)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     est = session._s.estimate
-    return {"cal": cal, "views": session.views, "wall_s": wall, "cpu_s": cpu, "loop_s": t_loop, "frames": session.frames_seen,
-            "examined": session.examined, "sigma_px": est.sigma_px if est else float("nan")}
+    return {"cal": cal, "views": final, "kept": session.views, "ranked": session.ranked_views(), "wall_s": wall,
+            "cpu_s": cpu, "loop_s": t_loop, "frames": session.frames_seen, "examined": session.examined,
+            "sigma_px": est.sigma_px if est else float("nan")}
 
 
 def detect_frames(path: Path, indices) -> dict[int, View]:
@@ -108,7 +116,15 @@ def cli_seconds(path: Path, target: float) -> tuple[float, float]:
         return time.perf_counter() - t0, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
 
 
-def bench(folder: Path, target: float, draws: int, rng) -> list[dict]:
+def _random_rows(lab, name, method, pool: list[View], k: int, draws: int, rng, note: str) -> dict:
+    res = np.array([fixed(lab, [pool[i] for i in sorted(rng.choice(len(pool), size=min(k, len(pool)), replace=False))])
+                    for _ in range(draws)])
+    return dict(video=name, method=method, views=int(np.median(res[:, 2])), err_px=float(np.nanmedian(res[:, 0])),
+                image_px=float(np.nanmedian(res[:, 1])), wall_s=float(np.nanmedian(res[:, 3])),
+                note=f"median of {draws} draws of {k} {note}")
+
+
+def bench(folder: Path, target: float, draws: int, rng, sizes) -> list[dict]:
     video = next(folder.glob("video.*"))
     lab = json.loads((folder / "labels.jsonl").read_text().splitlines()[0])
     n = sum(1 for _ in (folder / "labels.jsonl").open())
@@ -117,22 +133,26 @@ def bench(folder: Path, target: float, draws: int, rng) -> list[dict]:
     rows = [dict(video=folder.name, method="guided", views=len(g["cal"].views), err_px=err, image_px=err_img,
                  wall_s=g["wall_s"], cpu_s=g["cpu_s"],
                  note=f"{g['examined']} of {g['frames']} frames examined; loop {g['loop_s']:.1f} s; "
-                                          f"predicted σ90 {g['sigma_px']:.3f} px; model {g['cal'].model}")]
+                      f"predicted σ90 {g['sigma_px']:.3f} px; {len(g['ranked'])} views seen; model {g['cal'].model}")]
     rows[0]["cli_s"], rows[0]["cli_cpu_s"] = cli_seconds(video, target)
+    e, ei, used, s = fixed(lab, g["kept"])
+    rows.append(dict(video=folder.name, method="kept", views=used, err_px=e, image_px=ei, wall_s=s,
+                     note="the loop's kept views, as kept"))
     every = detect_frames(video, range(0, n, 30))
-    pool = rng.choice(n, size=min(n, 150), replace=False)
-    found = detect_frames(video, pool)
-    for k in sorted({len(g["cal"].views), 25, len(every)}):
+    found = detect_frames(video, rng.choice(n, size=min(n, 150), replace=False))
+    ranked = g["ranked"]
+    for k in sorted({len(g["cal"].views), *sizes}):
+        if k > len(ranked):
+            continue
+        e, ei, used, s = fixed(lab, ranked[:k])
+        rows.append(dict(video=folder.name, method="design", views=used, err_px=e, image_px=ei, wall_s=s,
+                         note=f"first {k} ranked"))
+        rows.append(_random_rows(lab, folder.name, "random-seen", ranked, k, draws, rng, "of the views seen"))
+        rows.append(_random_rows(lab, folder.name, "random", [found[i] for i in sorted(found)], k, draws, rng,
+                                 "of the whole video"))
         e, ei, used, s = fixed(lab, [every[i] for i in sorted(every)][:k])
-        rows.append(dict(video=folder.name, method="every30", views=used, err_px=e, image_px=ei, wall_s=s, note=f"first {k}"))
-        res = []
-        for _ in range(draws):
-            pick = rng.choice(sorted(found), size=min(k, len(found)), replace=False)
-            res.append(fixed(lab, [found[i] for i in sorted(pick)]))
-        res = np.array(res)
-        rows.append(dict(video=folder.name, method="random", views=int(np.median(res[:, 2])),
-                         err_px=float(np.nanmedian(res[:, 0])), image_px=float(np.nanmedian(res[:, 1])),
-                         wall_s=float(np.nanmedian(res[:, 3])), note=f"median of {draws} draws of {k}"))
+        rows.append(dict(video=folder.name, method="every30", views=used, err_px=e, image_px=ei, wall_s=s,
+                         note=f"first {k}"))
     return rows
 
 
@@ -145,6 +165,7 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--target", type=float, default=0.1)
     ap.add_argument("--draws", type=int, default=5)
+    ap.add_argument("--views", type=int, nargs="*", default=[6, 8, 11, 15, 20, 25], help="the view counts compared")
     ap.add_argument("--out", type=Path, default=None, help="CSV of the rows")
     args = ap.parse_args(argv)
     videos = list(args.videos)
@@ -160,7 +181,7 @@ def main(argv=None) -> int:
             videos.append(out)
     rows = []
     for v in videos:
-        rows += bench(v, args.target, args.draws, np.random.default_rng(0))
+        rows += bench(v, args.target, args.draws, np.random.default_rng(0), args.views)
     nan = float("nan")
     print(f"{'video':<12} {'method':<8} {'views':>5} {'err px':>7} {'image px':>8} {'wall s':>7} {'cpu s':>6} "
           f"{'cli s':>6} {'cli cpu':>7}  note")

@@ -21,13 +21,15 @@ MIN_SAVED_VIEWS = 3  # a calibration needs at least this many kept views
 
 
 def calibrate_session(session, meta: dict) -> tuple[Calibration, list]:
-    """(calibration with its quality, the views it used) of a session's kept views; CalibrationError
+    """(calibration with its quality, the views it used) of a session's final views (kept, or chosen
+    among the views seen: :meth:`~aicalib_tf.guided.session.GuidedCalibration.final_views`); CalibrationError
     with fewer than :data:`MIN_SAVED_VIEWS`."""
     if len(session.views) < MIN_SAVED_VIEWS:
         raise CalibrationError(f"only {len(session.views)} views kept so far; need at least {MIN_SAVED_VIEWS} "
                                "(show the board in more places)")
-    cal = session.result(meta=meta)
-    used = [v for v in session.views if v.name in set(cal.views)]
+    views = session.final_views()
+    cal = session.result(meta={**meta, "used_frames": [int(v.name.removeprefix("frame")) for v in views]}, views=views)
+    used = [v for v in views if v.name in set(cal.views)]
     return dataclasses.replace(cal, quality=assess(cal, used, fit=fit_views)), used
 
 

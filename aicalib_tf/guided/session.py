@@ -34,12 +34,14 @@ import numpy as np
 from aicalib_tf.calib.fit import Calibration, CalibrationError, View, calibrate_camera, fit_views
 from aicalib_tf.calib.quality import coverage_counts, lens_of, sigma_from_basis, uncertainty_basis, view_information
 from aicalib_tf.geometry.pattern import board_points
+from aicalib_tf.guided.design import design_weight, elimination_order
 from aicalib_tf.guided.guidance import Suggestion, missing, next_views
 from aicalib_tf.guided.selection import MotionGate, Pose, blur_px, board_pose, near_duplicate, tilt_of
 
 __all__ = ["GuidedConfig", "GuidedCalibration", "Update", "Estimate"]
 
 _CELLS = (8, 6)  # the coverage grid of the keep rule
+_POOL = 240  # candidate views remembered beyond the kept ones (the most recent)
 
 
 @dataclass(frozen=True)
@@ -104,6 +106,7 @@ class Update:
 class _State:
     views: list = field(default_factory=list)
     poses: list = field(default_factory=list)
+    pool: list = field(default_factory=list)  # views seen but not kept (near-duplicates, little gain): candidates
     frames: list = field(default_factory=list)
     blur: list = field(default_factory=list)
     cal: Calibration | None = None
@@ -186,12 +189,11 @@ class GuidedCalibration:
         pose = board_pose(corners, ids, cfg.square, self.image_size, lens)
         if pose is None:
             return False, "no pose for the board"
-        dup = near_duplicate(pose, s.poses, self.image_size)
-        if dup is not None:
-            return False, f"near-duplicate of frame {s.frames[dup]}"
         view = View(f"frame{index:06d}", corners, ids, relative=relative)
-        why = self._worth(view, pose)
-        if why.startswith("adds little"):
+        dup = near_duplicate(pose, s.poses, self.image_size)
+        why = f"near-duplicate of frame {s.frames[dup]}" if dup is not None else self._worth(view, pose)
+        if dup is not None or why.startswith("adds little"):
+            s.pool = [*s.pool[-(_POOL - 1):], view]
             return False, why
         s.views.append(view)
         s.poses.append(pose)
@@ -265,11 +267,55 @@ class GuidedCalibration:
         s.done = len(s.views) >= cfg.max_views or (
             sig <= cfg.target_px and len(s.views) >= cfg.min_views and not regions_left)
 
-    def result(self, *, meta: dict | None = None) -> Calibration:
-        """The calibration of the kept views with the configured model (``auto``: the full model
-        choice). Raises CalibrationError with fewer than 3 kept views."""
+    def _design(self) -> tuple[list[View], list[np.ndarray], np.ndarray, np.ndarray, list[int]]:
+        """(candidates: the kept views and the pool, their information / σ² under the running fit,
+        G, ok of the uncertainty basis over the cells they cover, the elimination order)."""
         s, cfg = self._s, self.cfg
-        if self.image_size is None or len(s.views) < 3:
-            raise CalibrationError(f"{len(s.views)} views kept; need at least 3")
-        return calibrate_camera(s.views, cfg.pattern, cfg.square, self.image_size, model=cfg.model,
+        lens = lens_of(s.cal)
+        cand, infos = [], []
+        for v in [*s.views, *s.pool]:
+            pose = board_pose(v.corners, v.ids, cfg.square, self.image_size, lens)
+            if pose is not None:
+                cand.append(v)
+                infos.append(self._view_info(v, pose) / self._sigma2())
+        covered = coverage_counts(cand, self.image_size, (32, 24)).ravel() > 0
+        _, G, ok = uncertainty_basis(s.cal, fit_mask=covered)
+        ok = ok & covered
+        return cand, infos, G, ok, elimination_order(infos, design_weight(G, ok), keep=min(cfg.min_views, len(cand)))
+
+    def ranked_views(self) -> list[View]:
+        """The candidates (kept and seen) from the most to the least useful: the first k are the
+        design of k views (:mod:`aicalib_tf.guided.design`); the kept views before the first fit."""
+        if self._s.cal is None:
+            return list(self._s.views)
+        cand, *_, order = self._design()
+        return [cand[i] for i in reversed(order)]
+
+    def final_views(self) -> list[View]:
+        """The views to calibrate with: among the kept views and the candidates seen but not kept,
+        the fewest (at least ``min_views``) whose design predicts the 90th percentile of the 1σ
+        uncertainty over the covered cells at or below ``target_px`` under the running fit; when
+        none does, the best ``max_views`` (or all). The kept views as they are before the first
+        fit or when nothing else was seen."""
+        s, cfg = self._s, self.cfg
+        if s.cal is None or not s.pool:
+            return list(s.views)
+        cand, infos, G, ok, order = self._design()
+        top = min(cfg.max_views, len(cand))
+        for k in range(min(cfg.min_views, top), top + 1):
+            pick = order[-k:]
+            sigma = sigma_from_basis(G, ok, np.linalg.pinv(np.sum([infos[i] for i in pick], axis=0), hermitian=True))
+            finite = sigma[np.isfinite(sigma)]
+            if finite.size and float(np.percentile(finite, 90)) <= cfg.target_px:
+                break
+        return [cand[i] for i in sorted(pick)]
+
+    def result(self, *, meta: dict | None = None, views: list[View] | None = None) -> Calibration:
+        """The calibration of ``views`` (default :meth:`final_views`) with the configured model
+        (``auto``: the full model choice). Raises CalibrationError with fewer than 3 views."""
+        cfg = self.cfg
+        views = self.final_views() if views is None else views
+        if self.image_size is None or len(views) < 3:
+            raise CalibrationError(f"{len(views)} views kept; need at least 3")
+        return calibrate_camera(views, cfg.pattern, cfg.square, self.image_size, model=cfg.model,
                                 square_unit=cfg.square_unit, meta=meta)
