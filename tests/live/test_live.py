@@ -114,3 +114,28 @@ def test_a_missing_source_is_one_error_line_and_exit_2(tmp_path):
     lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("error:")]
     assert proc.returncode == 2 and len(lines) == 1 and "none.mp4" in lines[0], proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+def test_page_frames_decode_to_the_same_gray_jpeg_or_png():
+    import cv2
+    import numpy as np
+
+    from aicalib_tf.live.server import LiveConfig, LiveState
+
+    seen = []
+
+    def detector(gray):
+        seen.append(gray.copy())
+        return None
+
+    detector.info, detector.relative = {}, False
+    state = LiveState(LiveConfig((9, 6)), detector)
+    rng = np.random.default_rng(1)
+    bgr = cv2.GaussianBlur(rng.integers(0, 256, (120, 160, 3), dtype=np.uint8), (7, 7), 2)
+    jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, 92])[1].tobytes()
+    png = cv2.imencode(".png", cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR))[1].tobytes()
+    assert state.add_jpeg(jpeg)["examined"] and state.add_jpeg(png)["examined"]
+    assert seen[0].dtype == np.uint8 and seen[0].shape == (120, 160)
+    assert np.abs(seen[0].astype(int) - seen[1]).max() <= 1  # the luma of the JPEG, and the PNG's grey
+    with pytest.raises(ValueError, match="not a JPEG or PNG"):
+        state.add_jpeg(b"\xff\xd8\xff" + b"junk" * 10)
