@@ -28,6 +28,7 @@ from aicalib_tf.geometry.camera import Camera
 from .background import make_background
 from .board import Board, sample_board
 from .camera import sample_camera, sample_fisheye
+from .charuco import sample_charuco
 from .degrade import apply_degradations
 from .pose import PoseConfig, corner_visibility, sample_pose
 from .render import lens_coverage, render_board
@@ -77,15 +78,24 @@ def rig_placement(rng: np.random.Generator, count: int, baseline: float, vergenc
 
 
 def sample_rig(rng: np.random.Generator, lenses=("pinhole", "pinhole"), size=(1280, 960), *,
-               baseline=(50.0, 500.0), vergence_deg=(0.0, 10.0), pattern=(9, 6)) -> RigTruth:
-    """Draw a rig of len(lenses) cameras (module docstring); baseline in mm (the board's unit), degrees."""
+               baseline=(50.0, 500.0), vergence_deg=(0.0, 10.0), pattern=(9, 6), charuco=None) -> RigTruth:
+    """Draw a rig of len(lenses) cameras (module docstring); baseline in mm (the board's unit), degrees.
+
+    charuco : a :class:`~aicalib_tf.geometry.charuco.CharucoBoard` to show instead of a chessboard of
+    ``pattern``; its square is the board's own, and the baseline is drawn as the chessboard's square
+    would be: 8 squares (within ``baseline``'s range)."""
     C = len(lenses)
     if C < 2:
         raise ValueError(f"a rig has at least 2 cameras, got {C}")
     b = float(rng.uniform(*baseline))
     cams = tuple(_camera(rng, lens, size) for lens in lenses)
-    R, T = rig_placement(rng, C, b, vergence_deg)
-    board = replace(sample_board(rng, pattern_size=pattern), square_size=float(np.clip(b / 8.0, 15.0, 60.0)))
+    if charuco is None:  # (this order of draws keeps the chessboard rigs as they were)
+        R, T = rig_placement(rng, C, b, vergence_deg)
+        board = replace(sample_board(rng, pattern_size=pattern), square_size=float(np.clip(b / 8.0, 15.0, 60.0)))
+    else:
+        board = sample_charuco(rng, charuco)
+        b = float(np.clip(8.0 * board.square_size * rng.uniform(0.8, 1.25), *baseline))
+        R, T = rig_placement(rng, C, b, vergence_deg)
     return RigTruth(cams, R, T, board)
 
 

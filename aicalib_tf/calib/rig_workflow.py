@@ -115,7 +115,7 @@ class RigConfig:
     model: str = "auto"  # one lens model (or auto) for every camera, or a comma list, one per camera
     quiet: bool = False
     workers: int | None = None  # detection processes (None: aicalib_tf.detect.batch's default)
-    board: str | None = None  # chessboards only for a rig (the command line refuses --board with --rig)
+    board: str | None = None  # a ChArUco description (pattern and square then follow from it), or a chessboard
 
 
 def _detect_camera(cam, frames, cfg: RigConfig) -> tuple[dict, dict, dict]:
@@ -183,7 +183,7 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
 
     Raises ValueError / CalibrationError / FileNotFoundError for bad input, before writing anything.
     """
-    from aicalib_tf.calib.workflow import make_detector
+    from aicalib_tf.calib.workflow import _target, make_detector
     from aicalib_tf.io import expand_images
     from aicalib_tf.outfolder import OutputFolder
 
@@ -195,7 +195,7 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
     models = rig_models(cfg.model, list(files))
     _refuse_shared_files(files)
     pairing = pair_images(files)
-    detect = make_detector(cfg.detector, cfg.pattern, cfg.network)  # a bad network fails here, before any work
+    detect = make_detector(cfg.detector, _target(cfg), cfg.network)  # a bad network or board fails here, before any work
     with OutputFolder(cfg.out, "rig") as out:  # a bad --out fails here; files are swapped in at the end
         views, sizes, skipped = {}, {}, {}
         for cam in files:
@@ -204,7 +204,8 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
             views[cam] = [v[n] for n, _ in pairing.frames if n in v]
             skipped.update({f"{cam}/{n}": why for n, why in sk.items()})
         meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
-                "lens_model": cfg.model, "pairing": pairing.rule, "images": {c: len(f) for c, f in files.items()}}
+                "lens_model": cfg.model, "pairing": pairing.rule, "images": {c: len(f) for c, f in files.items()},
+                **({"board": cfg.board} if cfg.board else {})}
         rig, report, figure = calibrate_views(views, sizes, pairing, skipped, cfg, models, meta)
         write_rig_files(out.path, rig, report, figure)
     return rig, report

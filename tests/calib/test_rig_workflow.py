@@ -115,3 +115,30 @@ def test_rig_given_one_folder_twice_is_refused(rig_photos, tmp_path, capsys):
     pattern = str(root / "left" / "*.png")
     assert main(["--rig", f"cam0={pattern}", f"cam1={pattern}", "--pattern", "9x6", "--out", str(tmp_path / "o")]) == 2
     assert "the same image file" in capsys.readouterr().err and not (tmp_path / "o").exists()
+
+
+def test_a_charuco_rig_calibrates_from_views_that_each_camera_sees_in_part(tmp_path, capsys):
+    from aicalib_tf.geometry.charuco import parse_board
+    from data_gen.rig import make_rig_sequence
+
+    spec = "charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100"
+    board = parse_board(spec)
+    truth, frames = make_rig_sequence(4, pairs=8, lenses=("pinhole", "pinhole"), size=(640, 480),
+                                      baseline=(150.0, 300.0), charuco=board)
+    partial = 0
+    for side, k in (("left", 0), ("right", 1)):
+        (tmp_path / side).mkdir()
+        for f, frame in enumerate(frames):
+            cv2.imwrite(str(tmp_path / side / f"{side}{f + 1:02d}.png"), frame[k].image)
+            partial += not all(frame[k].label["visible"])
+    assert partial >= 4  # boards cut by the frame: the markers name the corners each camera sees
+    out = tmp_path / "out"
+    rc = main(["--rig", f"cam0={tmp_path}/left/*.png", f"cam1={tmp_path}/right/*.png", "--board", spec,
+               "--out", str(out), "--quiet"])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    rig = json.loads((out / "rig.json").read_text())
+    assert rig["quality"]["status"] == "ok" and rig["meta"]["board"] == spec, text
+    baseline = float(np.linalg.norm(np.asarray(rig["T"])[1]))
+    assert abs(baseline / truth.baseline() - 1) < 0.002, (baseline, truth.baseline())
+    assert rotation_angle_deg(np.asarray(rig["R"])[1] @ truth.R[1].T) < 0.1

@@ -86,3 +86,12 @@ def test_a_stopped_run_saves_only_with_save_partial(video, tmp_path, monkeypatch
 def test_a_missing_camera_is_one_line(tmp_path, capsys):
     assert main(["--camera", "63", "--pattern", "9x6", "--out", str(tmp_path / "o"), "--quiet"]) == 2
     assert "camera 63: cannot open it" in _one_error_line(capsys)
+
+
+def test_a_charuco_board_with_a_video_is_one_line(tmp_path, capsys):
+    spec = "charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100"
+    assert main([str(tmp_path / "a.mp4"), "--board", spec, "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    assert "--board (a ChArUco board) takes photos" in _one_error_line(capsys)
+    assert main(["--rig", f"cam0={tmp_path}/a.mp4", f"cam1={tmp_path}/b.mp4", "--board", spec, "--out",
+                 str(tmp_path / "o"), "--quiet"]) == 2
+    assert "takes photos" in _one_error_line(capsys)
