@@ -72,11 +72,16 @@ def progress_line(session: GuidedCalibration, target_px: float) -> str:
     return f"frames {session.frames_seen} | examined {session.examined} | kept {len(session.views)} | {cov} | {sig}"
 
 
-def summary_lines(session: GuidedCalibration, source: str, stopped: str) -> list[str]:
-    """The report's head: what the loop saw and why it stopped."""
+def summary_lines(session: GuidedCalibration, source: str, stopped: str, used: int | None = None) -> list[str]:
+    """The report's head: what the loop saw, why it stopped and, given ``used`` (the number of final
+    views), how many of the views seen the calibration took."""
     skipped = ", ".join(f"{n} {why}" for why, n in session.skipped.most_common())
     lines = [f"{source}: {session.frames_seen} frames, {session.examined} examined, {len(session.views)} views kept "
              f"({stopped})", f"  frames not kept: {skipped or 'none'}"]
+    if used is not None:
+        seen = len(session.views) + len(session._s.pool)
+        lines.append(f"  calibrated with {used} of the {seen} views seen (kept or not): the fewest whose predicted "
+                     "uncertainty reaches the target, or the best --max-views")
     last = session._s
     if last.guidance is not None and not last.done:
         lines.append(f"  {last.guidance.text}")
@@ -136,4 +141,4 @@ def run_guided(cfg: GuidedRunConfig) -> tuple[Calibration, str]:
         cal, used = calibrate_session(session, meta)
     except CalibrationError as exc:
         raise CalibrationError(f"{name}: {exc}") from None
-    return cal, save_calibration_set(cal, used, cfg.out, summary_lines(session, name, stopped))
+    return cal, save_calibration_set(cal, used, cfg.out, summary_lines(session, name, stopped, len(used)))
