@@ -57,7 +57,7 @@ from .render import lens_coverage, render_board
 from .rig import rig_placement
 from .sample import OUTSIDE_CIRCLE
 
-__all__ = ["VideoConfig", "VideoScene", "make_scene", "rig_pose", "render_frame", "write_video", "write_y4m_header",
+__all__ = ["VideoConfig", "VideoScene", "make_scene", "rig_pose", "render_frame", "frame_truth", "write_video", "write_y4m_header",
            "y4m_frame", "LENSES", "main"]
 
 LENSES = ("mild", "strong", "fisheye150")
@@ -207,19 +207,35 @@ def _paper_alpha(scene: VideoScene, Rm, tm) -> np.ndarray:
     return np.clip(0.5 + d, 0.0, 1.0)
 
 
-def render_frame(scene: VideoScene, index: int) -> tuple[np.ndarray, dict]:
-    """Frame ``index``: ((H, W) uint8 grey, its label dict, JSON-ready)."""
+def frame_truth(scene: VideoScene, index: int) -> dict:
+    """Frame ``index``'s label dict (JSON-ready) without rendering it: the pose at the middle of the
+    exposure, the corners, which are visible, and the fastest corner's motion during the exposure."""
     cfg, cam = scene.cfg, scene.camera
     t0 = index / cfg.fps
-    tm = t0 + cfg.shutter / 2 + cfg.rolling_shutter / 2
-    Rm, tvm = scene.path.matrix(tm)
-    rvm = cv2.Rodrigues(Rm)[0].ravel()
+    Rm, tvm = scene.path.matrix(t0 + cfg.shutter / 2 + cfg.rolling_shutter / 2)
     corners, visible = _corners_at(scene, t0)
     a, _ = corner_visibility(scene.board, *scene.path.pose(t0), cam)
     b, _ = corner_visibility(scene.board, *scene.path.pose(t0 + cfg.shutter), cam)
     moved = np.linalg.norm(a - b, axis=1)[visible] if visible.any() else np.zeros(1)
     motion = float(np.nanmax(np.nan_to_num(moved, nan=0.0), initial=0.0))
-    n = int(np.clip(math.ceil(motion / 0.7), 1, _MAX_SUBFRAMES))
+    return {"index": index, "time_s": t0, "image_size": list(cam.image_size),
+            "pattern_size": list(scene.board.pattern_size), "square_size": scene.board.square_size,
+            "K": cam.K.tolist(), "distortion_model": cam.model, "dist": cam.dist.tolist(),
+            "rvec": cv2.Rodrigues(Rm)[0].ravel().tolist(), "tvec": tvm.tolist(),
+            "corners": [[float(x), float(y)] if np.isfinite(x) and np.isfinite(y) else None for x, y in corners],
+            "visible": visible.tolist(), "has_board": bool(visible.any()), "motion_px": motion,
+            "subframes": int(np.clip(math.ceil(motion / 0.7), 1, _MAX_SUBFRAMES))}
+
+
+def render_frame(scene: VideoScene, index: int) -> tuple[np.ndarray, dict]:
+    """Frame ``index``: ((H, W) uint8 grey, its label dict (:func:`frame_truth`), JSON-ready)."""
+    cfg, cam = scene.cfg, scene.camera
+    label = frame_truth(scene, index)
+    t0 = label["time_s"]
+    tm = t0 + cfg.shutter / 2 + cfg.rolling_shutter / 2
+    Rm, tvm = scene.path.matrix(tm)
+    rvm = cv2.Rodrigues(Rm)[0].ravel()
+    n = label["subframes"]
     sharp = render_board(cam, scene.board, rvm, tvm, scene.background, samples=34, junction_samples=89)
     img = sharp
     if n > 1 or cfg.rolling_shutter > 0:
@@ -237,12 +253,6 @@ def render_frame(scene: VideoScene, index: int) -> tuple[np.ndarray, dict]:
     rng = np.random.default_rng([cfg.seed, 13, index])
     img = gaussian_noise(gaussian_blur(img, rng, sigma=0.5), rng, sigma=cfg.noise)
     gray = np.clip(np.rint(img * 255.0), 0, 255).astype(np.uint8)
-    label = {"index": index, "time_s": t0, "image_size": list(cam.image_size),
-             "pattern_size": list(scene.board.pattern_size), "square_size": scene.board.square_size,
-             "K": cam.K.tolist(), "distortion_model": cam.model, "dist": cam.dist.tolist(),
-             "rvec": rvm.tolist(), "tvec": tvm.tolist(),
-             "corners": [[float(x), float(y)] if np.isfinite(x) and np.isfinite(y) else None for x, y in corners],
-             "visible": visible.tolist(), "has_board": bool(visible.any()), "motion_px": motion, "subframes": n}
     return gray, label
 
 

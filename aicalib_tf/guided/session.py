@@ -106,7 +106,7 @@ class Update:
 class _State:
     views: list = field(default_factory=list)
     poses: list = field(default_factory=list)
-    pool: list = field(default_factory=list)  # views seen but not kept (near-duplicates, little gain): candidates
+    pool: list = field(default_factory=list)  # (View, Pose) seen, not kept, no near-duplicate: candidates
     frames: list = field(default_factory=list)
     blur: list = field(default_factory=list)
     cal: Calibration | None = None
@@ -191,9 +191,12 @@ class GuidedCalibration:
             return False, "no pose for the board"
         view = View(f"frame{index:06d}", corners, ids, relative=relative)
         dup = near_duplicate(pose, s.poses, self.image_size)
-        why = f"near-duplicate of frame {s.frames[dup]}" if dup is not None else self._worth(view, pose)
-        if dup is not None or why.startswith("adds little"):
-            s.pool = [*s.pool[-(_POOL - 1):], view]
+        if dup is not None:
+            return False, f"near-duplicate of frame {s.frames[dup]}"
+        why = self._worth(view, pose)
+        if why.startswith("adds little"):
+            if near_duplicate(pose, [p for _, p in s.pool], self.image_size) is None:  # a repeat adds nothing
+                s.pool = [*s.pool[-(_POOL - 1):], (view, pose)]
             return False, why
         s.views.append(view)
         s.poses.append(pose)
@@ -273,7 +276,7 @@ class GuidedCalibration:
         s, cfg = self._s, self.cfg
         lens = lens_of(s.cal)
         cand, infos = [], []
-        for v in [*s.views, *s.pool]:
+        for v in [*s.views, *(v for v, _ in s.pool)]:
             pose = board_pose(v.corners, v.ids, cfg.square, self.image_size, lens)
             if pose is not None:
                 cand.append(v)
