@@ -186,7 +186,7 @@ def report_figure(cal: Calibration, views: list[View]) -> bytes:
     cov[~inside & (cov == 0)] = np.nan  # outside the image circle: not missing, left blank
     im = ax.imshow(cov, extent=(-0.5, w - 0.5, h - 0.5, -0.5), cmap="magma", interpolation="nearest")
     fig.colorbar(im, ax=ax, fraction=0.04, label="corners per cell")
-    where = "cells inside the image circle" if getattr(cal, "image_circle", None) else "cells"
+    where = "the circle's cells" if getattr(cal, "image_circle", None) else "cells"
     ax.set_title(f"corner coverage ({100 * share:.0f}% of {where})")
     _draw_circle(ax, cal)
     ax.set_xlim(-0.5, w - 0.5)

@@ -21,7 +21,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-__all__ = ["ImageCircle", "estimate_image_circle", "thumbnail", "circle_fov_deg", "circle_problem", "rim_points"]
+__all__ = ["ImageCircle", "circle_fov_deg", "circle_problem", "circle_tuple", "estimate_image_circle", "into_circle",
+           "rim_points", "thumbnail"]
 
 THUMB_SIDE = 640  # px: the longest side the photos are averaged at (the circle is scaled back)
 DARK_FRACTION = 0.25  # the threshold, from the black level towards the disk's median brightness
@@ -57,6 +58,27 @@ class ImageCircle:
     def to_dict(self) -> dict:
         """{"cx", "cy", "radius"} px (``camera.json``'s ``image_circle``)."""
         return {"cx": float(self.cx), "cy": float(self.cy), "radius": float(self.radius)}
+
+
+def circle_tuple(circle) -> tuple[float, float, float]:
+    """(cx, cy, radius) px of an image circle given as such a tuple or an :class:`ImageCircle`."""
+    if hasattr(circle, "radius"):
+        return float(circle.cx), float(circle.cy), float(circle.radius)
+    cx, cy, r = (float(v) for v in circle)
+    return cx, cy, r
+
+
+def into_circle(pts: np.ndarray, origin, circle) -> np.ndarray:
+    """(N, 2) px: each of ``pts`` (N, 2) px outside ``circle`` (:func:`circle_tuple`) moved along the
+    line from ``origin`` (x, y) px, inside the circle, onto the circle (unchanged when ``origin`` is not inside)."""
+    cx, cy, r = circle_tuple(circle)
+    o = np.asarray(origin, np.float64)
+    d, q = pts - o, o - (cx, cy)
+    a, b, c = np.sum(d * d, axis=1), 2 * d @ q, float(q @ q) - r * r
+    if c >= 0:
+        return pts
+    t = (-b + np.sqrt(np.maximum(b * b - 4 * a * c, 0.0))) / np.maximum(2 * a, 1e-300)  # where the line leaves it, t > 0
+    return np.where((t < 1)[:, None], o + t[:, None] * d, pts)
 
 
 def thumbnail(gray: np.ndarray, max_side: int = THUMB_SIDE) -> np.ndarray:

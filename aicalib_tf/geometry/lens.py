@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .image_circle import circle_tuple, into_circle
 from .lens_model import LensModel, pixel_jacobians
 from .lens_registry import MODELS, REGISTRY, get_model, model_from_file_name
 
@@ -208,27 +209,6 @@ def distortion_field(pixels, model: str, K, dist) -> tuple[np.ndarray, np.ndarra
     return field, ok
 
 
-def _circle(circle) -> tuple[float, float, float]:
-    """(cx, cy, radius) px of an image circle given as such a tuple or an object with those attributes."""
-    if hasattr(circle, "radius"):
-        return float(circle.cx), float(circle.cy), float(circle.radius)
-    cx, cy, r = (float(v) for v in circle)
-    return cx, cy, r
-
-
-def _into_circle(pts: np.ndarray, origin, circle) -> np.ndarray:
-    """(N, 2) px: each point outside ``circle`` (:func:`_circle`) moved along the line from
-    ``origin`` (x, y) (inside the circle) onto the circle."""
-    cx, cy, r = _circle(circle)
-    o = np.asarray(origin, np.float64)
-    d, q = pts - o, o - (cx, cy)
-    a, b, c = np.sum(d * d, axis=1), 2 * d @ q, float(q @ q) - r * r
-    if c >= 0:  # the origin is not inside the circle: nothing sensible to clip to
-        return pts
-    t = (-b + np.sqrt(np.maximum(b * b - 4 * a * c, 0.0))) / np.maximum(2 * a, 1e-300)  # the exit, t > 0
-    return np.where((t < 1)[:, None], o + t[:, None] * d, pts)
-
-
 def field_of_view(model: str, K, dist, image_size, circle=None) -> dict:
     """Full fields of view in degrees: {"horizontal", "vertical", "diagonal", "beyond_model"}; never NaN.
 
@@ -247,7 +227,7 @@ def field_of_view(model: str, K, dist, image_size, circle=None) -> dict:
     lo, hx, hy = -0.5, w - 0.5, h - 0.5
     pts = np.array([[lo, cy], [hx, cy], [cx, lo], [cx, hy], [lo, lo], [hx, hy], [hx, lo], [lo, hy]])
     if circle is not None:
-        pts = _into_circle(pts, (cx, cy), circle)
+        pts = into_circle(pts, (cx, cy), circle)
     rays = unproject(pts, model, K, dist)
     half = np.degrees(np.arctan2(np.hypot(rays[:, 0], rays[:, 1]), rays[:, 2]))
     beyond = bool(np.isnan(half).any())
@@ -278,7 +258,7 @@ def undistort_maps(model: str, K, dist, image_size, *, new_K=None, R=None,
     rays = np.stack([(u - P[0, 2]) / P[0, 0], (v - P[1, 2]) / P[1, 1], np.ones_like(u)], axis=-1)
     uv = project(rays @ Rm, model, K, d)  # row vectors: (Rᵀ·p)ᵀ = pᵀ·R
     if circle is not None:
-        ccx, ccy, r = _circle(circle)
+        ccx, ccy, r = circle_tuple(circle)
         with np.errstate(invalid="ignore"):
             uv[np.hypot(uv[..., 0] - ccx, uv[..., 1] - ccy) > r] = np.nan
     uv = np.where(np.isfinite(uv), uv, -1.0).astype(np.float32)

@@ -6,8 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from aicalib_tf.geometry.image_circle import (ImageCircle, circle_fov_deg, circle_problem, estimate_image_circle,
-                                              thumbnail)
+from aicalib_tf.geometry.image_circle import ImageCircle, circle_fov_deg, circle_problem, estimate_image_circle, thumbnail
 from aicalib_tf.geometry.lens import Lens
 
 
