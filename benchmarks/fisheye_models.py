@@ -57,9 +57,10 @@ CLASSES = {  # name -> (camera sampler(rng), pose preset, fisheye?, right family
     "kb185": (lambda r: sample_fisheye(r, (1280, 960), fov_deg=(185.0, 185.0)), "calib_fisheye", True),
     "ds190": (lambda r: sample_unified_fisheye(r, (1280, 960), "ds", fov_deg=(190.0, 190.0)), "calib_fisheye", True),
     "eucm170": (lambda r: sample_unified_fisheye(r, (1280, 960), "eucm", fov_deg=(170.0, 170.0)), "calib_fisheye", True),
-    "kb185near": (lambda r: sample_fisheye(r, (1280, 960), fov_deg=(185.0, 185.0)), "calib_fisheye", True),
     "mild": (lambda r: sample_camera(r, (640, 480), hfov_deg=(50.0, 80.0), distortion="mild"), "calib", False),
     "barrel": (lambda r: sample_camera(r, (640, 480), hfov_deg=(90.0, 110.0), distortion="strong"), "calib", False),
+    "kb185near": (lambda r: sample_fisheye(r, (1280, 960), fov_deg=(185.0, 185.0)), "calib_fisheye", True),  # last: the
+    # others keep their random streams (seeded by the class's place)
 }
 MAX_RAY_DEG = {"kb185near": 80.0}  # class -> views kept only when every corner's true ray is within this angle
 CIRCLE_ARG = "image_circle" in inspect.signature(calibrate_camera).parameters

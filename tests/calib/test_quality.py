@@ -198,3 +198,22 @@ def test_report_of_a_circular_fisheye_gives_the_circles_field_of_view_and_no_cor
     assert not any("image corners" in w for w in warnings)
     no_circle = calibration_warnings(dataclasses.replace(cal, image_circle=None), views)
     assert any("image corners" in w for w in no_circle)
+
+
+def test_assess_lets_each_half_choose_between_the_chosen_model_and_the_other_familys_best():
+    import dataclasses
+
+    views = synthetic_views(LENS, 8, 0.1, seed=3)
+    table = ({"model": "plumb_bob", "cv_rms": 0.10, "cv_se": 0.01}, {"model": "rational_polynomial", "cv_rms": 0.09},
+             {"model": "equidistant", "cv_rms": 0.11, "cv_se": 0.01}, {"model": "ds", "cv_rms": float("nan")})
+    cal = dataclasses.replace(_fit(views), model_table=table)
+    asked = []
+
+    def choose(vs, models):
+        asked.append(tuple(models))
+        return models[len(asked) - 1]  # the first half keeps plumb_bob, the second takes the rival
+
+    q = Q.assess(cal, views, fit=FIT, choose=choose)
+    assert asked == [("plumb_bob", "equidistant")] * 2 and q["half"]["models"] == ["plumb_bob", "equidistant"]
+    assert "different lens-model families (plumb_bob and equidistant)" in q["verdict"]
+    assert "models" not in Q.assess(cal, views, fit=FIT)["half"]
