@@ -90,9 +90,10 @@ def in_circle(image_size, grid, circle) -> np.ndarray:
     return np.ones(len(pts), bool) if circle is None else circle.contains(pts)
 
 
-def _reachable(image_size, circle, cells=(4, 4), min_share: float = 0.05) -> np.ndarray:
+def _reachable(image_size, circle, cells=(4, 4), min_share: float = 0.25) -> np.ndarray:
     """(cells_y, cells_x) bool: the cells of which at least ``min_share`` lies inside ``circle`` (a
-    board can reach them); all True without a circle."""
+    board can reach them; a cell the circle's edge only clips is left to :func:`rim_gaps`); all
+    True without a circle."""
     cx, cy = (int(v) for v in cells)
     inside = in_circle(image_size, (16 * cx, 16 * cy), circle).reshape(16 * cy, 16 * cx)
     return inside.reshape(cy, 16, cx, 16).mean(axis=(1, 3)) >= min_share
@@ -101,7 +102,7 @@ def _reachable(image_size, circle, cells=(4, 4), min_share: float = 0.05) -> np.
 def uncovered_regions(views, image_size, circle=None) -> list[str]:
     """Names of the image's nine regions (a 4 × 4 split: corners are the corner cells, "top" the two
     top middle cells, "centre" the middle four, ...) that no detected corner falls in; a region
-    (almost) wholly outside the image ``circle`` does not count."""
+    mostly outside the image ``circle`` (less than a quarter of each of its cells inside) does not count."""
     c = coverage_counts(views, image_size, (4, 4))
     reach = _reachable(image_size, circle)
     spans = (slice(0, 1), slice(1, 3), slice(3, 4))
@@ -121,7 +122,7 @@ def rim_gaps(views, image_size, circle, rim: float = 0.8) -> list[str]:
     sector = np.round(np.arctan2(pts[:, 1] - circle.cy, pts[:, 0] - circle.cx) / (np.pi / 4)).astype(int) % 8
     hit = set(sector[d >= rim * circle.radius].tolist())
     a = np.radians(np.arange(8) * 45.0)
-    r = 0.5 * (1 + rim) * circle.radius  # the ring's middle, in the frame?
+    r = 0.5 * (1 + rim) * circle.radius  # a sector counts when the middle of its ring is in the frame
     mx, my = circle.cx + r * np.cos(a), circle.cy + r * np.sin(a)
     in_frame = (mx >= -0.5) & (mx <= w - 0.5) & (my >= -0.5) & (my <= h - 0.5)
     return [_SECTORS[k] for k in range(8) if in_frame[k] and k not in hit]

@@ -34,11 +34,11 @@ the first that fits unprojects every observed corner, and a model whose ``MAX_AN
 least :data:`RAY_MARGIN_DEG` beyond the widest of those rays (a pinhole: rays at 85° or more) gets a
 row saying so and is not fitted. With an image circle (a circular fisheye, estimated from the
 photos), the rays of the circle's rim count too (that fit unprojects the rim): a lens whose photo
-shows rays at 90° is not a pinhole, even where the boards stopped short of the rim. On a real
-185° circular lens whose boards reached about 80°, rational_polynomial beat equidistant's held-out
-RMS by 1.5 standard errors (0.168 against 0.171 ± 0.002 px) with k1 = 0.34 ± 0.23, and the two
-halves of the views chose different families: its pixels beyond the boards' reach were a
-pinhole's extrapolation of a lens it cannot image.
+shows rays at 90° is not a pinhole, even where the boards stopped short of the rim. On real photos
+of a 185° circular lens whose boards stayed short of 90° (else no pinhole would have been fitted),
+rational_polynomial beat equidistant's held-out RMS by 1.5 standard errors (0.168 against
+0.171 ± 0.002 px) with k1 = 0.34 ± 0.23, and the two halves of the views chose different families:
+beyond the boards its pixels were a pinhole's extrapolation of a lens it cannot image.
 
 Determined extras. Among the models within one standard error, one whose ``EXTRA_COEFFS`` (the
 coefficients that make it more than a simpler model: rational's k4..k6, DS's ξ, EUCM's β) the
