@@ -80,7 +80,8 @@ def calibration_warnings(cal: Calibration, views: list[View]) -> list[str]:
     if gaps:
         warnings.append(f"no corners near the image circle's {', '.join(gaps)} rim: distortion is extrapolated "
                         "there; add views with the board near the edge of the image circle")
-    problem = circle_problem(Q.lens_of(cal), circle, np.concatenate([v.corners for v in views])) if circle else None
+    corners = np.concatenate([v.corners for v in views]) if views else None
+    problem = circle_problem(Q.lens_of(cal), circle, corners) if circle else None
     if problem:
         warnings.append(f"image circle and lens model disagree: {problem}")
     if cal.std.get("fx", 0.0) > 0.01 * cal.fx:

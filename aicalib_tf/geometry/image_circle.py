@@ -102,8 +102,8 @@ def _fit_circle(pts: np.ndarray) -> tuple[float, float, float]:
 
 
 def _robust_circle(pts: np.ndarray) -> tuple[float, float, float, float] | None:
-    """(cx, cy, r, median |residual|) after dropping boundary points far from the circle (3 MADs, at
-    least 1 px) twice; None with fewer than 20 points left."""
+    """(cx, cy, r, median |residual|) of three fits, each on the points the previous one left within
+    3 MADs (at least 1 px) of its circle; None with fewer than 20 points left."""
     keep = np.ones(len(pts), bool)
     for _ in range(3):
         if keep.sum() < 20:
@@ -115,12 +115,12 @@ def _robust_circle(pts: np.ndarray) -> tuple[float, float, float, float] | None:
     return cx, cy, r, float(np.median(res[keep]))
 
 
-def _refine(g: np.ndarray, circle: tuple[float, float, float], black: float, n: int = 360,
+def _refine(g: np.ndarray, circle: tuple[float, float, float], black: float, bright: float, n: int = 360,
             reach: float = 6.0) -> np.ndarray:
     """(k, 2) px: where the image ``g`` crosses halfway from ``black`` to its level just inside the
     rim, along ``n`` radial lines from the coarse ``circle`` (cx, cy, r), ±``reach`` px around r
     (sub-pixel: an edge an area average blurs keeps its 50% crossing). Lines that leave the
-    frame or show no step are left out."""
+    frame or show no step (less than a fifth of ``bright`` − ``black``) are left out."""
     cx, cy, r = circle
     h, w = g.shape
     a = 2 * np.pi * np.arange(n) / n
@@ -133,7 +133,7 @@ def _refine(g: np.ndarray, circle: tuple[float, float, float], black: float, n: 
     half = 0.5 * (black + inner)
     above = prof >= half[:, None]
     i = len(t) - 1 - np.argmax(above[:, ::-1], axis=1)  # the last sample at or above half
-    ok &= (inner - black > 0.1) & above.any(axis=1) & (i < len(t) - 1)
+    ok &= (inner - black > 0.2 * (bright - black)) & above.any(axis=1) & (i < len(t) - 1)
     i = np.minimum(i, len(t) - 2)
     rows = np.arange(n)
     p0, p1 = prof[rows, i], prof[rows, i + 1]
@@ -151,8 +151,7 @@ def estimate_image_circle(image, full_size=None) -> ImageCircle | None:
 
     The image is smoothed, thresholded a quarter of the way from its black level (1st percentile)
     to the median of its central half (a black level above a fifth of that median is no black ring:
-    None), and the dark pixels connected to the frame's border form
-    the outside. With at least three of the four frame corners outside, the boundary of the inside
+    None), and the dark pixels connected to the frame's border form the outside. With at least three of the four frame corners outside, the boundary of the inside
     (less the points on the frame's edge, where a cropped circle is cut) is fitted with a circle,
     points more than 3 MADs off dropped; a boundary that is no circle (median residual above
     1.5 px), a radius under a tenth of the frame or a flat image give None. The rim is then found to
@@ -193,7 +192,7 @@ def estimate_image_circle(image, full_size=None) -> ImageCircle | None:
     fit = _robust_circle(pts) if len(pts) >= 20 else None
     if fit is None or fit[3] > MAX_RESIDUAL or fit[2] < 0.1 * max(h, w):
         return None
-    fine = _refine(raw, (fit[0], fit[1], fit[2] + 0.5), black)  # the contour runs through inside pixels' centres
+    fine = _refine(raw, (fit[0], fit[1], fit[2] + 0.5), black, bright)  # the contour runs through inside pixels' centres
     fit = _robust_circle(fine) or fit
     cx, cy, r = fit[0], fit[1], fit[2]
     W, H = (w, h) if full_size is None else (float(full_size[0]), float(full_size[1]))
