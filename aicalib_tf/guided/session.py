@@ -19,7 +19,7 @@ predicted mean projection uncertainty over the image by ``min_gain`` or more. Ev
 whichever of plumb_bob and equidistant fits the first views better), warm-started from the last
 fit. The session is done when the 90th percentile of the 1σ uncertainty over the covered cells is
 at or below ``target_px`` with at least ``min_views`` views and every region of the image
-covered, or at ``max_views``. The examined frames' mean (small copies) gives the final
+covered (a circular fisheye: every region its image circle reaches), or at ``max_views``. The examined frames' mean (small copies) gives the final
 calibration its image circle (a circular fisheye's; :mod:`aicalib_tf.geometry.image_circle`).
 """
 
@@ -131,6 +131,7 @@ class GuidedCalibration:
         self.skipped: Counter = Counter()
         self._s = _State()
         self._thumbs, self._n_thumbs = None, 0  # the examined frames' thumbnails: sum (float64), count
+        self._circle = None  # the image circle as of the last refit
 
     @property
     def kept_frames(self) -> list[int]:
@@ -175,7 +176,7 @@ class GuidedCalibration:
             self.skipped[reason.split(" (")[0].split(" of frame")[0]] += 1
         s = self._s
         if kept or s.missing is None:
-            s.missing = tuple(missing(s.views, [tilt_of(p) for p in s.poses], self.image_size))
+            s.missing = tuple(missing(s.views, [tilt_of(p) for p in s.poses], self.image_size, self._circle))
         return Update(index, time_s, examined, corners, ids, kept, reason, s.guidance, s.missing, s.estimate, s.done)
 
     def _consider(self, index, gray, corners, ids, relative) -> tuple[bool, str]:
@@ -266,7 +267,8 @@ class GuidedCalibration:
         distance = float(np.median([np.linalg.norm(p.tvec) for p in s.poses]))
         ranked = next_views(lens_of(cal), s.information, s.basis, distance, cfg.pattern, cfg.square, self._sigma2())
         s.guidance = ranked[0] if ranked else None
-        gone = missing(s.views, [tilt_of(p) for p in s.poses], self.image_size)
+        self._circle = self.image_circle()  # the frames so far: corner regions outside it are not asked for
+        gone = missing(s.views, [tilt_of(p) for p in s.poses], self.image_size, self._circle)
         regions_left = any("covered" in g for g in gone)
         s.done = len(s.views) >= cfg.max_views or (
             sig <= cfg.target_px and len(s.views) >= cfg.min_views and not regions_left)
