@@ -13,7 +13,9 @@ Sphere and EUCM have no OpenCV or ROS name and are written ``ds`` with [ξ, α] 
 ``camera.json`` holds the same plus what is needed to rerun diagnostics: our model name
 (``model``: plumb_bob, rational_polynomial, thin_prism, equidistant, ds or eucm), the intrinsics covariance,
 the model-choice table, the quality summary, view names, per-view corner counts, standard
-deviations, rejected views with reasons, the square unit and the provenance in ``meta``.
+deviations, rejected views with reasons, the square unit and the provenance in ``meta``; for a
+circular fisheye the image circle (``image_circle``: {"cx", "cy", "radius"} px; absent or null when
+the photos fill the frame, and in files written before it was kept).
 :func:`load_calibration` reads it back exactly (floats are written with full precision); it also
 reads ``camera.yaml`` (without view names, covariance or table). The JSON is strict (:mod:`aicalib_tf.jsonio`):
 a number the calibration does not have (NaN: the cross-validation RMS of a forced model) is ``null``,
@@ -47,6 +49,7 @@ from aicalib_tf.calib.fit import Calibration
 from aicalib_tf.calib.kalibr import to_camchain_yaml
 from aicalib_tf.calib.quality import lens_of
 from aicalib_tf.geometry import lens as L
+from aicalib_tf.geometry.image_circle import ImageCircle
 from aicalib_tf.io import atomic_write_text
 from aicalib_tf.jsonio import dumps, jsonable, nan_for_null, read_json
 
@@ -98,6 +101,7 @@ def calibration_dict(cal: Calibration) -> dict:
         ],
         "rejected": dict(cal.rejected),
         "meta": dict(cal.meta),
+        "image_circle": None if getattr(cal, "image_circle", None) is None else cal.image_circle.to_dict(),
     }
 
 
@@ -193,6 +197,15 @@ def _model_table(d: dict) -> tuple:
     return tuple(out)
 
 
+def _image_circle(d: dict) -> ImageCircle | None:
+    """``image_circle`` ({"cx", "cy", "radius"} px), None when absent or null."""
+    if d.get("image_circle") is None:
+        return None
+    c = S.require_mapping(d, "image_circle")
+    with S.within("image_circle"):
+        return ImageCircle(S.require_number(c, "cx"), S.require_number(c, "cy"), S.require_number(c, "radius", positive=True))
+
+
 def _str_map(d: dict, key: str) -> dict:
     m = _optional_mapping(d, key)
     with S.within(key):
@@ -217,7 +230,8 @@ def calibration_from_dict(d: dict) -> Calibration:
     with S.within("std"):
         std = {k: S.require_number(std, k, nullable=True) for k in std}
     extra = {"model": model, "covariance": S.require_matrix(d, "covariance", (n, n), default=None),
-             "model_table": _model_table(d), "quality": nan_for_null(_optional_mapping(d, "quality"))}
+             "model_table": _model_table(d), "quality": nan_for_null(_optional_mapping(d, "quality")),
+             "image_circle": _image_circle(d)}
     return _build(dict(K=K, dist=S.require_dist(d, "distortion_coefficients", model), image_size=S.require_image_size(d),
                        pattern_size=pattern, square_size=square, square_unit=unit,
                        rms=S.require_number(d, "avg_reprojection_error", nonnegative=True), **_views(d), std=std,
@@ -292,7 +306,7 @@ def undistort_camera_matrix(cal: Calibration, alpha: float = 0.0) -> np.ndarray:
     if not lens.spec.IS_FISHEYE:
         new_K, _ = cv2.getOptimalNewCameraMatrix(lens.K, lens.dist, (w, h), a)
         return np.asarray(new_K, np.float64)
-    half = float(np.radians(lens.field_of_view()["horizontal"]) / 2)
+    half = float(np.radians(lens.field_of_view(getattr(cal, "image_circle", None))["horizontal"]) / 2)
     half = min(half, np.radians(MAX_FISHEYE_HALF_ANGLE_DEG))
     f1 = 0.5 * w / np.tan(half)
     fx, fy = (1 - a) * lens.fx + a * f1, (1 - a) * lens.fy + a * f1 * lens.fy / lens.fx
@@ -308,7 +322,8 @@ def undistort(image: np.ndarray, cal: Calibration, *, alpha: float = 0.0) -> np.
     image : (H, W) or (H, W, C) array of the calibration's image size.
     alpha : in [0, 1], the new camera matrix's trade-off (:func:`undistort_camera_matrix`).
     Returns an array of the same shape and dtype (black where the output pixel has no source:
-    bilinear ``cv2.remap`` through :func:`~aicalib_tf.geometry.lens.undistort_maps`).
+    bilinear ``cv2.remap`` through :func:`~aicalib_tf.geometry.lens.undistort_maps`; black too where it
+    would come from outside the calibration's image circle).
     """
     image = np.asarray(image)
     if image.ndim not in (2, 3) or image.dtype not in _REMAP_DTYPES:
@@ -318,5 +333,5 @@ def undistort(image: np.ndarray, cal: Calibration, *, alpha: float = 0.0) -> np.
     if (w, h) != tuple(cal.image_size):
         raise ValueError(f"image is {w}x{h} but the calibration is for {cal.image_size[0]}x{cal.image_size[1]}")
     lens = lens_of(cal)
-    map_x, map_y = lens.undistort_maps(new_K=undistort_camera_matrix(cal, alpha))
+    map_x, map_y = lens.undistort_maps(new_K=undistort_camera_matrix(cal, alpha), circle=getattr(cal, "image_circle", None))
     return cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)

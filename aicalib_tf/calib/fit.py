@@ -32,11 +32,12 @@ from aicalib_tf.calib.bundle import BundleResult, CalibrationError, bundle_adjus
 from aicalib_tf.calib.select import select_model
 from aicalib_tf.calib.starts import convert_start, fisheye_start, widest_angle
 from aicalib_tf.calib.view_checks import MIN_VIEW_CORNERS, duplicates, view_problem
+from aicalib_tf.geometry.image_circle import ImageCircle
 from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens, get_model, model_from_ros, project
 from aicalib_tf.geometry.pattern import board_points, check_pattern
 
-__all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "fit_views", "view_rms", "MIN_VIEW_CORNERS",
-           "outlier_threshold"]
+__all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "fit_views", "choose_model", "view_rms",
+           "MIN_VIEW_CORNERS", "outlier_threshold"]
 
 _CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
 
@@ -84,6 +85,8 @@ class Calibration:
     {"model", "n_params", "rms", "cv_rms", "cv_se", "chosen", "note"}. quality : filled by calib.quality.
     rejected : {view name: reason} for views given but not used.
     meta : free-form provenance (detector, model sha256, flags) kept in the JSON file.
+    image_circle : a circular fisheye's :class:`~aicalib_tf.geometry.image_circle.ImageCircle`
+    (px; estimated from the photos), or None when the photos fill the frame or it is unknown.
     """
 
     K: np.ndarray
@@ -105,6 +108,7 @@ class Calibration:
     covariance: np.ndarray | None = None
     model_table: tuple = ()
     quality: dict = field(default_factory=dict)
+    image_circle: ImageCircle | None = None
 
     @property
     def lens(self) -> Lens:
@@ -272,7 +276,7 @@ def _fit_model(model: str, views: list[View], square_size: float, image_size, st
 
 
 def _calibration(fit: BundleResult, views, pattern_size, square_size, image_size, rejected, square_unit,
-                 meta, table=()) -> Calibration:
+                 meta, table=(), image_circle=None) -> Calibration:
     """The Calibration of a fit made with a unit square: translations scaled to ``square_size`` (the
     square size only scales the poses, so fitting with 1 keeps the numbers well conditioned for any unit)."""
     std = dict(zip(param_names(fit.model), np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))))
@@ -283,7 +287,7 @@ def _calibration(fit: BundleResult, views, pattern_size, square_size, image_size
         rvecs=fit.rvecs, tvecs=fit.tvecs * float(square_size), per_view_rms=fit.per_view_rms,
         corner_counts=np.array([len(v.ids) for v in views]), std={k: float(v) for k, v in std.items()},
         rejected=dict(rejected), square_unit=square_unit, meta=dict(meta or {}, **({"fit_note": fit.note} if fit.note else {})), model=fit.model,
-        covariance=fit.covariance, model_table=tuple(table))
+        covariance=fit.covariance, model_table=tuple(table), image_circle=image_circle)
 
 
 def fit_views(views, pattern_size: tuple[int, int], square_size: float, image_size: tuple[int, int], model: str,
@@ -325,10 +329,20 @@ def _refit(model, usable, square_size, image_size, warm: BundleResult, fix_k3) -
     return min(fits, key=lambda f: f.cost)
 
 
+def choose_model(views, pattern_size: tuple[int, int], image_size: tuple[int, int], models=MODELS, *,
+                 fix_k3: bool = False, image_circle: ImageCircle | None = None) -> str:
+    """The model ``auto`` chooses among ``models`` for these views (:mod:`aicalib_tf.calib.select`;
+    no outlier rejection): e.g. each half of the views' choice. Raises CalibrationError when no model fits."""
+    pattern_size = _check_args(pattern_size, 1.0, image_size, 3)
+    usable, _ = _usable_views(views, pattern_size, 3, image_size)
+    return select_model(usable, 1.0, lambda vs, m, start: _fit_model(m, vs, 1.0, image_size, start, fix_k3),
+                        tuple(models), circle=image_circle)[1]
+
+
 def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 1.0,
                      image_size: tuple[int, int] | None = None, *, model: str = "auto", rational: bool = False,
                      fix_k3: bool = False, reject_outliers: bool = True, min_views: int = 3, square_unit: str = "",
-                     meta: dict | None = None) -> Calibration:
+                     meta: dict | None = None, image_circle: ImageCircle | None = None) -> Calibration:
     """Calibrate a camera from detected boards: a bundle fit of the lens model over all views.
 
     views : sequence of :class:`View` (or objects with ``corners``, ``ids`` and ``name``).
@@ -338,6 +352,9 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
     error of the best, see :mod:`aicalib_tf.calib.select`) or a lens model name to force it.
     rational : the same as model="rational_polynomial". fix_k3 : hold k3 at 0 (pinhole models).
     reject_outliers : drop views by the rule in the module docstring and refit.
+    image_circle : a circular fisheye's image circle (:func:`~aicalib_tf.geometry.image_circle.estimate_image_circle`),
+    kept in the Calibration; under ``auto`` a pinhole model is not eligible when the circle's rim lies
+    at or near 90° off-axis.
     Raises :class:`CalibrationError` with fewer than ``min_views`` usable views or when the model
     cannot be fitted, and ``ValueError`` for bad arguments (two views of one name among them).
     """
@@ -346,7 +363,7 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
     usable, rejected = _usable_views(views, pattern_size, min_views, image_size)
     if model == "auto":
         table, model, fit = select_model(
-            usable, 1.0, lambda vs, m, start: _fit_model(m, vs, 1.0, image_size, start, fix_k3))
+            usable, 1.0, lambda vs, m, start: _fit_model(m, vs, 1.0, image_size, start, fix_k3), circle=image_circle)
     else:
         fit = _fit_model(model, usable, 1.0, image_size, None, fix_k3, rank_strict=False)  # a unit square: tvecs scaled last
         table = ({"model": model, "n_params": fit.intrinsics.size, "rms": fit.rms, "cv_rms": float("nan"),
@@ -361,4 +378,5 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
         usable.pop(worst)
         max_drop -= 1
         fit = _refit(model, usable, 1.0, image_size, fit, fix_k3)
-    return _calibration(fit, usable, pattern_size, square_size, image_size, rejected, square_unit, meta, table)
+    return _calibration(fit, usable, pattern_size, square_size, image_size, rejected, square_unit, meta, table,
+                        image_circle)

@@ -7,6 +7,12 @@
 * :func:`predicted_half_difference`: what the two halves' covariances predict for that number.
 * :func:`verdict` and :func:`assess`: one line for the user and the dict kept in ``cal.quality``.
 
+The image circle. A circular fisheye's calibration carries its image circle (``cal.image_circle``,
+:mod:`aicalib_tf.geometry.image_circle`): cells outside it are no part of the camera's image. The
+uncertainty map is NaN there (and the numbers taken from it, the half-vs-half "all" figures and
+the verdict's share count the circle's cells only), and a region of the frame that lies wholly
+outside the circle is not "uncovered": no board can reach it.
+
 Rotation compensation. A monocular calibration cannot see a rotation of its own camera frame:
 a shift of (cx, cy) or a change of distortion that looks like a small rotation is absorbed by the
 board poses. Two calibrations are therefore compared after the rotation R that best maps one
@@ -33,7 +39,7 @@ from aicalib_tf.geometry.pose import best_rotation
 # size: the uncertainty map, its reusable basis (for guided calibration's many predicted covariances),
 # one view's information and the half-vs-half test share the private Jacobian helpers below.
 
-__all__ = ["lens_of", "grid_points", "coverage_counts", "uncovered_regions", "projection_uncertainty", "verdict",
+__all__ = ["lens_of", "grid_points", "coverage_counts", "uncovered_regions", "in_circle", "rim_gaps", "projection_uncertainty", "verdict",
            "rotation_compensated_diff", "half_difference", "predicted_half_difference", "intrinsics_covariance",
            "covariance_of", "default_fit", "assess", "SIGMA_LADDER_PX", "view_information", "uncertainty_basis",
            "sigma_from_basis"]
@@ -77,12 +83,49 @@ _REGIONS = {"top-left": (0, 0), "top": (0, 1), "top-right": (0, 2), "left": (1, 
             "right": (1, 2), "bottom-left": (2, 0), "bottom": (2, 1), "bottom-right": (2, 2)}
 
 
-def uncovered_regions(views, image_size) -> list[str]:
+def in_circle(image_size, grid, circle) -> np.ndarray:
+    """(gy·gx,) bool over :func:`grid_points`: the cell centres inside the image ``circle`` (all True
+    for None: the lens fills the frame)."""
+    pts = grid_points(image_size, grid)
+    return np.ones(len(pts), bool) if circle is None else circle.contains(pts)
+
+
+def _reachable(image_size, circle, cells=(4, 4), min_share: float = 0.25) -> np.ndarray:
+    """(cells_y, cells_x) bool: the cells of which at least ``min_share`` lies inside ``circle`` (a
+    board can reach them; a cell the circle's edge only clips is left to :func:`rim_gaps`); all
+    True without a circle."""
+    cx, cy = (int(v) for v in cells)
+    inside = in_circle(image_size, (16 * cx, 16 * cy), circle).reshape(16 * cy, 16 * cx)
+    return inside.reshape(cy, 16, cx, 16).mean(axis=(1, 3)) >= min_share
+
+
+def uncovered_regions(views, image_size, circle=None) -> list[str]:
     """Names of the image's nine regions (a 4 × 4 split: corners are the corner cells, "top" the two
-    top middle cells, "centre" the middle four, ...) that no detected corner falls in."""
+    top middle cells, "centre" the middle four, ...) that no detected corner falls in; a region
+    mostly outside the image ``circle`` (less than a quarter of each of its cells inside) does not count."""
     c = coverage_counts(views, image_size, (4, 4))
+    reach = _reachable(image_size, circle)
     spans = (slice(0, 1), slice(1, 3), slice(3, 4))
-    return [name for name, (r, k) in _REGIONS.items() if c[spans[r], spans[k]].sum() == 0]
+    return [name for name, (r, k) in _REGIONS.items()
+            if c[spans[r], spans[k]].sum() == 0 and reach[spans[r], spans[k]].any()]
+
+
+_SECTORS = ("right", "bottom-right", "bottom", "bottom-left", "left", "top-left", "top", "top-right")  # y down
+
+
+def rim_gaps(views, image_size, circle, rim: float = 0.8) -> list[str]:
+    """Names of the eight 45° sectors of the image ``circle``'s rim (the ring from ``rim``·radius to the
+    radius; "right" centred on +x, "bottom" on +y) that lie in the frame and hold no detected corner."""
+    w, h = (int(v) for v in image_size)
+    pts = np.concatenate([np.asarray(v.corners, np.float64).reshape(-1, 2) for v in views]) if len(views) else np.zeros((0, 2))
+    d = np.hypot(pts[:, 0] - circle.cx, pts[:, 1] - circle.cy)
+    sector = np.round(np.arctan2(pts[:, 1] - circle.cy, pts[:, 0] - circle.cx) / (np.pi / 4)).astype(int) % 8
+    hit = set(sector[d >= rim * circle.radius].tolist())
+    a = np.radians(np.arange(8) * 45.0)
+    r = 0.5 * (1 + rim) * circle.radius  # a sector counts when the middle of its ring is in the frame
+    mx, my = circle.cx + r * np.cos(a), circle.cy + r * np.sin(a)
+    in_frame = (mx >= -0.5) & (mx <= w - 0.5) & (my >= -0.5) & (my <= h - 0.5)
+    return [_SECTORS[k] for k in range(8) if in_frame[k] and k not in hit]
 
 
 def _covered_mask(views, image_size, grid) -> np.ndarray:
@@ -143,7 +186,8 @@ def projection_uncertainty(cal, grid=(32, 24), distance=None, *, covariance=None
         correction is a rotation and a translation, as mrcal's frame moves with the boards; σ then
         drops near the distance the boards were seen at.
 
-    Returns (points (M, 2) px, sigma (M,) px; NaN where the pixel has no ray).
+    Returns (points (M, 2) px, sigma (M,) px; NaN where the pixel has no ray or lies outside
+    ``cal.image_circle``, when the calibration has one).
     Raises ValueError when no covariance is available.
     """
     if distance is not None and not (float(distance) > 0):
@@ -157,6 +201,8 @@ def projection_uncertainty(cal, grid=(32, 24), distance=None, *, covariance=None
     if cov.shape != (n, n):
         raise ValueError(f"covariance must be {n}x{n} for {lens.model!r}, got {cov.shape}")
     pts = grid_points(lens.image_size, grid)
+    inside = in_circle(lens.image_size, grid, getattr(cal, "image_circle", None))
+    fit_mask = inside if fit_mask is None else np.asarray(fit_mask, bool) & inside
     if compensate:
         G, ok = _compensated_jacobian(lens, pts, fit_mask, distance)
     else:
@@ -165,7 +211,7 @@ def projection_uncertainty(cal, grid=(32, 24), distance=None, *, covariance=None
         G = lens.projection_jacobian(np.where(ok[:, None], rays, [0.0, 0.0, 1.0]))[2]
     C = np.einsum("mij,jk,mlk->mil", np.nan_to_num(G), cov, np.nan_to_num(G))
     sigma = np.sqrt(np.maximum(np.linalg.eigvalsh(C)[:, -1], 0.0))
-    return pts, np.where(ok & np.all(np.isfinite(G), axis=(1, 2)), sigma, np.nan)
+    return pts, np.where(ok & inside & np.all(np.isfinite(G), axis=(1, 2)), sigma, np.nan)
 
 
 def rotation_compensated_diff(lens_a: L.Lens, lens_b: L.Lens, pixels, fit_mask=None) -> tuple[np.ndarray, np.ndarray]:
@@ -204,14 +250,15 @@ def _stats(d: np.ndarray, mask: np.ndarray) -> tuple[float, float]:  # (median, 
 
 
 def half_difference(views, fit, pattern_size, square_size, image_size, model, split="evenodd", *,
-                    grid=(32, 24), start=None) -> dict:
+                    grid=(32, 24), start=None, circle=None) -> dict:
     """Calibrate two disjoint halves of ``views`` and compare them (rotation-compensated), px.
 
     fit : callable(views, pattern_size, square_size, image_size, model) -> Calibration, e.g.
         :func:`aicalib_tf.calib.fit.fit_views` (no outlier rejection or model choice).
     split : "evenodd" (views 0, 2, 4, ... against 1, 3, 5, ...) or "halves" (first against second).
     start : passed to ``fit`` as ``start=`` when given (e.g. the full calibration: a warm start).
-    The rotation is fitted over the grid cells that hold a detected corner ("covered").
+    The rotation is fitted over the grid cells that hold a detected corner ("covered"); the "all"
+    figures are over the cells inside the image ``circle`` (every cell without one).
 
     Returns {"split", "n_a", "n_b", "median_covered", "mean_covered", "median_all", "mean_all"
     (px), "rotation_deg", "points" (M, 2) px, "diff" (M,) px, "covered" (M,) bool, "grid",
@@ -227,7 +274,7 @@ def half_difference(views, fit, pattern_size, square_size, image_size, model, sp
     covered = _covered_mask(views, image_size, grid)
     diff, R = rotation_compensated_diff(lens_of(cal_a), lens_of(cal_b), pts, covered)
     med_c, mean_c = _stats(diff, covered)
-    med_a, mean_a = _stats(diff, np.ones_like(covered))
+    med_a, mean_a = _stats(diff, in_circle(image_size, grid, circle))
     return {"split": split, "n_a": len(a), "n_b": len(b), "median_covered": med_c, "mean_covered": mean_c,
             "median_all": med_a, "mean_all": mean_a,
             "rotation_deg": float(np.degrees(np.linalg.norm(cv2.Rodrigues(R)[0]))),
@@ -352,15 +399,23 @@ def _ladder(x: float) -> float:
     return next((r for r in SIGMA_LADDER_PX if x <= r), SIGMA_LADDER_PX[-1])
 
 
+def _family(model) -> str:
+    return "fisheye" if L.get_model(model).IS_FISHEYE else "pinhole"
+
+
 def verdict(cal, views, *, sigma=None, half=None, grid=(32, 24)) -> str:
     """One line: "good to X px (1σ) over Y% of the image; ...".
 
     X is the smallest rung of :data:`SIGMA_LADDER_PX` (0.05, 0.1, 0.2, 0.5, 1, 2, 5 px) at or above
     the 90th percentile of σ (:func:`projection_uncertainty`, ``sigma`` (M,) if given) over the
-    cells the boards covered; Y% is the share of the image's grid cells with σ ≤ X (cells with
-    no ray count as not good). Then the uncovered regions (:func:`uncovered_regions`) and, when
-    ``half`` (:func:`half_difference`'s dict) is given, how far the two halves disagree.
+    cells the boards covered; Y% is the share of the image's grid cells (those inside
+    ``cal.image_circle`` when it has one: "of the image circle") with σ ≤ X (cells with no ray count
+    as not good). Then the uncovered regions (:func:`uncovered_regions`; with an image circle, the
+    empty sectors of its rim, :func:`rim_gaps`) and, when ``half`` (:func:`half_difference`'s dict)
+    is given, how far the two halves disagree and, when it holds their own model choices
+    ("models"), whether they chose different families.
     """
+    circle = getattr(cal, "image_circle", None)
     parts = []
     if sigma is None and getattr(cal, "covariance", None) is not None:
         sigma = projection_uncertainty(cal, grid)[1]
@@ -369,31 +424,52 @@ def verdict(cal, views, *, sigma=None, half=None, grid=(32, 24)) -> str:
         s_cov = sigma[covered & np.isfinite(sigma)]
         if s_cov.size:
             x = _ladder(float(np.percentile(s_cov, 90)))
-            good = float(np.mean(np.nan_to_num(sigma, nan=np.inf) <= x))
-            parts.append(f"good to {x:g} px (1σ) over {100 * good:.0f}% of the image")
+            inside = in_circle(cal.image_size, grid, circle)
+            good = float(np.mean(np.nan_to_num(sigma, nan=np.inf)[inside] <= x))
+            parts.append(f"good to {x:g} px (1σ) over {100 * good:.0f}% of the image{' circle' if circle else ''}")
     else:
         parts.append("uncertainty unknown (no covariance)")
-    empty = uncovered_regions(views, cal.image_size)
+    empty = uncovered_regions(views, cal.image_size, circle)
     if empty:
         noun = "corner" if all("-" in e for e in empty) else "region"
         parts.append(f"no board has covered the {', '.join(empty)} {noun}{'s' if len(empty) > 1 else ''}")
+    gaps = rim_gaps(views, cal.image_size, circle) if circle is not None else []
+    if gaps:
+        parts.append(f"no board near the image circle's {', '.join(gaps)} rim")
     if half is not None:
         parts.append(f"two halves of the views ({half['split']}) disagree by {half['median_covered']:.2f} px "
                      "(median, covered area)")
+        models = half.get("models")
+        if models and None not in models and _family(models[0]) != _family(models[1]):
+            parts.append(f"the two halves choose different lens-model families ({models[0]} and {models[1]}): "
+                         "the model choice is not settled; add views nearer the edge of the image")
     return "; ".join(parts)
 
 
-def assess(cal, views, *, fit=None, split="evenodd", grid=(32, 24)) -> dict:
+def _rival(cal) -> str | None:
+    """The model-choice table's best model (lowest held-out RMS) of the other family than the chosen one."""
+    rows = [r for r in (getattr(cal, "model_table", ()) or ()) if r.get("cv_rms") is not None
+            and np.isfinite(r["cv_rms"]) and r.get("model") in L.MODELS]
+    other = [r for r in rows if _family(r["model"]) != _family(lens_of(cal).model)]
+    return min(other, key=lambda r: r["cv_rms"])["model"] if other else None
+
+
+def assess(cal, views, *, fit=None, split="evenodd", grid=(32, 24), choose=None) -> dict:
     """Everything :mod:`~aicalib_tf.calib.quality` knows about ``cal``, for ``cal.quality``.
 
     views : the views (used ones matter; others are ignored by name). fit : as in
     :func:`half_difference`; None skips the half-vs-half comparison (it costs two fits).
+    choose : callable(views, models) -> model name (e.g. :func:`aicalib_tf.calib.fit.choose_model`):
+    with the comparison, each half chooses between the chosen model and the best of the other
+    family in ``cal.model_table`` (half["models"], the verdict says when their families differ).
     Returns {"sigma_px": {"median_covered", "max_covered", "median_all", "max_all"} (or None
     without a covariance), "covered_fraction", "uncovered": [region names], "half": {"split",
     "median_covered", "mean_covered", "median_all", "mean_all", "predicted_median_covered"} or
     None, "verdict": str}. Grids and arrays are left out so the dict is JSON-able.
     """
     used = [v for v in views if v.name in set(cal.views)] or list(views)
+    circle = getattr(cal, "image_circle", None)
+    inside = in_circle(cal.image_size, grid, circle)
     covered = _covered_mask(used, cal.image_size, grid)
     try:
         cov = covariance_of(cal, used)
@@ -409,14 +485,25 @@ def assess(cal, views, *, fit=None, split="evenodd", grid=(32, 24)) -> dict:
     if fit is not None and len(used) >= 6:
         warm = lens_of(cal) if "start" in inspect.signature(fit).parameters else None
         h = half_difference(used, fit, cal.pattern_size, cal.square_size, cal.image_size, lens_of(cal).model, split,
-                            grid=grid, start=warm)
+                            grid=grid, start=warm, circle=circle)
         half = {k: h[k] for k in ("split", "n_a", "n_b", "median_covered", "mean_covered", "median_all", "mean_all")}
+        rival = _rival(cal) if choose is not None else None
+        if rival is not None:
+            half["models"] = [_half_choice(choose, h[f"views_{k}"], (lens_of(cal).model, rival)) for k in "ab"]
         try:
             covs = [covariance_of(h[f"cal_{k}"], h[f"views_{k}"]) for k in "ab"]
             half["predicted_median_covered"] = predicted_half_difference(
                 h["cal_a"], h["cal_b"], h["covered"], grid=grid, covariances=covs)["median_covered"]
         except (ValueError, np.linalg.LinAlgError):
             half["predicted_median_covered"] = None
-    return {"sigma_px": sig, "covered_fraction": float(np.mean(covered)),
-            "uncovered": uncovered_regions(used, cal.image_size), "half": half,
+    return {"sigma_px": sig, "covered_fraction": float(np.mean(covered[inside])) if inside.any() else 0.0,
+            "uncovered": uncovered_regions(used, cal.image_size, circle), "half": half,
             "verdict": verdict(cal, used, sigma=sigma, half=half, grid=grid)}
+
+
+def _half_choice(choose, views, models) -> str | None:
+    """``choose(views, models)``, None when no model can be fitted to them."""
+    try:
+        return choose(views, models)
+    except ValueError:  # CalibrationError is one
+        return None

@@ -6,7 +6,10 @@ that fits its own images but is wrong elsewhere):
 * every board nearly fronto-parallel (largest tilt < 15°): focal length and principal point trade
   off against the distance;
 * no corner in one of the image's corner regions (the outer 1/4 × 1/4): distortion is
-  extrapolated there;
+  extrapolated there (a corner region outside a circular fisheye's image circle is passed over:
+  no board can reach it; the circle's rim is checked instead, :func:`~aicalib_tf.calib.quality.rim_gaps`);
+* an image circle that the lens model does not agree with
+  (:func:`~aicalib_tf.geometry.image_circle.circle_problem`);
 * a focal length with a 1σ uncertainty above 1%, or fewer than 6 views;
 * an RMS above 1 px (blur, a wrong pattern, or a lens the model cannot describe).
 """
@@ -22,18 +25,34 @@ from aicalib_tf.calib import quality as Q
 from aicalib_tf.calib.fit import Calibration, View
 from aicalib_tf.calib.quality import coverage_counts
 from aicalib_tf.geometry import lens as L
+from aicalib_tf.geometry.image_circle import circle_fov_deg, circle_problem
 from aicalib_tf.geometry.pattern import board_points
 
-__all__ = ["field_of_view", "view_tilts_deg", "coverage_counts", "calibration_warnings", "format_report", "report_figure",
+__all__ = ["field_of_view", "fov_line", "view_tilts_deg", "coverage_counts", "calibration_warnings", "format_report", "report_figure",
            "uncertainty_map"]
 
 
 def field_of_view(cal: Calibration) -> tuple[float, float]:
     """(horizontal, vertical) field of view in degrees through the lens model
-    (:func:`aicalib_tf.geometry.lens.field_of_view`; never NaN: an edge pixel with no ray counts with the
-    widest angle the lens images, the valid region's diameter)."""
-    fov = Q.lens_of(cal).field_of_view()
+    (:func:`aicalib_tf.geometry.lens.field_of_view`, within ``cal.image_circle`` when it has one;
+    never NaN: an edge pixel with no ray counts with the widest angle the lens images, the valid
+    region's diameter)."""
+    fov = Q.lens_of(cal).field_of_view(getattr(cal, "image_circle", None))
     return fov["horizontal"], fov["vertical"]
+
+
+def fov_line(cal: Calibration) -> str:
+    """The report's field-of-view line: the image circle's diameter in degrees when the calibration
+    has one, then horizontal x vertical (marked when an edge lies beyond the model's range)."""
+    lens, circle = Q.lens_of(cal), getattr(cal, "image_circle", None)
+    fov = lens.field_of_view(circle)
+    text = f"field of view {fov['horizontal']:.1f}° x {fov['vertical']:.1f}° (horizontal x vertical)"
+    if fov["beyond_model"]:
+        text += f"; the frame's edges lie beyond the model's range (counted at its widest, {np.degrees(lens.max_angle()):.0f}°)"
+    if circle is not None:
+        text = (f"field of view {circle_fov_deg(lens, circle):.1f}° across the image circle (centre {circle.cx:.1f}, "
+                f"{circle.cy:.1f}, radius {circle.radius:.1f} px); " + text.removeprefix("field of view "))
+    return text
 
 
 def view_tilts_deg(cal: Calibration) -> np.ndarray:
@@ -52,12 +71,19 @@ def calibration_warnings(cal: Calibration, views: list[View]) -> list[str]:
     if tilts.max() < 15.0:
         warnings.append(f"all boards are nearly fronto-parallel (largest tilt {tilts.max():.0f}°): focal length and "
                         "principal point are poorly constrained; add views tilted 30–50°")
-    cov = coverage_counts(views, cal.image_size, (4, 4))
-    empty = [name for name, c in (("top-left", cov[0, 0]), ("top-right", cov[0, -1]),
-                                  ("bottom-left", cov[-1, 0]), ("bottom-right", cov[-1, -1])) if c == 0]
+    circle = getattr(cal, "image_circle", None)
+    empty = [name for name in Q.uncovered_regions(views, cal.image_size, circle) if "-" in name]
     if empty:
         warnings.append(f"no corners in the image's {', '.join(empty)} region{'s' if len(empty) > 1 else ''}: "
                         "distortion is extrapolated there; add views with the board near the image corners")
+    gaps = Q.rim_gaps(views, cal.image_size, circle) if circle is not None else []
+    if gaps:
+        warnings.append(f"no corners near the image circle's {', '.join(gaps)} rim: distortion is extrapolated "
+                        "there; add views with the board near the edge of the image circle")
+    corners = np.concatenate([v.corners for v in views]) if views else None
+    problem = circle_problem(Q.lens_of(cal), circle, corners) if circle else None
+    if problem:
+        warnings.append(f"image circle and lens model disagree: {problem}")
     if cal.std.get("fx", 0.0) > 0.01 * cal.fx:
         warnings.append(f"focal length uncertain: fx ± {100 * cal.std['fx'] / cal.fx:.1f}% (1σ)")
     if len(cal.views) < 6:
@@ -96,8 +122,7 @@ def format_report(cal: Calibration, views: list[View], *, skipped: dict | None =
     lines.append(f"cx = {cal.cx:.2f} ± {s.get('cx', 0):.2f}   cy = {cal.cy:.2f} ± {s.get('cy', 0):.2f}   (px)")
     names = L.COEFF_NAMES[Q.lens_of(cal).model]
     lines.append("dist: " + "  ".join(f"{n} = {v:+.5f} ± {s.get(n, 0):.5f}" for n, v in zip(names, cal.dist)))
-    hfov, vfov = field_of_view(cal)
-    lines.append(f"field of view {hfov:.1f}° x {vfov:.1f}° (horizontal x vertical)")
+    lines.append(fov_line(cal))
     for w in calibration_warnings(cal, views):
         lines.append(f"warning: {w}")
     quality = getattr(cal, "quality", None) or Q.assess(cal, views)
@@ -156,10 +181,17 @@ def report_figure(cal: Calibration, views: list[View]) -> bytes:
     _draw_residuals(fig, axes[1], cal, views)
 
     ax = axes[2]
-    cov = coverage_counts(views, cal.image_size)
+    cov = coverage_counts(views, cal.image_size).astype(np.float64)
+    inside = Q.in_circle(cal.image_size, cov.shape[::-1], getattr(cal, "image_circle", None)).reshape(cov.shape)
+    share = float(np.mean(cov[inside] > 0)) if inside.any() else 0.0
+    cov[~inside & (cov == 0)] = np.nan  # outside the image circle: not missing, left blank
     im = ax.imshow(cov, extent=(-0.5, w - 0.5, h - 0.5, -0.5), cmap="magma", interpolation="nearest")
     fig.colorbar(im, ax=ax, fraction=0.04, label="corners per cell")
-    ax.set_title(f"corner coverage ({100 * np.mean(cov > 0):.0f}% of cells)")
+    where = "the circle's cells" if getattr(cal, "image_circle", None) else "cells"
+    ax.set_title(f"corner coverage ({100 * share:.0f}% of {where})")
+    _draw_circle(ax, cal)
+    ax.set_xlim(-0.5, w - 0.5)
+    ax.set_ylim(h - 0.5, -0.5)
     _draw_uncertainty(fig, axes[3], cal, views)
     fig.tight_layout()
     return png_bytes(fig, tight=False)
@@ -182,10 +214,19 @@ def _draw_uncertainty(fig, ax, cal: Calibration, views: list[View]) -> None:
         xs, ys = pts[:, 0].reshape(sigma.shape), pts[:, 1].reshape(sigma.shape)
         cs = ax.contour(xs, ys, sigma, levels=levels, colors="w", linewidths=0.8)
         ax.clabel(cs, fmt="%.2g", fontsize=7)
+    _draw_circle(ax, cal)
     ax.set_xlim(-0.5, w - 0.5)
     ax.set_ylim(h - 0.5, -0.5)
     ax.set_aspect("equal")
     ax.set_title(f"projection uncertainty (median {np.nanmedian(sigma):.3g} px)")
+
+
+def _draw_circle(ax, cal: Calibration) -> None:
+    """The image circle's outline (dashed), when the calibration has one."""
+    c = getattr(cal, "image_circle", None)
+    if c is not None:
+        a = np.linspace(0, 2 * np.pi, 181)
+        ax.plot(c.cx + c.radius * np.cos(a), c.cy + c.radius * np.sin(a), "c--", lw=0.8)
 
 
 def _draw_residuals(fig, ax, cal: Calibration, views: list[View]) -> None:

@@ -1,5 +1,9 @@
 """From photos to a saved calibration: detect every image, build views, calibrate, report, write files.
 
+The photos' image circle (a circular fisheye's) is estimated from the mean of small copies of the
+photos of the calibration's size (:func:`~aicalib_tf.geometry.image_circle.estimate_image_circle`)
+and kept in the calibration.
+
 The command line is :mod:`aicalib_tf.calibrate`; its docstring describes the outputs and exit codes.
 """
 
@@ -14,8 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from aicalib_tf.calib.fit import Calibration, CalibrationError, View, calibrate_camera, fit_views
+from aicalib_tf.calib.fit import Calibration, CalibrationError, View, calibrate_camera, choose_model, fit_views
 from aicalib_tf.calib.quality import assess
+from aicalib_tf.geometry.image_circle import estimate_image_circle, thumbnail
 from aicalib_tf.geometry.lens import MODELS as LENS_MODELS
 
 __all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "CalibrateConfig", "parse_square", "make_detector", "run", "undistort"]
@@ -124,6 +129,7 @@ class _Found:
     size: tuple[int, int]
     view: View | None
     why: str = ""  # no view: why, where the detector says
+    thumb: np.ndarray | None = None  # a small uint8 copy of the photo (geometry.image_circle.thumbnail)
 
 
 def _labels(files: list[str]) -> dict[str, str]:
@@ -136,8 +142,8 @@ def _labels(files: list[str]) -> dict[str, str]:
 
 
 def _file_detector(name: str, pattern: tuple[int, int], network: str):
-    """``file -> (size (w, h), (corners, ids) or None, why, relative)`` or the ImageError's text, with
-    the detector made once (the setup of :func:`aicalib_tf.detect.batch.map_images`)."""
+    """``file -> (size (w, h), (corners, ids) or None, why, relative, thumbnail (h', w') uint8)`` or
+    the ImageError's text, with the detector made once (the setup of :func:`aicalib_tf.detect.batch.map_images`)."""
     from aicalib_tf.io import ImageError, load_image
 
     detect = make_detector(name, pattern, network)
@@ -148,7 +154,8 @@ def _file_detector(name: str, pattern: tuple[int, int], network: str):
         except ImageError as exc:
             return str(exc)
         hit = detect(gray)
-        return gray.shape[::-1], hit, detect.why, detect.relative
+        small = np.round(np.clip(thumbnail(gray), 0.0, 1.0) * 255).astype(np.uint8)  # 0.3 MB a photo at most
+        return gray.shape[::-1], hit, detect.why, detect.relative, small
     return work
 
 
@@ -165,9 +172,9 @@ def _detect_all(files: list[str], labels: dict[str, str], cfg: "CalibrateConfig"
         if isinstance(res, str):
             skipped[labels[f]] = res.removeprefix(f"{display_name(f)}: ")
             continue
-        size, hit, why, relative = res
+        size, hit, why, relative, thumb = res
         found.append(_Found(labels[f], f, size, View(labels[f], *hit, relative=relative) if hit is not None else None,
-                            "" if hit is not None else why))
+                            "" if hit is not None else why, thumb))
     return found, skipped
 
 
@@ -212,8 +219,16 @@ def _apply_size_policy(found: list[_Found], policy: str, skipped: dict) -> tuple
             view = View(view.name, (view.corners + 0.5) * s - 0.5, view.ids, view.relative)
         print(f"note: {f.label} is {tag}; {'cropped' if policy == 'crop' else 'scaled'} to {size[0]}x{size[1]}",
               file=sys.stderr)
-        out.append(_Found(f.label, f.file, size, view, f.why))
+        out.append(_Found(f.label, f.file, size, view, f.why))  # no thumbnail: not the photos' frame
     return out, size
+
+
+def _image_circle(found: list[_Found], size: tuple[int, int]):
+    """The image circle of the photos of ``size`` (their thumbnails' mean), or None."""
+    thumbs = [f.thumb for f in found if f.thumb is not None and f.size == size]
+    if not thumbs or any(t.shape != thumbs[0].shape for t in thumbs):
+        return None
+    return estimate_image_circle(np.mean(thumbs, axis=0, dtype=np.float64) / 255.0, size)
 
 
 def _preview(cal: Calibration, files: dict[str, str]) -> tuple[str, bytes] | None:
@@ -324,10 +339,15 @@ def _calibrate_files(files: list[str], detect, cfg: CalibrateConfig):
     meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
             "rational": cfg.rational, "lens_model": cfg.model, "fix_k3": cfg.fix_k3, "resize_policy": cfg.resize_policy,
             "images": len(files), **({"board": cfg.board} if cfg.board else {})}
+    circle = _image_circle(found, size)
     cal = calibrate_camera(views, cfg.pattern, cfg.square, size, model=cfg.model, rational=cfg.rational,
-                           fix_k3=cfg.fix_k3, square_unit=cfg.square_unit, meta=meta)
+                           fix_k3=cfg.fix_k3, square_unit=cfg.square_unit, meta=meta, image_circle=circle)
     by_name = {v.name: v for v in views}
     used = [by_name[n] for n in cal.views]
-    cal = dataclasses.replace(cal, quality=assess(cal, used, fit=fit_views))
+
+    def choose(vs, models):  # a half's own model choice (auto only: a forced model is not questioned)
+        return choose_model(vs, cfg.pattern, size, models, fix_k3=cfg.fix_k3, image_circle=circle)
+
+    cal = dataclasses.replace(cal, quality=assess(cal, used, fit=fit_views, choose=choose if cfg.model == "auto" else None))
     report = format_report(cal, used, skipped=skipped, total=len(files))
     return cal, report, report_figure(cal, used), _preview(cal, {labels[f]: f for f in files})

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .image_circle import circle_tuple, into_circle
 from .lens_model import LensModel, pixel_jacobians
 from .lens_registry import MODELS, REGISTRY, get_model, model_from_file_name
 
@@ -208,35 +209,43 @@ def distortion_field(pixels, model: str, K, dist) -> tuple[np.ndarray, np.ndarra
     return field, ok
 
 
-def field_of_view(model: str, K, dist, image_size) -> dict:
-    """Full fields of view in degrees: {"horizontal", "vertical", "diagonal"}; never NaN.
+def field_of_view(model: str, K, dist, image_size, circle=None) -> dict:
+    """Full fields of view in degrees: {"horizontal", "vertical", "diagonal", "beyond_model"}; never NaN.
 
     Each is the sum of the two half-angles from the optical axis of opposite edge rays (so it
     exceeds 180° for a wide fisheye): the image edges x = -0.5 and w - 0.5 at y = cy, likewise
-    vertically through cx, and the larger of the two corner diagonals. An edge pixel with no ray
-    (beyond a circular fisheye's valid region, or a pinhole's monotonic radius) counts with the
-    widest angle the model images (:func:`max_angle`): the valid region's diameter.
+    vertically through cx, and the larger of the two corner diagonals. ``circle`` (an image
+    circle: (cx, cy, radius) px or an :class:`~aicalib_tf.geometry.image_circle.ImageCircle`): an
+    edge point outside it is moved along the line from the principal point onto the circle, so a
+    circular fisheye's field is that of its circle, not of the black corners. An edge pixel with
+    no ray (beyond a circular fisheye's valid region, or a pinhole's monotonic radius) counts with
+    the widest angle the model images (:func:`max_angle`); "beyond_model" is then True.
     """
     K = _check_K(K)
     w, h = _check_size(image_size)
     cx, cy = K[0, 2], K[1, 2]
     lo, hx, hy = -0.5, w - 0.5, h - 0.5
     pts = np.array([[lo, cy], [hx, cy], [cx, lo], [cx, hy], [lo, lo], [hx, hy], [hx, lo], [lo, hy]])
+    if circle is not None:
+        pts = into_circle(pts, (cx, cy), circle)
     rays = unproject(pts, model, K, dist)
     half = np.degrees(np.arctan2(np.hypot(rays[:, 0], rays[:, 1]), rays[:, 2]))
+    beyond = bool(np.isnan(half).any())
     half = np.where(np.isnan(half), np.degrees(max_angle(model, dist)), half)
     diag = max(half[4] + half[5], half[6] + half[7])
-    return {"horizontal": float(half[0] + half[1]), "vertical": float(half[2] + half[3]), "diagonal": float(diag)}
+    return {"horizontal": float(half[0] + half[1]), "vertical": float(half[2] + half[3]), "diagonal": float(diag),
+            "beyond_model": beyond}
 
 
 def undistort_maps(model: str, K, dist, image_size, *, new_K=None, R=None,
-                   new_size=None) -> tuple[np.ndarray, np.ndarray]:
+                   new_size=None, circle=None) -> tuple[np.ndarray, np.ndarray]:
     """Maps for ``cv2.remap`` from the distorted image to an ideal (rectified) pinhole image.
 
     For each output pixel (u, v) of the pinhole camera ``new_K`` (default K) of ``new_size``
     (default ``image_size``), rotated by ``R`` (3x3, default identity; the ray is
     Rᵀ·new_K⁻¹·(u, v, 1), as ``cv2.initUndistortRectifyMap``), where to sample the distorted
-    image. Returns (map_x, map_y), float32 (H, W) px; -1 where the ray is not imaged.
+    image. Returns (map_x, map_y), float32 (H, W) px; -1 where the ray is not imaged, or where it
+    lands outside ``circle`` (an image circle, as in :func:`field_of_view`; None: no circle).
     """
     model, d = check_model(model, dist)
     K = _check_K(K)
@@ -248,6 +257,10 @@ def undistort_maps(model: str, K, dist, image_size, *, new_K=None, R=None,
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
     rays = np.stack([(u - P[0, 2]) / P[0, 0], (v - P[1, 2]) / P[1, 1], np.ones_like(u)], axis=-1)
     uv = project(rays @ Rm, model, K, d)  # row vectors: (Rᵀ·p)ᵀ = pᵀ·R
+    if circle is not None:
+        ccx, ccy, r = circle_tuple(circle)
+        with np.errstate(invalid="ignore"):
+            uv[np.hypot(uv[..., 0] - ccx, uv[..., 1] - ccy) > r] = np.nan
     uv = np.where(np.isfinite(uv), uv, -1.0).astype(np.float32)
     return uv[..., 0], uv[..., 1]
 
@@ -323,14 +336,14 @@ class Lens:
         """See :func:`distortion_field`."""
         return distortion_field(pixels, self.model, self.K, self.dist)
 
-    def field_of_view(self) -> dict:
+    def field_of_view(self, circle=None) -> dict:
         """See :func:`field_of_view`."""
-        return field_of_view(self.model, self.K, self.dist, self.image_size)
+        return field_of_view(self.model, self.K, self.dist, self.image_size, circle)
 
-    def undistort_maps(self, *, new_K=None, R=None, new_size=None) -> tuple[np.ndarray, np.ndarray]:
+    def undistort_maps(self, *, new_K=None, R=None, new_size=None, circle=None) -> tuple[np.ndarray, np.ndarray]:
         """See :func:`undistort_maps`."""
         return undistort_maps(self.model, self.K, self.dist, self.image_size,
-                              new_K=new_K, R=R, new_size=new_size)
+                              new_K=new_K, R=R, new_size=new_size, circle=circle)
 
     def projection_jacobian(self, points):
         """See :func:`projection_jacobian`."""

@@ -95,13 +95,14 @@ def next_views(lens: Lens, information: np.ndarray, basis, distance: float, patt
     return sorted(out, key=lambda c: c.sigma_px)
 
 
-def missing(views, tilts: list[tuple[float, float]], image_size) -> list[str]:
+def missing(views, tilts: list[tuple[float, float]], image_size, circle=None) -> list[str]:
     """What no kept view shows yet, one sentence each: uncovered image regions, then tilt families.
 
     views : the kept views (``corners`` (N, 2) px); tilts : (about vertical, about horizontal) degrees
-    of each (:func:`aicalib_tf.guided.selection.tilt_of`)."""
+    of each (:func:`aicalib_tf.guided.selection.tilt_of`). circle : the image circle of a circular
+    fisheye (regions outside it cannot be covered and are not asked for), or None."""
     out = []
-    for region in uncovered_regions(views, image_size):
+    for region in uncovered_regions(views, image_size, circle):
         out.append(f"{region} corner not covered" if "-" in region else f"{region} of the image not covered")
     yaw = max((abs(t[0]) for t in tilts), default=0.0)
     pitch = max((abs(t[1]) for t in tilts), default=0.0)

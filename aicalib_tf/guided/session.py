@@ -19,7 +19,8 @@ predicted mean projection uncertainty over the image by ``min_gain`` or more. Ev
 whichever of plumb_bob and equidistant fits the first views better), warm-started from the last
 fit. The session is done when the 90th percentile of the 1σ uncertainty over the covered cells is
 at or below ``target_px`` with at least ``min_views`` views and every region of the image
-covered, or at ``max_views``.
+covered (a circular fisheye: every region its image circle reaches), or at ``max_views``. The examined frames' mean (small copies) gives the final
+calibration its image circle (a circular fisheye's; :mod:`aicalib_tf.geometry.image_circle`).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ import numpy as np
 
 from aicalib_tf.calib.fit import Calibration, CalibrationError, View, calibrate_camera, fit_views
 from aicalib_tf.calib.quality import coverage_counts, lens_of, sigma_from_basis, uncertainty_basis, view_information
+from aicalib_tf.geometry.image_circle import ImageCircle, estimate_image_circle, thumbnail
 from aicalib_tf.geometry.pattern import board_points
 from aicalib_tf.guided.design import design_weight, elimination_order
 from aicalib_tf.guided.guidance import Suggestion, missing, next_views
@@ -131,6 +133,8 @@ class GuidedCalibration:
         self.examined, self.frames_seen = 0, 0
         self.skipped: Counter = Counter()
         self._s = _State()
+        self._thumbs, self._n_thumbs = None, 0  # the examined frames' thumbnails: sum (float64), count
+        self._circle = None  # the image circle as of the last refit
 
     @property
     def kept_frames(self) -> list[int]:
@@ -160,6 +164,9 @@ class GuidedCalibration:
         if why or self._s.done:
             return self._update(index, time_s, False, None, None, False, why or "done")
         self.examined += 1
+        small = thumbnail(gray) / (255.0 if gray.dtype == np.uint8 else 1.0)  # grey in [0, 1]
+        self._thumbs = small.astype(np.float64) if self._thumbs is None else self._thumbs + small
+        self._n_thumbs += 1
         hit = self.detect(gray)
         if hit is None:
             return self._update(index, time_s, True, None, None, False, "no board")
@@ -172,7 +179,7 @@ class GuidedCalibration:
             self.skipped[reason.split(" (")[0].split(" of frame")[0]] += 1
         s = self._s
         if kept or s.missing is None:
-            s.missing = tuple(missing(s.views, [tilt_of(p) for p in s.poses], self.image_size))
+            s.missing = tuple(missing(s.views, [tilt_of(p) for p in s.poses], self.image_size, self._circle))
         return Update(index, time_s, examined, corners, ids, kept, reason, s.guidance, s.missing, s.estimate, s.done)
 
     def _consider(self, index, gray, corners, ids, relative) -> tuple[bool, str]:
@@ -265,10 +272,17 @@ class GuidedCalibration:
         distance = float(np.median([np.linalg.norm(p.tvec) for p in s.poses]))
         ranked = next_views(lens_of(cal), s.information, s.basis, distance, cfg.pattern, cfg.square, self._sigma2())
         s.guidance = ranked[0] if ranked else None
-        gone = missing(s.views, [tilt_of(p) for p in s.poses], self.image_size)
+        self._circle = self.image_circle()  # the frames so far: corner regions outside it are not asked for
+        gone = missing(s.views, [tilt_of(p) for p in s.poses], self.image_size, self._circle)
         regions_left = any("covered" in g for g in gone)
         s.done = len(s.views) >= cfg.max_views or (
             sig <= cfg.target_px and len(s.views) >= cfg.min_views and not regions_left)
+
+    def image_circle(self) -> ImageCircle | None:
+        """The image circle of the examined frames (their thumbnails' mean), None when they fill the frame."""
+        if not self._n_thumbs:
+            return None
+        return estimate_image_circle(self._thumbs / self._n_thumbs, self.image_size)
 
     def _design(self) -> tuple[list[View], list[np.ndarray], np.ndarray, np.ndarray, list[int]]:
         """(candidates: the kept views and the pool, their information / σ² under the running fit,
@@ -321,4 +335,4 @@ class GuidedCalibration:
         if self.image_size is None or len(views) < 3:
             raise CalibrationError(f"{len(views)} views kept; need at least 3")
         return calibrate_camera(views, cfg.pattern, cfg.square, self.image_size, model=cfg.model,
-                                square_unit=cfg.square_unit, meta=meta)
+                                square_unit=cfg.square_unit, meta=meta, image_circle=self.image_circle())

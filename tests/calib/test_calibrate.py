@@ -301,3 +301,15 @@ def test_cli_with_two_workers_gives_what_one_process_gives(tmp_path, capsys):
     # views turns into up to 1.3e-7 relative (seen once, under load)
     np.testing.assert_allclose(cals["1"].K, cals["2"].K, rtol=1e-9)
     np.testing.assert_allclose(cals["1"].dist, cals["2"].dist, rtol=1e-6, atol=1e-12)
+
+
+def test_the_photos_image_circle_comes_from_their_thumbnails_mean():
+    from aicalib_tf.calib.workflow import _Found, _image_circle
+
+    yy, xx = np.mgrid[:480, :640]
+    disk = np.where(np.hypot(xx - 320.0, yy - 240.0) <= 200.0, 180, 3).astype(np.uint8)
+    found = [_Found(f"p{k}", f"p{k}.png", (1280, 960), None, "", disk) for k in range(3)]
+    c = _image_circle(found, (1280, 960))
+    assert c is not None and abs(c.cx - 640.5) < 1.0 and abs(c.cy - 480.5) < 1.0 and abs(c.radius - 401.0) < 1.5
+    assert _image_circle([_Found("p", "p.png", (1280, 960), None, "", np.full((480, 640), 90, np.uint8))], (1280, 960)) is None
+    assert _image_circle([_Found("p", "p.png", (1280, 960), None)], (1280, 960)) is None

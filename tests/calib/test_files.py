@@ -123,3 +123,32 @@ def test_undistort_camera_matrix_for_equidistant_and_errors():
         F.undistort_camera_matrix(cal, 1.5)
     with pytest.raises(ValueError, match="640x480"):
         F.undistort(np.zeros((10, 10), np.uint8), cal)
+
+
+def test_the_image_circle_round_trips_and_older_files_load_without_it(tmp_path):
+    from aicalib_tf.geometry.image_circle import ImageCircle
+
+    circle = ImageCircle(321.25, 238.5, 230.125)
+    cal = dataclasses.replace(_cal("equidistant"), image_circle=circle)
+    F.save_calibration(cal, tmp_path)
+    data = json.loads((tmp_path / "camera.json").read_text())
+    assert data["image_circle"] == {"cx": 321.25, "cy": 238.5, "radius": 230.125}
+    assert F.load_calibration(tmp_path).image_circle == circle
+    del data["image_circle"]  # a file written before the circle was kept
+    (tmp_path / "camera.json").write_text(json.dumps(data))
+    assert F.load_calibration(tmp_path).image_circle is None
+    assert F.load_calibration(tmp_path / "camera.yaml").image_circle is None
+    data["image_circle"] = {"cx": 1.0, "cy": 2.0, "radius": -3.0}
+    (tmp_path / "camera.json").write_text(json.dumps(data))
+    with pytest.raises(ValueError, match=r"camera.json.*image_circle.radius"):
+        F.load_calibration(tmp_path)
+
+
+def test_undistort_is_black_outside_the_image_circle():
+    from aicalib_tf.geometry.image_circle import ImageCircle
+
+    cal = dataclasses.replace(_cal("equidistant"), image_circle=ImageCircle(321.5, 238.25, 120.0))
+    img = np.full((SIZE[1], SIZE[0]), 200, np.uint8)
+    out = F.undistort(img, cal, alpha=1.0)
+    plain = F.undistort(img, dataclasses.replace(cal, image_circle=None), alpha=1.0)
+    assert (out == 0).sum() > (plain == 0).sum() and out[238, 321] == 200

@@ -132,3 +132,88 @@ def verdict_share(text: str) -> float:
     """The Y of "good to X px (1σ) over Y% of the image"."""
     return float(text.split(" over ")[1].split("%")[0])
 
+
+
+CIRCLE_LENS = L.Lens("equidistant", [[100.0, 0, 319.5], [0, 100.0, 239.5], [0, 0, 1]], [0.0, 0.0, 0.0, 0.0], SIZE)
+
+
+def _circular_cal(views=None):
+    """A 185° equidistant calibration on 640x480 whose image circle (radius 161 px) leaves the corners black."""
+    from aicalib_tf.geometry.image_circle import ImageCircle
+
+    return SimpleNamespace(model="equidistant", K=CIRCLE_LENS.K, dist=CIRCLE_LENS.dist, image_size=SIZE,
+                           covariance=np.diag([0.5, 0.5, 0.3, 0.3, 1e-4, 1e-5, 1e-6, 1e-7]),
+                           image_circle=ImageCircle(319.5, 239.5, 100.0 * np.radians(92.5)), views=(), rvecs=np.zeros((0, 3)))
+
+
+def test_uncertainty_is_nan_outside_the_image_circle_and_the_verdict_counts_the_circle():
+    cal = _circular_cal()
+    pts, sigma = Q.projection_uncertainty(cal, (32, 24))
+    inside = cal.image_circle.contains(pts)
+    assert inside.sum() > 100 and (~inside).sum() > 100
+    assert np.all(np.isnan(sigma[~inside])) and np.all(np.isfinite(sigma[inside]))
+    views = synthetic_views(CIRCLE_LENS, 8, 0.0, seed=1, distance=(0.15, 0.3))
+    text = Q.verdict(cal, views, sigma=sigma)
+    assert "of the image circle" in text and verdict_share(text) > 0
+
+
+def test_regions_outside_the_image_circle_are_not_uncovered_and_its_rim_is_checked():
+    cal = _circular_cal()
+    central = [v for v in synthetic_views(CIRCLE_LENS, 30, 0.0, seed=4, distance=(0.2, 0.3))
+               if np.all(cal.image_circle.contains(v.corners, -0.3 * cal.image_circle.radius))]
+    assert central
+    assert set(Q.uncovered_regions(central, SIZE)) >= {"top-left", "bottom-right"}
+    assert not {"top-left", "top-right", "bottom-left", "bottom-right"} & set(Q.uncovered_regions(central, SIZE, cal.image_circle))
+    assert set(Q.rim_gaps(central, SIZE, cal.image_circle)) == {"right", "bottom-right", "bottom", "bottom-left", "left",
+                                                               "top-left", "top", "top-right"}
+    from aicalib_tf.calib.fit import View
+    rim = View("rim", np.array([[319.5 + 150.0, 239.5]]), np.array([[0, 0]]))
+    assert "right" not in Q.rim_gaps(central + [rim], SIZE, cal.image_circle)
+
+
+def test_verdict_says_when_the_halves_choose_different_model_families():
+    views = synthetic_views(LENS, 8, 0.0, seed=1)
+    cal = SimpleNamespace(model="plumb_bob", K=LENS.K, dist=LENS.dist, image_size=SIZE, covariance=None)
+    half = {"split": "evenodd", "median_covered": 0.1}
+    assert "families" not in Q.verdict(cal, views, half=dict(half, models=["plumb_bob", "rational_polynomial"]))
+    text = Q.verdict(cal, views, half=dict(half, models=["equidistant", "rational_polynomial"]))
+    assert "different lens-model families (equidistant and rational_polynomial)" in text
+
+
+def test_report_of_a_circular_fisheye_gives_the_circles_field_of_view_and_no_corner_advice():
+    import dataclasses
+
+    from aicalib_tf.calib.fit import calibrate_camera
+    from aicalib_tf.calib.report import calibration_warnings, fov_line
+
+    circle = _circular_cal().image_circle
+    views = [v for v in synthetic_views(CIRCLE_LENS, 40, 0.02, seed=6, distance=(0.15, 0.3))
+             if np.all(circle.contains(v.corners))][:12]
+    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="equidistant", image_circle=circle)
+    assert cal.image_circle == circle
+    line = fov_line(cal)
+    assert "across the image circle" in line and "nan" not in line
+    assert float(line.split("field of view ")[1].split("°")[0]) == pytest.approx(185.0, abs=2.0)
+    warnings = calibration_warnings(cal, views)
+    assert not any("image corners" in w for w in warnings)
+    no_circle = calibration_warnings(dataclasses.replace(cal, image_circle=None), views)
+    assert any("image corners" in w for w in no_circle)
+
+
+def test_assess_lets_each_half_choose_between_the_chosen_model_and_the_other_familys_best():
+    import dataclasses
+
+    views = synthetic_views(LENS, 8, 0.1, seed=3)
+    table = ({"model": "plumb_bob", "cv_rms": 0.10, "cv_se": 0.01}, {"model": "rational_polynomial", "cv_rms": 0.09},
+             {"model": "equidistant", "cv_rms": 0.11, "cv_se": 0.01}, {"model": "ds", "cv_rms": float("nan")})
+    cal = dataclasses.replace(_fit(views), model_table=table)
+    asked = []
+
+    def choose(vs, models):
+        asked.append(tuple(models))
+        return models[len(asked) - 1]  # the first half keeps plumb_bob, the second takes the rival
+
+    q = Q.assess(cal, views, fit=FIT, choose=choose)
+    assert asked == [("plumb_bob", "equidistant")] * 2 and q["half"]["models"] == ["plumb_bob", "equidistant"]
+    assert "different lens-model families (plumb_bob and equidistant)" in q["verdict"]
+    assert "models" not in Q.assess(cal, views, fit=FIT)["half"]

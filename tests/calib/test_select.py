@@ -159,3 +159,21 @@ def test_a_fold_that_does_not_converge_fails_the_models_cross_validation():
     with pytest.raises(CalibrationError, match=r"plumb_bob: fold 2 of 5 did not converge in \d+ evaluations"):
         cross_validate(views, SQUARE, fit, "plumb_bob", full)
     assert calls == [8, 8]  # the folds after it are not fitted
+
+
+def test_the_image_circles_rim_makes_pinholes_ineligible_when_the_boards_stop_short_of_it():
+    from aicalib_tf.geometry.image_circle import ImageCircle
+
+    near = [v for v in synthetic_views(FISHEYE, 60, 0.02, seed=7, distance=(0.2, 0.35))
+            if np.all(np.hypot(*(v.corners - FISHEYE.K[:2, 2]).T) < 1.2 * FISHEYE.fx)][:10]  # rays below ~70°
+    assert len(near) == 10
+    fit = lambda vs, m, start: _fit_model(m, vs, SQUARE, FISHEYE.image_size, start)  # noqa: E731
+    models = ("plumb_bob", "equidistant")
+    rows = {r["model"]: r for r in select_model(near, SQUARE, fit, models)[0]}
+    assert np.isfinite(rows["plumb_bob"]["rms"])  # the boards alone leave the pinhole eligible
+    rim = FISHEYE.spec.radius(np.radians(92.5), FISHEYE.dist) * FISHEYE.fx
+    circle = ImageCircle(FISHEYE.cx, FISHEYE.cy, rim)
+    table, chosen, _ = select_model(near, SQUARE, fit, models, circle=circle)
+    rows = {r["model"]: r for r in table}
+    assert chosen == "equidistant" and not np.isfinite(rows["plumb_bob"]["rms"])
+    assert "the image circle's rim is at rays 92." in rows["plumb_bob"]["note"] and "not eligible" in rows["plumb_bob"]["note"]

@@ -34,3 +34,15 @@ def test_next_view_goes_where_no_board_was():
     facing = "facing the camera"
     assert ranked[0].sigma_px < 0.9 * now
     assert by[("top-right", facing)] < by[("top-left", facing)] and by[("bottom-right", facing)] < by[("bottom-left", facing)]
+
+
+def test_missing_does_not_ask_for_corners_outside_the_image_circle():
+    from aicalib_tf.calib.fit import View
+    from aicalib_tf.geometry.image_circle import ImageCircle
+
+    xs, ys = np.meshgrid(np.linspace(200, 440, 9), np.linspace(140, 340, 6))
+    central = [View("v", np.stack([xs.ravel(), ys.ravel()], 1), np.zeros((54, 2)))]
+    tilts = [(40.0, 40.0)]
+    assert any("top-left corner" in m for m in missing(central, tilts, (640, 480)))
+    inside = missing(central, tilts, (640, 480), ImageCircle(319.5, 239.5, 150.0))
+    assert not any("corner" in m for m in inside)

@@ -1,0 +1,105 @@
+"""The image circle: estimated from synthetic photos (drawn disks, data_gen's circular fisheye
+renders), None for photos that fill the frame, its field of view and its checks against a lens model."""
+
+import math
+
+import numpy as np
+import pytest
+
+from aicalib_tf.geometry.image_circle import ImageCircle, circle_fov_deg, circle_problem, estimate_image_circle, thumbnail
+from aicalib_tf.geometry.lens import Lens
+
+
+def _disk(size, centre, radius, rng, vignetting=0.6, noise=0.02):
+    """(h, w) float32: a textured, vignetted disk (area-antialiased rim) on a black frame with noise."""
+    w, h = size
+    yy, xx = np.mgrid[:h, :w].astype(np.float64)
+    d = np.hypot(xx - centre[0], yy - centre[1])
+    scene = 0.5 + 0.3 * np.sin(xx / 17.0) * np.cos(yy / 23.0)
+    img = np.clip(radius - d + 0.5, 0, 1) * scene * (1 - vignetting * (d / radius) ** 2)
+    return (img + 0.02 + noise * rng.standard_normal((h, w))).astype(np.float32)
+
+
+@pytest.mark.parametrize("centre, radius", [((640.3, 479.7), 450.0),  # the whole circle in the frame
+                                            ((650.0, 470.0), 600.0),  # cut at top and bottom
+                                            ((630.0, 490.0), 700.0)])  # cut on all four sides
+def test_circle_from_the_mean_of_shrunk_photos(centre, radius):
+    rng = np.random.default_rng(1)
+    mean = np.mean([thumbnail(_disk((1280, 960), centre, radius, rng)) for _ in range(3)], axis=0)
+    c = estimate_image_circle(mean, (1280, 960))
+    assert c is not None
+    assert c.cx == pytest.approx(centre[0], abs=0.5) and c.cy == pytest.approx(centre[1], abs=0.5)
+    assert c.radius == pytest.approx(radius, abs=0.5)
+
+
+def test_photos_that_fill_the_frame_have_no_circle():
+    rng = np.random.default_rng(2)
+    textured = np.clip(0.5 + 0.3 * rng.standard_normal((480, 640)), 0, 1).astype(np.float32)
+    yy, xx = np.mgrid[:480, :640]
+    vignetted = (0.8 * (1 - 0.5 * (np.hypot(xx - 320, yy - 240) / 400) ** 2)).astype(np.float32)  # grey corners
+    for img in (textured, vignetted, np.full((480, 640), 0.4, np.float32), np.zeros((480, 640), np.float32)):
+        assert estimate_image_circle(img) is None
+
+
+def test_circle_of_data_gen_circular_fisheye_renders():
+    from data_gen import Camera, make_sample
+    from data_gen.presets import get_preset
+
+    preset = get_preset("fisheye", fisheye_fov_deg=(185.0, 185.0), sizes=((320, 240),), partial_probability=0.0)
+    for seed in range(2):
+        s = make_sample(preset, 4, seed, pattern=(9, 6))
+        lab = s.label
+        K = np.array(lab["K"])
+        cam = Camera(K, lab["dist"], (320, 240), model=lab["distortion_model"], max_theta=math.radians(92.5))
+        c = estimate_image_circle(s.image / 255.0)
+        assert c is not None
+        assert (c.cx, c.cy) == pytest.approx((K[0, 2], K[1, 2]), abs=0.5)
+        assert c.radius == pytest.approx(cam.circle_radius() * 0.5 * (K[0, 0] + K[1, 1]), abs=0.6)
+
+
+def test_bad_input_is_a_clear_error():
+    with pytest.raises(ValueError, match="grey image"):
+        estimate_image_circle(np.zeros((8, 8, 3)))
+    with pytest.raises(ValueError, match="NaN"):
+        estimate_image_circle(np.full((32, 32), np.nan))
+    with pytest.raises(ValueError, match="radius > 0"):
+        ImageCircle(10.0, 10.0, 0.0)
+
+
+F = 300.0
+K = np.array([[F, 0, 639.5], [0, F, 479.5], [0, 0, 1]])
+CIRCLE = ImageCircle(639.5, 479.5, F * math.radians(92.5))  # an ideal 185° equidistant lens's circle
+
+
+def test_field_of_view_of_a_circular_fisheye_is_its_circle():
+    lens = Lens("equidistant", K, None, (1280, 960))
+    assert circle_fov_deg(lens, CIRCLE) == pytest.approx(185.0, abs=1e-6)
+    assert lens.field_of_view()["horizontal"] > 240  # the black corners, counted through the model
+    fov = lens.field_of_view(CIRCLE)
+    assert fov["horizontal"] == pytest.approx(185.0, abs=1e-6) and fov["diagonal"] == pytest.approx(185.0, abs=1e-6)
+    assert fov["vertical"] == pytest.approx(math.degrees(2 * 479.5 / F) + 0.0, abs=0.2)  # the frame cuts it
+
+
+def test_field_of_view_is_never_nan_and_says_beyond_the_model():
+    lens = Lens("plumb_bob", np.array([[200.0, 0, 319.5], [0, 200, 239.5], [0, 0, 1]]), [-0.5, 0.1, 0, 0, 0], (640, 480))
+    fov = lens.field_of_view()
+    assert all(np.isfinite(fov[k]) for k in ("horizontal", "vertical", "diagonal")) and fov["beyond_model"]
+
+
+def test_circle_problem_names_a_model_that_cannot_reach_the_rim_and_corners_outside():
+    fisheye = Lens("equidistant", K, None, (1280, 960))
+    assert circle_problem(fisheye, CIRCLE) is None
+    pinhole = Lens("plumb_bob", K, [-0.5, 0, 0, 0, 0], (1280, 960))  # valid out to 163 px from the centre
+    assert "beyond the rays the plumb_bob model images" in circle_problem(pinhole, CIRCLE)
+    outside = np.array([[639.5 + CIRCLE.radius + 10, 479.5]])
+    assert "1 detected corners lie outside" in circle_problem(fisheye, CIRCLE, outside)
+
+
+def test_undistortion_maps_are_invalid_outside_the_circle():
+    lens = Lens("equidistant", K, None, (1280, 960))
+    small = ImageCircle(639.5, 479.5, 200.0)
+    new_K = np.array([[150.0, 0, 639.5], [0, 150.0, 479.5], [0, 0, 1]])  # wide enough to see past the small circle
+    mx, my = lens.undistort_maps(new_K=new_K, circle=small)
+    valid = mx >= 0
+    assert valid.any() and (~valid).any()
+    assert np.all(np.hypot(mx[valid] - 639.5, my[valid] - 479.5) <= 200.0 + 1e-3)
