@@ -17,8 +17,9 @@ one 150° fisheye), rendered here with ``--render`` or given as folders with ``-
 
 The error is the rotation-fitted projection error against the truth (unproject a 32×24 pixel grid
 with the true lens, project with the estimate after the best rotation of the camera frame,
-:func:`aicalib_tf.calib.quality.rotation_compensated_diff`), mean over the cells the used views
-covered ("err px"), and over the image ("image px"). ``cli s`` is the wall time of the whole
+:func:`aicalib_tf.calib.quality.rotation_compensated_diff`), mean over the cells the video's
+boards cover (any detected view of any method: the same region for every method, "err px"), and
+over the image ("image px"). ``cli s`` is the wall time of the whole
 ``python -m aicalib_tf.calibrate video.avi`` command (report, half-vs-half check and files too);
 ``cpu s`` / ``cli cpu`` the CPU seconds (user + system, all threads) of the same, which a busy
 shared machine does not inflate.
@@ -51,15 +52,20 @@ from aicalib_tf.sources import VideoFile  # noqa: E402
 PATTERN, SQUARE = (9, 6), 25.0
 
 
-def _error(lab: dict, cal, views) -> tuple[float, float]:
-    """(mean over the covered cells, mean over the image) of the rotation-fitted error, px."""
+REGION: dict = {}  # video name -> (M,) bool: the cells any detected view of the video covers
+
+
+def _error(lab: dict, cal, views, region=None) -> tuple[float, float]:
+    """(mean over ``region``, mean over the image) of the rotation-fitted error, px. region : (M,)
+    bool over the 32×24 cells, the same for every method of a video (default: the cells ``views``
+    cover)."""
     size = tuple(lab["image_size"])
     true = Lens(lab["distortion_model"], lab["K"], lab["dist"], size)
     pts = Q.grid_points(size)
-    used = [v for v in views if v.name in set(cal.views)]
-    covered = Q.coverage_counts(used, size, (32, 24)).ravel() > 0
-    d, _ = Q.rotation_compensated_diff(true, cal.lens, pts, fit_mask=covered)
-    return float(np.nanmean(d[covered])), float(np.nanmean(d))
+    if region is None:
+        region = Q.coverage_counts([v for v in views if v.name in set(cal.views)], size, (32, 24)).ravel() > 0
+    d, _ = Q.rotation_compensated_diff(true, cal.lens, pts, fit_mask=region)
+    return float(np.nanmean(d[region])), float(np.nanmean(d))
 
 
 def guided(path: Path, target: float) -> dict:
@@ -92,14 +98,14 @@ def detect_frames(path: Path, indices) -> dict[int, View]:
     return out
 
 
-def fixed(lab: dict, views: list[View]) -> tuple[float, float, int, float]:
-    """(err covered, err image, views used, seconds) of calibrating ``views`` with model auto."""
+def fixed(lab: dict, views: list[View], region=None) -> tuple[float, float, int, float]:
+    """(err over ``region``, err image, views used, seconds) of calibrating ``views`` with model auto."""
     t0 = time.perf_counter()
     try:
         cal = calibrate_camera(views, PATTERN, SQUARE, tuple(lab["image_size"]))
     except CalibrationError:
         return float("nan"), float("nan"), 0, float("nan")
-    return (*_error(lab, cal, views), len(cal.views), time.perf_counter() - t0)
+    return (*_error(lab, cal, views, region), len(cal.views), time.perf_counter() - t0)
 
 
 def cli_seconds(path: Path, target: float) -> tuple[float, float]:
@@ -117,8 +123,8 @@ def cli_seconds(path: Path, target: float) -> tuple[float, float]:
 
 
 def _random_rows(lab, name, method, pool: list[View], k: int, draws: int, rng, note: str) -> dict:
-    res = np.array([fixed(lab, [pool[i] for i in sorted(rng.choice(len(pool), size=min(k, len(pool)), replace=False))])
-                    for _ in range(draws)])
+    res = np.array([fixed(lab, [pool[i] for i in sorted(rng.choice(len(pool), size=min(k, len(pool)), replace=False))],
+                          REGION.get(name)) for _ in range(draws)])
     return dict(video=name, method=method, views=int(np.median(res[:, 2])), err_px=float(np.nanmedian(res[:, 0])),
                 image_px=float(np.nanmedian(res[:, 1])), wall_s=float(np.nanmedian(res[:, 3])),
                 note=f"median of {draws} draws of {k} {note}")
@@ -129,28 +135,30 @@ def bench(folder: Path, target: float, draws: int, rng, sizes) -> list[dict]:
     lab = json.loads((folder / "labels.jsonl").read_text().splitlines()[0])
     n = sum(1 for _ in (folder / "labels.jsonl").open())
     g = guided(video, target)
-    err, err_img = _error(lab, g["cal"], g["views"])
+    every = detect_frames(video, range(0, n, 30))
+    found = detect_frames(video, rng.choice(n, size=min(n, 150), replace=False))
+    everything = [*every.values(), *found.values(), *g["ranked"], *g["kept"]]
+    region = REGION[folder.name] = Q.coverage_counts(everything, tuple(lab["image_size"]), (32, 24)).ravel() > 0
+    err, err_img = _error(lab, g["cal"], g["views"], region)
     rows = [dict(video=folder.name, method="guided", views=len(g["cal"].views), err_px=err, image_px=err_img,
                  wall_s=g["wall_s"], cpu_s=g["cpu_s"],
                  note=f"{g['examined']} of {g['frames']} frames examined; loop {g['loop_s']:.1f} s; "
                       f"predicted σ90 {g['sigma_px']:.3f} px; {len(g['ranked'])} views seen; model {g['cal'].model}")]
     rows[0]["cli_s"], rows[0]["cli_cpu_s"] = cli_seconds(video, target)
-    e, ei, used, s = fixed(lab, g["kept"])
+    e, ei, used, s = fixed(lab, g["kept"], region)
     rows.append(dict(video=folder.name, method="kept", views=used, err_px=e, image_px=ei, wall_s=s,
                      note="the loop's kept views, as kept"))
-    every = detect_frames(video, range(0, n, 30))
-    found = detect_frames(video, rng.choice(n, size=min(n, 150), replace=False))
     ranked = g["ranked"]
-    for k in sorted({len(g["cal"].views), *sizes}):
+    for k in sorted({len(g["cal"].views), len(g["kept"]), *sizes}):
         if k > len(ranked):
             continue
-        e, ei, used, s = fixed(lab, ranked[:k])
+        e, ei, used, s = fixed(lab, ranked[:k], region)
         rows.append(dict(video=folder.name, method="design", views=used, err_px=e, image_px=ei, wall_s=s,
                          note=f"first {k} ranked"))
         rows.append(_random_rows(lab, folder.name, "random-seen", ranked, k, draws, rng, "of the views seen"))
         rows.append(_random_rows(lab, folder.name, "random", [found[i] for i in sorted(found)], k, draws, rng,
                                  "of the whole video"))
-        e, ei, used, s = fixed(lab, [every[i] for i in sorted(every)][:k])
+        e, ei, used, s = fixed(lab, [every[i] for i in sorted(every)][:k], region)
         rows.append(dict(video=folder.name, method="every30", views=used, err_px=e, image_px=ei, wall_s=s,
                          note=f"first {k}"))
     return rows
