@@ -39,7 +39,7 @@ __all__ = [
     "find_chessboard_corners", "load_calibration", "load_image", "load_model", "save_calibration", "undistort",
     "__version__",
 ]
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 
 def load_model(weights="default", *, compile: bool = False):
