@@ -5,7 +5,7 @@ one 150° fisheye), rendered here with ``--render`` or given as folders with ``-
 
 * ``guided``: the loop of :mod:`aicalib_tf.guided` (motion gate, blur, duplicates, the keep rule,
   refits, the stop rule at ``--target``), then the full ``auto`` model choice over its final views
-  (the fewest of the views seen whose design reaches the target); wall time includes decoding
+  (the design over the views seen: as many as were kept, more if the target is not reached); wall time includes decoding
   every frame and detecting the examined ones; ``kept`` is the same with the views the loop kept,
   as it kept them;
 * ``design``: the first k of the loop's ranked views (:meth:`GuidedCalibration.ranked_views`, the

@@ -309,17 +309,18 @@ class GuidedCalibration:
         return [cand[i] for i in reversed(order)]
 
     def final_views(self) -> list[View]:
-        """The views to calibrate with: among the kept views and the candidates seen but not kept,
-        the fewest (at least ``min_views``) whose design predicts the 90th percentile of the 1σ
-        uncertainty over the covered cells at or below ``target_px`` under the running fit; when
-        none does, the best ``max_views`` (or all). The kept views as they are before the first
+        """The views to calibrate with: the design (:mod:`aicalib_tf.guided.design`) over the kept
+        views and the candidates seen but not kept, as many as were kept, or more until it predicts
+        the 90th percentile of the 1σ uncertainty over the covered cells at or below ``target_px``
+        under the running fit, at most ``max_views``. Never fewer than were kept: the prediction is
+        first-order and too hopeful for a few views. The kept views as they are before the first
         fit or when nothing else was seen."""
         s, cfg = self._s, self.cfg
         if s.cal is None or not s.pool:
             return list(s.views)
         cand, infos, G, ok, order = self._design()
-        top = min(cfg.max_views, len(cand))
-        for k in range(min(cfg.min_views, top), top + 1):
+        top = min(max(cfg.max_views, len(s.views)), len(cand))
+        for k in range(min(max(cfg.min_views, len(s.views)), top), top + 1):
             pick = order[-k:]
             sigma = sigma_from_basis(G, ok, np.linalg.pinv(np.sum([infos[i] for i in pick], axis=0), hermitian=True))
             finite = sigma[np.isfinite(sigma)]

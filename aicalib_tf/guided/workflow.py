@@ -80,8 +80,8 @@ def summary_lines(session: GuidedCalibration, source: str, stopped: str, used: i
              f"({stopped})", f"  frames not kept: {skipped or 'none'}"]
     if used is not None:
         seen = len(session.views) + len(session._s.pool)
-        lines.append(f"  calibrated with {used} of the {seen} views seen (kept or not): the fewest whose predicted "
-                     "uncertainty reaches the target, or the best --max-views")
+        lines.append(f"  calibrated with {used} of the {seen} views seen (kept or not): the best set of as many as were "
+                     "kept, or more until the predicted uncertainty reaches the target (at most --max-views)")
     last = session._s
     if last.guidance is not None and not last.done:
         lines.append(f"  {last.guidance.text}")
