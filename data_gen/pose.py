@@ -187,7 +187,7 @@ def sample_pose(
         roll = math.radians(rng.uniform(*cfg.roll_deg))
         R = _rotation(tilt, tilt_axis, roll)
         if cfg.circle_fill is not None and camera.fisheye:
-            t = _close_up(rng, camera, board, R, cfg.circle_fill)
+            R, t = _close_up(rng, camera, board, R, cfg.circle_fill)
             if t is not None and _acceptable(camera, board, R, t, cfg):
                 return cv2.Rodrigues(R)[0].ravel(), t
             continue
@@ -214,10 +214,13 @@ def sample_pose(
 
 
 def _close_up(rng: np.random.Generator, camera: Camera, board: Board, R: np.ndarray,
-              circle_fill: tuple[float, float]) -> np.ndarray | None:
-    """(3,) t for a board that fills a drawn fraction of a fisheye's image circle (see
-    :func:`paper_circle_fill`), its centre aimed at a pixel up to ``1 - fill`` of the circle's radius
-    from the circle's centre (so its far side may reach the rim); None if no range gives that fill."""
+              circle_fill: tuple[float, float]) -> tuple[np.ndarray, np.ndarray | None]:
+    """(R (3, 3), t (3,) or None) for a board held close to a fisheye, filling a drawn fraction of
+    its image circle (:func:`paper_circle_fill`). Its centre is aimed at a pixel up to ``1 - fill``
+    of the circle's radius from the circle's centre (so its far side may reach the rim), and it
+    faces that line of sight as a person holding it towards the lens does: ``R`` (roll and tilt
+    about the optical axis) is turned so that its tilt is measured from the line of sight. t is
+    None when no range gives that fill."""
     fill = rng.uniform(*circle_fill)
     a = rng.uniform(0.0, 2.0 * math.pi)
     s = (1.0 - fill) * math.sqrt(rng.uniform())
@@ -225,10 +228,14 @@ def _close_up(rng: np.random.Generator, camera: Camera, board: Board, R: np.ndar
     uv = np.array([camera.cx + s * rho * camera.fx * math.cos(a), camera.cy + s * rho * camera.fy * math.sin(a)])
     ray = camera.pixel_to_ray(uv)
     if not np.all(np.isfinite(ray)):
-        return None
+        return R, None
     ray = ray / np.linalg.norm(ray)
+    axis = np.cross([0.0, 0.0, 1.0], ray)
+    angle = math.atan2(float(np.linalg.norm(axis)), float(ray[2]))
+    if angle > 1e-9:
+        R = cv2.Rodrigues(axis / np.linalg.norm(axis) * angle)[0] @ R
     z = _distance_for_fill(board, R, ray, camera, fill)
-    return None if z is None else z * ray - R @ board.centre()
+    return R, None if z is None else z * ray - R @ board.centre()
 
 
 def _fisheye_target(rng: np.random.Generator, camera: Camera, partial: bool) -> np.ndarray:

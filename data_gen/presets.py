@@ -241,7 +241,7 @@ _add(Preset(
     lens=_CLOSEUP_LENSES,
     fisheye_fov_deg=(150.0, 200.0),
     fisheye_circular_from_deg=0.0,
-    pose=PoseConfig(tilt_max_deg=50.0, circle_fill=(0.4, 0.9), max_view_angle_deg=85.0),
+    pose=PoseConfig(tilt_max_deg=45.0, circle_fill=(0.4, 0.9), max_view_angle_deg=85.0),
     clutter=(0.0, 1.0),
     rules=(
         Rule.of("circle_falloff", strength=(0.85, 1.0), power=(2.0, 5.0)),
