@@ -334,6 +334,10 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit, stop=is_board)
     if board is not None or full_only:  # full_only: the quick pass, a full board or nothing
         return Detection(*board, True, (w, h)) if board else replace(empty, reason=NO_MATCH if grids else NO_GRID)
+    if not grids:  # no parallelogram 3×3 block: a board bent strongly by a fisheye close to it, say
+        grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit, stop=is_board, bent=True)
+        if board is not None:
+            return Detection(*board, True, (w, h))
     if not grids:  # no 3×3 block anywhere: strips 2 corners wide (between objects, say)
         grids = assemble_grids(refined, scores, gray=smooth, limit=limit, strips=True)
     look = second_look(grids[0], refined) if second_look is not None and grids else None
