@@ -102,8 +102,9 @@ class _Lattice:
     limit : the largest extent (number of i or j positions) a grid may reach.
     """
 
-    def __init__(self, pts: np.ndarray, free: np.ndarray, propose=None, limit: int | None = None):
+    def __init__(self, pts: np.ndarray, free: np.ndarray, propose=None, limit: int | None = None, bend: bool = False):
         self.pts, self.free, self.n0 = pts, free, len(pts)
+        self.bend = bend  # lines that bend strongly (assemble_grids' ``bend``)
         self.cells: dict[tuple[int, int], int] = {}
         self.at: dict[tuple[int, int], np.ndarray] = {}  # the cells' points: (2,) float64 px
         self.coords: tuple[set, set] = (set(), set())  # the i and the j positions taken
@@ -240,7 +241,8 @@ def _grow_side(lat: _Lattice, axis: int, sign: int, whole: bool = False) -> bool
         return False
     cells, preds, tols = side
     found = lat.find(preds, tols, allow_propose=lat.limit is not None and not whole)
-    found = _single_steps(lat, axis, sign, cells, preds, tols, found)
+    if lat.bend:
+        found = _single_steps(lat, axis, sign, cells, preds, tols, found)
     hits = [(c, k) for c, k in zip(cells, found) if k >= 0]
     if whole and len(hits) < len(cells):
         return False
@@ -489,7 +491,7 @@ def _bent_seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarr
 
 def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray: np.ndarray | None = None,
                    min_size: int = MIN_CORNERS, neighbours: int = 12, propose=None, limit: int | None = None,
-                   strips: bool = False, stop=None, bent: bool = False) -> list[Grid]:
+                   strips: bool = False, stop=None, bend: bool = False) -> list[Grid]:
     """Find lattices among candidate corner points.
 
     points : (N, 2) float (x, y) px. scores : (N,) or None; seeds are tried strongest first.
@@ -507,9 +509,11 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
         the first grid that is the full board: later seeds could only give other grids, and of
         the grids that are the full board the first assembled was returned anyway. On a photo
         with clutter (a keyboard, a screen), seeds there cost more than the board itself.
-    bent : seed with :func:`_bent_seed` (3×3 blocks that are no parallelogram: a board close to a
-        fisheye), not :func:`_seed`. :mod:`aicalib_tf.detect.pipeline` uses them only where no
-        3×3 seed started a grid.
+    bend : for a board whose lines bend strongly and whose squares shrink towards a fisheye's rim
+        (a board close to the lens): where :func:`_seed` places no 3×3 block at a point,
+        :func:`_bent_seed` tries, and growth undoes double steps (:func:`_single_steps`).
+        :mod:`aicalib_tf.detect.pipeline` assembles so only where the plain assembly found no full
+        board, and takes a full board from it or nothing.
     Returns grids, largest first; they share no point.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
@@ -529,10 +533,9 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
     for k in order:
         if not free[k]:
             continue
-        lat = _Lattice(pts, free, propose, limit)
-        seeded = (_bent_seed(lat, int(k), near[k], None if contrast is None else contrast[k]) if bent
-                  else _seed(lat, int(k), near[k], None if contrast is None else contrast[k], strips))
-        if not seeded:
+        lat = _Lattice(pts, free, propose, limit, bend)
+        edges = None if contrast is None else contrast[k]
+        if not (_seed(lat, int(k), near[k], edges, strips) or (bend and _bent_seed(lat, int(k), near[k], edges))):
             continue
         _grow(lat)
         _fill_holes(lat)

@@ -327,8 +327,10 @@ def partial_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int
             kept = drop_outliers(ids[~tight], pts[~tight], sc[~tight])
         if kept is None and len(ids) >= CURVED_SHARE * cols * rows:  # a (nearly) completed board bent by a strong lens
             kept = drop_outliers(ids, pts, sc, tight, residuals=curved_residuals)
-        if kept is None and len(ids) >= CURVED_SHARE * cols * rows:  # bent too strongly for that: a fisheye close-up
+        bent = False
+        if kept is None and len(ids) == cols * rows:  # bent too strongly for that (a fisheye close-up): complete only
             kept = drop_outliers(ids, pts, sc, tight, max_residual=BENT_RESIDUAL, residuals=line_residuals)
+            bent = True
         if kept is None:
             continue
         ids, pts, sc = kept
@@ -339,6 +341,8 @@ def partial_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int
             ids, pts, sc = ids[~edge], pts[~edge], sc[~edge]
             if len(ids) < MIN_CORNERS:
                 continue
+        if bent and len(ids) < cols * rows:
+            continue
         if _corners_beyond(ids, pts, pattern_size, propose, size) >= 2:
             continue
         order = np.argsort(ids[:, 1] * cols + ids[:, 0], kind="stable")

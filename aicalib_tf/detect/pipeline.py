@@ -79,6 +79,14 @@ board found there is returned, so is a partial one with more than half the patte
 otherwise partial boards are looked for at full size too, and the one with more corners is
 returned.
 
+Boards close to a fisheye (``pattern_size`` given): when the assembly finds no full board, the
+candidates are assembled again following strongly bending lines (:func:`aicalib_tf.detect.grid.assemble_grids`
+with ``bend``: 3×3 seeds that need not be parallelograms, and no double steps along a line whose
+steps grow across the lens' centre and shrink towards its rim); a full board found so is returned,
+otherwise the search goes on with the first assembly's grids. A partial board completed to the
+whole pattern whose lattice only line interpolation follows (:func:`aicalib_tf.detect.lattice.line_residuals`)
+is returned complete or not at all.
+
 Without ``pattern_size``, the largest grid with every corner found is returned, complete, its
 size taken as the pattern (columns counted along the grid direction nearer the image's x axis,
 so a 9×6 board held landscape is (9, 6) and turned on its side (6, 9)); ids are relative to that
@@ -332,12 +340,10 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     # grow one step past the pattern so that a bigger board shows itself and is rejected
     limit = max(pattern_size) + 1
     grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit, stop=is_board)
+    if board is None and not full_only:  # a board bent strongly (close to a fisheye): a full board or nothing
+        assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit, stop=is_board, bend=True)
     if board is not None or full_only:  # full_only: the quick pass, a full board or nothing
         return Detection(*board, True, (w, h)) if board else replace(empty, reason=NO_MATCH if grids else NO_GRID)
-    if not grids:  # no parallelogram 3×3 block: a board bent strongly by a fisheye close to it, say
-        grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit, stop=is_board, bent=True)
-        if board is not None:
-            return Detection(*board, True, (w, h))
     if not grids:  # no 3×3 block anywhere: strips 2 corners wide (between objects, say)
         grids = assemble_grids(refined, scores, gray=smooth, limit=limit, strips=True)
     look = second_look(grids[0], refined) if second_look is not None and grids else None
