@@ -425,24 +425,16 @@ def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | 
     return True
 
 
-def _bent_seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | None) -> bool:
-    """A 3×3 seed about point ``k`` for a block that is no parallelogram; True (and cells taken) on success.
+def _bent_pairs(steps: np.ndarray, ln: np.ndarray, contrast: np.ndarray | None) -> list[tuple]:
+    """Pairs of seed steps as :func:`_seed` picks them, for :func:`_bent_seed`, in the order tried.
 
-    Close to a fisheye the squares on one side of a corner can be a third smaller than on the
-    other, and a 3×3 block's corners bow out: :func:`_seed`'s parallelogram misses them. Here the
-    steps u and v (to two near points along square edges, as :func:`_seed` picks them) predict the
-    opposite neighbours at −u and −v within ``BENT_SEED_TOLERANCE`` of the shorter step, and each
-    diagonal corner is predicted from the edge neighbours found (p(i, 0) + p(0, j) − p(0, 0)), a
-    parallelogram of one cell, within ``TOLERANCE``. Pairs of steps are tried as :func:`_seed` tries
-    them, with ``BENT_CELL_AREA`` for ``MAX_CELL_AREA``: the smallest cell beside a corner may be
-    the squeezed one.
+    steps : (K, 2) px from the seed point to its near points; ln : (K,) their lengths; contrast : (K,)
+    :func:`edge_contrast` or None. Returns [(span, cos, area, a, b)]: single steps along square
+    edges, not nearly collinear, cells up to ``BENT_CELL_AREA`` times the smallest, spans up to
+    ``MAX_SPAN_RATIO`` times the shortest; shortest span first.
     """
-    pts = lat.pts
-    p0 = pts[k]
-    steps = pts[neighbours] - p0
-    ln = np.sqrt((steps * steps).sum(axis=1))
     keep = []
-    for a in range(len(neighbours)):  # single steps along square edges, as _seed's
+    for a in range(len(steps)):  # single steps along square edges, as _seed's
         if ln[a] < 1.0 or (contrast is not None and contrast[a] < 0.5 * contrast.max()):
             continue
         t = steps @ steps[a] / ln[a] ** 2
@@ -450,23 +442,34 @@ def _bent_seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarr
         if not np.any((t > 0.2) & (t < 0.8) & (off < TOLERANCE * ln)):
             keep.append(a)
     pairs = []
-    for x in range(len(keep)):
-        for y in range(x + 1, len(keep)):
-            a, b = keep[x], keep[y]
-            if not 1 / MAX_STEP_RATIO <= ln[a] / ln[b] <= MAX_STEP_RATIO:
-                continue
+    for x, a in enumerate(keep):
+        for b in keep[x + 1:]:
             cos = abs(steps[a] @ steps[b]) / (ln[a] * ln[b])
-            if cos < 0.95:
+            if 1 / MAX_STEP_RATIO <= ln[a] / ln[b] <= MAX_STEP_RATIO and cos < 0.95:
                 area = abs(steps[a, 0] * steps[b, 1] - steps[a, 1] * steps[b, 0])
                 pairs.append((ln[a] + ln[b], cos, area, a, b))
     if not pairs:
-        return False
+        return []
     amin = min(p[2] for p in pairs)
     pairs = [p for p in pairs if p[2] <= BENT_CELL_AREA * amin]
     smin = min(p[0] for p in pairs)
-    for span, _, _, a, b in sorted(pairs):
-        if span > MAX_SPAN_RATIO * smin:
-            break
+    return [p for p in sorted(pairs) if p[0] <= MAX_SPAN_RATIO * smin]
+
+
+def _bent_seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | None) -> bool:
+    """A 3×3 seed about point ``k`` for a block that is no parallelogram; True (and cells taken) on success.
+
+    Close to a fisheye the squares on one side of a corner can be a third smaller than on the
+    other, and a 3×3 block's corners bow out: :func:`_seed`'s parallelogram misses them. Here the
+    steps u and v (:func:`_bent_pairs`) predict the opposite neighbours at −u and −v within
+    ``BENT_SEED_TOLERANCE`` of the shorter step, and each diagonal corner is predicted from the
+    edge neighbours found (p(i, 0) + p(0, j) − p(0, 0)), a parallelogram of one cell, within
+    ``TOLERANCE``.
+    """
+    p0 = lat.pts[k]
+    steps = lat.pts[neighbours] - p0
+    ln = np.sqrt((steps * steps).sum(axis=1))
+    for _, _, _, a, b in _bent_pairs(steps, ln, contrast):
         u, v = steps[a], steps[b]
         tol = min(ln[a], ln[b])
         got = {(1, 0): int(neighbours[a]), (0, 1): int(neighbours[b])}
@@ -509,11 +512,8 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
         the first grid that is the full board: later seeds could only give other grids, and of
         the grids that are the full board the first assembled was returned anyway. On a photo
         with clutter (a keyboard, a screen), seeds there cost more than the board itself.
-    bend : for a board whose lines bend strongly and whose squares shrink towards a fisheye's rim
-        (a board close to the lens): where :func:`_seed` places no 3×3 block at a point,
-        :func:`_bent_seed` tries, and growth undoes double steps (:func:`_single_steps`).
-        :mod:`aicalib_tf.detect.pipeline` assembles so only where the plain assembly found no full
-        board, and takes a full board from it or nothing.
+    bend : lines bending strongly, squares shrinking towards a fisheye's rim: :func:`_bent_seed`
+        where :func:`_seed` fails, double steps undone (:func:`_single_steps`).
     Returns grids, largest first; they share no point.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)

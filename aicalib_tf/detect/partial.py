@@ -327,10 +327,9 @@ def partial_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int
             kept = drop_outliers(ids[~tight], pts[~tight], sc[~tight])
         if kept is None and len(ids) >= CURVED_SHARE * cols * rows:  # a (nearly) completed board bent by a strong lens
             kept = drop_outliers(ids, pts, sc, tight, residuals=curved_residuals)
-        bent = False
-        if kept is None and len(ids) == cols * rows:  # bent too strongly for that (a fisheye close-up): complete only
+        bent = kept is None and len(ids) == cols * rows  # bent too strongly for that (fisheye close-up): complete only
+        if bent:
             kept = drop_outliers(ids, pts, sc, tight, max_residual=BENT_RESIDUAL, residuals=line_residuals)
-            bent = True
         if kept is None:
             continue
         ids, pts, sc = kept
@@ -341,9 +340,7 @@ def partial_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int
             ids, pts, sc = ids[~edge], pts[~edge], sc[~edge]
             if len(ids) < MIN_CORNERS:
                 continue
-        if bent and len(ids) < cols * rows:
-            continue
-        if _corners_beyond(ids, pts, pattern_size, propose, size) >= 2:
+        if (bent and len(ids) < cols * rows) or _corners_beyond(ids, pts, pattern_size, propose, size) >= 2:
             continue
         order = np.argsort(ids[:, 1] * cols + ids[:, 0], kind="stable")
         ids, pts, sc = ids[order].astype(np.int32), pts[order].astype(np.float32), sc[order].astype(np.float32)
