@@ -6,7 +6,8 @@
 
 Default suite (no download, fixed seeds): data_gen renders of 9×6 boards at 640×480 under the
 named conditions (clean, noise20/40, blur2/3, contrast, shading, jpeg15, saltpepper5, barrel,
-tilt60, small, occluded, partial, board-free clutter) plus clean 1920×1080 images; severity
+fisheye150, fisheye185, fisheye_closeup (boards close to circular 150–200° fisheyes), tilt60, small,
+occluded, partial, board-free clutter) plus clean 1920×1080 images; severity
 sweeps (noise σ 0–60, blur σ 0.5–4 px, contrast, JPEG quality, lens distortion, tilt), each
 level on the same scenes; and 4 calibration sequences (data_gen ``calib``, seed 11: two mild
 lenses, two strong barrel lenses) with known K and distortion. ``--conditions`` takes condition
@@ -41,7 +42,8 @@ before any of them is timed; the detectors and their timings stay in this proces
 time, so the times are those of one detection on an idle machine, whatever N is.
 
 Sizes: the full suite renders 100 images per named condition, 32 per sweep level, 30 at
-1920×1080 and 20 views per calibration sequence; --quick renders 6, 3, 2 and 6; --limit N caps
+1920×1080 and 20 views per calibration sequence; --quick renders 6, 3, 2 and 6 (2 per fisheye
+condition); --limit N caps
 every count at N (calibration views at max(3, N)).
 
 --images DIR --pattern CxR: the user's photos, no ground truth: per image each detector's

@@ -16,7 +16,7 @@ import numpy as np
 
 from aicalib_tf.io import quantize
 
-__all__ = ["gaussian_noise", "shot_noise", "gaussian_blur", "motion_blur", "defocus", "contrast", "illumination_gradient", "vignetting", "shadow", "exposure", "jpeg", "salt_pepper", "apply_degradations", "DEGRADATIONS", "PIPELINE_ORDER"]
+__all__ = ["gaussian_noise", "shot_noise", "gaussian_blur", "motion_blur", "defocus", "contrast", "illumination_gradient", "vignetting", "shadow", "exposure", "jpeg", "salt_pepper", "circle_falloff", "field_blur", "apply_degradations", "DEGRADATIONS", "PIPELINE_ORDER", "CIRCLE_STEPS"]
 
 
 def illumination_gradient(img: np.ndarray, rng: np.random.Generator, *, strength: float) -> np.ndarray:
@@ -36,6 +36,54 @@ def vignetting(img: np.ndarray, rng: np.random.Generator, *, strength: float) ->
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
     r2 = ((xx - (w - 1) / 2.0) ** 2 + (yy - (h - 1) / 2.0) ** 2) / (((w - 1) / 2.0) ** 2 + ((h - 1) / 2.0) ** 2)
     return img * (1.0 - strength * r2).astype(np.float32)
+
+
+def _circle_rho(shape: tuple[int, int], cx: float, cy: float, radius: float) -> np.ndarray:
+    """(H, W) float32: each pixel's distance from (cx, cy) px over ``radius`` px (1 on the circle)."""
+    h, w = shape
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    return (np.hypot(xx - np.float32(cx), yy - np.float32(cy)) / np.float32(max(radius, 1e-6))).astype(np.float32)
+
+
+def circle_falloff(img: np.ndarray, rng: np.random.Generator, *, strength: float, power: float, cx: float,
+                   cy: float, radius: float) -> np.ndarray:
+    """A fisheye's vignetting: light × ``max(0, 1 - strength·ρ^power)``, ρ = distance from the image
+    circle's centre (cx, cy) px over its ``radius`` px; ``strength`` 1 falls to black at the circle.
+
+    The circle comes from the camera (:func:`data_gen.sample.draw_scene` fills it in, see
+    :data:`CIRCLE_STEPS`).
+
+    >>> circle_falloff(np.ones((1, 3), np.float32), None, strength=1.0, power=2.0, cx=0.0, cy=0.0,
+    ...                radius=2.0).round(2).tolist()
+    [[1.0, 0.75, 0.0]]
+    """
+    del rng
+    rho = _circle_rho(img.shape, cx, cy, radius)
+    return (img * np.clip(1.0 - np.float32(strength) * rho ** np.float32(power), 0.0, 1.0)).astype(np.float32)
+
+
+def field_blur(img: np.ndarray, rng: np.random.Generator, *, sigma_centre: float, sigma_rim: float, power: float,
+               cx: float, cy: float, radius: float) -> np.ndarray:
+    """Shallow focus across a fisheye's field: Gaussian blur whose σ (px) grows from ``sigma_centre`` at
+    the image circle's centre (cx, cy) px to ``sigma_rim`` at its ``radius`` px, as ρ^``power``.
+
+    Blends a few uniformly blurred copies pixel by pixel (linear in σ between neighbouring copies).
+    """
+    del rng
+    rho = np.minimum(_circle_rho(img.shape, cx, cy, radius), 1.0)
+    sigma = sigma_centre + (sigma_rim - sigma_centre) * rho ** np.float32(power)
+    levels = np.linspace(min(sigma_centre, sigma_rim), max(sigma_centre, sigma_rim), 6)
+    if levels[-1] - levels[0] < 1e-6:
+        return gaussian_blur(img, None, sigma=float(levels[0]))
+    stack = [gaussian_blur(img, None, sigma=float(s)) for s in levels]
+    pos = np.clip((sigma - levels[0]) / (levels[1] - levels[0]), 0.0, len(levels) - 1.0 - 1e-6)
+    i = pos.astype(np.int32)
+    frac = (pos - i).astype(np.float32)
+    out = np.zeros_like(img, dtype=np.float32)
+    for k in range(len(levels) - 1):
+        m = i == k
+        out[m] = stack[k][m] * (1.0 - frac[m]) + stack[k + 1][m] * frac[m]
+    return out
 
 
 def shadow(img: np.ndarray, rng: np.random.Generator, *, strength: float, softness: float = 1.0) -> np.ndarray:
@@ -146,11 +194,13 @@ def salt_pepper(img: np.ndarray, rng: np.random.Generator, *, fraction: float) -
 DEGRADATIONS = {
     "illumination_gradient": illumination_gradient,
     "vignetting": vignetting,
+    "circle_falloff": circle_falloff,
     "shadow": shadow,
     "contrast": contrast,
     "exposure": exposure,
     "defocus": defocus,
     "gaussian_blur": gaussian_blur,
+    "field_blur": field_blur,
     "motion_blur": motion_blur,
     "shot_noise": shot_noise,
     "gaussian_noise": gaussian_noise,
@@ -160,6 +210,8 @@ DEGRADATIONS = {
 
 # Scene light, then lens, then sensor, then encoding and transmission.
 PIPELINE_ORDER = tuple(DEGRADATIONS)
+# Steps that follow a fisheye's image circle: the scene gives them ``cx``, ``cy`` and ``radius`` (px).
+CIRCLE_STEPS = ("circle_falloff", "field_blur")
 
 
 def apply_degradations(img: np.ndarray, steps: list[dict], rng: np.random.Generator) -> np.ndarray:

@@ -17,7 +17,7 @@ from aicalib_tf.geometry.pose import in_frame, project_points
 
 from .board import Board
 
-__all__ = ["PoseConfig", "sample_pose", "corner_visibility", "imaged_mask", "FRAMING"]
+__all__ = ["PoseConfig", "sample_pose", "corner_visibility", "imaged_mask", "paper_circle_fill", "FRAMING"]
 
 FRAMING = ("inside", "partial", "any")
 
@@ -31,6 +31,10 @@ class PoseConfig:
     framing : "inside" (whole paper in frame), "partial" (some inner corners cut by the frame,
         at least ``min_visible_fraction`` of them in frame) or "any".
     max_view_angle_deg : largest angle between the board normal and any line of sight.
+    circle_fill : for a fisheye, None or the range of :func:`paper_circle_fill` (the paper's
+        extent in the image over the image circle's diameter); when set it replaces ``fill``, the
+        distance is solved to give a drawn value exactly, and the board is aimed so that it may
+        reach the rim.
     """
 
     tilt_max_deg: float = 60.0
@@ -39,6 +43,7 @@ class PoseConfig:
     min_visible_fraction: float = 0.3
     max_view_angle_deg: float = 80.0
     roll_deg: tuple[float, float] = (0.0, 360.0)
+    circle_fill: tuple[float, float] | None = None
 
     def __post_init__(self):
         if self.framing not in FRAMING:
@@ -85,6 +90,50 @@ def _paper_outline(board: Board, fisheye: bool) -> np.ndarray:
     return np.concatenate([corners] + edges)
 
 
+def paper_circle_fill(board: Board, R: np.ndarray, t: np.ndarray, camera: Camera) -> float:
+    """How much of a fisheye's image circle the paper fills: the largest distance (px) between two
+    projected points of its outline (4 corners and 7 points along each edge) over the circle's
+    diameter (px, ``2·circle_radius·sqrt(fx·fy)``). R : (3, 3), t : (3,) board -> camera.
+    NaN where an outline point is not imaged (behind the lens or beyond its circle)."""
+    paper = _paper_outline(board, True)
+    cam_pts = paper @ np.asarray(R, dtype=np.float64).T + np.asarray(t, dtype=np.float64).ravel()
+    if not np.all(camera.imaged(cam_pts)):
+        return float("nan")
+    px = camera.project(cam_pts)
+    extent = float(np.max(np.linalg.norm(px[:, None, :] - px[None, :, :], axis=2)))
+    return extent / (2.0 * camera.circle_radius() * math.sqrt(camera.fx * camera.fy))
+
+
+def _distance_for_fill(board: Board, R: np.ndarray, centre_ray: np.ndarray, camera: Camera, fill: float) -> float | None:
+    """Range (board units) along the unit ``centre_ray`` at which the paper's centre gives
+    :func:`paper_circle_fill` = ``fill`` (bisection on the log of the range); None if no range does."""
+    def fill_at(z: float) -> float:
+        return paper_circle_fill(board, R, z * centre_ray - R @ board.centre(), camera)
+
+    x0, y0, x1, y1 = board.paper_bounds()
+    diag = math.hypot(x1 - x0, y1 - y0)
+    near, far = 0.05 * diag, 50.0 * diag
+    if not fill_at(far) < fill:
+        return None
+    # the near end: the closest range whose whole outline is still imaged
+    for _ in range(40):
+        if np.isfinite(fill_at(near)):
+            break
+        near *= 1.25
+    else:
+        return None
+    if not fill_at(near) > fill:
+        return None
+    for _ in range(40):
+        mid = math.sqrt(near * far)
+        f = fill_at(mid)
+        if not np.isfinite(f) or f > fill:
+            near = mid
+        else:
+            far = mid
+    return far
+
+
 def _acceptable(camera: Camera, board: Board, R: np.ndarray, t: np.ndarray, cfg: PoseConfig) -> bool:
     paper = _paper_outline(board, camera.fisheye)
     paper_cam = paper @ R.T + t
@@ -99,6 +148,10 @@ def _acceptable(camera: Camera, board: Board, R: np.ndarray, t: np.ndarray, cfg:
     if np.any(cosang < math.cos(math.radians(cfg.max_view_angle_deg))):
         return False
     rvec = cv2.Rodrigues(R)[0]
+    if cfg.circle_fill is not None and camera.fisheye:
+        f = paper_circle_fill(board, R, t, camera)
+        if not cfg.circle_fill[0] - 1e-6 <= f <= cfg.circle_fill[1] + 1e-6:
+            return False
     if cfg.framing == "inside":
         if not np.all(imaged_mask(paper_cam, camera)):
             return False
@@ -133,6 +186,11 @@ def sample_pose(
         tilt_axis = rng.uniform(0.0, 2.0 * math.pi)
         roll = math.radians(rng.uniform(*cfg.roll_deg))
         R = _rotation(tilt, tilt_axis, roll)
+        if cfg.circle_fill is not None and camera.fisheye:
+            R, t = _close_up(rng, camera, board, R, cfg.circle_fill)
+            if t is not None and _acceptable(camera, board, R, t, cfg):
+                return cv2.Rodrigues(R)[0].ravel(), t
+            continue
         if camera.fisheye:
             target = _fisheye_target(rng, camera, cfg.framing == "partial")
         elif cfg.framing == "partial":
@@ -153,6 +211,31 @@ def sample_pose(
         f"no acceptable pose for a {board.cols}x{board.rows} board with framing={cfg.framing!r} "
         f"after {max_tries} tries; widen PoseConfig.fill or tilt"
     )
+
+
+def _close_up(rng: np.random.Generator, camera: Camera, board: Board, R: np.ndarray,
+              circle_fill: tuple[float, float]) -> tuple[np.ndarray, np.ndarray | None]:
+    """(R (3, 3), t (3,) or None) for a board held close to a fisheye, filling a drawn fraction of
+    its image circle (:func:`paper_circle_fill`). Its centre is aimed at a pixel up to ``1 - fill``
+    of the circle's radius from the circle's centre (so its far side may reach the rim), and it
+    faces that line of sight as a person holding it towards the lens does: ``R`` (roll and tilt
+    about the optical axis) is turned so that its tilt is measured from the line of sight. t is
+    None when no range gives that fill."""
+    fill = rng.uniform(*circle_fill)
+    a = rng.uniform(0.0, 2.0 * math.pi)
+    s = (1.0 - fill) * math.sqrt(rng.uniform())
+    rho = camera.circle_radius()
+    uv = np.array([camera.cx + s * rho * camera.fx * math.cos(a), camera.cy + s * rho * camera.fy * math.sin(a)])
+    ray = camera.pixel_to_ray(uv)
+    if not np.all(np.isfinite(ray)):
+        return R, None
+    ray = ray / np.linalg.norm(ray)
+    axis = np.cross([0.0, 0.0, 1.0], ray)
+    angle = math.atan2(float(np.linalg.norm(axis)), float(ray[2]))
+    if angle > 1e-9:
+        R = cv2.Rodrigues(axis / np.linalg.norm(axis) * angle)[0] @ R
+    z = _distance_for_fill(board, R, ray, camera, fill)
+    return R, None if z is None else z * ray - R @ board.centre()
 
 
 def _fisheye_target(rng: np.random.Generator, camera: Camera, partial: bool) -> np.ndarray:

@@ -38,7 +38,9 @@ class Preset:
     lens : "pinhole" (OpenCV's 5 coefficients; ``hfov_deg`` and ``distortion`` apply) or
     "fisheye" (equidistant Kannala–Brandt with full FOV from ``fisheye_fov_deg``, see
     :func:`data_gen.camera.sample_fisheye`), "ds" or "eucm" (Double Sphere or Extended Unified
-    with full FOV from ``fisheye_fov_deg``, :func:`data_gen.camera.sample_unified_fisheye`).
+    with full FOV from ``fisheye_fov_deg``, :func:`data_gen.camera.sample_unified_fisheye`), or a
+    tuple of these names, one drawn per camera. ``fisheye_circular_from_deg``: fisheyes of at least
+    this FOV are circular (the whole image circle inside the frame), narrower ones full frame.
     board : None (chessboards, sized by ``pattern`` or the ranges) or a ChArUco description,
     ``charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100`` (:mod:`aicalib_tf.geometry.charuco`).
     """
@@ -60,13 +62,15 @@ class Preset:
     occlusion_severity: tuple[float, float] = (0.1, 0.3)
     rules: tuple[Rule, ...] = ()
     views_per_camera: int = 1
-    lens: str = "pinhole"
+    lens: str | tuple[str, ...] = "pinhole"
     fisheye_fov_deg: tuple[float, float] = (150.0, 200.0)
     board: str | None = None
+    fisheye_circular_from_deg: float = 175.0
 
     def __post_init__(self):
-        if self.lens not in LENSES:
-            raise ValueError(f"preset {self.name!r}: lens must be one of {LENSES}, got {self.lens!r}")
+        lenses = (self.lens,) if isinstance(self.lens, str) else tuple(self.lens)
+        if not lenses or any(ln not in LENSES for ln in lenses):
+            raise ValueError(f"preset {self.name!r}: lens must be one of {LENSES} or a tuple of them, got {self.lens!r}")
         if self.board is not None:
             from aicalib_tf.geometry.charuco import parse_board
 
@@ -226,6 +230,24 @@ _add(Preset(
     pose=PoseConfig(tilt_max_deg=50.0, fill=(0.25, 0.6)),
     rules=(_OPTICS, Rule.of("gaussian_noise", sigma=2.0)),
     views_per_camera=20,
+))
+_CLOSEUP_LENSES = ("fisheye", "fisheye", "ds", "eucm")  # half equidistant (Kannala–Brandt), half unified
+_add(Preset(
+    name="fisheye_closeup",
+    description="Close-up boards through circular 150–200° fisheyes (equidistant, DS, EUCM): the paper spans "
+                "40–90% of the image circle, up to its rim, lines bend strongly; vignetting falls to black at "
+                "the circle and the blur grows towards it (shallow focus).",
+    sizes=((640, 480), (1280, 960)),
+    lens=_CLOSEUP_LENSES,
+    fisheye_fov_deg=(150.0, 200.0),
+    fisheye_circular_from_deg=0.0,
+    pose=PoseConfig(tilt_max_deg=45.0, circle_fill=(0.4, 0.9), max_view_angle_deg=85.0),
+    clutter=(0.0, 1.0),
+    rules=(
+        Rule.of("circle_falloff", strength=(0.85, 1.0), power=(2.0, 5.0)),
+        Rule.of("field_blur", sigma_centre=(0.5, 0.9), sigma_rim=(1.2, 2.5), power=(1.5, 3.0)),
+        Rule.of("gaussian_noise", sigma=2.0),
+    ),
 ))
 
 

@@ -9,6 +9,7 @@ image depends only on (preset, seed, index, size, pattern): the same on any work
 from __future__ import annotations
 
 import copy
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -19,7 +20,7 @@ from .background import make_background
 from .board import Board, sample_board
 from .camera import UNIFIED_MODELS, sample_camera, sample_fisheye, sample_unified_fisheye
 from .charuco import CharucoTarget, marker_truth, sample_charuco
-from .degrade import apply_degradations
+from .degrade import CIRCLE_STEPS, apply_degradations
 from .occlude import draw_occluders, occluded, sample_occluders
 from .pose import corner_visibility, sample_pose
 from .presets import INT_PARAMS, Preset, Rule, get_preset
@@ -77,10 +78,14 @@ def scene_for(preset: Preset, seed: int, camera_id: int, size=None, pattern=None
     rng = np.random.default_rng([seed, camera_id, 0])
     if size is None:
         size = preset.sizes[int(rng.integers(len(preset.sizes)))]
-    if preset.lens == "fisheye":
-        cam = sample_fisheye(rng, size, fov_deg=preset.fisheye_fov_deg)
-    elif preset.lens in UNIFIED_MODELS:
-        cam = sample_unified_fisheye(rng, size, preset.lens, fov_deg=preset.fisheye_fov_deg)
+    lens = preset.lens
+    if not isinstance(lens, str):  # one lens family per camera (a preset with one family draws nothing here)
+        lens = lens[int(rng.integers(len(lens)))]
+    circular = preset.fisheye_circular_from_deg
+    if lens == "fisheye":
+        cam = sample_fisheye(rng, size, fov_deg=preset.fisheye_fov_deg, circular_from_deg=circular)
+    elif lens in UNIFIED_MODELS:
+        cam = sample_unified_fisheye(rng, size, lens, fov_deg=preset.fisheye_fov_deg, circular_from_deg=circular)
     else:
         cam = sample_camera(rng, size, hfov_deg=preset.hfov_deg, distortion=preset.distortion)
     if preset.board is not None:  # a ChArUco board: its squares are fixed, only the paper is drawn
@@ -94,6 +99,15 @@ def scene_for(preset: Preset, seed: int, camera_id: int, size=None, pattern=None
         rows_range=preset.rows_range,
     )
     return cam, board
+
+
+def _circle_px(cam: Camera) -> dict:
+    """The image circle in px: {"cx", "cy", "radius"}; for a lens without one, the frame's centre and
+    half its diagonal."""
+    w, h = cam.image_size
+    if not cam.fisheye:
+        return {"cx": (w - 1) / 2.0, "cy": (h - 1) / 2.0, "radius": math.hypot(w, h) / 2.0}
+    return {"cx": float(cam.cx), "cy": float(cam.cy), "radius": float(cam.circle_radius() * math.sqrt(cam.fx * cam.fy))}
 
 
 def _occluders_leaving_corners(rng, corners, visible, p: Preset, tries: int = 10) -> list[np.ndarray]:
@@ -189,6 +203,9 @@ def draw_scene(
             levels = [float(rng.uniform(0.05, 0.95)) for _ in polys]
             visible &= ~occluded(corners, polys)
     steps = draw_steps(p.rules, rng)
+    for step in steps:
+        if step["name"] in CIRCLE_STEPS:  # these follow the lens' image circle (the frame's centre for a pinhole)
+            step.update(_circle_px(cam))
     return Scene(p, cam, board, background, has_board, framing, rvec, tvec, polys, levels, corners, visible,
                  steps, rng)  # render() copies rng before each use
 

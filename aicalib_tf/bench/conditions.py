@@ -23,7 +23,7 @@ from data_gen.presets import Preset, Rule, get_preset
 from data_gen.sample import Sample, make_sample
 
 __all__ = [
-    "PATTERN", "Condition", "named_conditions", "sweep_conditions", "all_conditions", "select_conditions",
+    "PATTERN", "is_fisheye", "Condition", "named_conditions", "sweep_conditions", "all_conditions", "select_conditions",
     "condition_samples", "calibration_sequences", "board_tilt_deg", "square_px", "CALIB_SEED", "CALIB_CAMERAS",
     "FISHEYE_SEQUENCES", "fisheye_preset",
 ]
@@ -85,6 +85,12 @@ def fisheye_preset(fov_deg: float, base: str = "fisheye", **overrides) -> Preset
     return replace(get_preset(base), **{**fields, **overrides})
 
 
+def is_fisheye(preset: Preset) -> bool:
+    """True when the preset's cameras are fisheyes (equidistant, ds, eucm, or a mix of them)."""
+    lenses = (preset.lens,) if isinstance(preset.lens, str) else tuple(preset.lens)
+    return all(ln != "pinhole" for ln in lenses)
+
+
 def named_conditions() -> list[Condition]:
     """The detection issue's conditions at 640×480 (plus one 1920×1080 set), 9×6 boards."""
     wide = dict(hfov_deg=(90.0, 120.0), distortion=("strong",))
@@ -114,6 +120,10 @@ def named_conditions() -> list[Condition]:
         Condition("fisheye150", fisheye_preset(150.0), description="full-frame fisheye, 150° diagonal (equidistant)"),
         Condition("fisheye185", fisheye_preset(185.0),
                   description="circular fisheye, 185°: the image circle inside the frame, dark outside it"),
+        Condition("fisheye_closeup", replace(get_preset("fisheye_closeup"), sizes=(VGA,)),
+                  description="close-up boards through circular 150–200° fisheyes (equidistant, DS, EUCM): "
+                              "the paper spans 40–90% of the image circle, vignetting to black at the rim, "
+                              "blur growing towards it"),
         Condition("tilt60", _clean_with((_OPTICS, _READ_NOISE), "tilt60", pose=PoseConfig(tilt_max_deg=62.0, fill=(0.4, 0.9))),
                   min_tilt_deg=50.0, description="steep tilt: 50–62° between board normal and optical axis"),
         Condition("small", _clean_with((_OPTICS, _READ_NOISE), "small", pose=PoseConfig(tilt_max_deg=30.0, fill=(0.12, 0.16))),

@@ -20,6 +20,7 @@ from aicalib_tf.bench.conditions import (
     board_tilt_deg,
     calibration_sequences,
     condition_samples,
+    is_fisheye,
     select_conditions,
     square_px,
 )
@@ -96,7 +97,7 @@ def run_synthetic(conditions: list[Condition], detectors: dict, counts: dict, *,
     from tqdm import tqdm
 
     def n_for(c: Condition) -> int:
-        if c.preset.lens == "fisheye":
+        if is_fisheye(c.preset):
             return counts.get("fisheye", counts["named"])
         return counts["sweep"] if c.sweep else counts["hd"] if c.size[0] > 1000 else counts["named"]
 

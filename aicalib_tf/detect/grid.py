@@ -35,6 +35,9 @@ TOLERANCE = 0.3  # of the local step: how far a predicted corner may be from the
 MAX_STEP_RATIO = 4.5  # a seed's two steps may differ in length this much (a board tilted 60°+ halves one)
 MAX_CELL_AREA = 1.5  # seed pairs spanning more than this of the smallest cell generate a sub-lattice
 MAX_SPAN_RATIO = 1.15  # seed pairs longer than this times the shortest (|u| + |v|) are not tried
+BENT_SEED_TOLERANCE = 0.45  # of the shorter step: a bent seed's opposite neighbours (see _bent_seed)
+BENT_CELL_AREA = 2.0  # MAX_CELL_AREA of bent seeds: beside a fisheye's centre, cells next to each other differ this much
+DOUBLE_STEP_REACH = 1.7  # tolerances from a prediction within which a skipped corner is taken instead
 
 
 @dataclass(frozen=True)
@@ -99,8 +102,9 @@ class _Lattice:
     limit : the largest extent (number of i or j positions) a grid may reach.
     """
 
-    def __init__(self, pts: np.ndarray, free: np.ndarray, propose=None, limit: int | None = None):
+    def __init__(self, pts: np.ndarray, free: np.ndarray, propose=None, limit: int | None = None, bend: bool = False):
         self.pts, self.free, self.n0 = pts, free, len(pts)
+        self.bend = bend  # lines that bend strongly (assemble_grids' ``bend``)
         self.cells: dict[tuple[int, int], int] = {}
         self.at: dict[tuple[int, int], np.ndarray] = {}  # the cells' points: (2,) float64 px
         self.coords: tuple[set, set] = (set(), set())  # the i and the j positions taken
@@ -237,6 +241,8 @@ def _grow_side(lat: _Lattice, axis: int, sign: int, whole: bool = False) -> bool
         return False
     cells, preds, tols = side
     found = lat.find(preds, tols, allow_propose=lat.limit is not None and not whole)
+    if lat.bend:
+        found = _single_steps(lat, axis, sign, cells, preds, tols, found)
     hits = [(c, k) for c, k in zip(cells, found) if k >= 0]
     if whole and len(hits) < len(cells):
         return False
@@ -245,6 +251,44 @@ def _grow_side(lat: _Lattice, axis: int, sign: int, whole: bool = False) -> bool
     for c, k in hits:
         lat.take(c, k)
     return True
+
+
+def _single_steps(lat: _Lattice, axis: int, sign: int, cells: list, preds: np.ndarray, tols: np.ndarray,
+                  found: np.ndarray) -> np.ndarray:
+    """``found`` (M,) with double steps undone: a grid line's next corner is its neighbour, with no
+    corner between them.
+
+    Where a line's steps first grow and then shrink (a close-up board across a fisheye's centre,
+    its far side squeezed towards the rim), the extrapolated step overshoots and the corner two
+    steps on can lie nearer the prediction than the next one. A point found with a free candidate
+    part-way along the step to it (20–80% of the way, within ``TOLERANCE`` of that part-step of
+    the line) takes that candidate instead when it lies within ``DOUBLE_STEP_REACH`` tolerances of
+    the prediction, and is dropped otherwise.
+    """
+    out = found.copy()
+    n0 = lat.n0
+    for m, (cell, k) in enumerate(zip(cells, found)):
+        if k < 0:
+            continue
+        back = (cell[0] - sign, cell[1]) if axis == 0 else (cell[0], cell[1] - sign)
+        p1 = lat.at[back]
+        d = lat.point(int(k)) - p1
+        l2 = float(d.dot(d))
+        if l2 < 1e-12:
+            continue
+        rel = lat.pts - p1
+        t = (rel @ d) / l2
+        off = np.abs(rel[:, 0] * d[1] - rel[:, 1] * d[0]) / np.sqrt(l2)
+        between = (t > 0.2) & (t < 0.8) & (off < TOLERANCE * np.sqrt((rel * rel).sum(axis=1)))
+        if k < n0:
+            between[k] = False
+        idx = np.flatnonzero(between)
+        if len(idx) == 0:
+            continue
+        near = idx[np.argmin(((lat.pts[idx] - preds[m]) ** 2).sum(axis=1))]
+        ok = lat.free[near] and _norm(lat.pts[near] - preds[m]) <= DOUBLE_STEP_REACH * tols[m]
+        out[m] = near if ok else -1
+    return out
 
 
 def _grow(lat: _Lattice) -> None:
@@ -381,9 +425,76 @@ def _seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | 
     return True
 
 
+def _bent_pairs(steps: np.ndarray, ln: np.ndarray, contrast: np.ndarray | None) -> list[tuple]:
+    """Pairs of seed steps as :func:`_seed` picks them, for :func:`_bent_seed`, in the order tried.
+
+    steps : (K, 2) px from the seed point to its near points; ln : (K,) their lengths; contrast : (K,)
+    :func:`edge_contrast` or None. Returns [(span, cos, area, a, b)]: single steps along square
+    edges, not nearly collinear, cells up to ``BENT_CELL_AREA`` times the smallest, spans up to
+    ``MAX_SPAN_RATIO`` times the shortest; shortest span first.
+    """
+    keep = []
+    for a in range(len(steps)):  # single steps along square edges, as _seed's
+        if ln[a] < 1.0 or (contrast is not None and contrast[a] < 0.5 * contrast.max()):
+            continue
+        t = steps @ steps[a] / ln[a] ** 2
+        off = np.abs(steps[a, 0] * steps[:, 1] - steps[a, 1] * steps[:, 0]) / ln[a]
+        if not np.any((t > 0.2) & (t < 0.8) & (off < TOLERANCE * ln)):
+            keep.append(a)
+    pairs = []
+    for x, a in enumerate(keep):
+        for b in keep[x + 1:]:
+            cos = abs(steps[a] @ steps[b]) / (ln[a] * ln[b])
+            if 1 / MAX_STEP_RATIO <= ln[a] / ln[b] <= MAX_STEP_RATIO and cos < 0.95:
+                area = abs(steps[a, 0] * steps[b, 1] - steps[a, 1] * steps[b, 0])
+                pairs.append((ln[a] + ln[b], cos, area, a, b))
+    if not pairs:
+        return []
+    amin = min(p[2] for p in pairs)
+    pairs = [p for p in pairs if p[2] <= BENT_CELL_AREA * amin]
+    smin = min(p[0] for p in pairs)
+    return [p for p in sorted(pairs) if p[0] <= MAX_SPAN_RATIO * smin]
+
+
+def _bent_seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarray | None) -> bool:
+    """A 3×3 seed about point ``k`` for a block that is no parallelogram; True (and cells taken) on success.
+
+    Close to a fisheye the squares on one side of a corner can be a third smaller than on the
+    other, and a 3×3 block's corners bow out: :func:`_seed`'s parallelogram misses them. Here the
+    steps u and v (:func:`_bent_pairs`) predict the opposite neighbours at −u and −v within
+    ``BENT_SEED_TOLERANCE`` of the shorter step, and each diagonal corner is predicted from the
+    edge neighbours found (p(i, 0) + p(0, j) − p(0, 0)), a parallelogram of one cell, within
+    ``TOLERANCE``.
+    """
+    p0 = lat.pts[k]
+    steps = lat.pts[neighbours] - p0
+    ln = np.sqrt((steps * steps).sum(axis=1))
+    for _, _, _, a, b in _bent_pairs(steps, ln, contrast):
+        u, v = steps[a], steps[b]
+        tol = min(ln[a], ln[b])
+        got = {(1, 0): int(neighbours[a]), (0, 1): int(neighbours[b])}
+        opp = lat.find(np.array([p0 - u, p0 - v]), np.full(2, BENT_SEED_TOLERANCE * tol), allow_propose=False)
+        if np.any(opp < 0):
+            continue
+        got[(-1, 0)], got[(0, -1)] = int(opp[0]), int(opp[1])
+        diag = [(i, j) for i in (-1, 1) for j in (-1, 1)]
+        preds = np.array([lat.point(got[(i, 0)]) + lat.point(got[(0, j)]) - p0 for i, j in diag])
+        found = lat.find(preds, np.full(4, TOLERANCE * tol), allow_propose=False)
+        if np.any(found < 0):
+            continue
+        got.update({c: int(q) for c, q in zip(diag, found)})
+        if len(set(got.values()) | {k}) < 9:
+            continue
+        lat.take((0, 0), k)
+        for cell, q in got.items():
+            lat.take(cell, q)
+        return True
+    return False
+
+
 def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray: np.ndarray | None = None,
                    min_size: int = MIN_CORNERS, neighbours: int = 12, propose=None, limit: int | None = None,
-                   strips: bool = False, stop=None) -> list[Grid]:
+                   strips: bool = False, stop=None, bend: bool = False) -> list[Grid]:
     """Find lattices among candidate corner points.
 
     points : (N, 2) float (x, y) px. scores : (N,) or None; seeds are tried strongest first.
@@ -401,6 +512,8 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
         the first grid that is the full board: later seeds could only give other grids, and of
         the grids that are the full board the first assembled was returned anyway. On a photo
         with clutter (a keyboard, a screen), seeds there cost more than the board itself.
+    bend : lines bending strongly, squares shrinking towards a fisheye's rim: :func:`_bent_seed`
+        where :func:`_seed` fails, double steps undone (:func:`_single_steps`).
     Returns grids, largest first; they share no point.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
@@ -420,8 +533,9 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
     for k in order:
         if not free[k]:
             continue
-        lat = _Lattice(pts, free, propose, limit)
-        if not _seed(lat, int(k), near[k], None if contrast is None else contrast[k], strips):
+        lat = _Lattice(pts, free, propose, limit, bend)
+        edges = None if contrast is None else contrast[k]
+        if not (_seed(lat, int(k), near[k], edges, strips) or (bend and _bent_seed(lat, int(k), near[k], edges))):
             continue
         _grow(lat)
         _fill_holes(lat)

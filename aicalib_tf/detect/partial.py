@@ -24,6 +24,7 @@ from aicalib_tf.detect.lattice import (
     curved_residuals,
     drop_outliers,
     in_view,
+    line_residuals,
     local_step,
     predict_ids,
 )
@@ -33,6 +34,9 @@ __all__ = ["partial_board", "relative_board"]
 MATCH_STEP = 0.3  # of a step: how far a corner found may lie from where the lattice predicts it
 
 
+# of a step, with line_residuals: their own miss on true fisheye close-up corners reaches 0.15 (a wrong
+# corner, a neighbour's, is half a step or more off)
+BENT_RESIDUAL = 0.2
 CURVED_SHARE = 0.9  # of the pattern's corners: a board this complete may be bent by its lens (curved_residuals)
 EDGE_WINDOW = 0.7  # of its refinement window's radius: how far a partial board's corner must be from the frame
 LONE_SHIFT = 0.1  # of a step: how near its prediction a line's lone corner must be when its ring test leaves the frame
@@ -323,6 +327,9 @@ def partial_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int
             kept = drop_outliers(ids[~tight], pts[~tight], sc[~tight])
         if kept is None and len(ids) >= CURVED_SHARE * cols * rows:  # a (nearly) completed board bent by a strong lens
             kept = drop_outliers(ids, pts, sc, tight, residuals=curved_residuals)
+        bent = kept is None and len(ids) == cols * rows  # bent too strongly for that (fisheye close-up): complete only
+        if bent:
+            kept = drop_outliers(ids, pts, sc, tight, max_residual=BENT_RESIDUAL, residuals=line_residuals)
         if kept is None:
             continue
         ids, pts, sc = kept
@@ -333,7 +340,7 @@ def partial_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int
             ids, pts, sc = ids[~edge], pts[~edge], sc[~edge]
             if len(ids) < MIN_CORNERS:
                 continue
-        if _corners_beyond(ids, pts, pattern_size, propose, size) >= 2:
+        if (bent and len(ids) < cols * rows) or _corners_beyond(ids, pts, pattern_size, propose, size) >= 2:
             continue
         order = np.argsort(ids[:, 1] * cols + ids[:, 0], kind="stable")
         ids, pts, sc = ids[order].astype(np.int32), pts[order].astype(np.float32), sc[order].astype(np.float32)

@@ -77,7 +77,8 @@ board but assembles a grid with corners under 6 px apart, the region the board c
 enlarged 3× (at most 240,000 px enlarged) and searched again (:mod:`aicalib_tf.detect.zoom`). A complete
 board found there is returned, so is a partial one with more than half the pattern's corners;
 otherwise partial boards are looked for at full size too, and the one with more corners is
-returned.
+returned. Boards close to a fisheye: with no full board assembled, the candidates are assembled again
+with ``bend`` (:func:`aicalib_tf.detect.grid.assemble_grids`); only a full board from it counts.
 
 Without ``pattern_size``, the largest grid with every corner found is returned, complete, its
 size taken as the pattern (columns counted along the grid direction nearer the image's x axis,
@@ -295,9 +296,9 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
 
     second_look : None, or ``look(grid, candidates) -> Detection | None``, asked with the largest
     grid and the candidate points when no full board is found (:func:`_zoomed`, at full size). Its
-    board is returned when complete or with more than half the pattern's corners (the partial
-    search here is the costly part of a thin board's time); else the one with more corners of it and
-    this scale's partial board. partial_above : partial boards are only looked for when the largest
+    board is returned when complete or with more than half the pattern's corners (the partial search
+    here is the costly part of a thin board's time); else the larger of it and this scale's partial
+    board. partial_above : partial boards are only looked for when the largest
     grid has more corners than this. relative : as :func:`detect_corners`. full_only : a full board or nothing.
     """
     h, w = gray.shape
@@ -312,8 +313,7 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     smooth = smoothed.sigma(1.0)
     propose = None
     if len(refined) >= MIN_CORNERS:
-        spacing = nearest_spacing(refined)
-        amp, _ = ring_symmetry(smooth, refined.astype(np.float64), 0.3 * spacing)
+        amp, _ = ring_symmetry(smooth, refined.astype(np.float64), 0.3 * nearest_spacing(refined))
         propose = proposer(smoothed, smooth, float(np.median(amp[: max(MIN_CORNERS, len(amp) // 2)])))
     if pattern_size is None:
         grids = _own_grids(assemble_grids(refined, scores, gray=smooth, propose=propose))
@@ -332,6 +332,8 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     # grow one step past the pattern so that a bigger board shows itself and is rejected
     limit = max(pattern_size) + 1
     grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit, stop=is_board)
+    if board is None and not full_only:  # bent strongly (close to a fisheye): a full board or nothing
+        assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit, stop=is_board, bend=True)
     if board is not None or full_only:  # full_only: the quick pass, a full board or nothing
         return Detection(*board, True, (w, h)) if board else replace(empty, reason=NO_MATCH if grids else NO_GRID)
     if not grids:  # no 3×3 block anywhere: strips 2 corners wide (between objects, say)

@@ -406,3 +406,17 @@ def test_strip_seeds_only_where_no_3x3_seed_started_a_grid(model):
     # another, so it is not placed. Seeded again by 3×2 blocks, its points gave a sheared lattice
     # (steps of one column and of two columns plus a row) that was placed with 10 wrong ids
     _no_wrong_ids(model, "partial", 21, 66)
+
+
+@pytest.mark.parametrize("index", [27, 29])
+def test_close_up_fisheye_boards_whose_lines_bend_are_found(model, index):
+    # the benchmark's fisheye_closeup images 27 (no 3×3 block is a parallelogram) and 29 (a line's
+    # steps grow across the lens' centre, then shrink towards the rim)
+    from aicalib_tf.bench.conditions import named_conditions
+
+    cond = next(c for c in named_conditions() if c.name == "fisheye_closeup")
+    s = make_sample(cond.preset, cond.seed, index, size=cond.size, pattern=(9, 6))
+    det = detect_corners(s.image, (9, 6), model=model)
+    assert det.complete
+    err = min(np.abs(det.corners - t).max() for t in (s.corners, s.corners[::-1]))
+    assert err < 0.5
