@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 
 from aicalib_tf.detect.lattice import MAX_RESIDUAL, curved_residuals, lattice_residuals, predict_ids
-from aicalib_tf.detect.refine import Smoothed, refine_windowed
+from aicalib_tf.detect.refine import Smoothed, refine_windowed, window_radius
 
 __all__ = ["SAME_PLACE_PX", "MAX_SHIFT_MARGIN", "merge_same_board", "complete_from_markers", "square_corners", "polish"]
 
@@ -161,7 +161,10 @@ def complete_from_markers(gray: np.ndarray, det, read):
 def polish(gray: np.ndarray, det, max_move: float = 1.5):
     """det with each corner refined again from its place, the window 0.8 of the white margin beside
     it (from the nearest of det's markers; 2 px at least); a corner whose fit fails or moves more than
-    ``max_move`` px keeps its place. gray : (H, W) float32."""
+    ``max_move`` px keeps its place, and one whose window leaves the image goes where the corners
+    inside predict it (:func:`aicalib_tf.detect.charuco_grow.place_edge_corners`). gray : (H, W) float32."""
+    from aicalib_tf.detect.charuco_grow import place_edge_corners
+
     if not len(det.corners):
         return det
     pts = det.corners.astype(np.float64)
@@ -174,7 +177,8 @@ def polish(gray: np.ndarray, det, max_move: float = 1.5):
         radius = np.maximum(0.8 * side[near] * ratio, 2.0)
     got, ok = refine_windowed(Smoothed(gray), pts, radius / 0.45, max_shift=np.full(len(pts), max_move),
                               shadow_gate=lambda idx, saddles: np.zeros(len(idx), bool))
-    return _on_lattice(replace(det, corners=np.where(ok[:, None], got, pts).astype(np.float32)))
+    det = replace(det, corners=np.where(ok[:, None], got, pts).astype(np.float32))
+    return _on_lattice(place_edge_corners(det, window_radius(radius / 0.45)))
 
 
 def _on_lattice(det):

@@ -222,6 +222,31 @@ def square_contrast(img: np.ndarray, board, ids: np.ndarray, pts: np.ndarray, st
     return out
 
 
+def at_frame_edge(pts: np.ndarray, size: tuple[int, int], radius: np.ndarray) -> np.ndarray:
+    """(N,) bool: the fit window of half-size ``radius`` (N,) px about points (N, 2) px leaves the
+    image of size (w, h): its samples there would be the edge pixels repeated."""
+    w, h = size
+    pts = np.asarray(pts, np.float64).reshape(-1, 2)
+    return (pts[:, 0] < radius) | (pts[:, 0] > w - 1 - radius) | (pts[:, 1] < radius) | (pts[:, 1] > h - 1 - radius)
+
+
+def place_edge_corners(det, radius: np.ndarray):
+    """det with each corner whose fit window leaves the image (:func:`at_frame_edge`, window
+    half-size ``radius`` (N,) px) put where the corners whose windows are inside predict it (a
+    fit on edge pixels repeated is pulled by up to a pixel; the prediction from the lattice inside is
+    within a tenth of one on rendered views). Corners with fewer than 4 such corners to predict
+    them keep their place."""
+    edge = at_frame_edge(det.corners, det.image_size, np.asarray(radius, np.float64))
+    if not edge.any() or (~edge).sum() < 4:
+        return det
+    ids = det.ids.astype(np.float64)
+    at = predict_ids(ids[~edge], det.corners[~edge].astype(np.float64), ids[edge])
+    corners = det.corners.copy()
+    good = np.isfinite(at).all(axis=1)
+    corners[np.flatnonzero(edge)[good]] = at[good]
+    return replace(det, corners=corners)
+
+
 def grow_along_lattice(gray: np.ndarray, det, smoothed: Smoothed | None = None):
     """det with the missing corners its lattice predicts added (module docstring).
 
@@ -263,9 +288,8 @@ def grow_along_lattice(gray: np.ndarray, det, smoothed: Smoothed | None = None):
                                            max_asymmetry=max_asym)
             ok2 &= np.linalg.norm(again - at[miss], axis=1) <= MAX_SHIFT_MARGIN * margin[miss] + 0.5
             got[miss[ok2]], ok[miss[ok2]] = again[ok2], True
-        r = window_radius(spacing)
-        clipped = (at[:, 0] < r) | (at[:, 0] > w - 1 - r) | (at[:, 1] < r) | (at[:, 1] > h - 1 - r)
-        edge = clipped & ~ok & (count >= EDGE_NEIGHBOURS)
+        clipped = at_frame_edge(at, (w, h), window_radius(spacing))
+        edge = clipped & (count >= EDGE_NEIGHBOURS)
         got[edge] = at[edge]
         ok |= edge
         ok &= (got[:, 0] >= 0) & (got[:, 0] <= w - 1) & (got[:, 1] >= 0) & (got[:, 1] <= h - 1)

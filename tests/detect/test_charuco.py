@@ -97,3 +97,54 @@ def test_detect_cli_takes_a_board(tmp_path, capsys):
     assert main([str(tmp_path / "a.png"), "--board", "charuco:11x8,square=3,marker=4,dict=DICT_5X5_100",
                  "--out", str(tmp_path / "o2")]) == 2
     assert "smaller than square" in capsys.readouterr().err
+
+
+def _posed(tilt_deg, axis, fill, size=(640, 480)):
+    """(image, true corners (70, 2) px, visible (70,)) of the board B at a chosen pose: centred, turned
+    by tilt_deg about ``axis`` (board frame), its squares' width ``fill`` of the image's."""
+    from data_gen.pose import corner_visibility
+    from data_gen.sample import draw_scene
+
+    sc = draw_scene(get_preset("clean", board=B), 5, 2, size=size)
+    cam, board = sc.camera, sc.board
+    a = np.asarray(axis, np.float64) / np.linalg.norm(axis)
+    R, _ = cv2.Rodrigues(a * np.radians(tilt_deg))
+    z = cam.K[0, 0] * board.square_size * 11 / (fill * size[0])
+    t = -R @ board.centre() + np.array([0.0, 0.0, z])
+    rvec = cv2.Rodrigues(R)[0].ravel()
+    corners, visible = corner_visibility(board, rvec, t, cam)
+    return sc.render(rvec, t), corners, visible
+
+
+def test_a_steep_oblique_view_is_named_whole(model):
+    # turned 70° about a diagonal: the squares are sheared and the white margins thin; few grids
+    # of corners form, and a marker's own outline predicts its square's corners too coarsely
+    img, corners, visible = _posed(70.0, (1.0, 1.0, 0.0), 0.5)
+    found = detect_charuco(img, [B], model=model)
+    assert found and visible.all()
+    err = np.linalg.norm(found[0].corners - corners[found[0].charuco_ids], axis=1)
+    assert err.max() < 0.5 and np.median(err) < 0.05
+    assert len(found[0].corners) >= 0.95 * visible.sum()
+
+
+@pytest.mark.parametrize("side", ["left", "bottom"])
+def test_corners_at_the_frame_edge_are_named(model, side):
+    # the frame cuts the board within a pixel of a corner: the fit's window leaves the image there
+    img, corners, _ = _posed(20.0, (0.0, 1.0, 0.0), 0.75)
+    if side == "left":
+        k = 30  # (0, 3)
+        x0 = int(np.floor(corners[k, 0] - 0.4))
+        img, corners = img[:, x0:], corners - [x0, 0]
+    else:
+        k = 63  # (3, 6)
+        y1 = int(np.ceil(corners[k, 1] + 0.4)) + 1
+        img = img[:y1]
+    h, w = img.shape[:2]
+    visible = (corners[:, 0] >= 0) & (corners[:, 0] <= w - 1) & (corners[:, 1] >= 0) & (corners[:, 1] <= h - 1)
+    found = detect_charuco(np.ascontiguousarray(img), [B], model=model)
+    assert found and visible[k]
+    d = found[0]
+    err = np.linalg.norm(d.corners - corners[d.charuco_ids], axis=1)
+    assert visible[d.charuco_ids].all() and err.max() < 0.5
+    assert k in d.charuco_ids.tolist()
+    assert len(d.corners) >= 0.98 * visible.sum()
