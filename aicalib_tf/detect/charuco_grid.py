@@ -18,7 +18,6 @@ Grids are assembled as for chessboards and corners off their neighbours' lattice
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from aicalib_tf.detect.grid import MIN_CORNERS, assemble_grids
@@ -92,12 +91,13 @@ def corner_candidates(model, gray: np.ndarray, threshold: float, quads: np.ndarr
 
 
 def lattices(model, gray: np.ndarray, threshold: float, quads: np.ndarray, margin_ratio: float,
-             limit: int) -> list[tuple[np.ndarray, np.ndarray]]:
+             limit: int, smoothed: Smoothed | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
     """Every grid of ChArUco corners in gray (H, W) float32: [(lattice ids (N, 2) int64, pts (N, 2) px)].
 
-    limit : the largest grid side to grow (one more than the board's).
+    limit : the largest grid side to grow (one more than the board's). smoothed : gray's smoothed
+    copies, when the caller shares them.
     """
-    smoothed = Smoothed(gray)
+    smoothed = Smoothed(gray) if smoothed is None else smoothed
     refined, scores = corner_candidates(model, gray, threshold, quads, margin_ratio, smoothed)
     if len(refined) < MIN_CORNERS:
         return []

@@ -5,39 +5,45 @@ that is up to a fifth of a marker side off, more than the saddle fit may travel 
 margin. The corners already named predict better: a missing corner with at least
 :data:`MIN_NEIGHBOURS` of its eight neighbours found is predicted by a homography of the nearest
 named corners (:func:`aicalib_tf.detect.lattice.predict_ids`; at least 4 of them within two steps,
-not on one line), then looked for there with the saddle fit, its window inside the white margin,
-which must land within :data:`MAX_SHIFT_MARGIN` of the margin (+ 0.5 px) of the prediction.
+not on one line) and looked for there, within
+:data:`~aicalib_tf.detect.charuco_complete.MAX_SHIFT_MARGIN` of the white margin (+ 0.5 px): by
+the saddle fit with its window inside the margin, or, where that fails (a steep view squeezes the
+margin along one axis and shears the squares), by :func:`refine_in_squares`, the centre of point
+symmetry of a window laid along the board's axes.
 
 Its id is the lattice's, and it is decided as :func:`aicalib_tf.detect.charuco.name_lattice`
 decides one: a marker of the board (one that named it) lies within
 :data:`~aicalib_tf.detect.charuco.SUPPORT` squares of the corner, and the named corners put that
 marker's square where the marker is (its centre within a quarter square: a lattice predicted from
-too few corners, off by a square, names nothing). Passes repeat while corners are
-added.
+too few corners, off by a square, names nothing). The image must show a corner there: its white
+squares brighter than its black ones by at least :data:`MIN_CONTRAST_SHARE` of the named corners'
+median (an object in front has no such contrast), and the window point-symmetric about it
+(:func:`asymmetry` at most twice the named corners' median, :data:`MAX_AFFINE_ASYMMETRY` at
+least). Passes repeat while corners are added.
 
-A corner whose fit window leaves the image (it lies within the window's half-size of the frame:
-the samples outside would be the edge pixels repeated, and a fit on the part inside is biased by
-up to a pixel) is kept at its prediction when the fit does not hold, it has at least
-:data:`EDGE_NEIGHBOURS` neighbours found and it lies inside the hull of the pixel centres. Its
-error is the prediction's (0.01–0.3 px on the rendered partial views), larger than a fitted
-corner's, but its id is as certain.
+At the frame's edge a fit window leaves the image (:func:`at_frame_edge`): its samples there
+would be the edge pixels repeated, and the fit is pulled by up to a pixel. A missing corner there
+with at least :data:`EDGE_NEIGHBOURS` neighbours found, inside the hull of the pixel centres and
+with the board's contrast in its part of the window, is taken at its prediction; and every corner
+of a board whose window leaves the image is put, last, where the corners inside predict it
+(:func:`place_edge_corners`, within a tenth of a pixel on rendered views).
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import replace
 
 import numpy as np
 
 from aicalib_tf.detect.lattice import predict_ids
 from aicalib_tf.detect.refine import Smoothed, refine_windowed, window_radius
-from aicalib_tf.detect.saddle import saddle_fit_matrix
 
-__all__ = ["MIN_NEIGHBOURS", "EDGE_NEIGHBOURS", "MAX_SHIFT_MARGIN", "grow_along_lattice", "margin_px", "refine_in_squares"]
+__all__ = ["MIN_NEIGHBOURS", "EDGE_NEIGHBOURS", "MIN_CONTRAST_SHARE", "MAX_AFFINE_ASYMMETRY", "grow_along_lattice",
+           "margin_px", "refine_in_squares", "asymmetry", "square_contrast", "at_frame_edge", "place_edge_corners"]
 
 MIN_NEIGHBOURS = 2
 EDGE_NEIGHBOURS = 3
-MAX_SHIFT_MARGIN = 0.5
 _NEIGHBOURS = np.array([(i, j) for j in (-1, 0, 1) for i in (-1, 0, 1) if (i, j) != (0, 0)], np.int64)
 
 
@@ -212,8 +218,8 @@ def square_contrast(img: np.ndarray, board, ids: np.ndarray, pts: np.ndarray, st
     xy = np.asarray(pts, np.float64)[:, None, None, :] + np.einsum("nij,qkj->nqki", steps, uv)  # (N, 4, 9, 2)
     inside = (xy[..., 0] >= 0) & (xy[..., 0] <= w - 1) & (xy[..., 1] >= 0) & (xy[..., 1] <= h - 1)
     vals = np.where(inside, _bilinear(img, xy), np.nan)
-    with np.errstate(invalid="ignore"), __import__("warnings").catch_warnings():
-        __import__("warnings").simplefilter("ignore", RuntimeWarning)
+    with warnings.catch_warnings():  # all-NaN rows (no square of one colour in the image) give NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
         mean = np.nanmean(vals, axis=2)  # (N, 4)
         sq_i = ids[:, 0:1] + np.array([0, 1, 0, 1])[None]
         sq_j = ids[:, 1:2] + np.array([0, 0, 1, 1])[None]
@@ -253,7 +259,7 @@ def grow_along_lattice(gray: np.ndarray, det, smoothed: Smoothed | None = None):
     gray : (H, W) float32. det : a :class:`~aicalib_tf.detect.charuco.CharucoDetection` with at
     least 4 corners (otherwise returned as it is).
     """
-    from aicalib_tf.detect.charuco_complete import _union
+    from aicalib_tf.detect.charuco_complete import MAX_SHIFT_MARGIN, _union
 
     h, w = gray.shape
     no_shadow = lambda idx, saddles: np.zeros(len(idx), bool)  # noqa: E731 - the saddle stands
