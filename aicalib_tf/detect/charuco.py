@@ -149,7 +149,8 @@ def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], model, t
     corners (a grid whose steps are not the squares', as the grid assembly sometimes builds on a
     ChArUco board, is read in squares first: :func:`square_lattice`). Grids of one board
     that share its markers at the same places are merged; corners beside the markers are then
-    looked for where the markers put them (:mod:`aicalib_tf.detect.charuco_complete`).
+    looked for where the markers put them (:mod:`aicalib_tf.detect.charuco_complete`), and the board
+    grown along its own lattice (:mod:`aicalib_tf.detect.charuco_grow`: steep views, the frame's edge).
     more_lattices : ``f(pattern_size) -> [(ids, pts)]``, asked for a board none of these grids
     names (the chessboard pipeline's own search, whose pyramid and partial-board growth reach
     boards whose markers OpenCV cannot read, e.g. under heavy noise).

@@ -148,3 +148,39 @@ def test_corners_at_the_frame_edge_are_named(model, side):
     assert visible[d.charuco_ids].all() and err.max() < 0.5
     assert k in d.charuco_ids.tolist()
     assert len(d.corners) >= 0.98 * visible.sum()
+
+
+def test_no_corner_named_under_an_object_in_front(model):
+    # the lattice predicts corners under an object too; the image shows none there
+    p = get_preset("occluded", board=B)
+    for i in range(3):
+        s = make_sample(p, 7, i, size=(640, 480))
+        found = detect_charuco(s.image, [B], model=model)
+        assert found and _check(found[0], s) >= 0.9  # _check: every corner named is visible and right
+
+
+def test_noise_sigma_reads_the_noise_not_the_edges():
+    from aicalib_tf.detect.markers import noise_sigma
+
+    img = np.zeros((240, 320), np.float64)
+    img[:, 160:] = 200.0  # a strong edge
+    img += np.linspace(0, 40, 320)[None]  # and a ramp
+    rng = np.random.default_rng(0)
+    assert noise_sigma(np.clip(img, 0, 255).astype(np.uint8)) < 1.0
+    noisy = np.clip(img + rng.normal(0, 10, img.shape), 0, 255).astype(np.uint8)
+    assert abs(noise_sigma(noisy) - 10.0) < 1.0
+
+
+def test_outside_markers_matches_opencvs_polygon_test():
+    from aicalib_tf.detect.charuco_grid import MARKER_GROW, outside_markers
+
+    rng = np.random.default_rng(1)
+    quads = rng.uniform(0, 100, (6, 1, 2)) + np.array([[-8, -8], [8, -7], [7, 8], [-7, 7]]) * rng.uniform(0.5, 2, (6, 1, 1))
+    pts = rng.uniform(-10, 110, (2000, 2))
+    expect = np.ones(len(pts), bool)
+    for q in quads:
+        c = q.mean(axis=0)
+        poly = (c + MARKER_GROW * (q - c)).astype(np.float32).reshape(-1, 1, 2)
+        expect &= np.array([cv2.pointPolygonTest(poly, (float(x), float(y)), False) < 0 for x, y in pts])
+    assert (outside_markers(pts, quads) == expect).all() and (~expect).sum() > 50
+    assert outside_markers(pts, np.zeros((0, 4, 2))).all()
