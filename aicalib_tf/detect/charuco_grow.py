@@ -106,16 +106,18 @@ def _spans(ids: np.ndarray, want: np.ndarray) -> bool:
 
 
 def _bilinear(img: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    """(...) float64 bilinear samples of img (H, W) at xy (..., 2) px, edge pixels repeated outside."""
+    """(...) float64 bilinear samples of img (H, W) at xy (..., 2) px, edge pixels repeated outside;
+    NaN at a NaN position."""
     h, w = img.shape
-    x = np.clip(xy[..., 0], 0.0, w - 1.0)
-    y = np.clip(xy[..., 1], 0.0, h - 1.0)
+    bad = ~np.isfinite(xy).all(axis=-1)
+    x = np.clip(np.where(bad, 0.0, xy[..., 0]), 0.0, w - 1.0)
+    y = np.clip(np.where(bad, 0.0, xy[..., 1]), 0.0, h - 1.0)
     x0 = np.minimum(np.floor(x).astype(np.int64), w - 2)
     y0 = np.minimum(np.floor(y).astype(np.int64), h - 2)
     fx, fy = x - x0, y - y0
     top = img[y0, x0] + fx * (img[y0, x0 + 1] - img[y0, x0])
     bot = img[y0 + 1, x0] + fx * (img[y0 + 1, x0 + 1] - img[y0 + 1, x0])
-    return top + fy * (bot - top)
+    return np.where(bad, np.nan, top + fy * (bot - top))
 
 
 AFFINE_RADIUS = 3  # the window: (2r + 1)² samples on a grid along the board's axes
@@ -139,6 +141,14 @@ def refine_in_squares(img: np.ndarray, pts: np.ndarray, steps: np.ndarray, reach
     returned as started.
     """
     pts = np.asarray(pts, np.float64).reshape(-1, 2)
+    steps = np.asarray(steps, np.float64).reshape(-1, 2, 2)
+    reach = np.broadcast_to(np.asarray(reach, np.float64), (len(pts),))
+    good = np.isfinite(pts).all(axis=1) & np.isfinite(steps).all(axis=(1, 2))
+    if not good.all():  # no lattice there: not ok
+        out, ok = pts.copy(), np.zeros(len(pts), bool)
+        if good.any():
+            out[good], ok[good] = refine_in_squares(img, pts[good], steps[good], reach[good], iterations, max_asymmetry)
+        return out, ok
     d = _half_window(steps, reach)
     gy, gx = np.gradient(img.astype(np.float64))
     cur = pts.copy()

@@ -184,3 +184,20 @@ def test_outside_markers_matches_opencvs_polygon_test():
         expect &= np.array([cv2.pointPolygonTest(poly, (float(x), float(y)), False) < 0 for x, y in pts])
     assert (outside_markers(pts, quads) == expect).all() and (~expect).sum() > 50
     assert outside_markers(pts, np.zeros((0, 4, 2))).all()
+
+
+def test_refine_in_squares_finds_the_centre_of_a_sheared_corner():
+    from aicalib_tf.detect.charuco_grow import asymmetry, refine_in_squares
+
+    # a corner at exactly (24.5, 24.5), its squares sheared: the board's x axis along (10, 0) px,
+    # its y axis along (6, 8) px; blurred
+    yy, xx = np.mgrid[0:50, 0:50].astype(np.float64)
+    u, v = np.linalg.solve(np.array([[10.0, 6.0], [0.0, 8.0]]), np.stack([xx.ravel() - 24.5, yy.ravel() - 24.5]))
+    img = cv2.GaussianBlur(((u > 0) == (v > 0)).reshape(50, 50).astype(np.float32), (0, 0), 0.8)
+    steps = np.array([[[10.0, 6.0], [0.0, 8.0]]] * 3)
+    steps[2, 0, 0] = np.nan  # no lattice there
+    got, ok = refine_in_squares(img, np.array([[25.0, 24.1], [24.2, 24.9], [24.0, 24.0]]), steps, 0.15)
+    assert ok.tolist() == [True, True, False]
+    assert np.abs(got[:2] - 24.5).max() < 0.01 and (got[2] == 24.0).all()
+    assert asymmetry(img, np.array([[24.5, 24.5]]), steps[:1], 0.15)[0] < 0.01
+    assert asymmetry(img, np.array([[27.5, 24.5]]), steps[:1], 0.15)[0] > 0.5  # on an edge, not a corner
