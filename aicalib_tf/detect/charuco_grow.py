@@ -47,14 +47,19 @@ EDGE_NEIGHBOURS = 3
 _NEIGHBOURS = np.array([(i, j) for j in (-1, 0, 1) for i in (-1, 0, 1) if (i, j) != (0, 0)], np.int64)
 
 
+def _sides(quads: np.ndarray) -> np.ndarray:
+    """(M,) px: the mean side of each marker outline (M, 4, 2) px."""
+    return np.linalg.norm(np.diff(np.concatenate([quads, quads[:, :1]], axis=1), axis=1), axis=2).mean(axis=1)
+
+
 def margin_px(det, pts: np.ndarray) -> np.ndarray:
     """(N,) px: the white margin between a board corner and the markers beside it, at points (N, 2)
     px, from the side of the nearest of det's markers (0 where det has no marker)."""
     pts = np.asarray(pts, np.float64).reshape(-1, 2)
     if not len(det.marker_corners) or not len(pts):
         return np.zeros(len(pts))
-    quads = np.asarray(det.marker_corners, np.float64)
-    side = np.linalg.norm(np.diff(np.concatenate([quads, quads[:, :1]], axis=1), axis=1), axis=2).mean(axis=1)
+    quads = np.asarray(det.marker_corners, np.float64).reshape(-1, 4, 2)
+    side = _sides(quads)
     near = np.argmin(np.linalg.norm(pts[:, None] - quads.mean(axis=1)[None], axis=2), axis=1)
     return side[near] * (det.board.square - det.board.marker) / (2.0 * det.board.marker)
 
@@ -68,9 +73,8 @@ def _agreeing_markers(det) -> np.ndarray:
     centres = np.array([sq[int(k)] for k in det.marker_ids], np.float64) - 0.5  # square (i, j) centre, in corner ids
     quads = np.asarray(det.marker_corners, np.float64).reshape(-1, 4, 2)
     at = predict_ids(det.ids.astype(np.float64), det.corners.astype(np.float64), centres)
-    side = np.linalg.norm(np.diff(np.concatenate([quads, quads[:, :1]], axis=1), axis=1), axis=2).mean(axis=1)
     off = np.linalg.norm(at - quads.mean(axis=1), axis=1)
-    ok = np.isfinite(off) & (off < 0.25 * side * det.board.square / det.board.marker)
+    ok = np.isfinite(off) & (off < 0.25 * _sides(quads) * det.board.square / det.board.marker)
     return centres[ok]
 
 
