@@ -39,11 +39,12 @@ import numpy as np
 from aicalib_tf.detect.lattice import predict_ids
 from aicalib_tf.detect.refine import Smoothed, refine_windowed, window_radius
 
-__all__ = ["MIN_NEIGHBOURS", "EDGE_NEIGHBOURS", "MIN_CONTRAST_SHARE", "MAX_AFFINE_ASYMMETRY", "grow_along_lattice",
+__all__ = ["MIN_NEIGHBOURS", "EDGE_NEIGHBOURS", "MAX_EDGE_MOVE", "MIN_CONTRAST_SHARE", "MAX_AFFINE_ASYMMETRY", "grow_along_lattice",
            "margin_px", "refine_in_squares", "asymmetry", "square_contrast", "at_frame_edge", "place_edge_corners"]
 
 MIN_NEIGHBOURS = 2
 EDGE_NEIGHBOURS = 3
+MAX_EDGE_MOVE = 1.5  # px: the most a fit on the image's edge was seen pulled (0.9 px), with room
 _NEIGHBOURS = np.array([(i, j) for j in (-1, 0, 1) for i in (-1, 0, 1) if (i, j) != (0, 0)], np.int64)
 
 
@@ -255,14 +256,15 @@ def place_edge_corners(det, radius: np.ndarray):
     half-size ``radius`` (N,) px) put where the corners whose windows are inside predict it (a
     fit on edge pixels repeated is pulled by up to a pixel; the prediction from the lattice inside is
     within a tenth of one on rendered views). Corners with fewer than 4 such corners to predict
-    them keep their place."""
+    them, or whose prediction is more than :data:`MAX_EDGE_MOVE` px away, keep their place."""
     edge = at_frame_edge(det.corners, det.image_size, np.asarray(radius, np.float64))
-    if not edge.any() or (~edge).sum() < 4:
-        return det
     ids = det.ids.astype(np.float64)
+    if not edge.any() or (~edge).sum() < 4 or np.linalg.matrix_rank(ids[~edge] - ids[~edge].mean(axis=0), tol=1e-6) < 2:
+        return det
     at = predict_ids(ids[~edge], det.corners[~edge].astype(np.float64), ids[edge])
     corners = det.corners.copy()
     good = np.isfinite(at).all(axis=1)
+    good[good] = np.linalg.norm(at[good] - corners[edge][good], axis=1) <= MAX_EDGE_MOVE  # a fit pulled, not lost
     corners[np.flatnonzero(edge)[good]] = at[good]
     return replace(det, corners=corners)
 
