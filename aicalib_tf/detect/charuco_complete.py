@@ -162,18 +162,21 @@ def polish(gray: np.ndarray, det, max_move: float = 1.5, smoothed: Smoothed | No
     """det with each corner refined again from its place, the window 0.8 of the white margin beside
     it (from the nearest of det's markers; 2 px at least); a corner whose fit fails or moves more than
     ``max_move`` px keeps its place, and one whose window leaves the image goes where the corners
-    inside predict it (:func:`aicalib_tf.detect.charuco_grow.place_edge_corners`). gray : (H, W) float32;
+    inside predict it (:func:`aicalib_tf.detect.charuco_grow.place_edge_corners`); corners without the
+    board's contrast are dropped (:func:`aicalib_tf.detect.charuco_grow.keep_with_contrast`). gray : (H, W) float32;
     smoothed : its smoothed copies, when the caller shares them."""
-    from aicalib_tf.detect.charuco_grow import margin_px, place_edge_corners
+    from aicalib_tf.detect.charuco_grow import FIT_SIGMA, keep_with_contrast, margin_px, place_edge_corners
 
     if not len(det.corners):
         return det
     pts = det.corners.astype(np.float64)
     radius = np.maximum(0.8 * margin_px(det, pts), 2.0)
-    got, ok = refine_windowed(Smoothed(gray) if smoothed is None else smoothed, pts, radius / 0.45, max_shift=np.full(len(pts), max_move),
+    smoothed = Smoothed(gray) if smoothed is None else smoothed
+    got, ok = refine_windowed(smoothed, pts, radius / 0.45, max_shift=np.full(len(pts), max_move),
                               shadow_gate=lambda idx, saddles: np.zeros(len(idx), bool))
     det = replace(det, corners=np.where(ok[:, None], got, pts).astype(np.float32))
-    return _on_lattice(place_edge_corners(det, window_radius(radius / 0.45)))
+    det = keep_with_contrast(place_edge_corners(det, window_radius(radius / 0.45)), smoothed.sigma(FIT_SIGMA))
+    return _on_lattice(det)
 
 
 def _on_lattice(det):

@@ -40,7 +40,7 @@ from aicalib_tf.detect.lattice import predict_ids
 from aicalib_tf.detect.refine import Smoothed, refine_windowed, window_radius
 
 __all__ = ["MIN_NEIGHBOURS", "EDGE_NEIGHBOURS", "MAX_EDGE_MOVE", "MIN_CONTRAST_SHARE", "MAX_AFFINE_ASYMMETRY", "grow_along_lattice",
-           "margin_px", "refine_in_squares", "asymmetry", "square_contrast", "at_frame_edge", "place_edge_corners"]
+           "keep_with_contrast", "margin_px", "refine_in_squares", "asymmetry", "square_contrast", "at_frame_edge", "place_edge_corners"]
 
 MIN_NEIGHBOURS = 2
 EDGE_NEIGHBOURS = 3
@@ -267,6 +267,21 @@ def place_edge_corners(det, radius: np.ndarray):
     good[good] = np.linalg.norm(at[good] - corners[edge][good], axis=1) <= MAX_EDGE_MOVE  # a fit pulled, not lost
     corners[np.flatnonzero(edge)[good]] = at[good]
     return replace(det, corners=corners)
+
+
+def keep_with_contrast(det, img: np.ndarray):
+    """det without the corners whose squares do not show the board's contrast
+    (:func:`square_contrast` under :data:`MIN_CONTRAST_SHARE` of the median of det's corners): a
+    corner just behind the edge of an object in front, where the fit found the object's edge across
+    the board's. img : (H, W) float32, the image smoothed by :data:`FIT_SIGMA` px."""
+    if len(det.corners) < 5:
+        return det
+    c = square_contrast(img, det.board, det.ids, det.corners, _steps(det, det.ids))
+    ref = np.nanmedian(np.append(c, np.nan)) if np.isfinite(c).any() else np.nan
+    if not ref > 0:
+        return det
+    keep = ~(c < MIN_CONTRAST_SHARE * ref)  # NaN (no lattice, or no square of one colour in the image): kept
+    return replace(det, corners=det.corners[keep], ids=det.ids[keep])
 
 
 def grow_along_lattice(gray: np.ndarray, det, smoothed: Smoothed | None = None):
