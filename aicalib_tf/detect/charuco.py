@@ -149,34 +149,38 @@ def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], model, t
     corners (a grid whose steps are not the squares', as the grid assembly sometimes builds on a
     ChArUco board, is read in squares first: :func:`square_lattice`). Grids of one board
     that share its markers at the same places are merged; corners beside the markers are then
-    looked for where the markers put them (:mod:`aicalib_tf.detect.charuco_complete`).
+    looked for where the markers put them (:mod:`aicalib_tf.detect.charuco_complete`), and the board
+    grown along its own lattice (:mod:`aicalib_tf.detect.charuco_grow`: steep views, the frame's edge).
     more_lattices : ``f(pattern_size) -> [(ids, pts)]``, asked for a board none of these grids
     names (the chessboard pipeline's own search, whose pyramid and partial-board growth reach
     boards whose markers OpenCV cannot read, e.g. under heavy noise).
     """
     from aicalib_tf.detect.charuco_complete import complete_from_markers, merge_same_board, polish
     from aicalib_tf.detect.charuco_grid import lattices
+    from aicalib_tf.detect.charuco_grow import grow_along_lattice
+    from aicalib_tf.detect.refine import Smoothed
     from aicalib_tf.io import quantize
 
     u8 = quantize(gray)
+    smoothed = Smoothed(gray)  # its smoothed copies, made once for every stage
     reads = {b: aruco_markers(u8, b) for b in dict.fromkeys(boards)}
     quads = np.concatenate([r[1] for r in reads.values()])
     ratio = min((b.square - b.marker) / (2.0 * b.marker) for b in reads)
     limit = max(max(b.pattern_size) for b in reads) + 1
-    found = _name_all(gray, u8, reads, lattices(model, gray, threshold, quads, ratio, limit))
+    found = _name_all(gray, u8, reads, lattices(model, gray, threshold, quads, ratio, limit, smoothed))
     if more_lattices is not None:
         for board in [b for b in reads if b not in {d.board for d in found}]:
             found += _name_all(gray, u8, {board: reads[board]}, more_lattices(board.pattern_size))
     found = merge_same_board(found)
-    found = [complete_from_markers(gray, d, reads[d.board]) for d in found]
+    found = [grow_along_lattice(gray, complete_from_markers(gray, d, reads[d.board], smoothed), smoothed) for d in found]
     h, w = gray.shape
     for board in (b for b in reads if b not in {d.board for d in found} and len(reads[b][0]) >= 2):
         seed = CharucoDetection(board, np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32),
                                 reads[board][0], reads[board][1], False, (w, h))
-        seed = complete_from_markers(gray, seed, reads[board])
+        seed = complete_from_markers(gray, seed, reads[board], smoothed)
         if len(seed.corners) >= 4:
-            found.append(seed)
-    found = [d for d in (polish(gray, d) for d in found) if len(d.corners)]
+            found.append(grow_along_lattice(gray, seed, smoothed))
+    found = [d for d in (polish(gray, d, smoothed=smoothed) for d in found) if len(d.corners)]
     return _flag_duplicates(sorted(found, key=lambda d: -len(d.corners)))
 
 

@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 
 from aicalib_tf.detect.lattice import MAX_RESIDUAL, curved_residuals, lattice_residuals, predict_ids
-from aicalib_tf.detect.refine import Smoothed, refine_windowed
+from aicalib_tf.detect.refine import Smoothed, refine_windowed, window_radius
 
 __all__ = ["SAME_PLACE_PX", "MAX_SHIFT_MARGIN", "merge_same_board", "complete_from_markers", "square_corners", "polish"]
 
@@ -127,12 +127,12 @@ def _predictions(det, markers) -> dict[tuple[int, int], tuple[np.ndarray, float]
     return out
 
 
-def complete_from_markers(gray: np.ndarray, det, read):
+def complete_from_markers(gray: np.ndarray, det, read, smoothed: Smoothed | None = None):
     """det with the corners its agreeing markers fix added (module docstring).
 
     gray : (H, W) float32. read : OpenCV's markers of det's board (ids (M,), corners (M, 4, 2) px).
+    smoothed : gray's smoothed copies, when the caller shares them.
     """
-    smoothed = None
     margin_ratio = (det.board.square - det.board.marker) / (2.0 * det.board.marker)
     h, w = gray.shape
     for _ in range(PASSES):
@@ -158,23 +158,25 @@ def complete_from_markers(gray: np.ndarray, det, read):
     return det
 
 
-def polish(gray: np.ndarray, det, max_move: float = 1.5):
+def polish(gray: np.ndarray, det, max_move: float = 1.5, smoothed: Smoothed | None = None):
     """det with each corner refined again from its place, the window 0.8 of the white margin beside
     it (from the nearest of det's markers; 2 px at least); a corner whose fit fails or moves more than
-    ``max_move`` px keeps its place. gray : (H, W) float32."""
+    ``max_move`` px keeps its place, and one whose window leaves the image goes where the corners
+    inside predict it (:func:`aicalib_tf.detect.charuco_grow.place_edge_corners`); corners without the
+    board's contrast are dropped (:func:`aicalib_tf.detect.charuco_grow.keep_with_contrast`). gray : (H, W) float32;
+    smoothed : its smoothed copies, when the caller shares them."""
+    from aicalib_tf.detect.charuco_grow import FIT_SIGMA, keep_with_contrast, margin_px, place_edge_corners
+
     if not len(det.corners):
         return det
     pts = det.corners.astype(np.float64)
-    radius = np.full(len(pts), 2.0)
-    if len(det.marker_corners):
-        quads = det.marker_corners
-        side = np.linalg.norm(np.diff(np.concatenate([quads, quads[:, :1]], axis=1), axis=1), axis=2).mean(axis=1)
-        near = np.argmin(np.linalg.norm(pts[:, None] - quads.mean(axis=1)[None], axis=2), axis=1)
-        ratio = (det.board.square - det.board.marker) / (2.0 * det.board.marker)
-        radius = np.maximum(0.8 * side[near] * ratio, 2.0)
-    got, ok = refine_windowed(Smoothed(gray), pts, radius / 0.45, max_shift=np.full(len(pts), max_move),
+    radius = np.maximum(0.8 * margin_px(det, pts), 2.0)
+    smoothed = Smoothed(gray) if smoothed is None else smoothed
+    got, ok = refine_windowed(smoothed, pts, radius / 0.45, max_shift=np.full(len(pts), max_move),
                               shadow_gate=lambda idx, saddles: np.zeros(len(idx), bool))
-    return _on_lattice(replace(det, corners=np.where(ok[:, None], got, pts).astype(np.float32)))
+    det = replace(det, corners=np.where(ok[:, None], got, pts).astype(np.float32))
+    det = keep_with_contrast(place_edge_corners(det, window_radius(radius / 0.45)), smoothed.sigma(FIT_SIGMA))
+    return _on_lattice(det)
 
 
 def _on_lattice(det):

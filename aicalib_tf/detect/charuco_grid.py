@@ -18,7 +18,6 @@ Grids are assembled as for chessboards and corners off their neighbours' lattice
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from aicalib_tf.detect.grid import MIN_CORNERS, assemble_grids
@@ -34,15 +33,20 @@ MAX_CANDIDATES = 3000
 
 def outside_markers(points: np.ndarray, marker_corners: np.ndarray, grow: float = MARKER_GROW) -> np.ndarray:
     """(N,) bool: points (N, 2) px outside every marker (corners (M, 4, 2) px, each scaled by
-    ``grow`` about its centre). A marker's bits make X-junctions of their own; none is a board corner."""
-    keep = np.ones(len(points), bool)
-    for quad in np.asarray(marker_corners, np.float64).reshape(-1, 4, 2):
-        c = quad.mean(axis=0)
-        poly = (c + grow * (quad - c)).astype(np.float32).reshape(-1, 1, 2)
-        for k in np.nonzero(keep)[0]:
-            if cv2.pointPolygonTest(poly, (float(points[k, 0]), float(points[k, 1])), False) >= 0:
-                keep[k] = False
-    return keep
+    ``grow`` about its centre; a point on an outline is inside). A marker's bits make X-junctions of
+    their own; none is a board corner. The outlines are convex: a point is inside when it lies on
+    the same side of all four sides."""
+    pts = np.asarray(points, np.float64).reshape(-1, 2)
+    quads = np.asarray(marker_corners, np.float64).reshape(-1, 4, 2)
+    if not len(quads) or not len(pts):
+        return np.ones(len(pts), bool)
+    c = quads.mean(axis=1, keepdims=True)
+    q = c + grow * (quads - c)  # (M, 4, 2)
+    side = np.roll(q, -1, axis=1) - q
+    rel = pts[None, None] - q[:, :, None]  # (M, 4, N, 2)
+    cross = side[:, :, None, 0] * rel[..., 1] - side[:, :, None, 1] * rel[..., 0]
+    inside = (cross >= 0).all(axis=1) | (cross <= 0).all(axis=1)  # (M, N)
+    return ~inside.any(axis=0)
 
 
 def _window_spacing(pts: np.ndarray, quads: np.ndarray, margin_ratio: float) -> np.ndarray:
@@ -87,12 +91,13 @@ def corner_candidates(model, gray: np.ndarray, threshold: float, quads: np.ndarr
 
 
 def lattices(model, gray: np.ndarray, threshold: float, quads: np.ndarray, margin_ratio: float,
-             limit: int) -> list[tuple[np.ndarray, np.ndarray]]:
+             limit: int, smoothed: Smoothed | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
     """Every grid of ChArUco corners in gray (H, W) float32: [(lattice ids (N, 2) int64, pts (N, 2) px)].
 
-    limit : the largest grid side to grow (one more than the board's).
+    limit : the largest grid side to grow (one more than the board's). smoothed : gray's smoothed
+    copies, when the caller shares them.
     """
-    smoothed = Smoothed(gray)
+    smoothed = Smoothed(gray) if smoothed is None else smoothed
     refined, scores = corner_candidates(model, gray, threshold, quads, margin_ratio, smoothed)
     if len(refined) < MIN_CORNERS:
         return []

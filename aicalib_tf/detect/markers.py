@@ -24,7 +24,7 @@ import numpy as np
 
 from aicalib_tf.geometry.charuco import CharucoBoard, dictionary
 
-__all__ = ["Placed", "READINGS", "aruco_markers", "lattice_coords", "place_marker", "decode_cells", "verify_cells", "MAX_BIT_ERRORS", "MIN_BIT_MARGIN"]
+__all__ = ["Placed", "READINGS", "aruco_markers", "noise_sigma", "lattice_coords", "place_marker", "decode_cells", "verify_cells", "MAX_BIT_ERRORS", "MIN_BIT_MARGIN"]
 
 MAX_BIT_ERRORS = 1
 MIN_BIT_MARGIN = 4
@@ -75,12 +75,22 @@ def _read(det, img: np.ndarray, board: CharucoBoard) -> tuple[np.ndarray, np.nda
     return ids[keep], corners[keep]
 
 
+def noise_sigma(gray_u8: np.ndarray) -> float:
+    """The image noise's standard deviation in grey levels, from the absolute response to a
+    Laplacian-difference mask that cancels edges of first and second order (Immerkær, "Fast noise
+    variance estimation", 1996). gray_u8 : (H, W) uint8, at least 3 × 3."""
+    k = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
+    r = cv2.filter2D(gray_u8.astype(np.float32), -1, k)[1:-1, 1:-1]
+    return float(np.sqrt(np.pi / 2.0) * np.abs(r).mean() / 6.0)
+
+
 def aruco_markers(gray_u8: np.ndarray, board: CharucoBoard) -> tuple[np.ndarray, np.ndarray]:
     """OpenCV's marker detector (sub-pixel corners; more thresholds, smaller markers and rounder
     outlines than its defaults; outlines it rejected looked at again where the read markers and the
-    board's layout put a marker) on the board's dictionary,
-    on the image and on the image smoothed (Gaussian σ :data:`READ_SIGMA` px; noise breaks the
-    markers' outlines apart): a marker read in both keeps the first reading.
+    board's layout put a marker) on the board's dictionary. On a noisy image (:func:`noise_sigma`
+    above the adaptive threshold's constant, where noise breaks the markers' outlines apart) also on
+    the image smoothed (Gaussian σ :data:`READ_SIGMA` px): a marker read in both keeps the first
+    reading.
 
     Returns ids (M,) int64 inside the board's id range and corners (M, 4, 2) float64 px.
     """
@@ -91,6 +101,8 @@ def aruco_markers(gray_u8: np.ndarray, board: CharucoBoard) -> tuple[np.ndarray,
     params.polygonalApproxAccuracyRate = 0.05
     det = cv2.aruco.ArucoDetector(dictionary(board.dictionary), params)
     ids, corners = _read(det, gray_u8, board)
+    if len(ids) == board.n_markers or noise_sigma(gray_u8) <= params.adaptiveThreshConstant:
+        return ids, corners
     ids2, corners2 = _read(det, cv2.GaussianBlur(gray_u8, (0, 0), READ_SIGMA), board)
     centres = corners.mean(axis=1)
     new = [k for k in range(len(ids2))

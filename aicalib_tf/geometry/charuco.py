@@ -21,7 +21,9 @@ from __future__ import annotations
 
 import functools
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import cv2
 import numpy as np
@@ -137,9 +139,9 @@ class CharucoBoard:
         """(M,) int64 marker ids, in marker order."""
         return np.arange(self.first_id, self.first_id + self.n_markers, dtype=np.int64)
 
-    def marker_square_of(self) -> dict[int, tuple[int, int]]:
-        """{marker id: (i, j) square}."""
-        return {int(k): (int(i), int(j)) for k, (i, j) in zip(self.marker_ids(), self.marker_squares())}
+    def marker_square_of(self) -> Mapping[int, tuple[int, int]]:
+        """{marker id: (i, j) square}, read-only (made once per board: the detector asks often)."""
+        return _square_of(self)
 
     def marker_corners(self) -> np.ndarray:
         """(M, 4, 3) float64 marker corners in our frame (top-left, top-right, bottom-right, bottom-left)."""
@@ -173,6 +175,11 @@ class CharucoBoard:
                 "square": self.square, "marker": self.marker, "dictionary": self.dictionary,
                 "legacy": self.legacy, "first_id": self.first_id, "unit": self.unit,
                 "pattern_size": list(self.pattern_size)}
+
+
+@functools.lru_cache(maxsize=64)
+def _square_of(board: CharucoBoard) -> Mapping[int, tuple[int, int]]:
+    return MappingProxyType({int(k): (int(i), int(j)) for k, (i, j) in zip(board.marker_ids(), board.marker_squares())})
 
 
 def is_charuco(text) -> bool:
