@@ -55,6 +55,12 @@ consensus board (see aicalib_tf.bench.photos).
 Writes into --out (default reports/<YYYYmmdd-HHMMSS>), atomically: results.csv (one row per
 image × detector), summary.csv, calibration.csv, rigs.csv (full suite), report.md, figures/*.png and
 config.json.
+With ``--board charuco:...`` the suite is the ChArUco one instead (:mod:`aicalib_tf.bench.charuco`:
+the chessboard conditions with the ChArUco board, the CNN pipeline against OpenCV's
+CharucoDetector with default and refined parameters on the same images): correct corners, the
+share of the visible ones named, wrong ids, the median error and time, per condition, written as
+report.md and results.csv (10 images per condition, 3 with --quick, --limit N).
+
 Exit codes: 0 done; 2 bad arguments.
 """
 
@@ -89,6 +95,8 @@ def build_parser():
     ap.add_argument("--workers", type=int, default=None,
                     help="processes rendering the images (default: one per core); detection is timed in one process")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    ap.add_argument("--board", default=None,
+                    help="the ChArUco suite with this board, e.g. charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100")
     return ap
 
 
@@ -115,6 +123,8 @@ def _main(args, argv, started: float) -> int:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
     if args.limit is not None and args.limit < 1:
         raise ValueError(f"--limit must be >= 1, got {args.limit}")
+    if args.board is not None:
+        return _charuco_suite(args, argv, started)
     pattern = None
     if args.images is not None:
         from aicalib_tf.geometry.pattern import parse_pattern
@@ -144,6 +154,42 @@ def _main(args, argv, started: float) -> int:
     detectors, info = make_detectors(dets, pattern or PATTERN, args.model)  # a bad model is a bad argument
     folder = run(cfg, detectors, info, started=started)
     print(f"report: {folder / 'report.md'}")
+    return 0
+
+
+CHARUCO_IMAGES = (10, 3)  # images per ChArUco condition: the suite, --quick
+
+
+def _charuco_suite(args, argv, started: float) -> int:
+    """``--board``: the ChArUco suite (module docstring) into ``--out``; ValueError for a bad board
+    or options that belong to the chessboard suite."""
+    from aicalib_tf.bench.charuco import detection_markdown, detection_table
+    from aicalib_tf.cnn.model import load_model
+    from aicalib_tf.geometry.charuco import parse_board
+    from aicalib_tf.io import atomic_write_text
+    from aicalib_tf.outfolder import OutputFolder, check_out_path
+
+    parse_board(args.board)  # a board that cannot be is an error before any work
+    if args.images is not None or args.pattern is not None or args.conditions is not None or args.degrade:
+        raise ValueError("--board runs the ChArUco suite: it takes --quick, --limit, --model and --out, not --images, "
+                         "--pattern, --conditions or --degrade")
+    if args.limit is not None and args.limit < 1:
+        raise ValueError(f"--limit must be >= 1, got {args.limit}")
+    out = args.out or str(Path("reports") / time.strftime("%Y%m%d-%H%M%S"))
+    check_out_path(out)
+    model = load_model(args.model)
+    n = args.limit or CHARUCO_IMAGES[bool(args.quick)]
+    rows = detection_table(args.board, n, model)
+    command = "python -m aicalib_tf.evaluate " + " ".join(sys.argv[1:] if argv is None else argv)
+    report = (f"# ChArUco benchmark\n\n`{command}`: {args.board}, {n} images per condition, "
+              f"{time.perf_counter() - started:.0f} s\n\n{detection_markdown(rows)}\n")
+    header = list(rows[0])
+    csv = "\n".join([",".join(header), *(",".join(str(r[k]) for k in header) for r in rows)]) + "\n"
+    with OutputFolder(out, "report") as folder:
+        atomic_write_text(folder.path / "report.md", report)
+        atomic_write_text(folder.path / "results.csv", csv)
+    print(detection_markdown(rows))
+    print(f"report: {Path(out) / 'report.md'}")
     return 0
 
 

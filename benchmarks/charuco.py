@@ -21,44 +21,6 @@ import sys
 import time
 from datetime import date
 
-import numpy as np
-
-
-def _detectors(board, model):
-    from aicalib_tf.bench.charuco import cnn_charuco, opencv_charuco
-
-    return {"cnn": cnn_charuco(board, model), "opencv": opencv_charuco(board),
-            "opencv-refined": opencv_charuco(board, refined=True)}
-
-
-def detection_table(board_text: str, n_images: int, model) -> list[dict]:
-    """One row per (condition, detector)."""
-    from aicalib_tf.bench.charuco import charuco_conditions, score_charuco
-    from aicalib_tf.geometry.charuco import parse_board
-    from data_gen.sample import make_sample
-
-    board = parse_board(board_text)
-    dets = _detectors(board, model)
-    rows = []
-    for cond in charuco_conditions(board_text):
-        acc = {k: {"correct": 0, "wrong": 0, "visible": 0, "errors": [], "times": []} for k in dets}
-        for i in range(n_images):
-            s = make_sample(cond.preset, cond.seed, i, size=cond.size)
-            for name, f in dets.items():
-                t = time.perf_counter()
-                corners, ids = f(s.image)
-                acc[name]["times"].append(time.perf_counter() - t)
-                sc = score_charuco(corners, ids, s.corners, s.visible)
-                for key in ("correct", "wrong", "visible"):
-                    acc[name][key] += sc[key]
-                acc[name]["errors"].append(sc["errors"])
-        for name, a in acc.items():
-            e = np.concatenate(a["errors"]) if a["errors"] else np.zeros(0)
-            rows.append({"condition": cond.name, "detector": name, "correct": a["correct"], "wrong": a["wrong"],
-                         "visible": a["visible"], "named": a["correct"] / max(a["visible"], 1),
-                         "err_median": float(np.median(e)) if e.size else float("nan"),
-                         "ms": 1000 * float(np.median(a["times"]))})
-    return rows
 
 
 def _chessboard_twin(scene):
@@ -105,13 +67,10 @@ def calibration_table(board_text: str, sequences: int, model) -> list[dict]:
 
 
 def _markdown(det_rows: list[dict], cal_rows: list[dict]) -> str:
-    lines = ["| condition | detector | correct corners | named of visible | wrong ids | median error (px) | median ms |",
-             "|---|---|---:|---:|---:|---:|---:|"]
-    for r in det_rows:
-        lines.append(f"| {r['condition']} | {r['detector']} | {r['correct']} | {100 * r['named']:.1f} % | {r['wrong']} | "
-                     f"{r['err_median']:.3f} | {r['ms']:.0f} |")
-    lines += ["", "| camera | board | views used | corners | focal error (%) | projection error, mean (px) | RMS (px) |",
-              "|---|---|---:|---:|---:|---:|---:|"]
+    from aicalib_tf.bench.charuco import detection_markdown
+
+    lines = [detection_markdown(det_rows), "", "| camera | board | views used | corners | focal error (%) | "
+             "projection error, mean (px) | RMS (px) |", "|---|---|---:|---:|---:|---:|---:|"]
     for r in cal_rows:
         lines.append(f"| {r['camera']} | {r['board']} | {r['views']} | {r['corners']} | {r['fx_pct']:+.3f} | "
                      f"{r['proj_px']:.3f} | {r['rms']:.3f} |")
@@ -119,7 +78,7 @@ def _markdown(det_rows: list[dict], cal_rows: list[dict]) -> str:
 
 
 def main(argv=None) -> int:
-    from aicalib_tf.bench.charuco import BOARD
+    from aicalib_tf.bench.charuco import BOARD, detection_table
     from aicalib_tf.cnn.model import load_model
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])

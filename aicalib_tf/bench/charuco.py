@@ -20,7 +20,8 @@ from aicalib_tf.geometry.charuco import CharucoBoard, parse_board
 from data_gen.pose import PoseConfig
 from data_gen.presets import Rule, get_preset
 
-__all__ = ["BOARD", "charuco_conditions", "opencv_charuco", "cnn_charuco", "score_charuco", "CHARUCO_DETECTORS"]
+__all__ = ["BOARD", "charuco_conditions", "opencv_charuco", "cnn_charuco", "score_charuco", "CHARUCO_DETECTORS",
+           "detection_table", "detection_markdown"]
 
 BOARD = "charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100"
 CHARUCO_DETECTORS = ("cnn", "opencv", "opencv-refined")
@@ -100,3 +101,49 @@ def score_charuco(corners: np.ndarray, ids: np.ndarray, truth: np.ndarray, visib
     good = err <= WRONG_PX
     return {"found": int(len(ids)), "correct": int(good.sum()), "wrong": int((~good).sum()),
             "visible": int(np.asarray(visible, bool).sum()), "errors": err[good]}
+
+
+def detection_table(board_text: str, n_images: int, model, conditions=None) -> list[dict]:
+    """One row per (condition, detector of :data:`CHARUCO_DETECTORS`), the first ``n_images`` images
+    of each condition (``conditions``: names, default all), the detectors on the same images in
+    one process: correct corners, wrong ids, visible corners, the share named, the median error
+    of the correct ones (px) and the median time per image (ms)."""
+    import time
+
+    from data_gen.sample import make_sample
+
+    board = parse_board(board_text)
+    dets = {"cnn": cnn_charuco(board, model), "opencv": opencv_charuco(board),
+            "opencv-refined": opencv_charuco(board, refined=True)}
+    rows = []
+    for cond in charuco_conditions(board_text):
+        if conditions is not None and cond.name not in conditions:
+            continue
+        acc = {k: {"correct": 0, "wrong": 0, "visible": 0, "errors": [], "times": []} for k in dets}
+        for i in range(n_images):
+            s = make_sample(cond.preset, cond.seed, i, size=cond.size)
+            for name, f in dets.items():
+                t = time.perf_counter()
+                corners, ids = f(s.image)
+                acc[name]["times"].append(time.perf_counter() - t)
+                sc = score_charuco(corners, ids, s.corners, s.visible)
+                for key in ("correct", "wrong", "visible"):
+                    acc[name][key] += sc[key]
+                acc[name]["errors"].append(sc["errors"])
+        for name, a in acc.items():
+            e = np.concatenate(a["errors"]) if a["errors"] else np.zeros(0)
+            rows.append({"condition": cond.name, "detector": name, "correct": a["correct"], "wrong": a["wrong"],
+                         "visible": a["visible"], "named": a["correct"] / max(a["visible"], 1),
+                         "err_median": float(np.median(e)) if e.size else float("nan"),
+                         "ms": 1000 * float(np.median(a["times"])) if a["times"] else float("nan")})
+    return rows
+
+
+def detection_markdown(rows: list[dict]) -> str:
+    """:func:`detection_table`'s rows as a Markdown table."""
+    lines = ["| condition | detector | correct corners | named of visible | wrong ids | median error (px) | median ms |",
+             "|---|---|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        lines.append(f"| {r['condition']} | {r['detector']} | {r['correct']} | {100 * r['named']:.1f} % | {r['wrong']} | "
+                     f"{r['err_median']:.3f} | {r['ms']:.0f} |")
+    return "\n".join(lines)
