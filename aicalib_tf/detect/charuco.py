@@ -27,11 +27,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from aicalib_tf.detect.markers import Placed, aruco_markers, decode_cells, place_marker, verify_cells
+from aicalib_tf.detect.charuco_grow import SUPPORT
 from aicalib_tf.geometry.charuco import CharucoBoard
 
 __all__ = ["CharucoDetection", "SUPPORT", "name_lattice", "detect_charuco_boards", "square_lattice"]
 
-SUPPORT = 1.5  # squares from a corner to a marker that names it (Chebyshev, marker centre)
 
 
 @dataclass(frozen=True)

@@ -26,12 +26,12 @@ import cv2
 import numpy as np
 
 from aicalib_tf.detect.lattice import MAX_RESIDUAL, curved_residuals, lattice_residuals, predict_ids
+from aicalib_tf.detect.charuco_grow import MAX_SHIFT_MARGIN, _union
 from aicalib_tf.detect.refine import Smoothed, refine_windowed, window_radius
 
 __all__ = ["SAME_PLACE_PX", "MAX_SHIFT_MARGIN", "merge_same_board", "complete_from_markers", "square_corners", "polish"]
 
 SAME_PLACE_PX = 2.0
-MAX_SHIFT_MARGIN = 0.5
 PASSES = 4
 
 
@@ -47,20 +47,6 @@ def _same_board(a, b) -> bool:
         if np.linalg.norm(ca - cb) > SAME_PLACE_PX:
             return False
     return True
-
-
-def _union(a, b):
-    """One detection of the corners and markers of a and b (same board, disjoint ids)."""
-    ids = np.concatenate([a.ids, b.ids])
-    pts = np.concatenate([a.corners, b.corners])
-    order = np.lexsort((ids[:, 0], ids[:, 1]))
-    mk = dict(zip(b.marker_ids.tolist(), b.marker_corners))
-    mk.update(zip(a.marker_ids.tolist(), a.marker_corners))
-    keys = sorted(mk)
-    cols, rows = a.board.pattern_size
-    return replace(a, corners=pts[order], ids=ids[order], marker_ids=np.array(keys, np.int64),
-                   marker_corners=np.array([mk[k] for k in keys], np.float64).reshape(-1, 4, 2),
-                   complete=len(ids) == cols * rows)
 
 
 def merge_same_board(found: list) -> list:

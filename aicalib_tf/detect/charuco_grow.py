@@ -6,14 +6,14 @@ margin. The corners already named predict better: a missing corner with at least
 :data:`MIN_NEIGHBOURS` of its eight neighbours found is predicted by a homography of the nearest
 named corners (:func:`aicalib_tf.detect.lattice.predict_ids`; at least 4 of them within two steps,
 not on one line) and looked for there, within
-:data:`~aicalib_tf.detect.charuco_complete.MAX_SHIFT_MARGIN` of the white margin (+ 0.5 px): by
+:data:`MAX_SHIFT_MARGIN` of the white margin (+ 0.5 px): by
 the saddle fit with its window inside the margin, or, where that fails (a steep view squeezes the
 margin along one axis and shears the squares), by :func:`refine_in_squares`, the centre of point
 symmetry of a window laid along the board's axes.
 
 Its id is the lattice's, and it is decided as :func:`aicalib_tf.detect.charuco.name_lattice`
 decides one: a marker of the board (one that named it) lies within
-:data:`~aicalib_tf.detect.charuco.SUPPORT` squares of the corner, and the named corners put that
+:data:`SUPPORT` squares of the corner, and the named corners put that
 marker's square where the marker is (its centre within a quarter square: a lattice predicted from
 too few corners, off by a square, names nothing). The image must show a corner there: its white
 squares brighter than its black ones by at least :data:`MIN_CONTRAST_SHARE` of the named corners'
@@ -39,9 +39,11 @@ import numpy as np
 from aicalib_tf.detect.lattice import predict_ids
 from aicalib_tf.detect.refine import Smoothed, refine_windowed, window_radius
 
-__all__ = ["MIN_NEIGHBOURS", "EDGE_NEIGHBOURS", "MAX_EDGE_MOVE", "MIN_CONTRAST_SHARE", "MAX_AFFINE_ASYMMETRY", "grow_along_lattice",
+__all__ = ["SUPPORT", "MAX_SHIFT_MARGIN", "MIN_NEIGHBOURS", "EDGE_NEIGHBOURS", "MAX_EDGE_MOVE", "MIN_CONTRAST_SHARE", "MAX_AFFINE_ASYMMETRY", "grow_along_lattice",
            "keep_with_contrast", "margin_px", "refine_in_squares", "asymmetry", "square_contrast", "at_frame_edge", "place_edge_corners"]
 
+SUPPORT = 1.5  # squares from a corner to a marker that names it (Chebyshev, marker centre)
+MAX_SHIFT_MARGIN = 0.5  # a refined corner moves at most this share of its margin (plus 0.5 px)
 MIN_NEIGHBOURS = 2
 EDGE_NEIGHBOURS = 3
 MAX_EDGE_MOVE = 1.5  # px: the most a fit on the image's edge was seen pulled (0.9 px), with room
@@ -82,8 +84,6 @@ def _agreeing_markers(det) -> np.ndarray:
 def _supported(det, want: np.ndarray) -> np.ndarray:
     """(M,) bool: a marker that named det, and that sits where det's corners put it, lies within
     SUPPORT squares (Chebyshev) of each corner id (M, 2)."""
-    from aicalib_tf.detect.charuco import SUPPORT
-
     centres = _agreeing_markers(det)
     if not len(centres) or not len(want):
         return np.zeros(len(want), bool)
@@ -290,8 +290,6 @@ def grow_along_lattice(gray: np.ndarray, det, smoothed: Smoothed | None = None):
     gray : (H, W) float32. det : a :class:`~aicalib_tf.detect.charuco.CharucoDetection` with at
     least 4 corners (otherwise returned as it is).
     """
-    from aicalib_tf.detect.charuco_complete import MAX_SHIFT_MARGIN, _union
-
     h, w = gray.shape
     no_shadow = lambda idx, saddles: np.zeros(len(idx), bool)  # noqa: E731 - the saddle stands
     contrast = max_asym = None
@@ -339,3 +337,17 @@ def grow_along_lattice(gray: np.ndarray, det, smoothed: Smoothed | None = None):
             break
         det = _union(det, replace(det, corners=got[ok].astype(np.float32), ids=want[ok].astype(np.int32)))
     return det
+
+
+def _union(a, b):
+    """One detection of the corners and markers of a and b (same board, disjoint ids)."""
+    ids = np.concatenate([a.ids, b.ids])
+    pts = np.concatenate([a.corners, b.corners])
+    order = np.lexsort((ids[:, 0], ids[:, 1]))
+    mk = dict(zip(b.marker_ids.tolist(), b.marker_corners))
+    mk.update(zip(a.marker_ids.tolist(), a.marker_corners))
+    keys = sorted(mk)
+    cols, rows = a.board.pattern_size
+    return replace(a, corners=pts[order], ids=ids[order], marker_ids=np.array(keys, np.int64),
+                   marker_corners=np.array([mk[k] for k in keys], np.float64).reshape(-1, 4, 2),
+                   complete=len(ids) == cols * rows)
