@@ -40,6 +40,8 @@ def charuco_conditions(board: str = BOARD) -> list[Condition]:
         Condition("clean", clean, seed=41, description="sharp, well lit, lens blur σ 0.6 px"),
         Condition("noise40", with_rules("noise40", (_OPTICS, Rule.of("gaussian_noise", sigma=40.0))), seed=41,
                   description="Gaussian noise σ 40 grey levels"),
+        Condition("blur2", with_rules("blur2", (Rule.of("gaussian_blur", sigma=2.0), _READ_NOISE)), seed=41,
+                  description="Gaussian blur σ 2 px (the markers' bits still legible)"),
         Condition("blur3", with_rules("blur3", (Rule.of("gaussian_blur", sigma=3.0), _READ_NOISE)), seed=41,
                   description="Gaussian blur σ 3 px"),
         Condition("lowlight", with_rules("lowlight", (Rule.of("exposure", gain=0.2), _OPTICS,
