@@ -162,8 +162,11 @@ CHARUCO_IMAGES = (10, 3)  # images per ChArUco condition: the suite, --quick
 
 def _charuco_suite(args, argv, started: float) -> int:
     """``--board``: the ChArUco suite (module docstring) into ``--out``; ValueError for a bad board
-    or options that belong to the chessboard suite."""
+    or options that belong to the chessboard suite (``--limit`` and ``--workers`` are checked by the caller)."""
+    import pandas as pd
+
     from aicalib_tf.bench.charuco import detection_markdown, detection_table
+    from aicalib_tf.bench.report import _csv
     from aicalib_tf.cnn.model import load_model
     from aicalib_tf.geometry.charuco import parse_board
     from aicalib_tf.io import atomic_write_text
@@ -173,8 +176,6 @@ def _charuco_suite(args, argv, started: float) -> int:
     if args.images is not None or args.pattern is not None or args.conditions is not None or args.degrade:
         raise ValueError("--board runs the ChArUco suite: it takes --quick, --limit, --model and --out, not --images, "
                          "--pattern, --conditions or --degrade")
-    if args.limit is not None and args.limit < 1:
-        raise ValueError(f"--limit must be >= 1, got {args.limit}")
     out = args.out or str(Path("reports") / time.strftime("%Y%m%d-%H%M%S"))
     check_out_path(out)
     model = load_model(args.model)
@@ -183,11 +184,9 @@ def _charuco_suite(args, argv, started: float) -> int:
     command = "python -m aicalib_tf.evaluate " + " ".join(sys.argv[1:] if argv is None else argv)
     report = (f"# ChArUco benchmark\n\n`{command}`: {args.board}, {n} images per condition, "
               f"{time.perf_counter() - started:.0f} s\n\n{detection_markdown(rows)}\n")
-    header = list(rows[0])
-    csv = "\n".join([",".join(header), *(",".join(str(r[k]) for k in header) for r in rows)]) + "\n"
     with OutputFolder(out, "report") as folder:
         atomic_write_text(folder.path / "report.md", report)
-        atomic_write_text(folder.path / "results.csv", csv)
+        _csv(pd.DataFrame(rows), folder.path / "results.csv")
     print(detection_markdown(rows))
     print(f"report: {Path(out) / 'report.md'}")
     return 0
