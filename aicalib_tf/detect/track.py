@@ -18,7 +18,13 @@ cheaper searches first:
 3. *frame*: the whole frame, as a single image.
 
 A frame without a full board (or of another size) forgets the board: the next frame is searched
-whole. Coordinates are (x, y) px, OpenCV's convention (the centre of pixel (0, 0) at (0.0, 0.0)); a
+whole, unless it shows the same scene as the last frame searched whole (*still*: no block of
+``STILL_BLOCK`` thumbnail px changed by ``STILL_LEVEL`` grey levels or more on average,
+:func:`scene_changed`); then that search's result stands, for at most ``STILL_MAX`` frames in a
+row. A live camera pointed at a scene without the board, or at a board too far or too blurred to
+find, shows nearly the same image frame after frame: the result of the same image is not searched
+for again. The thresholds sit far above a camera's noise in a block's mean (a block averages
+thousands of pixels) and far below a board's edge entering it. Coordinates are (x, y) px, OpenCV's convention (the centre of pixel (0, 0) at (0.0, 0.0)); a
 box ``(x0, y0, x1, y1)`` holds pixels x0 … x1 − 1 and y0 … y1 − 1.
 """
 
@@ -26,6 +32,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import cv2
 import numpy as np
 
 from aicalib_tf.detect.board_order import full_board_ids, reading
@@ -34,13 +41,18 @@ from aicalib_tf.detect.pipeline import Detection, detect_corners
 from aicalib_tf.detect.pyramid import refine_full
 from aicalib_tf.io import load_image, to_gray_float
 
-__all__ = ["FOLLOW_SHIFT", "MAX_BEND", "ROI_STEPS", "Tracker", "follow", "lattice_bent", "search_box"]
+__all__ = ["FOLLOW_SHIFT", "MAX_BEND", "ROI_STEPS", "STILL_LEVEL", "STILL_MAX", "Tracker", "follow", "lattice_bent",
+           "scene_changed", "scene_thumbnail", "search_box"]
 
 FOLLOW_SHIFT = 0.3  # of the median corner spacing: the furthest a followed corner may end from its prediction
 MAX_BEND = 0.25  # of the median spacing: the largest second difference along a row or column of a followed board
 ROI_STEPS = 2.0  # corner spacings around the last board searched before the whole frame
 ALIGN = 32  # px: a region's sides are rounded up to multiples of this (the network keeps a plan per input size)
 MARGIN = 8  # px around the predicted corners read for the follow step (beyond the largest saddle window)
+STILL_SIDE = 160  # px: the longer side of the thumbnail a frame is compared at
+STILL_BLOCK = 8  # thumbnail px: the side of the blocks whose mean change is tested
+STILL_LEVEL = 4.0  # grey levels of 255: a block's mean absolute change at or above this is a changed scene
+STILL_MAX = 15  # frames: a still scene is searched again at least this often
 
 
 def lattice_bent(corners: np.ndarray, pattern_size: tuple[int, int]) -> float:
@@ -79,6 +91,27 @@ def search_box(corners: np.ndarray, size: tuple[int, int], pad: float) -> tuple[
     if x1 - x0 < 8 or y1 - y0 < 8:
         return None
     return int(x0), int(y0), int(x1), int(y1)
+
+
+def scene_thumbnail(raw: np.ndarray) -> np.ndarray:
+    """(h, w) float32 grey levels of 255: a frame (any array the image gate takes) shrunk by area
+    averaging to a longer side of ``STILL_SIDE`` px. A uint8 grey frame is shrunk as it is."""
+    from aicalib_tf.geometry.image_circle import thumbnail
+
+    if raw.ndim == 2 and raw.dtype == np.uint8:
+        return thumbnail(raw, STILL_SIDE)
+    return thumbnail(to_gray_float(raw), STILL_SIDE) * np.float32(255.0)
+
+
+def scene_changed(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two thumbnails of :func:`scene_thumbnail` show a changed scene: a block of
+    ``STILL_BLOCK`` px whose mean absolute difference reaches ``STILL_LEVEL``, or another size."""
+    if a.shape != b.shape:
+        return True
+    d = np.abs(a - b)
+    h, w = d.shape
+    blocks = cv2.resize(d, (max(1, w // STILL_BLOCK), max(1, h // STILL_BLOCK)), interpolation=cv2.INTER_AREA)
+    return bool(blocks.max() >= STILL_LEVEL)
 
 
 def _crop_gray(raw: np.ndarray, box: tuple[int, int, int, int]) -> np.ndarray:
@@ -124,7 +157,8 @@ class Tracker:
     pattern_size : (cols, rows) inner corners. model, threshold : as
     :func:`aicalib_tf.detect.pipeline.detect_corners`. Call it with each frame (a path or an array the
     image gate takes); it returns the frame's :class:`~aicalib_tf.detect.pipeline.Detection`.
-    ``how`` says how the last frame's board was found: "follow", "region", "frame" or "" (none).
+    ``how`` says how the last frame's board was found: "follow", "region", "frame" or "" (none), or
+    "still" when the frame repeats the scene of the last frame searched whole, whose result it gets.
 
     >>> from aicalib_tf.detect.warm import synthetic_board
     >>> track = Tracker((9, 6))
@@ -145,24 +179,36 @@ class Tracker:
         """Forget the board: the next frame is searched whole."""
         self._last = self._before = self._scores = None
         self._size = None
+        self._still = None  # (thumbnail, detection, frames reused) of the last frame searched whole without a board
 
     def __call__(self, image) -> Detection:
         raw = image if isinstance(image, np.ndarray) and image.ndim in (2, 3) else load_image(image)
         h, w = raw.shape[:2]
         if self._size != (w, h):
             self.reset()
-        det, self.how = None, ""
-        if self._last is not None:
-            det = self._near(raw, (w, h))
+        self._size, self.how = (w, h), ""
+        thumb = scene_thumbnail(raw) if self._last is None else None
+        det = self._near(raw, (w, h)) if self._last is not None else self._repeat(thumb)
         if det is None:
             det = detect_corners(load_image(raw), self.pattern_size, model=self.model, threshold=self.threshold)
             self.how = "frame" if det.complete else ""
+            self._still = None if det.complete else (scene_thumbnail(raw) if thumb is None else thumb, det, 0)
         if det.complete:
             # the motion is taken between the two boards in one order
             self._before = None if self._last is None else _aligned(self._last, det.corners, self.pattern_size)
-            self._last, self._scores, self._size = det.corners, det.scores, (w, h)
+            self._last, self._scores = det.corners, det.scores
         else:
-            self.reset()
+            self._last = self._before = self._scores = None
+        return det
+
+    def _repeat(self, thumb: np.ndarray) -> Detection | None:
+        """The last whole-frame search's result when ``thumb`` shows its scene (module docstring), or None."""
+        if self._still is None:
+            return None
+        seen, det, reused = self._still
+        if reused >= STILL_MAX or scene_changed(thumb, seen):
+            return None
+        self._still, self.how = (seen, det, reused + 1), "still"
         return det
 
     def _near(self, raw: np.ndarray, size: tuple[int, int]) -> Detection | None:

@@ -143,3 +143,53 @@ def test_the_tracker_takes_colour_frames_and_paths(tmp_path):
     assert all(d.complete for d in got) and track.how == "follow"
     want = detect_corners(frames[2], PATTERN)
     assert np.abs(got[2].corners - want.corners).max() < 0.05
+
+
+def _noisy(base: np.ndarray, sigma: float, seed: int) -> np.ndarray:
+    """base (H, W) uint8 with Gaussian read noise of ``sigma`` grey levels."""
+    noise = np.random.default_rng(seed).normal(0.0, sigma, base.shape)
+    return np.clip(base + noise, 0, 255).astype(np.uint8)
+
+
+def _background(shape) -> np.ndarray:
+    """A textured (H, W) uint8 scene without a board: smooth blobs of grey."""
+    import cv2
+
+    rng = np.random.default_rng(0)
+    return cv2.GaussianBlur(rng.uniform(40, 220, shape).astype(np.float32), (0, 0), 9).astype(np.uint8)
+
+
+def test_a_scene_is_changed_by_a_small_board_entering_and_not_by_a_cameras_noise():
+    from aicalib_tf.detect.track import STILL_LEVEL, scene_changed, scene_thumbnail
+
+    base = _background((480, 640))
+    a, b = (scene_thumbnail(_noisy(base, 8.0, s)) for s in (1, 2))  # heavy read noise, same scene
+    assert not scene_changed(a, b)
+    entered = base.copy()
+    entered[:40, :40] = np.where((np.arange(40)[:, None] // 10 + np.arange(40)[None] // 10) % 2, 60, 180)
+    assert scene_changed(a, scene_thumbnail(_noisy(entered, 8.0, 3)))  # a 40 px corner of a board
+    assert scene_changed(a, scene_thumbnail(_noisy(base[:, :600], 8.0, 4)))  # another size
+    dimmer = scene_thumbnail(np.clip(base.astype(int) - int(STILL_LEVEL) - 1, 0, 255).astype(np.uint8))
+    assert scene_changed(scene_thumbnail(base), dimmer)  # the exposure moved
+    float_frame = scene_thumbnail(base.astype(np.float32) / 255.0)
+    assert np.abs(float_frame - scene_thumbnail(base)).max() < 0.01  # grey levels of 255 from any frame
+
+
+def test_a_still_scene_without_a_board_is_searched_once_then_again_every_still_max_frames(monkeypatch):
+    from aicalib_tf.detect import track as track_module
+    from aicalib_tf.detect.track import STILL_MAX
+
+    calls = []
+    search = track_module.detect_corners
+    monkeypatch.setattr(track_module, "detect_corners", lambda *a, **k: calls.append(1) or search(*a, **k))
+    base = _background((480, 640))
+    track = Tracker(PATTERN)
+    hows = []
+    for k in range(STILL_MAX + 3):
+        det = track(_noisy(base, 3.0, k))
+        hows.append(track.how)
+        assert not det.found and det.image_size == (640, 480)
+    assert hows == [""] + ["still"] * STILL_MAX + ["", "still"]
+    assert len(calls) == 2
+    board = synthetic_board(PATTERN, size=(640, 480))  # the board comes into view: searched at once
+    assert track(board).complete and track.how == "frame" and len(calls) == 3
