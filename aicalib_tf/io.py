@@ -60,11 +60,13 @@ def to_gray_float(image: np.ndarray, name: str = "array") -> np.ndarray:
         scale = 1.0
     else:
         raise ImageError(f"{name}: unsupported dtype {a.dtype}; use uint8, uint16 or float in [0, 1]")
-    a = a.astype(np.float32) * np.float32(scale)
+    exact = a.ndim == 2 and a.dtype.kind == "u"  # integer grey: already in [0, 1] once scaled
+    # a new array in one pass (the caller's is never changed); float input has scale 1
+    a = a.astype(np.float32) if a.dtype.kind == "f" else np.multiply(a, np.float32(scale), dtype=np.float32)
     if a.ndim == 3:
         code = cv2.COLOR_BGRA2GRAY if a.shape[2] == 4 else cv2.COLOR_BGR2GRAY
         a = cv2.cvtColor(a, code)
-    return np.clip(a, 0.0, 1.0)
+    return a if exact else np.clip(a, 0.0, 1.0, out=a)
 
 
 def display_name(path) -> str:

@@ -4,7 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
-from aicalib_tf.io import ImageError, atomic_write_text, load_image
+from aicalib_tf.io import ImageError, atomic_write_text, load_image, to_gray_float
 
 
 def test_gate_accepts_gray_colour_uint8_uint16(tmp_path):
@@ -156,3 +156,18 @@ def test_any_array_gives_a_grey_image_or_an_image_error(dtype, shape):
     except ImageError:
         return
     assert img.dtype == np.float32 and img.ndim == 2
+
+
+@pytest.mark.parametrize("dtype, channels", [(np.uint8, 0), (np.uint16, 0), (np.uint8, 3), (np.float64, 0), (np.float32, 4)])
+def test_to_gray_float_scales_exactly_into_a_new_array(dtype, channels):
+    rng = np.random.default_rng(3)
+    shape = (37, 53) if not channels else (37, 53, channels)
+    top = np.iinfo(dtype).max if np.dtype(dtype).kind == "u" else 1.0
+    a = (rng.integers(0, top + 1, shape) if np.dtype(dtype).kind == "u" else rng.random(shape)).astype(dtype)
+    want = a.astype(np.float32) * np.float32(1.0 / top)
+    if channels:
+        want = cv2.cvtColor(want, cv2.COLOR_BGRA2GRAY if channels == 4 else cv2.COLOR_BGR2GRAY)
+    got = to_gray_float(a)
+    assert got.dtype == np.float32 and got.min() >= 0.0 and got.max() <= 1.0
+    np.testing.assert_array_equal(got, np.clip(want, 0.0, 1.0))
+    assert not np.shares_memory(got, a)
