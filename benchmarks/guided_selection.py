@@ -21,7 +21,13 @@ whole image (32×24 cells: what a user of the calibration gets) and over the cel
 covered. Reported: the median over the trials and how often the guided set beat the other at
 the same count (paired by trial).
 
+One set's error swings 2-3× between noise draws, so with ``--redraws R`` each set is scored by
+the mean error of R fits of its frames with fresh noise: its expected error, what the selection
+itself is worth. ``--curve`` adds random frames at fixed counts and reads off how many random
+frames reach the guided sets' errors.
+
     python benchmarks/guided_selection.py --paths mild:60:1280x720:1 fisheye150:60:1280x720:2 --trials 20
+    python benchmarks/guided_selection.py --paths mild:60:1280x720:3 --trials 20 --redraws 6 --curve 6 9 13 18 26 36 52
     python benchmarks/guided_selection.py /tmp/vids/fish30 --trials 20   (a rendered video's labels.jsonl)
 """
 
@@ -29,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 import sys
 import time
 from pathlib import Path
@@ -83,8 +90,19 @@ def _detected(labels, max_motion: float) -> dict[int, np.ndarray]:
     return out
 
 
-def _score(lab: dict, views: list[View], model: str) -> tuple[float, float, int]:
-    """(error over the image, over the covered cells, views used) px; NaN when the fit fails."""
+def _score(lab: dict, views: list[View], model: str, redraw=None) -> tuple[float, float, int]:
+    """(error over the image, over the covered cells, views used) px; NaN when the fit fails.
+
+    redraw : None, or (exact corners {frame: (N, 2)}, rng, noise σ px, R): the set's frames fitted R
+    times with fresh noise instead of the trial's own, and the mean of the R errors returned: the
+    set's expected error, without the luck of one draw (errors of one set swing 2-3× between draws).
+    """
+    if redraw is not None:
+        exact, rng, noise, reps = redraw
+        frames = [int(v.name[len("frame"):]) for v in views]
+        runs = [_score(lab, [replace(v, corners=exact[i] + rng.normal(0.0, noise, exact[i].shape))
+                             for v, i in zip(views, frames)], model) for _ in range(reps)]
+        return float(np.mean([r[0] for r in runs])), float(np.mean([r[1] for r in runs])), runs[0][2]
     size = tuple(lab["image_size"])
     try:
         cal = fit_views(views, tuple(lab["pattern_size"]), lab["square_size"], size, model, fix_k3=model != "equidistant")
@@ -115,12 +133,33 @@ def trial(labels, detected, ids, rng, args) -> dict:
     repeats = duplicates([views[i] for i in sorted(views)])  # a board at rest: the same view, counted once
     pool = [i for i in sorted(views) if views[i].name not in repeats]
     row = {"frames_read": session.frames_seen, "seen": len(session.ranked_views())}
+    redraw = (detected, rng, args.noise, args.redraws) if args.redraws else None
     for name, got in (("guided", final), ("kept", kept)):
         k = len(got)
-        row[name] = _score(lab, got, model)
-        row[f"random@{name}"] = _score(lab, [views[i] for i in sorted(rng.choice(pool, size=k, replace=False))], model)
-        row[f"every30@{name}"] = _score(lab, every[:k], model)
+        row[name] = _score(lab, got, model, redraw)
+        row[f"random@{name}"] = _score(lab, [views[i] for i in sorted(rng.choice(pool, size=k, replace=False))], model,
+                                       redraw)
+        row[f"every30@{name}"] = _score(lab, every[:k], model, redraw)
+    for k in args.curve:  # random frames at fixed counts: how many it takes for an error
+        if k <= len(pool):
+            row[f"curve{k}"] = _score(lab, [views[i] for i in sorted(rng.choice(pool, size=k, replace=False))], model,
+                                      redraw)
     return row
+
+
+def views_for(curve: dict[int, float], error: float) -> float:
+    """How many random views reach ``error`` px: the median-error curve {count: px}, interpolated in
+    log(count) against log(error); inf beyond its largest count, and its smallest count or fewer
+    when already below."""
+    ks = sorted(k for k in curve if np.isfinite(curve[k]))
+    if not ks or error <= 0:
+        return float("nan")
+    for a, b in zip(ks, ks[1:]):
+        ea, eb = curve[a], curve[b]
+        if ea >= error >= eb and ea > eb:
+            t = (np.log(ea) - np.log(error)) / (np.log(ea) - np.log(eb))
+            return float(np.exp(np.log(a) + t * (np.log(b) - np.log(a))))
+    return float(ks[0]) if error >= curve[ks[0]] else float("inf")
 
 
 def main(argv=None) -> int:
@@ -132,6 +171,10 @@ def main(argv=None) -> int:
     ap.add_argument("--noise", type=float, default=0.15, help="corner noise σ per axis, px")
     ap.add_argument("--target", type=float, default=0.1, help="the loop's --target, px")
     ap.add_argument("--step", type=int, default=3, help="the loop sees every step-th frame")
+    ap.add_argument("--redraws", type=int, default=0,
+                    help="score each set by the mean error of this many fits with fresh noise (0: the trial's own)")
+    ap.add_argument("--curve", type=int, nargs="*", default=[],
+                    help="also random frames at these counts, and how many random views reach the guided errors")
     ap.add_argument("--max-motion", type=float, default=1.0, help="px: a frame moving more is blurred, not detected")
     args = ap.parse_args(argv)
     for name, labels in [*((f.name, _load(f)) for f in args.videos), *(_path_labels(p) for p in args.paths)]:
@@ -153,6 +196,15 @@ def main(argv=None) -> int:
                 wins = "" if name == base else f"{np.mean(ref[:, 0] < a[:, 0]):.0%} of trials"
                 print(f"  {name:<16} {np.median(a[:, 2]):5.0f} {np.nanmedian(a[:, 0]):9.4f} {np.nanmedian(a[:, 1]):10.4f} "
                       f"{wins:>26}")
+        curve = {k: float(np.nanmedian([r[f"curve{k}"][0] for r in rows_])) for k in args.curve
+                 if all(f"curve{k}" in r for r in rows_)}
+        if curve:
+            print("  random frames, median error over the image: "
+                  + ", ".join(f"{k} views {e:.4f} px" for k, e in sorted(curve.items())))
+            for base in ("guided", "kept"):
+                a = np.array([r[base] for r in rows_])
+                err, k = float(np.nanmedian(a[:, 0])), float(np.median(a[:, 2]))
+                print(f"  random frames for {base}'s {err:.4f} px ({k:.0f} views): {views_for(curve, err):.1f} views")
     return 0
 
 
