@@ -33,7 +33,8 @@ import cv2
 import numpy as np
 
 from aicalib_tf.calib.fit import Calibration, CalibrationError, View, calibrate_camera, fit_views
-from aicalib_tf.calib.quality import coverage_counts, lens_of, sigma_from_basis, uncertainty_basis, view_information
+from aicalib_tf.calib.quality import (coverage_counts, in_circle, lens_of, sigma_from_basis, uncertainty_basis,
+                                      view_information)
 from aicalib_tf.geometry.image_circle import ImageCircle, estimate_image_circle, thumbnail
 from aicalib_tf.geometry.pattern import board_points
 from aicalib_tf.guided.design import design_weight, elimination_order
@@ -261,18 +262,19 @@ class GuidedCalibration:
         s.cal, s.running, s.since_fit = cal, cal.model, 0
         s.poses = [board_pose(v.corners, v.ids, cfg.square, self.image_size, lens_of(cal)) or p
                    for v, p in zip(s.views, s.poses)]
+        self._circle = self.image_circle()  # the frames so far: nothing outside it is suggested or asked for
         covered = coverage_counts(s.views, self.image_size, (32, 24)).ravel() > 0
         _, G, ok = uncertainty_basis(cal, fit_mask=covered)
-        s.basis = (G, ok)
+        s.basis = (G, ok & in_circle(self.image_size, (32, 24), self._circle))
         s.information = np.linalg.pinv(cal.covariance, hermitian=True)
         sigma = sigma_from_basis(G, ok, cal.covariance)
         sig = float(np.percentile(sigma[covered & np.isfinite(sigma)], 90)) if (covered & np.isfinite(sigma)).any() else math.inf
         frac = float(np.mean(coverage_counts(s.views, self.image_size, _CELLS) > 0))
         s.estimate = Estimate(cal.model, cal.K, cal.dist, cal.rms, len(s.views), sig, frac)
         distance = float(np.median([np.linalg.norm(p.tvec) for p in s.poses]))
-        ranked = next_views(lens_of(cal), s.information, s.basis, distance, cfg.pattern, cfg.square, self._sigma2())
+        ranked = next_views(lens_of(cal), s.information, s.basis, distance, cfg.pattern, cfg.square, self._sigma2(),
+                            self._circle)
         s.guidance = ranked[0] if ranked else None
-        self._circle = self.image_circle()  # the frames so far: corner regions outside it are not asked for
         gone = missing(s.views, [tilt_of(p) for p in s.poses], self.image_size, self._circle)
         regions_left = any("covered" in g for g in gone)
         s.done = len(s.views) >= cfg.max_views or (
