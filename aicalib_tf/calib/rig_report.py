@@ -36,6 +36,8 @@ def format_rig_report(rig: RigCalibration, pairing, skipped: dict) -> str:
                      f"fy {cal.fy:.2f} ± {s.get('fy', 0):.2f}, cx {cal.cx:.2f} ± {s.get('cx', 0):.2f}, "
                      f"cy {cal.cy:.2f} ± {s.get('cy', 0):.2f}")
         lines.append(f"  {fov_line(cal)}")
+        if rig.meta.get("image_circle_notes", {}).get(name):
+            lines.append(f"  {rig.meta['image_circle_notes'][name]}: no image circle, the full frame is used")
         if cal.quality.get("verdict"):
             lines.append(f"  {cal.quality['verdict']}")
     unit = f" {rig.square_unit}" if rig.square_unit else ""

@@ -200,16 +200,18 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
     pairing = pair_images(files)
     detect = make_detector(cfg.detector, _target(cfg), cfg.network)  # a bad network or board fails here, before any work
     with OutputFolder(cfg.out, "rig") as out:  # a bad --out fails here; files are swapped in at the end
-        views, sizes, skipped, circles = {}, {}, {}, {}
+        views, sizes, skipped, circles, notes = {}, {}, {}, {}, {}
         for cam in files:
             v, s, sk, found = _detect_camera(cam, pairing.frames, cfg)
             sizes[cam] = _check_sizes(cam, v, s, pairing.frames, sk)
-            circles[cam] = _image_circle(found, sizes[cam])
+            circles[cam], note = _image_circle(found, sizes[cam])
+            if note:
+                notes[cam] = note
             views[cam] = [v[n] for n, _ in pairing.frames if n in v]
             skipped.update({f"{cam}/{n}": why for n, why in sk.items()})
         meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
                 "lens_model": cfg.model, "pairing": pairing.rule, "images": {c: len(f) for c, f in files.items()},
-                **({"board": cfg.board} if cfg.board else {})}
+                **({"board": cfg.board} if cfg.board else {}), **({"image_circle_notes": notes} if notes else {})}
         rig, report, figure = calibrate_views(views, sizes, pairing, skipped, cfg, models, meta, circles)
         write_rig_files(out.path, rig, report, figure)
     return rig, report

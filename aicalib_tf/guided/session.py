@@ -35,7 +35,7 @@ import numpy as np
 from aicalib_tf.calib.fit import Calibration, CalibrationError, View, calibrate_camera, fit_views
 from aicalib_tf.calib.quality import (coverage_counts, in_circle, lens_of, sigma_from_basis, uncertainty_basis,
                                       view_information)
-from aicalib_tf.geometry.image_circle import ImageCircle, estimate_image_circle, thumbnail
+from aicalib_tf.geometry.image_circle import ImageCircle, find_image_circle, thumbnail
 from aicalib_tf.geometry.pattern import board_points
 from aicalib_tf.guided.design import design_weight, elimination_order
 from aicalib_tf.guided.guidance import Suggestion, missing, next_views
@@ -282,9 +282,13 @@ class GuidedCalibration:
 
     def image_circle(self) -> ImageCircle | None:
         """The image circle of the examined frames (their thumbnails' mean), None when they fill the frame."""
+        return self.image_circle_and_note()[0]
+
+    def image_circle_and_note(self) -> tuple[ImageCircle | None, str]:
+        """(:meth:`image_circle`, why none was found where the frames' corners are dark, else "")."""
         if not self._n_thumbs:
-            return None
-        return estimate_image_circle(self._thumbs / self._n_thumbs, self.image_size)
+            return None, ""
+        return find_image_circle(self._thumbs / self._n_thumbs, self.image_size)
 
     def _design(self) -> tuple[list[View], list[np.ndarray], np.ndarray, np.ndarray, list[int]]:
         """(candidates: the kept views and the pool, their information / σ² under the running fit,
@@ -337,5 +341,7 @@ class GuidedCalibration:
         views = self.final_views() if views is None else views
         if self.image_size is None or len(views) < 3:
             raise CalibrationError(f"{len(views)} views kept; need at least 3")
+        circle, note = self.image_circle_and_note()
+        meta = dict(meta or {}, **({"image_circle_note": note} if note else {}))
         return calibrate_camera(views, cfg.pattern, cfg.square, self.image_size, model=cfg.model,
-                                square_unit=cfg.square_unit, meta=meta, image_circle=self.image_circle())
+                                square_unit=cfg.square_unit, meta=meta, image_circle=circle)
