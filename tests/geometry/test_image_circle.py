@@ -118,3 +118,11 @@ def test_undistortion_maps_are_invalid_outside_the_circle():
     valid = mx >= 0
     assert valid.any() and (~valid).any()
     assert np.all(np.hypot(mx[valid] - 639.5, my[valid] - 479.5) <= 200.0 + 1e-3)
+
+
+def test_doctests():
+    import doctest
+
+    from aicalib_tf.geometry import image_circle
+
+    assert doctest.testmod(image_circle).failed == 0
