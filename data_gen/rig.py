@@ -6,7 +6,8 @@ in about its y axis by up to ``vergence_deg`` in all (the cameras converge) and 
 degree about the other axes, as a real mount is. Camera k maps camera 0's frame as
 X_k = R_k·X_0 + T_k with T_k = −R_k·c_k (OpenCV's stereo convention). Lenses are drawn per camera
 (:func:`data_gen.camera.sample_camera` for "pinhole", :func:`data_gen.camera.sample_fisheye` for
-"fisheye", full-frame 150–175°). The board's square grows with the baseline (the board a user
+"fisheye", full-frame 150–175°, and for "circular", 180–195° with the whole image circle inside the
+frame, its outside black). The board's square grows with the baseline (the board a user
 would pick), so every camera sees it from a distance where it fills a good part of the image.
 
 Each frame draws the board's pose for one camera (in turn, so every camera's image gets covered),
@@ -36,7 +37,7 @@ from .sample import OUTSIDE_CIRCLE, Sample
 
 __all__ = ["RigTruth", "sample_rig", "rig_placement", "rig_frame_poses", "make_rig_sequence", "RIG_LENSES"]
 
-RIG_LENSES = ("pinhole", "fisheye")
+RIG_LENSES = ("pinhole", "fisheye", "circular")
 _POSE = PoseConfig(tilt_max_deg=45.0, fill=(0.25, 0.6), framing="inside")
 
 
@@ -57,6 +58,8 @@ class RigTruth:
 def _camera(rng, lens: str, size) -> Camera:
     if lens == "fisheye":
         return sample_fisheye(rng, size, fov_deg=(150.0, 175.0))
+    if lens == "circular":
+        return sample_fisheye(rng, size, fov_deg=(180.0, 195.0))
     if lens == "pinhole":
         return sample_camera(rng, size, hfov_deg=(55.0, 90.0), distortion=("mild", "strong"))
     raise ValueError(f"rig lens must be one of {RIG_LENSES}, got {lens!r}")

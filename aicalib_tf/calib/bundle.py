@@ -12,7 +12,13 @@ blocks per view, then a (4 + n)² system), so a step costs O(V). Measured on 40 
 
 A corner that the current parameters cannot project (behind a pinhole camera, or beyond the
 model's monotonic range) gets a constant residual of ``_PENALTY`` px and a zero Jacobian row, so
-the solver moves away from such parameters; a final fit with any such corner is an error.
+the solver moves away from such parameters; a final fit with any such corner is an error. A step
+that takes a coefficient outside the model's valid range (Double Sphere ξ ∈ (−1, 1], α ∈ [0, 1];
+EUCM α ∈ [0, 1], β > 0) cannot be evaluated and is refused the same way, so the search never
+leaves the range; a fit that ends on its edge (within ``RANGE_EDGE_REL`` of
+:mod:`~aicalib_tf.geometry.lens_model`) stopped there because the views ask for a value beyond it,
+and is an error naming the coefficient (``auto`` then moves on to the next model), as is a start
+outside the range.
 
 Starts: :mod:`aicalib_tf.calib.starts` gives the intrinsics; :func:`poses_from_rays` gives every view's pose from a lens guess (rays from
 :func:`~aicalib_tf.geometry.lens.unproject`, turned so that the board lies ahead, then
@@ -26,7 +32,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from aicalib_tf.geometry.lens import COEFF_NAMES, N_COEFFS, Lens, check_model, projection_jacobian
+from aicalib_tf.geometry.lens import COEFF_NAMES, N_COEFFS, Lens, check_model, get_model, projection_jacobian
 
 __all__ = ["CalibrationError", "BundleResult", "bundle_adjust", "levenberg_marquardt", "schur_complement", "reduce_blocks",
            "SchurProblem", "poses_from_rays", "solve_pose", "param_names"]
@@ -259,6 +265,11 @@ def bundle_adjust(model: str, obj, px, intrinsics, rvecs, tvecs, *, free=None, m
     :class:`CalibrationError` when the fit ends with non-finite values or unprojectable corners.
     rank_strict : raise on a rank-deficient fit (else the covariance is a pseudo-inverse and ``note`` says so).
     """
+    if model in N_COEFFS:  # a known model whose start lies outside its valid range: no fit to make
+        try:
+            check_model(model, np.asarray(intrinsics, np.float64)[4:])
+        except ValueError as exc:
+            raise CalibrationError(f"{model}: the start is outside the model's valid range ({exc})") from exc
     check_model(model, np.asarray(intrinsics, np.float64)[4:])
     if len(obj) != len(px) or len(px) != len(rvecs) or len(px) != len(tvecs) or not px:
         raise ValueError(f"obj, px, rvecs and tvecs must list the same V >= 1 views, got {len(obj)}, {len(px)}, "
@@ -277,6 +288,10 @@ def bundle_adjust(model: str, obj, px, intrinsics, rvecs, tvecs, *, free=None, m
     if strict and (n_bad or not np.all(np.isfinite(x))):
         raise CalibrationError(f"{model}: the fit diverged ({n_bad} of {prob.N} corners cannot be projected "
                                "with the final parameters)")
+    edge = get_model(model).range_edge(intr[4:]) if strict else None
+    if edge is not None:  # the search stops there: every step beyond is outside the model (module docstring)
+        raise CalibrationError(f"{model}: the fit stopped at the edge of the model's valid range ({edge}): the views "
+                               "ask for a value the model does not allow, so it does not describe this lens")
     res2 = res.reshape(-1, 2)
     sq = np.sum(res2 * res2, axis=1)
     per_view = np.array([np.sqrt(np.mean(s)) for s in np.split(sq, prob.splits)])

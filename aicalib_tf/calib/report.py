@@ -72,6 +72,9 @@ def calibration_warnings(cal: Calibration, views: list[View]) -> list[str]:
         warnings.append(f"all boards are nearly fronto-parallel (largest tilt {tilts.max():.0f}°): focal length and "
                         "principal point are poorly constrained; add views tilted 30–50°")
     circle = getattr(cal, "image_circle", None)
+    if cal.meta.get("image_circle_note"):
+        warnings.append(f"{cal.meta['image_circle_note']}: no image circle is used; coverage, uncertainty and "
+                        "field of view count the full frame")
     empty = [name for name in Q.uncovered_regions(views, cal.image_size, circle) if "-" in name]
     if empty:
         warnings.append(f"no corners in the image's {', '.join(empty)} region{'s' if len(empty) > 1 else ''}: "

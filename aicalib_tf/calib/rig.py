@@ -4,7 +4,8 @@ Input: per camera, :class:`~aicalib_tf.calib.fit.View` objects named by their *f
 cameras with one name were taken at the same instant (a pair), so they share the board's pose.
 
 1. Each camera is calibrated alone (:func:`~aicalib_tf.calib.fit.calibrate_camera`: the lens model
-   chosen on held-out views unless forced, outlier views rejected).
+   chosen on held-out views unless forced, outlier views rejected; a circular fisheye with its image
+   circle, which the joint fit's calibration of that camera keeps).
 2. The cameras are placed from the frames they share (:func:`place_cameras`): camera 0 is the
    reference; the others are reached through the pair with the most shared frames (so a camera
    that never shares a frame with camera 0 is placed through another one). Each shared frame gives
@@ -168,10 +169,12 @@ def fit_rig(models, intr, extr, obs, poses, names, *, reject_outliers=True) -> t
     return fit, obs, names, _group_rms(fit, obs, len(names))[0], rejected
 
 
-def _single(views, name, pattern_size, square_size, size, model, square_unit) -> Calibration:
-    """One camera's own calibration, its views' relative flags kept in ``meta["relative_views"]``."""
+def _single(views, name, pattern_size, square_size, size, model, square_unit, circle=None) -> Calibration:
+    """One camera's own calibration (with its image ``circle``, or None), its views' relative flags kept in
+    ``meta["relative_views"]``."""
     try:
-        cal = calibrate_camera(views, pattern_size, square_size, size, model=model, square_unit=square_unit)
+        cal = calibrate_camera(views, pattern_size, square_size, size, model=model, square_unit=square_unit,
+                               image_circle=circle)
     except CalibrationError as exc:
         raise CalibrationError(f"{name}: {exc}") from exc
     rel = {v.name: bool(v.relative) for v in views}
@@ -179,12 +182,15 @@ def _single(views, name, pattern_size, square_size, size, model, square_unit) ->
 
 
 def calibrate_rig(views, pattern_size, square_size: float, image_sizes, *, names=None, models="auto",
-                  reject_outliers: bool = True, square_unit: str = "", meta: dict | None = None) -> RigCalibration:
+                  reject_outliers: bool = True, square_unit: str = "", meta: dict | None = None,
+                  image_circles=None) -> RigCalibration:
     """Calibrate a rig of C >= 2 cameras (module docstring).
 
     views : C sequences of :class:`View`, named by frame. image_sizes : C (width, height), or one
     for all. names : C camera names (default cam0, cam1, ...). models : "auto", a lens model name,
-    or C of them. Raises :class:`CalibrationError` naming the camera that cannot be calibrated or
+    or C of them. image_circles : C image circles
+    (:class:`~aicalib_tf.geometry.image_circle.ImageCircle` or None each; default none): each
+    camera's calibration keeps its own and uses it as a single camera's does. Raises :class:`CalibrationError` naming the camera that cannot be calibrated or
     placed, or saying that the cameras never see the board at once; ValueError for bad arguments.
     """
     pattern_size = check_pattern(pattern_size)
@@ -194,10 +200,13 @@ def calibrate_rig(views, pattern_size, square_size: float, image_sizes, *, names
     names = [f"cam{k}" for k in range(C)] if names is None else list(names)
     sizes = [tuple(image_sizes)] * C if np.ndim(image_sizes) == 1 else [tuple(s) for s in image_sizes]
     models = [models] * C if isinstance(models, str) else list(models)
-    if len(names) != C or len(sizes) != C or len(models) != C or len(set(names)) != C:
-        raise ValueError(f"{C} cameras need {C} distinct names, image sizes and models; got {names}, {sizes}, {models}")
+    circles = [None] * C if image_circles is None else list(image_circles)
+    if len(names) != C or len(sizes) != C or len(models) != C or len(circles) != C or len(set(names)) != C:
+        raise ValueError(f"{C} cameras need {C} distinct names, image sizes, models and image circles; got {names}, "
+                         f"{sizes}, {models}, {circles}")
     views = [list(v) for v in views]
-    cals = [_single(v, n, pattern_size, square_size, s, m, square_unit) for v, n, s, m in zip(views, names, sizes, models)]
+    cals = [_single(v, n, pattern_size, square_size, s, m, square_unit, c)
+            for v, n, s, m, c in zip(views, names, sizes, models, circles)]
     extr = place_cameras(cals, names)
     frames, solo = frame_groups(cals)
     obs, poses, groups = joint_start(cals, extr, frames, solo, views, square_size)

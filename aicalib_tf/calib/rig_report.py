@@ -5,6 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from aicalib_tf.calib.report import fov_line
 from aicalib_tf.calib.rig_quality import pair_rectification
 from aicalib_tf.calib.rig_result import RigCalibration
 from aicalib_tf.geometry import lens as L
@@ -34,6 +35,11 @@ def format_rig_report(rig: RigCalibration, pairing, skipped: dict) -> str:
                      f"{len(cal.views)} views, RMS {cal.rms:.3f} px; fx {cal.fx:.2f} ± {s.get('fx', 0):.2f}, "
                      f"fy {cal.fy:.2f} ± {s.get('fy', 0):.2f}, cx {cal.cx:.2f} ± {s.get('cx', 0):.2f}, "
                      f"cy {cal.cy:.2f} ± {s.get('cy', 0):.2f}")
+        lines.append(f"  {fov_line(cal)}")
+        if rig.meta.get("image_circle_notes", {}).get(name):
+            lines.append(f"  {rig.meta['image_circle_notes'][name]}: no image circle, the full frame is used")
+        if cal.quality.get("verdict"):
+            lines.append(f"  {cal.quality['verdict']}")
     unit = f" {rig.square_unit}" if rig.square_unit else ""
     for k in range(1, len(rig.names)):
         t = rig.T[k]
@@ -54,8 +60,9 @@ def rectify_images(rig: RigCalibration, images, i: int = 0, j: int = 1) -> tuple
     """The rectified images (same shape kind as the inputs) of cameras i and j: images = (image_i, image_j)."""
     rect = pair_rectification(rig.lenses, rig.R, rig.T, i, j)
     out = []
-    for lens, R, P, img in ((rig.lenses[i], rect.R1, rect.P1, images[0]), (rig.lenses[j], rect.R2, rect.P2, images[1])):
-        mx, my = lens.undistort_maps(new_K=P[:, :3], R=R, new_size=rect.size)
+    for k, R, P, img in ((i, rect.R1, rect.P1, images[0]), (j, rect.R2, rect.P2, images[1])):
+        circle = getattr(rig.cameras[k], "image_circle", None)  # nothing is sampled from outside it
+        mx, my = rig.lenses[k].undistort_maps(new_K=P[:, :3], R=R, new_size=rect.size, circle=circle)
         out.append(cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT))
     return out[0], out[1]
 

@@ -6,6 +6,9 @@ number it ends with (``left01.jpg`` with ``right01.jpg``: frame ``01``); whichev
 wins. When no name is shared and every camera has as many images, they are paired in sorted
 order. Images left without a partner are reported; they still serve their own camera's lens.
 
+Each camera's image circle (a circular fisheye's) is estimated from the mean of its images, as for
+one camera (:mod:`aicalib_tf.calib.workflow`), and kept in its calibration.
+
 The command line is ``python -m aicalib_tf.calibrate --rig cam0="left/*.png" cam1="right/*.png"``.
 Videos of a rig come through :mod:`aicalib_tf.guided.rig_video`, which selects the frames and then
 calls the same :func:`calibrate_views` and :func:`write_rig_files`.
@@ -118,8 +121,8 @@ class RigConfig:
     board: str | None = None  # a ChArUco description (pattern and square then follow from it), or a chessboard
 
 
-def _detect_camera(cam, frames, cfg: RigConfig) -> tuple[dict, dict, dict]:
-    """({frame: View}, {frame: (w, h)}, {frame: why skipped}) of one camera."""
+def _detect_camera(cam, frames, cfg: RigConfig) -> tuple[dict, dict, dict, list]:
+    """({frame: View}, {frame: (w, h)}, {frame: why skipped}, the detections with their thumbnails) of one camera."""
     from aicalib_tf.calib.workflow import _detect_all
 
     files = [fs[cam] for _, fs in frames if cam in fs]
@@ -129,7 +132,7 @@ def _detect_camera(cam, frames, cfg: RigConfig) -> tuple[dict, dict, dict]:
     for f in found:
         if f.view is None:
             skipped[f.label] = "no board found" + (f": {f.why}" if f.why else "")
-    return views, {f.label: f.size for f in found}, skipped
+    return views, {f.label: f.size for f in found}, skipped, found
 
 
 def _save_failed_rig(rig, folder: Path) -> None:
@@ -183,7 +186,7 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
 
     Raises ValueError / CalibrationError / FileNotFoundError for bad input, before writing anything.
     """
-    from aicalib_tf.calib.workflow import _target, make_detector
+    from aicalib_tf.calib.workflow import _image_circle, _target, make_detector
     from aicalib_tf.io import expand_images
     from aicalib_tf.outfolder import OutputFolder
 
@@ -197,16 +200,19 @@ def run_rig(cfg: RigConfig) -> tuple[object, str]:
     pairing = pair_images(files)
     detect = make_detector(cfg.detector, _target(cfg), cfg.network)  # a bad network or board fails here, before any work
     with OutputFolder(cfg.out, "rig") as out:  # a bad --out fails here; files are swapped in at the end
-        views, sizes, skipped = {}, {}, {}
+        views, sizes, skipped, circles, notes = {}, {}, {}, {}, {}
         for cam in files:
-            v, s, sk = _detect_camera(cam, pairing.frames, cfg)
+            v, s, sk, found = _detect_camera(cam, pairing.frames, cfg)
             sizes[cam] = _check_sizes(cam, v, s, pairing.frames, sk)
+            circles[cam], note = _image_circle(found, sizes[cam])
+            if note:
+                notes[cam] = note
             views[cam] = [v[n] for n, _ in pairing.frames if n in v]
             skipped.update({f"{cam}/{n}": why for n, why in sk.items()})
         meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
                 "lens_model": cfg.model, "pairing": pairing.rule, "images": {c: len(f) for c, f in files.items()},
-                **({"board": cfg.board} if cfg.board else {})}
-        rig, report, figure = calibrate_views(views, sizes, pairing, skipped, cfg, models, meta)
+                **({"board": cfg.board} if cfg.board else {}), **({"image_circle_notes": notes} if notes else {})}
+        rig, report, figure = calibrate_views(views, sizes, pairing, skipped, cfg, models, meta, circles)
         write_rig_files(out.path, rig, report, figure)
     return rig, report
 
@@ -235,11 +241,13 @@ def write_rig_files(folder: Path, rig, report: str, figure: bytes) -> None:
     atomic_write_text(folder / "report.txt", report + "\n")
 
 
-def calibrate_views(views: dict, sizes: dict, pairing, skipped: dict, cfg, models: list[str], meta: dict):
+def calibrate_views(views: dict, sizes: dict, pairing, skipped: dict, cfg, models: list[str], meta: dict,
+                    circles: dict | None = None):
     """Calibrate the rig from each camera's views named by frame, assess it and run the sanity checks;
     returns (rig, report text, report.png bytes).
 
     views : {camera: [View]} (a frame's views share its name across cameras); sizes : {camera: (w, h)};
+    circles : {camera: its image circle (a circular fisheye's, estimated from its images) or None};
     pairing : a :class:`Pairing` ({camera: file path or (H, W) image} per frame, for the preview);
     skipped : {"camera/frame": why}; cfg : pattern, square, square_unit (:class:`RigConfig` or alike).
     """
@@ -250,7 +258,8 @@ def calibrate_views(views: dict, sizes: dict, pairing, skipped: dict, cfg, model
 
     names = list(views)
     rig = calibrate_rig([views[c] for c in names], cfg.pattern, cfg.square, [sizes[c] for c in names], names=names,
-                        models=models if len(models) > 1 else models[0], square_unit=cfg.square_unit, meta=meta)
+                        models=models if len(models) > 1 else models[0], square_unit=cfg.square_unit, meta=meta,
+                        image_circles=[(circles or {}).get(c) for c in names])
     rig = assess_rig(rig, [views[c] for c in names])
     problems = rig_problems(rig)
     rig = dataclasses.replace(rig, quality=dict(rig.quality, status="failed" if problems else "ok", problems=problems))

@@ -20,7 +20,7 @@ import numpy as np
 
 from aicalib_tf.calib.fit import Calibration, CalibrationError, View, calibrate_camera, choose_model, fit_views
 from aicalib_tf.calib.quality import assess
-from aicalib_tf.geometry.image_circle import estimate_image_circle, thumbnail
+from aicalib_tf.geometry.image_circle import find_image_circle, thumbnail
 from aicalib_tf.geometry.lens import MODELS as LENS_MODELS
 
 __all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "CalibrateConfig", "parse_square", "make_detector", "run", "undistort"]
@@ -224,11 +224,12 @@ def _apply_size_policy(found: list[_Found], policy: str, skipped: dict) -> tuple
 
 
 def _image_circle(found: list[_Found], size: tuple[int, int]):
-    """The image circle of the photos of ``size`` (their thumbnails' mean), or None."""
+    """(the image circle of the photos of ``size`` (their thumbnails' mean) or None, why none was found
+    where the frame's corners are dark, else "")."""
     thumbs = [f.thumb for f in found if f.thumb is not None and f.size == size]
     if not thumbs or any(t.shape != thumbs[0].shape for t in thumbs):
-        return None
-    return estimate_image_circle(np.mean(thumbs, axis=0, dtype=np.float64) / 255.0, size)
+        return None, ""
+    return find_image_circle(np.mean(thumbs, axis=0, dtype=np.float64) / 255.0, size)
 
 
 def _preview(cal: Calibration, files: dict[str, str]) -> tuple[str, bytes] | None:
@@ -339,7 +340,9 @@ def _calibrate_files(files: list[str], detect, cfg: CalibrateConfig):
     meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
             "rational": cfg.rational, "lens_model": cfg.model, "fix_k3": cfg.fix_k3, "resize_policy": cfg.resize_policy,
             "images": len(files), **({"board": cfg.board} if cfg.board else {})}
-    circle = _image_circle(found, size)
+    circle, note = _image_circle(found, size)
+    if note:
+        meta["image_circle_note"] = note
     cal = calibrate_camera(views, cfg.pattern, cfg.square, size, model=cfg.model, rational=cfg.rational,
                            fix_k3=cfg.fix_k3, square_unit=cfg.square_unit, meta=meta, image_circle=circle)
     by_name = {v.name: v for v in views}

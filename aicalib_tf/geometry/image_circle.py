@@ -6,7 +6,8 @@ there and no uncertainty or undistortion means anything there.
 
 * :class:`ImageCircle`: centre (x, y) and radius, px (pixel (0, 0)'s centre at 0.0).
 * :func:`estimate_image_circle`: the circle from the mean of the photos (a dark ring around a
-  bright disk), or None for photos that fill the frame.
+  bright disk), or None for photos that fill the frame; :func:`find_image_circle` also says why
+  none was found where the frame's corners are dark (the calibration then uses the full frame).
 * :func:`circle_fov_deg`: the circle's diameter in degrees, through a lens model.
 * :func:`circle_problem`: whether a lens model and a circle agree (a sentence when they do not).
 
@@ -21,7 +22,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-__all__ = ["ImageCircle", "circle_fov_deg", "circle_problem", "circle_tuple", "estimate_image_circle", "into_circle",
+__all__ = ["ImageCircle", "circle_fov_deg", "circle_problem", "circle_tuple", "estimate_image_circle", "find_image_circle",
+           "into_circle",
            "rim_points", "thumbnail"]
 
 THUMB_SIDE = 640  # px: the longest side the photos are averaged at (the circle is scaled back)
@@ -165,6 +167,19 @@ def estimate_image_circle(image, full_size=None) -> ImageCircle | None:
     >>> estimate_image_circle(np.full((120, 160), 0.5, np.float32)) is None
     True
     """
+    return find_image_circle(image, full_size)[0]
+
+
+def find_image_circle(image, full_size=None) -> tuple[ImageCircle | None, str]:
+    """(circle or None, why none): :func:`estimate_image_circle`, with a sentence when the frame's
+    corners are dark (at least three of four: a circular fisheye, it seems) but no circle fits the
+    boundary of the bright area; "" when a circle is found or the photos fill the frame.
+
+    >>> yy, xx = np.mgrid[:120, :160]
+    >>> square = ((abs(xx - 80.0) <= 45) & (abs(yy - 60.0) <= 45)).astype(np.float32)
+    >>> find_image_circle(square)[1].startswith("the frame's corners are dark but")
+    True
+    """
     raw = np.asarray(image, np.float32)
     if raw.ndim != 2 or min(raw.shape) < 16:
         raise ValueError(f"estimate_image_circle takes an (h, w) grey image of at least 16x16, got shape {raw.shape}")
@@ -175,7 +190,7 @@ def estimate_image_circle(image, full_size=None) -> ImageCircle | None:
     black = float(np.percentile(g, 1))
     bright = float(np.median(g[h // 4: h - h // 4, w // 4: w - w // 4]))
     if not (bright > 0 and black <= MAX_BLACK * bright):  # no black ring (a vignetted corner stays grey)
-        return None
+        return None, ""
     below = (g <= black + DARK_FRACTION * (bright - black)).astype(np.uint8)
     _, labels = cv2.connectedComponents(below, connectivity=4)
     edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
@@ -183,21 +198,33 @@ def estimate_image_circle(image, full_size=None) -> ImageCircle | None:
     p = max(1, round(0.03 * min(h, w)))
     corners = [outside[:p, :p], outside[:p, -p:], outside[-p:, :p], outside[-p:, -p:]]
     if sum(c.mean() > 0.5 for c in corners) < MIN_DARK_CORNERS:
-        return None
+        return None, ""
     contours, _ = cv2.findContours((~outside).astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    if not contours:
-        return None
-    pts = max(contours, key=cv2.contourArea).reshape(-1, 2).astype(np.float64)
+    pts = max(contours, key=cv2.contourArea).reshape(-1, 2).astype(np.float64) if contours else np.zeros((0, 2))
     pts = pts[(pts[:, 0] > 0) & (pts[:, 1] > 0) & (pts[:, 0] < w - 1) & (pts[:, 1] < h - 1)]
     fit = _robust_circle(pts) if len(pts) >= 20 else None
-    if fit is None or fit[3] > MAX_RESIDUAL or fit[2] < 0.1 * max(h, w):
-        return None
+    why = _no_circle(fit, max(h, w))
+    if why:
+        return None, "the frame's corners are dark but " + why
     fine = _refine(raw, (fit[0], fit[1], fit[2] + 0.5), black, bright)  # the contour runs through inside pixels' centres
     fit = _robust_circle(fine) or fit
     cx, cy, r = fit[0], fit[1], fit[2]
     W, H = (w, h) if full_size is None else (float(full_size[0]), float(full_size[1]))
     sx, sy = W / w, H / h
-    return ImageCircle((cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5, r * 0.5 * (sx + sy))
+    return ImageCircle((cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5, r * 0.5 * (sx + sy)), ""
+
+
+def _no_circle(fit, side: int) -> str:
+    """Why a coarse ``fit`` (cx, cy, r, median residual) px of the bright area's boundary, or None,
+    is no image circle ("" when it is one); side : the averaged image's longer side, px."""
+    if fit is None:
+        return "the bright area's boundary is too short to fit a circle to"
+    if fit[3] > MAX_RESIDUAL:
+        return (f"the bright area's boundary is no circle (median distance {fit[3]:.1f} px from the best circle in "
+                f"the photos' shrunk mean, at most {MAX_RESIDUAL:g} px allowed)")
+    if fit[2] < 0.1 * side:
+        return f"the bright area is too small for an image circle (radius {fit[2]:.0f} px of a {side} px frame)"
+    return ""
 
 
 def rim_points(circle: ImageCircle, n: int = 72) -> np.ndarray:

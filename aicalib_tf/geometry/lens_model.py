@@ -35,7 +35,9 @@ import math
 
 import numpy as np
 
-__all__ = ["LensModel", "pixel_jacobians", "unified_w"]
+__all__ = ["LensModel", "pixel_jacobians", "unified_w", "RANGE_EDGE_REL"]
+
+RANGE_EDGE_REL = 1e-6  # a coefficient this close (relative, at least 1 x this) to its range's edge sits on it
 
 
 class LensModel:
@@ -70,6 +72,18 @@ class LensModel:
 
     def range_problem(self, d: np.ndarray) -> str | None:
         """Why ``d`` is outside the model's valid range (a sentence), or None."""
+        return None
+
+    def range_edge(self, d: np.ndarray, rel: float = RANGE_EDGE_REL) -> str | None:
+        """"name = value" of the first coefficient of ``d`` that sits on the edge of the valid range (a step
+        of ``rel`` times its magnitude, at least ``rel``, leaves the range), or None."""
+        d = np.asarray(d, np.float64)
+        for i, name in enumerate(self.COEFF_NAMES):
+            for sign in (-1.0, 1.0):
+                e = d.copy()
+                e[i] += sign * rel * max(1.0, abs(float(d[i])))
+                if self.range_problem(e) is not None:
+                    return f"{name} = {d[i]:.6g}"
         return None
 
     def resolve(self, n: int) -> str | None:

@@ -333,7 +333,13 @@ def run_rig_video(cfg: RigVideoConfig) -> tuple[object, str]:
                 "offset_s": {c.name: p.offset_s if np.isfinite(p.offset_s) else None for c, p in zip(cams[1:], pairings)},
                 "stopped": stopped, "partial": partial}
         sizes = {c.name: c.session.image_size for c in cams}
-        rig, report, figure = calibrate_views(views, sizes, Pairing(images, rule, solo), skipped, cfg, models, meta)
+        found = {c.name: c.session.image_circle_and_note() for c in cams}  # each camera's examined frames
+        circles = {name: circle for name, (circle, _) in found.items()}
+        notes = {name: note for name, (_, note) in found.items() if note}
+        if notes:
+            meta["image_circle_notes"] = notes
+        rig, report, figure = calibrate_views(views, sizes, Pairing(images, rule, solo), skipped, cfg, models, meta,
+                                              circles)
         report = "\n".join([*_summary(cams, pairings, stopped, detected), report])
         if partial:
             report = PARTIAL_HEAD + report

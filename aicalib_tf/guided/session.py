@@ -33,8 +33,9 @@ import cv2
 import numpy as np
 
 from aicalib_tf.calib.fit import Calibration, CalibrationError, View, calibrate_camera, fit_views
-from aicalib_tf.calib.quality import coverage_counts, lens_of, sigma_from_basis, uncertainty_basis, view_information
-from aicalib_tf.geometry.image_circle import ImageCircle, estimate_image_circle, thumbnail
+from aicalib_tf.calib.quality import (coverage_counts, in_circle, lens_of, sigma_from_basis, uncertainty_basis,
+                                      view_information)
+from aicalib_tf.geometry.image_circle import ImageCircle, find_image_circle, thumbnail
 from aicalib_tf.geometry.pattern import board_points
 from aicalib_tf.guided.design import design_weight, elimination_order
 from aicalib_tf.guided.guidance import Suggestion, missing, next_views
@@ -261,18 +262,19 @@ class GuidedCalibration:
         s.cal, s.running, s.since_fit = cal, cal.model, 0
         s.poses = [board_pose(v.corners, v.ids, cfg.square, self.image_size, lens_of(cal)) or p
                    for v, p in zip(s.views, s.poses)]
+        self._circle = self.image_circle()  # the frames so far: nothing outside it is suggested or asked for
         covered = coverage_counts(s.views, self.image_size, (32, 24)).ravel() > 0
         _, G, ok = uncertainty_basis(cal, fit_mask=covered)
-        s.basis = (G, ok)
+        s.basis = (G, ok & in_circle(self.image_size, (32, 24), self._circle))
         s.information = np.linalg.pinv(cal.covariance, hermitian=True)
         sigma = sigma_from_basis(G, ok, cal.covariance)
         sig = float(np.percentile(sigma[covered & np.isfinite(sigma)], 90)) if (covered & np.isfinite(sigma)).any() else math.inf
         frac = float(np.mean(coverage_counts(s.views, self.image_size, _CELLS) > 0))
         s.estimate = Estimate(cal.model, cal.K, cal.dist, cal.rms, len(s.views), sig, frac)
         distance = float(np.median([np.linalg.norm(p.tvec) for p in s.poses]))
-        ranked = next_views(lens_of(cal), s.information, s.basis, distance, cfg.pattern, cfg.square, self._sigma2())
+        ranked = next_views(lens_of(cal), s.information, s.basis, distance, cfg.pattern, cfg.square, self._sigma2(),
+                            self._circle)
         s.guidance = ranked[0] if ranked else None
-        self._circle = self.image_circle()  # the frames so far: corner regions outside it are not asked for
         gone = missing(s.views, [tilt_of(p) for p in s.poses], self.image_size, self._circle)
         regions_left = any("covered" in g for g in gone)
         s.done = len(s.views) >= cfg.max_views or (
@@ -280,9 +282,13 @@ class GuidedCalibration:
 
     def image_circle(self) -> ImageCircle | None:
         """The image circle of the examined frames (their thumbnails' mean), None when they fill the frame."""
+        return self.image_circle_and_note()[0]
+
+    def image_circle_and_note(self) -> tuple[ImageCircle | None, str]:
+        """(:meth:`image_circle`, why none was found where the frames' corners are dark, else "")."""
         if not self._n_thumbs:
-            return None
-        return estimate_image_circle(self._thumbs / self._n_thumbs, self.image_size)
+            return None, ""
+        return find_image_circle(self._thumbs / self._n_thumbs, self.image_size)
 
     def _design(self) -> tuple[list[View], list[np.ndarray], np.ndarray, np.ndarray, list[int]]:
         """(candidates: the kept views and the pool, their information / σ² under the running fit,
@@ -335,5 +341,7 @@ class GuidedCalibration:
         views = self.final_views() if views is None else views
         if self.image_size is None or len(views) < 3:
             raise CalibrationError(f"{len(views)} views kept; need at least 3")
+        circle, note = self.image_circle_and_note()
+        meta = dict(meta or {}, **({"image_circle_note": note} if note else {}))
         return calibrate_camera(views, cfg.pattern, cfg.square, self.image_size, model=cfg.model,
-                                square_unit=cfg.square_unit, meta=meta, image_circle=self.image_circle())
+                                square_unit=cfg.square_unit, meta=meta, image_circle=circle)

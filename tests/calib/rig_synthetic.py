@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import functools
+import json
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -59,3 +62,32 @@ def rig_views(lenses, Rs, Ts, n=20, noise=0.0, *, seed=0, distance=(0.45, 0.8), 
                 out[k].append(View(name, uv[ok] + noise * rng.standard_normal((int(ok.sum()), 2)), ids[ok]))
         frame += 1
     return out
+
+
+@functools.lru_cache(maxsize=1)
+def circular_rig(pairs: int = 9):
+    """(truth, frames) of data_gen's rendered rig of two circular fisheyes (180–195°) at 640x480, rendered once."""
+    from data_gen.rig import make_rig_sequence
+
+    return make_rig_sequence(3, pairs=pairs, lenses=("circular", "circular"), size=(640, 480), baseline=(80.0, 150.0))
+
+
+def true_circle(cam) -> tuple[float, float, float]:
+    """(cx, cy, radius) px of a data_gen circular fisheye camera's image circle."""
+    return float(cam.K[0, 2]), float(cam.K[1, 2]), cam.circle_radius() * 0.5 * float(cam.K[0, 0] + cam.K[1, 1])
+
+
+def check_circular_rig_output(out, truth, text: str) -> None:
+    """Asserts that a rig calibration folder ``out`` of :func:`circular_rig` kept each camera's image circle
+    (within 1 px of the truth, in rig.json and the camera's camera.json) and used it: the verdict and
+    the field of view are the circle's, no corner region outside it is asked for, nothing is NaN."""
+    rig = json.loads((out / "rig.json").read_text())
+    assert rig["quality"]["status"] == "ok" and "nan" not in text.lower(), text
+    for k, name in enumerate(rig["names"]):
+        cx, cy, r = true_circle(truth.cameras[k])
+        for c in (json.loads((out / name / "camera.json").read_text())["image_circle"], rig["cameras"][k]["image_circle"]):
+            assert abs(c["cx"] - cx) < 1.0 and abs(c["cy"] - cy) < 1.0 and abs(c["radius"] - r) < 1.0, (c, (cx, cy, r))
+        q = rig["cameras"][k]["quality"]
+        assert "of the image circle" in q["verdict"] and np.isfinite(q["sigma_px"]["max_all"]), q
+        assert not {"top-left", "top-right", "bottom-left", "bottom-right"} & set(q["uncovered"]), q["uncovered"]
+    assert text.count("° across the image circle") == len(rig["names"]), text

@@ -112,3 +112,34 @@ def test_poses_from_rays_places_a_board_seen_past_90_degrees():
     rv, tv = poses_from_rays(FISHEYE, [X[seen]], [uv[seen]])
     np.testing.assert_allclose(cv2.Rodrigues(rv[0])[0], R, atol=1e-6)
     np.testing.assert_allclose(tv[0], t, atol=1e-7)
+
+
+def test_a_fit_that_ends_on_the_edge_of_the_models_range_is_refused_with_the_coefficient():
+    # an EUCM lens at α = 1: on these views the fit runs into α = 1 with the wrong β (RMS 2.8 px)
+    true = L.Lens("eucm", [[250.0, 0, 641.5], [0, 249.6, 478.2], [0, 0, 1]], [1.0, 0.8], FISHEYE_SIZE)
+    views = synthetic_views(true, 12, 0.05, seed=0, distance=(0.15, 0.4))
+    obj, px = _problem(views)
+    intr0, poses = fisheye_start(obj, px, FISHEYE_SIZE, np.ones(6, bool), "eucm")
+    with pytest.raises(CalibrationError, match=r"^eucm: the fit stopped at the edge of the model's valid range \(alpha = 1\)"):
+        bundle_adjust("eucm", obj, px, intr0, *poses)
+    loose = bundle_adjust("eucm", obj, px, intr0, *poses, strict=False)  # what was refused
+    assert loose.intrinsics[4] == pytest.approx(1.0, abs=1e-6) and loose.rms > 1.0
+    views = synthetic_views(true, 12, 0.05, seed=1, distance=(0.15, 0.4))  # here the fit finds the lens inside
+    obj, px = _problem(views)
+    fit = bundle_adjust("eucm", obj, px, *_start(obj, px, "eucm"))
+    assert fit.rms < 0.1 and 0.99 < fit.intrinsics[4] < 1.0
+
+
+def _start(obj, px, model):
+    intr0, poses = fisheye_start(obj, px, FISHEYE_SIZE, np.ones(6, bool), model)
+    return (intr0, *poses)
+
+
+def test_a_start_outside_the_models_range_is_refused_with_the_reason():
+    views = synthetic_views(L.Lens("ds", [[250.0, 0, 641.5], [0, 249.6, 478.2], [0, 0, 1]], [-0.2, 0.6], FISHEYE_SIZE),
+                            6, 0.0, seed=2, distance=(0.15, 0.4))
+    obj, px = _problem(views)
+    intr0, poses = fisheye_start(obj, px, FISHEYE_SIZE, np.ones(6, bool), "ds")
+    intr0[4] = 1.5
+    with pytest.raises(CalibrationError, match=r"^ds: the start is outside the model's valid range .*xi must be in \(-1, 1\]"):
+        bundle_adjust("ds", obj, px, intr0, *poses)

@@ -309,7 +309,26 @@ def test_the_photos_image_circle_comes_from_their_thumbnails_mean():
     yy, xx = np.mgrid[:480, :640]
     disk = np.where(np.hypot(xx - 320.0, yy - 240.0) <= 200.0, 180, 3).astype(np.uint8)
     found = [_Found(f"p{k}", f"p{k}.png", (1280, 960), None, "", disk) for k in range(3)]
-    c = _image_circle(found, (1280, 960))
+    c, note = _image_circle(found, (1280, 960))
     assert c is not None and abs(c.cx - 640.5) < 1.0 and abs(c.cy - 480.5) < 1.0 and abs(c.radius - 401.0) < 1.5
-    assert _image_circle([_Found("p", "p.png", (1280, 960), None, "", np.full((480, 640), 90, np.uint8))], (1280, 960)) is None
-    assert _image_circle([_Found("p", "p.png", (1280, 960), None)], (1280, 960)) is None
+    assert note == ""
+    grey = [_Found("p", "p.png", (1280, 960), None, "", np.full((480, 640), 90, np.uint8))]
+    assert _image_circle(grey, (1280, 960)) == (None, "")
+    assert _image_circle([_Found("p", "p.png", (1280, 960), None)], (1280, 960)) == (None, "")
+
+
+def test_dark_corners_without_a_circle_fall_back_to_the_full_frame_and_the_report_says_so(tmp_path, capsys):
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    dark = np.ones((480, 640), np.uint8)  # the four frame corners cut off unevenly: dark, but no circle
+    for (x, y), cut in zip(((0, 0), (639, 0), (0, 479), (639, 479)), (60, 150, 100, 190)):
+        cv2.fillConvexPoly(dark, np.array([(x, y), (abs(x - cut), y), (x, abs(y - cut))], np.int32), 0)
+    for f in sorted(LEFT.glob("*.jpg")):
+        cv2.imwrite(str(photos / f"{f.stem}.png"), cv2.imread(str(f), cv2.IMREAD_GRAYSCALE) * dark)
+    rc, out, err = _run_cli(capsys, str(photos / "*.png"), "--pattern", "9x6", "--square", "25mm",
+                            "--out", tmp_path / "c")
+    assert rc == 0, err
+    cal = load_calibration(tmp_path / "c")
+    assert cal.image_circle is None and cal.meta["image_circle_note"].startswith("the frame's corners are dark but")
+    assert "no image circle is used; coverage, uncertainty and field of view count the full frame" in out
+    assert "across the image circle" not in out

@@ -142,3 +142,20 @@ def test_a_charuco_rig_calibrates_from_views_that_each_camera_sees_in_part(tmp_p
     baseline = float(np.linalg.norm(np.asarray(rig["T"])[1]))
     assert abs(baseline / truth.baseline() - 1) < 0.002, (baseline, truth.baseline())
     assert rotation_angle_deg(np.asarray(rig["R"])[1] @ truth.R[1].T) < 0.1
+
+
+
+def test_a_circular_fisheye_rig_keeps_and_uses_each_cameras_image_circle(tmp_path, capsys):
+    from tests.calib.rig_synthetic import check_circular_rig_output, circular_rig
+
+    truth, frames = circular_rig()
+    for side, k in (("left", 0), ("right", 1)):
+        (tmp_path / side).mkdir()
+        for f, frame in enumerate(frames):
+            cv2.imwrite(str(tmp_path / side / f"{side}{f + 1:02d}.png"), frame[k].image)
+    out = tmp_path / "out"
+    rc = main(["--rig", f"cam0={tmp_path}/left/*.png", f"cam1={tmp_path}/right/*.png", "--pattern", "9x6",
+               "--square", f"{truth.board.square_size}mm", "--out", str(out), "--quiet"])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    check_circular_rig_output(out, truth, text)

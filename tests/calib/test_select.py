@@ -59,6 +59,48 @@ def test_a_held_out_gain_within_its_own_noise_does_not_count():
     assert choose(rows) == "equidistant"
 
 
+
+def _folds_row(model, folds, rms, determined=True, corners=500):
+    f = np.asarray(folds)
+    return dict(_row(model, float(f.mean()), float(f.std(ddof=1) / np.sqrt(len(f)))), cv_folds=list(folds),
+                determined=determined, rms=rms, corners=corners)
+
+
+def test_a_gain_that_one_fold_carries_alone_does_not_count():
+    # one half of an EUCM 170° sequence: EUCM's edge over equidistant is all in fold 3, the in-sample fits alike
+    eq = [0.02076, 0.0222, 0.0239, 0.02068, 0.02278]
+    eucm = [0.02069, 0.02223, 0.02101, 0.02061, 0.0228]
+    rows = [_folds_row("equidistant", eq, 0.02130), _folds_row("eucm", eucm, 0.02132)]
+    assert choose([dict(r, cv_folds=None) for r in rows]) == "eucm"  # the mean alone: beyond the noise
+    assert choose(rows) == "equidistant"
+    # a KB 150° half: every model misses fold 3's view, equidistant most; it wins the four other folds
+    rows = [_folds_row("equidistant", [0.02255, 0.02184, 0.0714, 0.02043, 0.02206], 0.02126),
+            _folds_row("ds", [0.02649, 0.02572, 0.04779, 0.02761, 0.02487], 0.02526),
+            _folds_row("eucm", [0.02487, 0.0238, 0.03909, 0.02488, 0.02362], 0.02338)]
+    assert choose(rows) == "equidistant"
+    # an EUCM 170° half: equidistant extrapolates to fold 4's pose 0.011 px worse, and fits the views 0.00001
+    # px worse in-sample, less than two parameters buy on noise (0.0204 · 2 / (4 · 500) = 0.00002 px)
+    rows = [_folds_row("equidistant", [0.01906, 0.02164, 0.02033, 0.03254, 0.01963], 0.02041),
+            _folds_row("eucm", [0.01905, 0.02157, 0.02031, 0.02195, 0.01951], 0.02040)]
+    assert choose(rows) == "equidistant"
+    # a KB 150° half where every model misses fold 2's pose, equidistant by 0.25 px, EUCM by 0.06
+    rows = [_folds_row("equidistant", [0.02074, 0.25225, 0.01965, 0.02227, 0.02115], 0.02080),
+            _folds_row("eucm", [0.02294, 0.05873, 0.02043, 0.02286, 0.02137], 0.02193)]
+    assert choose(rows) == "equidistant"
+    # a Double Sphere 190° half: DS, with fewer parameters, also fits the views better; its edge counts
+    rows = [_folds_row("equidistant", [0.0209, 0.02253, 0.02206, 0.0181, 0.02081], 0.02050),
+            _folds_row("ds", [0.02055, 0.02053, 0.02185, 0.01812, 0.02018], 0.02005)]
+    assert choose(rows) == "ds"
+    assert choose([rows[0], dict(rows[1], rms=0.0206)]) == "equidistant"
+    # a gain in every fold counts, however it is spread
+    rows = [_folds_row("equidistant", [0.0230, 0.0231, 0.0260, 0.0229, 0.0232], 0.0200),
+            _folds_row("eucm", [0.0210, 0.0211, 0.0212, 0.0209, 0.0210], 0.0201)]
+    assert choose(rows) == "eucm"
+    # a model that fits the views worse and fails a fold is no alternative
+    rows = [_folds_row("plumb_bob", [0.0201, 0.0203, 0.0200, 0.5, 0.0202], 0.0590),
+            _folds_row("equidistant", [0.0202, 0.0203, 0.0201, 0.0204, 0.0202], 0.0200)]
+    assert choose(rows) == "equidistant"
+
 def _views_past_90_degrees(lens, n=10, seed=0, noise=0.01):
     """Boards facing the camera with their centres 50–88° off-axis, corners beyond 90° kept."""
     rng = np.random.default_rng(seed)

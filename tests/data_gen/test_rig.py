@@ -43,3 +43,14 @@ def test_rig_sequences_are_deterministic():
     assert all(np.array_equal(x.image, y.image) for fa, fb in zip(a[1], b[1]) for x, y in zip(fa, fb))
     with pytest.raises(ValueError, match="at least 2 cameras"):
         sample_rig(np.random.default_rng(0), ("pinhole",))
+
+
+def test_a_circular_rig_lens_images_a_whole_circle_inside_the_frame_and_black_outside():
+    truth = sample_rig(np.random.default_rng(1), ("circular", "circular"), (640, 480))
+    for cam in truth.cameras:
+        assert cam.model == "equidistant" and 180.0 <= 2 * np.degrees(cam.max_theta) <= 195.0
+        r = cam.circle_radius() * cam.K[0, 0]
+        assert cam.K[0, 2] - r > 0 and cam.K[0, 2] + r < 639 and cam.K[1, 2] - r > 0 and cam.K[1, 2] + r < 479
+    _, frames = make_rig_sequence(1, pairs=1, lenses=("circular", "pinhole"), size=(320, 240))
+    img = frames[0][0].image.astype(float)
+    assert img[:8, :8].mean() < 20 and img[100:140, 140:180].mean() > 40  # the corners are outside the circle

@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from aicalib_tf.geometry.image_circle import ImageCircle, circle_fov_deg, circle_problem, estimate_image_circle, thumbnail
+from aicalib_tf.geometry.image_circle import (ImageCircle, circle_fov_deg, circle_problem, estimate_image_circle,
+                                             find_image_circle, thumbnail)
 from aicalib_tf.geometry.lens import Lens
 
 
@@ -39,6 +40,20 @@ def test_photos_that_fill_the_frame_have_no_circle():
     vignetted = (0.8 * (1 - 0.5 * (np.hypot(xx - 320, yy - 240) / 400) ** 2)).astype(np.float32)  # grey corners
     for img in (textured, vignetted, np.full((480, 640), 0.4, np.float32), np.zeros((480, 640), np.float32)):
         assert estimate_image_circle(img) is None
+
+        assert find_image_circle(img) == (None, "")  # photos that fill the frame: nothing to say
+
+
+def test_dark_corners_that_no_circle_fits_are_said_so():
+    rng = np.random.default_rng(3)
+    yy, xx = np.mgrid[:480, :640]
+    frame = (0.6 + 0.05 * rng.standard_normal((480, 640))).astype(np.float32)
+    box = np.where((abs(xx - 320) <= 230) & (abs(yy - 240) <= 200), frame, 0.01).astype(np.float32)  # a lit rectangle
+    circle, why = find_image_circle(box)
+    assert circle is None and why.startswith("the frame's corners are dark but the bright area's boundary is no circle")
+    assert estimate_image_circle(box) is None
+    circle, why = find_image_circle(_disk((640, 480), (320.0, 240.0), 220.0, rng))
+    assert circle is not None and why == ""
 
 
 def test_circle_of_data_gen_circular_fisheye_renders():
@@ -103,3 +118,11 @@ def test_undistortion_maps_are_invalid_outside_the_circle():
     valid = mx >= 0
     assert valid.any() and (~valid).any()
     assert np.all(np.hypot(mx[valid] - 639.5, my[valid] - 479.5) <= 200.0 + 1e-3)
+
+
+def test_doctests():
+    import doctest
+
+    from aicalib_tf.geometry import image_circle
+
+    assert doctest.testmod(image_circle).failed == 0

@@ -46,3 +46,38 @@ def test_missing_does_not_ask_for_corners_outside_the_image_circle():
     assert any("top-left corner" in m for m in missing(central, tilts, (640, 480)))
     inside = missing(central, tilts, (640, 480), ImageCircle(319.5, 239.5, 150.0))
     assert not any("corner" in m for m in inside)
+
+
+def test_next_view_never_points_outside_the_image_circle():
+    from aicalib_tf.calib.fit import View
+    from aicalib_tf.calib.quality import in_circle
+    from aicalib_tf.geometry.image_circle import ImageCircle
+    from aicalib_tf.guided.guidance import REGIONS, TILTS, candidate_points
+
+    fish = Lens("equidistant", [[140, 0, 319.5], [0, 140, 239.5], [0, 0, 1]], [0.0, 0.0, 0.0, 0.0], (640, 480))
+    circle = ImageCircle(319.5, 239.5, 140 * np.radians(80.0))  # a 160° circular lens: the frame's corners black
+    views = []
+    for v in synthetic_views(fish, 12, noise=0.02, seed=3, distance=(0.25, 0.4)):
+        keep = circle.contains(v.corners)
+        if keep.sum() >= 20:
+            views.append(View(v.name, v.corners[keep], v.ids[keep]))
+    cal = fit_views(views, PATTERN, SQUARE, (640, 480), "equidistant")
+    covered = coverage_counts(views, (640, 480), (32, 24)).ravel() > 0
+    _, G, ok = uncertainty_basis(cal, fit_mask=covered)
+    distance = float(np.median(np.linalg.norm(cal.tvecs, axis=1)))
+    for lens in (fish, cal.lens):
+        beyond = [(r, t) for r in REGIONS for t in TILTS
+                  if (P := candidate_points(lens, r, t, distance, PATTERN, SQUARE)) is not None
+                  and not circle.contains(lens.project(P)).all()]
+        assert beyond  # without the circle, boards at the left and right edges reach into the black
+        for r in REGIONS:
+            for t in TILTS:
+                P = candidate_points(lens, r, t, distance, PATTERN, SQUARE, circle)
+                assert P is not None and circle.contains(lens.project(P), margin=-2.0).all(), (r, t)
+    ranked = next_views(cal.lens, np.linalg.pinv(cal.covariance), (G, ok & in_circle((640, 480), (32, 24), circle)),
+                        distance, PATTERN, SQUARE, cal.rms ** 2, circle)
+    assert {r.region for r in ranked} == set(REGIONS)  # every region still gets a board, inside the circle
+    for r in ranked:
+        uv = cal.lens.project(candidate_points(cal.lens, r.region, r.tilt, distance, PATTERN, SQUARE, circle))
+        assert circle.contains(uv).all(), (r.region, r.tilt)
+        assert "image circle" in r.text and "corner of the image" not in r.text and np.isfinite(r.sigma_px)

@@ -114,3 +114,19 @@ def test_a_stopped_rig_run_saves_only_with_save_partial(pair, tmp_path, monkeypa
     assert meta["partial"] is True and meta["stopped"].startswith("stopped early")
     assert 35 <= meta["frames"]["cam1"] < 45  # the reading stopped at cam1's frame 40
     assert (out / "report.txt").read_text().startswith("PARTIAL")
+
+
+def test_a_circular_fisheye_rig_video_keeps_each_cameras_image_circle(tmp_path, capsys):
+    from tests.calib.rig_synthetic import check_circular_rig_output, circular_rig
+
+    truth, frames = circular_rig()
+    for k in (0, 1):  # each board pose held for 4 frames at 10 fps: the motion gate sees it rest
+        w = cv2.VideoWriter(str(tmp_path / f"cam{k}.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (640, 480), False)
+        for frame in frames:
+            for _ in range(4):
+                w.write(frame[k].image)
+        w.release()
+    out = tmp_path / "rig"
+    assert main(["--rig", f"cam0={tmp_path / 'cam0.avi'}", f"cam1={tmp_path / 'cam1.avi'}", "--pattern", "9x6",
+                 "--square", f"{truth.board.square_size}mm", "--out", str(out), "--quiet"]) == 0
+    check_circular_rig_output(out, truth, capsys.readouterr().out)

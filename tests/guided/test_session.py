@@ -21,3 +21,39 @@ def test_the_sessions_image_circle_comes_from_the_examined_frames():
     full = GuidedCalibration(GuidedConfig(pattern=(9, 6), gate=False), _no_board)
     full.add((0, 0.0, np.full((480, 640), 120, np.uint8)))
     assert full.image_circle() is None
+
+
+def test_the_sessions_guidance_stays_inside_the_image_circle():
+    import cv2
+
+    from aicalib_tf.geometry.lens import Lens
+    from aicalib_tf.geometry.pattern import board_points, pattern_ids
+    from aicalib_tf.guided.guidance import candidate_points
+    from tests.guided.boards import PATTERN, FakeDetector
+
+    size, f, r = (640, 480), 140.0, 140.0 * np.radians(80.0)  # a 160° circular fisheye
+    lens = Lens("equidistant", [[f, 0, 319.5], [0, f, 239.5], [0, 0, 1]], [0.0, 0.0, 0.0, 0.0], size)
+    yy, xx = np.mgrid[:480, :640]
+    disk = np.where(np.hypot(xx - 319.5, yy - 239.5) <= r, 150, 3).astype(np.uint8)
+    ids = pattern_ids(PATTERN)
+    P = board_points(ids, 25.0)
+    P = P - P.mean(axis=0)
+    rng = np.random.default_rng(5)
+    det = FakeDetector()
+    session = GuidedCalibration(GuidedConfig(PATTERN, 25.0, gate=False, max_views=30), det)
+    u, k = None, 0
+    while len(session.views) < 10 and k < 60:  # boards inside the circle, tilted
+        yaw, pitch = rng.uniform(-35, 35, 2)
+        at = rng.uniform([-160, -120], [160, 120])
+        corners = lens.project(P @ cv2.Rodrigues(np.radians([pitch, yaw, 0.0]))[0].T + [at[0], at[1], 300.0])
+        inside = np.hypot(corners[:, 0] - 319.5, corners[:, 1] - 239.5).max() < r - 5
+        det.next = (corners + rng.normal(0, 0.05, corners.shape), ids) if inside else None
+        u = session.add((k, k / 30, disk))
+        k += 1
+    circle = session.image_circle()
+    assert circle is not None and abs(circle.radius - r) < 2.0
+    assert u.guidance is not None and "image circle" in u.guidance.text, u.guidance
+    assert not any("corner" in m for m in u.missing), u.missing
+    est = Lens(u.estimate.model, u.estimate.K, u.estimate.dist, size)
+    for distance in (250.0, 300.0, 400.0):  # the suggested board exists inside the circle near the boards' distance
+        assert candidate_points(est, u.guidance.region, u.guidance.tilt, distance, PATTERN, 25.0, circle) is not None
