@@ -1,0 +1,143 @@
+"""ChArUco corners refined on the part of their neighbourhood that is the same at every corner.
+
+A corner of a chessboard is point-symmetric over a window of up to half a square: I(c + d) equals
+I(c − d), whatever the view's affine distortion and the lens' (symmetric) blur. On a ChArUco board
+the two white squares at a corner hold two different markers, so a window that reaches their
+bits is not symmetric and its fit is pulled towards them; one kept inside the white margin (a
+few px wide) sees too few pixels to average the noise. What is symmetric about a ChArUco corner:
+the two black squares whole, and in the two white squares the band along the corner's edges, out
+to the white margin plus the marker's black border bit, :func:`plain_band` squares from the
+corner along each axis. :func:`refine_on_plain_band` samples a window of :data:`REACH` squares
+along the board's axes (the lattice's local steps), gives no weight to the white squares beyond
+the band (less :data:`BLUR_PX` px, as far as the image's blur spreads the bits) nor to samples
+outside the image, and moves the corner by Gauss–Newton steps that minimise the weighted squared
+differences of opposite samples (:func:`symmetry_fit`; the weights are point-symmetric, so the
+fit is not pulled either way). On the calibration sequences of ``benchmarks/charuco.py`` (noise
+σ 10) this took the corners' RMS error against the truth from 0.087 px (saddle fit in the margin)
+to about 0.04 px; the same window without the band's limit gave 0.10 px.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["REACH", "BLUR_PX", "SAMPLES", "plain_band", "bilinear", "symmetry_fit", "refine_on_plain_band",
+           "window_reach_px"]
+
+REACH = 0.35  # squares: the window's half-size along each board axis (the next corners are one square away)
+BLUR_PX = 2.0  # px: how far the image's blur and the fit's smoothing carry a marker bit into the band
+SAMPLES = 8  # samples per half-side of the window: (2·SAMPLES + 1)² on the grid, half of them paired
+MAX_STEP = 0.5  # px: the longest Gauss–Newton step
+SETTLED = 0.02  # px: the last step of a fit that settled
+
+
+def plain_band(board) -> float:
+    """Squares from a corner, along each axis, over which a white square of ``board`` (a
+    :class:`~aicalib_tf.geometry.charuco.CharucoBoard`) is alike at every corner: the white margin
+    (square − marker)/2 and the marker's one-bit black border, marker/(bits + 2)."""
+    return ((board.square - board.marker) / 2.0 + board.marker / (board.bits + 2)) / board.square
+
+
+def bilinear(img: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """(...) float64 bilinear samples of img (H, W) at xy (..., 2) px, edge pixels repeated outside;
+    NaN at a NaN position."""
+    h, w = img.shape
+    bad = ~np.isfinite(xy).all(axis=-1)
+    x = np.clip(np.where(bad, 0.0, xy[..., 0]), 0.0, w - 1.0)
+    y = np.clip(np.where(bad, 0.0, xy[..., 1]), 0.0, h - 1.0)
+    x0 = np.minimum(np.floor(x).astype(np.int64), w - 2)
+    y0 = np.minimum(np.floor(y).astype(np.int64), h - 2)
+    fx, fy = x - x0, y - y0
+    top = img[y0, x0] + fx * (img[y0, x0 + 1] - img[y0, x0])
+    bot = img[y0 + 1, x0] + fx * (img[y0 + 1, x0 + 1] - img[y0 + 1, x0])
+    return np.where(bad, np.nan, top + fy * (bot - top))
+
+
+def symmetry_fit(img: np.ndarray, pts: np.ndarray, d: np.ndarray, w: np.ndarray | float = 1.0,
+                 iterations: int = 10, grad: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Centres of point symmetry: Gauss–Newton on Σ w (I(p + d) − I(p − d))², each point on its own.
+
+    img : (H, W) float, smoothed. pts : (N, 2) px starts. d : (N, M, 2) px offsets, one of each
+    opposite pair. w : (N, M) or scalar weights. grad : img's (gy, gx) when the caller has them.
+    Returns (N, 2) float64 px and the last step's length (N,) px (at most :data:`MAX_STEP`).
+    """
+    gy, gx = np.gradient(img.astype(np.float64)) if grad is None else grad
+    cur = np.asarray(pts, np.float64).reshape(-1, 2).copy()
+    sw = np.sqrt(np.broadcast_to(np.asarray(w, np.float64), d.shape[:2]))  # (N, M): each residual times √w
+    step = np.full(len(cur), np.inf)
+    for _ in range(iterations):
+        a, b = cur[:, None, :] + d, cur[:, None, :] - d
+        res = (bilinear(img, a) - bilinear(img, b)) * sw  # (N, M)
+        jac = np.stack([bilinear(gx, a) - bilinear(gx, b), bilinear(gy, a) - bilinear(gy, b)], axis=-1) * sw[..., None]
+        H = np.einsum("nmi,nmj->nij", jac, jac) + 1e-12 * np.eye(2)
+        delta = -np.linalg.solve(H, np.einsum("nmi,nm->ni", jac, res)[..., None])[..., 0]
+        norm = np.linalg.norm(delta, axis=1)
+        delta *= np.minimum(1.0, MAX_STEP / np.maximum(norm, 1e-12))[:, None]
+        cur += delta
+        step = np.minimum(norm, MAX_STEP)
+        if (step < 1e-3).all():
+            break
+    return cur, step
+
+
+def _grid() -> np.ndarray:
+    """(K, 2) offsets in squares (u, v) along the board's axes: one of each opposite pair of the
+    (2·SAMPLES + 1)² grid over ±REACH (the centre left out)."""
+    g = np.linspace(-REACH, REACH, 2 * SAMPLES + 1)
+    uv = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    return uv[: len(uv) // 2]
+
+
+def _weights(board, ids: np.ndarray, steps: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """(N, K) 0/1: the samples uv (K, 2) squares off each corner that lie in its black squares or in
+    the plain band of its white squares (the band narrowed by BLUR_PX px at the local square size)."""
+    px = np.sqrt(np.abs(np.linalg.det(steps)))  # (N,) px per square
+    band = plain_band(board) - BLUR_PX / np.maximum(px, 1e-9)
+    # the white squares are (+, +) and (−, −) where square (c + 1, r + 1) holds a marker, else (+, −) and (−, +)
+    pp_white = board.is_marker_square(ids[:, 0] + 1, ids[:, 1] + 1)
+    same_sign = np.sign(uv[:, 0]) == np.sign(uv[:, 1])  # (K,)
+    white = np.where(pp_white[:, None], same_sign[None], ~same_sign[None])
+    inner = np.minimum(np.abs(uv[:, 0]), np.abs(uv[:, 1]))[None] > band[:, None]
+    return (~(white & inner)).astype(np.float64)
+
+
+def window_reach_px(steps: np.ndarray) -> np.ndarray:
+    """(N,) px: the farthest sample of a corner's window from the corner, steps (N, 2, 2) px per square."""
+    uv = _grid()
+    return np.linalg.norm(np.einsum("nij,kj->nki", np.asarray(steps, np.float64), uv), axis=2).max(axis=1)
+
+
+def refine_on_plain_band(img: np.ndarray, board, ids: np.ndarray, pts: np.ndarray, steps: np.ndarray,
+                         grad: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """ChArUco corners as the centres of point symmetry of their plain neighbourhood (module docstring).
+
+    img : (H, W) float32, lightly smoothed. board : the CharucoBoard. ids : (N, 2) corner ids
+    (col, row). pts : (N, 2) px starts, within a px or so. steps : (N, 2, 2) px, columns one square
+    along the board's x and y at each corner. Samples outside the image have no weight, nor their
+    opposites. Returns (N, 2) float64 px, ok (N,) bool (the fit settled; points not ok are returned
+    as started) and the asymmetry left (N,): the weighted mean squared difference of opposite
+    samples over twice their variance (0 for a corner, about 1 for noise).
+    """
+    pts = np.asarray(pts, np.float64).reshape(-1, 2)
+    steps = np.asarray(steps, np.float64).reshape(-1, 2, 2)
+    good = np.isfinite(pts).all(axis=1) & np.isfinite(steps).all(axis=(1, 2))
+    out, ok, left = pts.copy(), np.zeros(len(pts), bool), np.ones(len(pts))
+    if not good.any():
+        return out, ok, left
+    uv = _grid()
+    d = np.einsum("nij,kj->nki", steps[good], uv)  # (N, K, 2) px
+    w = _weights(board, np.asarray(ids, np.int64).reshape(-1, 2)[good], steps[good], uv)
+    h, wd = img.shape
+    for sign in (1.0, -1.0):  # both samples of a pair in the image
+        at = pts[good, None, :] + sign * d
+        w *= (at[..., 0] >= 0) & (at[..., 0] <= wd - 1) & (at[..., 1] >= 0) & (at[..., 1] <= h - 1)
+    got, step = symmetry_fit(img, pts[good], d, w, grad=grad)
+    a, b = bilinear(img, got[:, None, :] + d), bilinear(img, got[:, None, :] - d)
+    total = np.maximum(w.sum(axis=1), 1.0)
+    mean = (w * (a + b)).sum(axis=1) / (2 * total)
+    var = (w * ((a - mean[:, None]) ** 2 + (b - mean[:, None]) ** 2)).sum(axis=1) / (2 * total)
+    asym = np.where(var > 1e-8, (w * (a - b) ** 2).sum(axis=1) / total / (2 * np.maximum(var, 1e-12)), 1.0)
+    settled = (step < SETTLED) & (w.sum(axis=1) >= 2 * SAMPLES)
+    out[good] = np.where(settled[:, None], got, pts[good])
+    ok[good], left[good] = settled, asym
+    return out, ok, left
