@@ -124,7 +124,7 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     model = load_model("default")
     t0 = time.perf_counter()
-    det_rows = detection_table(a.board, a.images, model)
+    det_rows = detection_table(a.board, a.images, model) if a.images else []
     cal_rows = calibration_table(a.board, a.calib, model) if a.calib else []
     print(f"python benchmarks/charuco.py --images {a.images} --calib {a.calib}; {date.today()}; "
           f"{platform.machine()} {platform.processor() or ''}; {time.perf_counter() - t0:.0f} s\n")
