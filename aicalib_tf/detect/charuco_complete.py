@@ -180,12 +180,12 @@ def _band_fit(det, pts: np.ndarray, img: np.ndarray, max_move: float) -> tuple[n
     """(N, 2) px and ok (N,): det's corners pts (N, 2) px refined on their plain neighbourhood, on img
     (H, W) smoothed; ok where the fit settled within ``max_move`` px, its asymmetry at most
     ODD_SHARE times the median of those that settled (MAX_AFFINE_ASYMMETRY at least)."""
-    from aicalib_tf.detect.charuco_grow import MAX_AFFINE_ASYMMETRY, _steps
-    from aicalib_tf.detect.charuco_refine import refine_on_plain_band
+    from aicalib_tf.detect.charuco_grow import MAX_AFFINE_ASYMMETRY
+    from aicalib_tf.detect.charuco_refine import local_homographies, refine_on_plain_band
 
     if len(pts) < 4:
         return pts.copy(), np.zeros(len(pts), bool)
-    got, ok, left = refine_on_plain_band(img, det.board, det.ids, pts, _steps(det, det.ids))
+    got, ok, left = refine_on_plain_band(img, det.board, det.ids, pts, local_homographies(det.ids, pts))
     ok &= np.linalg.norm(got - pts, axis=1) <= max_move
     if ok.any():
         ok &= left <= max(MAX_AFFINE_ASYMMETRY, ODD_SHARE * float(np.median(left[ok])))

@@ -1,28 +1,34 @@
 """ChArUco corners refined on the part of their neighbourhood that is the same at every corner.
 
 A corner of a chessboard is point-symmetric over a window of up to half a square: I(c + d) equals
-I(c − d), whatever the view's affine distortion and the lens' (symmetric) blur. On a ChArUco board
-the two white squares at a corner hold two different markers, so a window that reaches their
-bits is not symmetric and its fit is pulled towards them; one kept inside the white margin (a
-few px wide) sees too few pixels to average the noise. What is symmetric about a ChArUco corner:
-the two black squares whole, and in the two white squares the band along the corner's edges, out
-to the white margin plus the marker's black border bit, :func:`plain_band` squares from the
-corner along each axis. :func:`refine_on_plain_band` samples a window of :data:`REACH` squares
-along the board's axes (the lattice's local steps), gives no weight to the white squares beyond
+I(c − d), whatever the lens' (symmetric) blur. On a ChArUco board the two white squares at a
+corner hold two different markers, so a window that reaches their bits is not symmetric and its
+fit is pulled towards them; one kept inside the white margin (a few px wide) sees too few pixels
+to average the noise. What is symmetric about a ChArUco corner: the two black squares whole, and
+in the two white squares the band along the corner's edges, out to the white margin plus the
+marker's black border bit, :func:`plain_band` squares from the corner along each axis.
+
+:func:`refine_on_plain_band` samples a window of :data:`REACH` squares about the corner in the
+board's plane, each sample and its opposite on the board put in the image by the corner's local
+homography (:func:`local_homographies`, from the lattice of the corners found), so a steep view's
+perspective keeps the pairs opposite on the board. It gives no weight to the white squares beyond
 the band (less :data:`BLUR_PX` px, as far as the image's blur spreads the bits) nor to samples
 outside the image, and moves the corner by Gauss–Newton steps that minimise the weighted squared
-differences of opposite samples (:func:`symmetry_fit`; the weights are point-symmetric, so the
-fit is not pulled either way). On the calibration sequences of ``benchmarks/charuco.py`` (noise
-σ 10) this took the corners' RMS error against the truth from 0.087 px (saddle fit in the margin)
-to about 0.04 px; the same window without the band's limit gave 0.10 px.
+differences of opposite samples (:func:`symmetry_fit`; the weights are the same for both samples
+of a pair, so the fit is not pulled either way). On the calibration sequences of
+``benchmarks/charuco.py`` (noise σ 10) this took the corners' RMS error against the truth from
+0.087 px (saddle fit in the margin) to 0.037 px; the same window without the band's limit gave
+0.10 px, and pairs opposite in the image rather than on the board 0.041 px (and more on strongly
+distorted and steep views).
 """
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
-__all__ = ["REACH", "BLUR_PX", "SAMPLES", "plain_band", "bilinear", "symmetry_fit", "refine_on_plain_band",
-           "window_reach_px"]
+__all__ = ["REACH", "BLUR_PX", "SAMPLES", "plain_band", "bilinear", "symmetry_fit", "local_homographies",
+           "refine_on_plain_band"]
 
 REACH = 0.35  # squares: the window's half-size along each board axis (the next corners are one square away)
 BLUR_PX = 2.0  # px: how far the image's blur and the fit's smoothing carry a marker bit into the band
@@ -54,19 +60,21 @@ def bilinear(img: np.ndarray, xy: np.ndarray) -> np.ndarray:
 
 
 def symmetry_fit(img: np.ndarray, pts: np.ndarray, d: np.ndarray, w: np.ndarray | float = 1.0,
-                 iterations: int = 10, grad: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Centres of point symmetry: Gauss–Newton on Σ w (I(p + d) − I(p − d))², each point on its own.
+                 iterations: int = 10, opposite: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Centres of point symmetry: Gauss–Newton on Σ w (I(p + d) − I(p + d'))², each point on its own.
 
     img : (H, W) float, smoothed. pts : (N, 2) px starts. d : (N, M, 2) px offsets, one of each
-    opposite pair. w : (N, M) or scalar weights. grad : img's (gy, gx) when the caller has them.
-    Returns (N, 2) float64 px and the last step's length (N,) px (at most :data:`MAX_STEP`).
+    opposite pair; opposite : (N, M, 2) px, the other of each pair (default −d: an affine view; a
+    perspective view puts the board's opposite points at unequal distances). w : (N, M) or scalar
+    weights. Returns (N, 2) float64 px and the last step's length (N,) px (at most :data:`MAX_STEP`).
     """
-    gy, gx = np.gradient(img.astype(np.float64)) if grad is None else grad
+    gy, gx = np.gradient(img.astype(np.float64))
+    opposite = -d if opposite is None else opposite
     cur = np.asarray(pts, np.float64).reshape(-1, 2).copy()
     sw = np.sqrt(np.broadcast_to(np.asarray(w, np.float64), d.shape[:2]))  # (N, M): each residual times √w
     step = np.full(len(cur), np.inf)
     for _ in range(iterations):
-        a, b = cur[:, None, :] + d, cur[:, None, :] - d
+        a, b = cur[:, None, :] + d, cur[:, None, :] + opposite
         res = (bilinear(img, a) - bilinear(img, b)) * sw  # (N, M)
         jac = np.stack([bilinear(gx, a) - bilinear(gx, b), bilinear(gy, a) - bilinear(gy, b)], axis=-1) * sw[..., None]
         H = np.einsum("nmi,nmj->nij", jac, jac) + 1e-12 * np.eye(2)
@@ -88,10 +96,10 @@ def _grid() -> np.ndarray:
     return uv[: len(uv) // 2]
 
 
-def _weights(board, ids: np.ndarray, steps: np.ndarray, uv: np.ndarray) -> np.ndarray:
+def _weights(board, ids: np.ndarray, px: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """(N, K) 0/1: the samples uv (K, 2) squares off each corner that lie in its black squares or in
-    the plain band of its white squares (the band narrowed by BLUR_PX px at the local square size)."""
-    px = np.sqrt(np.abs(np.linalg.det(steps)))  # (N,) px per square
+    the plain band of its white squares (the band narrowed by BLUR_PX px at the local square size
+    px (N,) px)."""
     band = plain_band(board) - BLUR_PX / np.maximum(px, 1e-9)
     # the white squares are (+, +) and (−, −) where square (c + 1, r + 1) holds a marker, else (+, −) and (−, +)
     pp_white = board.is_marker_square(ids[:, 0] + 1, ids[:, 1] + 1)
@@ -101,38 +109,60 @@ def _weights(board, ids: np.ndarray, steps: np.ndarray, uv: np.ndarray) -> np.nd
     return (~(white & inner)).astype(np.float64)
 
 
-def window_reach_px(steps: np.ndarray) -> np.ndarray:
-    """(N,) px: the farthest sample of a corner's window from the corner, steps (N, 2, 2) px per square."""
-    uv = _grid()
-    return np.linalg.norm(np.einsum("nij,kj->nki", np.asarray(steps, np.float64), uv), axis=2).max(axis=1)
+def local_homographies(ids: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """(N, 3, 3): for each corner, the homography from offsets (u, v) in squares about its id to px,
+    from where the lattice of all corners (ids (N, 2), pts (N, 2) px) puts the four points half a
+    square off it diagonally (:func:`aicalib_tf.detect.lattice.predict_ids`); NaN where it cannot."""
+    from aicalib_tf.detect.lattice import predict_ids
+
+    ids = np.asarray(ids, np.float64).reshape(-1, 2)
+    at = predict_ids(ids, np.asarray(pts, np.float64).reshape(-1, 2),
+                     (ids[:, None, :] + _DIAGONAL[None]).reshape(-1, 2)).reshape(-1, 4, 2)
+    out = np.full((len(ids), 3, 3), np.nan)
+    for n in np.flatnonzero(np.isfinite(at).all(axis=(1, 2))):
+        out[n] = cv2.getPerspectiveTransform(_DIAGONAL.astype(np.float32), at[n].astype(np.float32))
+    return out
 
 
-def refine_on_plain_band(img: np.ndarray, board, ids: np.ndarray, pts: np.ndarray, steps: np.ndarray,
-                         grad: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+_DIAGONAL = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
+
+
+def _offsets(H: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """(N, K, 2) px: where homographies H (N, 3, 3) put offsets uv (K, 2) squares, less where they put (0, 0)."""
+    p = np.einsum("nij,kj->nki", H, np.column_stack([uv, np.ones(len(uv))]))
+    return p[..., :2] / p[..., 2:] - (H[:, :2, 2] / H[:, 2:, 2])[:, None, :]
+
+
+def refine_on_plain_band(img: np.ndarray, board, ids: np.ndarray, pts: np.ndarray,
+                         H: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ChArUco corners as the centres of point symmetry of their plain neighbourhood (module docstring).
 
     img : (H, W) float32, lightly smoothed. board : the CharucoBoard. ids : (N, 2) corner ids
-    (col, row). pts : (N, 2) px starts, within a px or so. steps : (N, 2, 2) px, columns one square
-    along the board's x and y at each corner. Samples outside the image have no weight, nor their
-    opposites. Returns (N, 2) float64 px, ok (N,) bool (the fit settled; points not ok are returned
-    as started) and the asymmetry left (N,): the weighted mean squared difference of opposite
-    samples over twice their variance (0 for a corner, about 1 for noise).
+    (col, row). pts : (N, 2) px starts, within a px or so. H : (N, 3, 3) local homographies from
+    offsets in squares about each corner to px (:func:`local_homographies`): opposite points of
+    the board are sampled where the view puts them, so perspective does not pull the fit. Samples
+    outside the image have no weight, nor their opposites. Returns (N, 2) float64 px, ok (N,) bool
+    (the fit settled; points not ok are returned as started) and the asymmetry left (N,): the
+    weighted mean squared difference of opposite samples over twice their variance (0 for a
+    corner, about 1 for noise).
     """
     pts = np.asarray(pts, np.float64).reshape(-1, 2)
-    steps = np.asarray(steps, np.float64).reshape(-1, 2, 2)
-    good = np.isfinite(pts).all(axis=1) & np.isfinite(steps).all(axis=(1, 2))
+    H = np.asarray(H, np.float64).reshape(-1, 3, 3)
+    good = np.isfinite(pts).all(axis=1) & np.isfinite(H).all(axis=(1, 2))
     out, ok, left = pts.copy(), np.zeros(len(pts), bool), np.ones(len(pts))
     if not good.any():
         return out, ok, left
     uv = _grid()
-    d = np.einsum("nij,kj->nki", steps[good], uv)  # (N, K, 2) px
-    w = _weights(board, np.asarray(ids, np.int64).reshape(-1, 2)[good], steps[good], uv)
+    d, opp = _offsets(H[good], uv), _offsets(H[good], -uv)  # (N, K, 2) px
+    unit = _offsets(H[good], np.eye(2))  # one square along the board's x and y
+    px = np.sqrt(np.abs(unit[:, 0, 0] * unit[:, 1, 1] - unit[:, 0, 1] * unit[:, 1, 0]))  # px per square
+    w = _weights(board, np.asarray(ids, np.int64).reshape(-1, 2)[good], px, uv)
     h, wd = img.shape
-    for sign in (1.0, -1.0):  # both samples of a pair in the image
-        at = pts[good, None, :] + sign * d
+    for off in (d, opp):  # both samples of a pair in the image
+        at = pts[good, None, :] + off
         w *= (at[..., 0] >= 0) & (at[..., 0] <= wd - 1) & (at[..., 1] >= 0) & (at[..., 1] <= h - 1)
-    got, step = symmetry_fit(img, pts[good], d, w, grad=grad)
-    a, b = bilinear(img, got[:, None, :] + d), bilinear(img, got[:, None, :] - d)
+    got, step = symmetry_fit(img, pts[good], d, w, opposite=opp)
+    a, b = bilinear(img, got[:, None, :] + d), bilinear(img, got[:, None, :] + opp)
     total = np.maximum(w.sum(axis=1), 1.0)
     mean = (w * (a + b)).sum(axis=1) / (2 * total)
     var = (w * ((a - mean[:, None]) ** 2 + (b - mean[:, None]) ** 2)).sum(axis=1) / (2 * total)

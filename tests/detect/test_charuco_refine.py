@@ -7,8 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from aicalib_tf.detect.charuco_grow import _steps
-from aicalib_tf.detect.charuco_refine import REACH, plain_band, refine_on_plain_band, symmetry_fit
+from aicalib_tf.detect.charuco_refine import REACH, local_homographies, plain_band, refine_on_plain_band, symmetry_fit
 from aicalib_tf.detect.refine import Smoothed, refine_windowed
 from aicalib_tf.geometry.charuco import layout_image, parse_board
 
@@ -114,7 +113,7 @@ def test_the_plain_band_beats_the_window_in_the_margin_and_the_window_over_the_b
         sm = Smoothed(gray)
         truth = sc.corners[ch.charuco_ids]
         start = ch.corners.astype(np.float64)
-        got, ok, _ = refine_on_plain_band(sm.sigma(0.5), ch.board, ch.ids, start, _steps(ch, ch.ids))
+        got, ok, _ = refine_on_plain_band(sm.sigma(0.5), ch.board, ch.ids, start, local_homographies(ch.ids, start))
         assert ok.mean() > 0.95
         band_err.append(np.linalg.norm(got - truth, axis=1)[ok])
         step = np.median(np.linalg.norm(np.diff(truth[:2], axis=0), axis=1))
