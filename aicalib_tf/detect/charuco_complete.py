@@ -11,8 +11,9 @@ marker's centre (so a second copy of the board elsewhere never adds corners). A 
 looked for where its markers put it (their predictions within a tenth of a marker side of each
 other): a saddle fit with a window inside the white margin must land within
 :data:`MAX_SHIFT_MARGIN` of the margin of the prediction. Passes repeat while corners are added. Last, every corner is refined once more from where it is
-(:func:`polish`): a saddle fit that started a pixel or two off, from the network's point, has not
-always reached the saddle; corners then off their neighbours' lattice are dropped. A board that no grid of corners found is seeded by its
+(:func:`polish`) on the part of its neighbourhood every corner shares, the markers' bits left out
+(:mod:`aicalib_tf.detect.charuco_refine`: the margin's small window averages little noise, and a
+wider one is pulled by the bits); corners then off their neighbours' lattice are dropped. A board that no grid of corners found is seeded by its
 markers alone (:func:`complete_from_markers` on a detection with no corners): then each corner needs
 two markers whose predictions agree, and the board at least 4 corners.
 """
