@@ -12,7 +12,8 @@ marker's black border bit, :func:`plain_band` squares from the corner along each
 board's plane, each sample and its opposite on the board put in the image by the corner's local
 homography (:func:`local_homographies`, from the lattice of the corners found), so a steep view's
 perspective keeps the pairs opposite on the board. It gives no weight to the white squares beyond
-the band (less :data:`BLUR_PX` px, as far as the image's blur spreads the bits) nor to samples
+the band (less :data:`BLUR_SPREAD` times the edges' blur, :func:`edge_blur`, as far as the
+image's blur spreads the bits) nor to samples
 outside the image, and moves the corner by Gauss–Newton steps that minimise the weighted squared
 differences of opposite samples (:func:`symmetry_fit`; the weights are the same for both samples
 of a pair, so the fit is not pulled either way). On the calibration sequences of
@@ -27,11 +28,11 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-__all__ = ["REACH", "BLUR_PX", "SAMPLES", "plain_band", "bilinear", "symmetry_fit", "local_homographies",
-           "refine_on_plain_band"]
+__all__ = ["REACH", "BLUR_SPREAD", "SAMPLES", "plain_band", "bilinear", "symmetry_fit", "local_homographies",
+           "edge_blur", "refine_on_plain_band"]
 
 REACH = 0.35  # squares: the window's half-size along each board axis (the next corners are one square away)
-BLUR_PX = 2.0  # px: how far the image's blur and the fit's smoothing carry a marker bit into the band
+BLUR_SPREAD = 3.0  # how far a marker bit's blur reaches into the band, in units of the edges' blur (edge_blur)
 SAMPLES = 8  # samples per half-side of the window: (2·SAMPLES + 1)² on the grid, half of them paired
 MAX_STEP = 0.5  # px: the longest Gauss–Newton step
 SETTLED = 0.02  # px: the last step of a fit that settled
@@ -96,11 +97,11 @@ def _grid() -> np.ndarray:
     return uv[: len(uv) // 2]
 
 
-def _weights(board, ids: np.ndarray, px: np.ndarray, uv: np.ndarray) -> np.ndarray:
+def _weights(board, ids: np.ndarray, px: np.ndarray, uv: np.ndarray, spread: float) -> np.ndarray:
     """(N, K) 0/1: the samples uv (K, 2) squares off each corner that lie in its black squares or in
-    the plain band of its white squares (the band narrowed by BLUR_PX px at the local square size
+    the plain band of its white squares (the band narrowed by ``spread`` px at the local square size
     px (N,) px)."""
-    band = plain_band(board) - BLUR_PX / np.maximum(px, 1e-9)
+    band = plain_band(board) - spread / np.maximum(px, 1e-9)
     # the white squares are (+, +) and (−, −) where square (c + 1, r + 1) holds a marker, else (+, −) and (−, +)
     pp_white = board.is_marker_square(ids[:, 0] + 1, ids[:, 1] + 1)
     same_sign = np.sign(uv[:, 0]) == np.sign(uv[:, 1])  # (K,)
@@ -130,7 +131,30 @@ _DIAGONAL = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
 def _offsets(H: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """(N, K, 2) px: where homographies H (N, 3, 3) put offsets uv (K, 2) squares, less where they put (0, 0)."""
     p = np.einsum("nij,kj->nki", H, np.column_stack([uv, np.ones(len(uv))]))
-    return p[..., :2] / p[..., 2:] - (H[:, :2, 2] / H[:, 2:, 2])[:, None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):  # a degenerate homography: NaN, not ok
+        return p[..., :2] / p[..., 2:] - (H[:, :2, 2] / H[:, 2:, 2])[:, None, :]
+
+
+def edge_blur(img: np.ndarray, board, pts: np.ndarray, H: np.ndarray) -> float:
+    """px: the blur of the board's edges in img (H, W), smoothed as the fit sees it: the median over
+    corners pts (N, 2) px (local homographies H (N, 3, 3)) and over the four half-edges through the
+    band of C / (√(2π) · the steepest gradient), C the step's height across ±0.3 squares (σ for a
+    Gaussian-blurred step; under-read where the other edge's blur lowers C: 0.7 px for a lens blur of
+    0.6 px, 1.4 px for a Gaussian blur of 2 px); NaN without a corner to measure."""
+    b = plain_band(board) / 2.0
+    u = np.linspace(-0.3, 0.3, 25)
+    lines = [np.column_stack([u, np.full_like(u, v)]) for v in (b, -b)]
+    lines += [line[:, ::-1] for line in lines]  # across the edges along the board's y, then its x
+    gy, gx = np.gradient(img.astype(np.float64))
+    sig = []
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for uv in lines:
+            xy = np.asarray(pts, np.float64)[:, None, :] + _offsets(H, uv)
+            grey = bilinear(img, xy)
+            steep = np.hypot(bilinear(gx, xy), bilinear(gy, xy)).max(axis=1)
+            sig.append(np.abs(grey[:, -4:].mean(axis=1) - grey[:, :4].mean(axis=1)) / (np.sqrt(2 * np.pi) * steep))
+    sig = np.concatenate(sig)
+    return float(np.median(sig[np.isfinite(sig)])) if np.isfinite(sig).any() else float("nan")
 
 
 def refine_on_plain_band(img: np.ndarray, board, ids: np.ndarray, pts: np.ndarray,
@@ -153,10 +177,16 @@ def refine_on_plain_band(img: np.ndarray, board, ids: np.ndarray, pts: np.ndarra
     if not good.any():
         return out, ok, left
     uv = _grid()
+    good &= np.isfinite(_offsets(H, np.vstack([uv, -uv, np.eye(2)]))).all(axis=(1, 2))
+    if not good.any():
+        return out, ok, left
     d, opp = _offsets(H[good], uv), _offsets(H[good], -uv)  # (N, K, 2) px
     unit = _offsets(H[good], np.eye(2))  # one square along the board's x and y
     px = np.sqrt(np.abs(unit[:, 0, 0] * unit[:, 1, 1] - unit[:, 0, 1] * unit[:, 1, 0]))  # px per square
-    w = _weights(board, np.asarray(ids, np.int64).reshape(-1, 2)[good], px, uv)
+    blur = edge_blur(img, board, pts[good], H[good])
+    if not np.isfinite(blur):
+        return out, ok, left
+    w = _weights(board, np.asarray(ids, np.int64).reshape(-1, 2)[good], px, uv, BLUR_SPREAD * blur)
     h, wd = img.shape
     for off in (d, opp):  # both samples of a pair in the image
         at = pts[good, None, :] + off
