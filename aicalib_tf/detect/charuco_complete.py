@@ -11,8 +11,9 @@ marker's centre (so a second copy of the board elsewhere never adds corners). A 
 looked for where its markers put it (their predictions within a tenth of a marker side of each
 other): a saddle fit with a window inside the white margin must land within
 :data:`MAX_SHIFT_MARGIN` of the margin of the prediction. Passes repeat while corners are added. Last, every corner is refined once more from where it is
-(:func:`polish`): a saddle fit that started a pixel or two off, from the network's point, has not
-always reached the saddle; corners then off their neighbours' lattice are dropped. A board that no grid of corners found is seeded by its
+(:func:`polish`) on the part of its neighbourhood every corner shares, the markers' bits left out
+(:mod:`aicalib_tf.detect.charuco_refine`: the margin's small window averages little noise, and a
+wider one is pulled by the bits); corners then off their neighbours' lattice are dropped. A board that no grid of corners found is seeded by its
 markers alone (:func:`complete_from_markers` on a detection with no corners): then each corner needs
 two markers whose predictions agree, and the board at least 4 corners.
 """
@@ -145,24 +146,51 @@ def complete_from_markers(gray: np.ndarray, det, read, smoothed: Smoothed | None
 
 
 def polish(gray: np.ndarray, det, max_move: float = 1.5, smoothed: Smoothed | None = None):
-    """det with each corner refined again from its place, the window 0.8 of the white margin beside
-    it (from the nearest of det's markers; 2 px at least); a corner whose fit fails or moves more than
-    ``max_move`` px keeps its place, and one whose window leaves the image goes where the corners
-    inside predict it (:func:`aicalib_tf.detect.charuco_grow.place_edge_corners`); corners without the
-    board's contrast are dropped (:func:`aicalib_tf.detect.charuco_grow.keep_with_contrast`). gray : (H, W) float32;
+    """det with each corner refined again from its place, on its plain neighbourhood
+    (:func:`aicalib_tf.detect.charuco_refine.refine_on_plain_band`: the black squares and the white
+    squares' band along the edges, the markers' bits left out); where that fit does not settle, moves
+    more than ``max_move`` px or leaves more asymmetry than :data:`ODD_SHARE` times the board's median
+    (an object's edge in the window), by the saddle fit with its window 0.8 of the white margin (from
+    the nearest of det's markers; 2 px at least), and a corner whose fit fails both ways keeps its place.
+    A corner whose saddle window leaves the image goes where the corners inside predict it
+    (:func:`aicalib_tf.detect.charuco_grow.place_edge_corners`); corners without the board's contrast
+    are dropped (:func:`aicalib_tf.detect.charuco_grow.keep_with_contrast`). gray : (H, W) float32;
     smoothed : its smoothed copies, when the caller shares them."""
     from aicalib_tf.detect.charuco_grow import FIT_SIGMA, keep_with_contrast, margin_px, place_edge_corners
 
     if not len(det.corners):
         return det
     pts = det.corners.astype(np.float64)
-    radius = np.maximum(0.8 * margin_px(det, pts), 2.0)
     smoothed = Smoothed(gray) if smoothed is None else smoothed
-    got, ok = refine_windowed(smoothed, pts, radius / 0.45, max_shift=np.full(len(pts), max_move),
-                              shadow_gate=lambda idx, saddles: np.zeros(len(idx), bool))
+    got, ok = _band_fit(det, pts, smoothed.sigma(FIT_SIGMA), max_move)
+    radius = np.maximum(0.8 * margin_px(det, pts), 2.0)
+    if (~ok).any():
+        miss = np.flatnonzero(~ok)
+        sad, sad_ok = refine_windowed(smoothed, pts[miss], radius[miss] / 0.45, max_shift=np.full(len(miss), max_move),
+                                      shadow_gate=lambda idx, saddles: np.zeros(len(idx), bool))
+        got[miss], ok[miss] = sad, sad_ok
     det = replace(det, corners=np.where(ok[:, None], got, pts).astype(np.float32))
     det = keep_with_contrast(place_edge_corners(det, window_radius(radius / 0.45)), smoothed.sigma(FIT_SIGMA))
     return _on_lattice(det)
+
+
+ODD_SHARE = 2.0  # a plain-band fit leaving more than this times the board's median asymmetry is not taken
+
+
+def _band_fit(det, pts: np.ndarray, img: np.ndarray, max_move: float) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 2) px and ok (N,): det's corners pts (N, 2) px refined on their plain neighbourhood, on img
+    (H, W) smoothed; ok where the fit settled within ``max_move`` px, its asymmetry at most
+    ODD_SHARE times the median of those that settled (MAX_AFFINE_ASYMMETRY at least)."""
+    from aicalib_tf.detect.charuco_grow import MAX_AFFINE_ASYMMETRY
+    from aicalib_tf.detect.charuco_refine import local_homographies, refine_on_plain_band
+
+    if len(pts) < 4:
+        return pts.copy(), np.zeros(len(pts), bool)
+    got, ok, left = refine_on_plain_band(img, det.board, det.ids, pts, local_homographies(det.ids, pts))
+    ok &= np.linalg.norm(got - pts, axis=1) <= max_move
+    if ok.any():
+        ok &= left <= max(MAX_AFFINE_ASYMMETRY, ODD_SHARE * float(np.median(left[ok])))
+    return got, ok
 
 
 def _on_lattice(det):

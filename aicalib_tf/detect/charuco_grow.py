@@ -36,6 +36,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from aicalib_tf.detect.charuco_refine import bilinear, symmetry_fit
 from aicalib_tf.detect.lattice import predict_ids
 from aicalib_tf.detect.refine import Smoothed, refine_windowed, window_radius
 
@@ -110,21 +111,6 @@ def _spans(ids: np.ndarray, want: np.ndarray) -> bool:
     return len(near) >= 4 and np.linalg.matrix_rank(near - near.mean(axis=0), tol=1e-6) == 2
 
 
-def _bilinear(img: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    """(...) float64 bilinear samples of img (H, W) at xy (..., 2) px, edge pixels repeated outside;
-    NaN at a NaN position."""
-    h, w = img.shape
-    bad = ~np.isfinite(xy).all(axis=-1)
-    x = np.clip(np.where(bad, 0.0, xy[..., 0]), 0.0, w - 1.0)
-    y = np.clip(np.where(bad, 0.0, xy[..., 1]), 0.0, h - 1.0)
-    x0 = np.minimum(np.floor(x).astype(np.int64), w - 2)
-    y0 = np.minimum(np.floor(y).astype(np.int64), h - 2)
-    fx, fy = x - x0, y - y0
-    top = img[y0, x0] + fx * (img[y0, x0 + 1] - img[y0, x0])
-    bot = img[y0 + 1, x0] + fx * (img[y0 + 1, x0 + 1] - img[y0 + 1, x0])
-    return np.where(bad, np.nan, top + fy * (bot - top))
-
-
 AFFINE_RADIUS = 3  # the window: (2r + 1)² samples on a grid along the board's axes
 AFFINE_REACH = 1.0  # of the white margin: the window's half-size along each board axis (the markers' black borders beyond it are point-symmetric too)
 MAX_AFFINE_ASYMMETRY = 0.05  # of the window's variance: the mean squared difference of opposite samples
@@ -155,21 +141,7 @@ def refine_in_squares(img: np.ndarray, pts: np.ndarray, steps: np.ndarray, reach
             out[good], ok[good] = refine_in_squares(img, pts[good], steps[good], reach[good], iterations, max_asymmetry)
         return out, ok
     d = _half_window(steps, reach)
-    gy, gx = np.gradient(img.astype(np.float64))
-    cur = pts.copy()
-    step = np.full(len(pts), np.inf)
-    for _ in range(iterations):
-        a, b = cur[:, None, :] + d, cur[:, None, :] - d
-        res = _bilinear(img, a) - _bilinear(img, b)  # (N, M)
-        jac = np.stack([_bilinear(gx, a) - _bilinear(gx, b), _bilinear(gy, a) - _bilinear(gy, b)], axis=-1)
-        H = np.einsum("nmi,nmj->nij", jac, jac) + 1e-12 * np.eye(2)
-        delta = -np.linalg.solve(H, np.einsum("nmi,nm->ni", jac, res)[..., None])[..., 0]
-        norm = np.linalg.norm(delta, axis=1)
-        delta *= np.minimum(1.0, 0.5 / np.maximum(norm, 1e-12))[:, None]  # half a pixel at most
-        cur += delta
-        step = np.minimum(norm, 0.5)
-        if (step < 1e-3).all():
-            break
+    cur, step = symmetry_fit(img, pts, d, iterations=iterations)
     ok = (step < 0.02) & (_asymmetry(img, cur, d) <= max_asymmetry)
     return np.where(ok[:, None], cur, pts), ok
 
@@ -196,7 +168,7 @@ def asymmetry(img: np.ndarray, pts: np.ndarray, steps: np.ndarray, reach: float)
 def _asymmetry(img: np.ndarray, pts: np.ndarray, d: np.ndarray) -> np.ndarray:
     """(N,) mean squared difference of the samples at pts + d and pts − d (d (N, M, 2) px), over
     twice the samples' variance (1 for a flat window)."""
-    a, b = _bilinear(img, pts[:, None, :] + d), _bilinear(img, pts[:, None, :] - d)
+    a, b = bilinear(img, pts[:, None, :] + d), bilinear(img, pts[:, None, :] - d)
     var = np.concatenate([a, b], axis=1).var(axis=1)
     return np.where(var > 1e-8, ((a - b) ** 2).mean(axis=1) / (2 * np.maximum(var, 1e-12)), 1.0)
 
@@ -232,7 +204,7 @@ def square_contrast(img: np.ndarray, board, ids: np.ndarray, pts: np.ndarray, st
     uv = _QUADRANTS[:, None, :] * _INSET[None]  # (4, 9, 2) squares
     xy = np.asarray(pts, np.float64)[:, None, None, :] + np.einsum("nij,qkj->nqki", steps, uv)  # (N, 4, 9, 2)
     inside = (xy[..., 0] >= 0) & (xy[..., 0] <= w - 1) & (xy[..., 1] >= 0) & (xy[..., 1] <= h - 1)
-    vals = np.where(inside, _bilinear(img, xy), np.nan)
+    vals = np.where(inside, bilinear(img, xy), np.nan)
     with warnings.catch_warnings():  # all-NaN rows (no square of one colour in the image) give NaN
         warnings.simplefilter("ignore", RuntimeWarning)
         mean = np.nanmean(vals, axis=2)  # (N, 4)

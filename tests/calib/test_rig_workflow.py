@@ -141,8 +141,10 @@ def test_a_charuco_rig_calibrates_from_views_that_each_camera_sees_in_part(tmp_p
     assert rig["quality"]["status"] == "ok" and rig["meta"]["board"] == spec, text
     baseline = float(np.linalg.norm(np.asarray(rig["T"])[1]))
     assert abs(baseline / truth.baseline() - 1) < 0.002, (baseline, truth.baseline())
-    assert rotation_angle_deg(np.asarray(rig["R"])[1] @ truth.R[1].T) < 0.1
-
+    # within 0.1° or three of the rig's own σ: the model choice may give one camera a richer lens
+    # model (rational_polynomial here), whose fit leaves the rotation less determined
+    sigma = rig["quality"]["pairs"][0]["rotation_std_deg"]
+    assert rotation_angle_deg(np.asarray(rig["R"])[1] @ truth.R[1].T) < max(0.1, 3 * sigma), sigma
 
 
 def test_a_circular_fisheye_rig_keeps_and_uses_each_cameras_image_circle(tmp_path, capsys):
