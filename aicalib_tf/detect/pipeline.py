@@ -103,7 +103,7 @@ from aicalib_tf.detect.junctions import dedupe, nearest_spacing, proposer, ring_
 from aicalib_tf.detect.lattice import drop_outliers
 from aicalib_tf.detect.partial import partial_board, relative_board
 from aicalib_tf.detect.pyramid import downscale, quick_scales, quick_shift, refine_full, scales, to_full
-from aicalib_tf.detect.refine import Smoothed, refine_windowed, window_radius
+from aicalib_tf.detect.refine import Smoothed, refine_candidates
 from aicalib_tf.detect.zoom import from_zoom, zoom_box, zoom_in
 from aicalib_tf.io import load_image
 
@@ -265,16 +265,13 @@ def _zoomed(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: f
     return replace(det, corners=from_zoom(det.corners, box), image_size=(w, h))
 
 
-SQUEEZED_WINDOW = 0.6  # a failed saddle fit tries again with the window of squares this much narrower
-
-
 def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed: Smoothed | None = None,
                    min_points: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """The detector's corner candidates: the CNN's points, refined on the image, duplicates merged.
 
     gray : (H, W) float32 or uint8. The network's points (:func:`aicalib_tf.cnn.inference.corner_points`,
     at most ``MAX_CANDIDATES``, strongest first) are moved to the saddle point of the image around
-    them (:func:`aicalib_tf.detect.refine.refine_windowed`, a window fitting the local spacing); points
+    them (:func:`aicalib_tf.detect.refine.refine_candidates`, a window fitting the local spacing); points
     whose fit fails are dropped, and of points that meet within 1.5 px the strongest stays.
     smoothed : the image's :class:`~aicalib_tf.detect.refine.Smoothed` when the caller has it.
     min_points : fewer network points than this give no candidates (nothing is refined).
@@ -287,12 +284,7 @@ def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed:
     if len(pts) < max(min_points, 1):
         return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
     smoothed = Smoothed(np.asarray(gray, np.float32)) if smoothed is None else smoothed
-    spacing = nearest_spacing(pts)
-    refined, ok = refine_windowed(smoothed, pts, spacing)
-    # a corner squeezed towards a fisheye's rim: its squares are narrower across than the spacing says
-    again = np.flatnonzero(~ok & (window_radius(SQUEEZED_WINDOW * spacing) < window_radius(spacing)))
-    if len(again):
-        refined[again], ok[again] = refine_windowed(smoothed, pts[again], SQUEEZED_WINDOW * spacing[again])
+    refined, ok = refine_candidates(smoothed, pts, nearest_spacing(pts))
     refined, scores = refined[ok], scores[ok]
     keep = dedupe(refined, scores)
     return refined[keep].astype(np.float32), scores[keep].astype(np.float32)
