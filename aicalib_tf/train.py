@@ -5,8 +5,15 @@ Examples::
     python -m aicalib_tf.train --arch default --out runs/default            # the default network
     python -m aicalib_tf.train --arch report --out runs/report              # the report's network
     python -m aicalib_tf.train --out runs/default --resume                  # continue a killed run
+    python -m aicalib_tf.train --init default --learning-rate 0.0005 --epochs 6 --out runs/ft  # fine-tune
     python -m aicalib_tf.train --data 'shards/*.tfrecord' --out runs/big    # from data_gen --format tfrecord
     TF_CONFIG=... python -m aicalib_tf.train --strategy multiworker --data 'shards/*.tfrecord' --out runs/big
+
+``--init MODEL`` starts from the weights of a trained model (a shipped name such as ``default``,
+or a .keras file; loaded with safe_mode) instead of a fresh initialisation, for fine-tuning on
+new data: the model must have ``--arch``'s layers. The learning-rate schedule starts again from
+``--learning-rate``, so a fine-tune usually takes a lower one. config.json and metrics.json
+record the init file and its sha256.
 
 The exact commands of the shipped models, with their data options, are in models/MODEL_CARD.md.
 
@@ -84,6 +91,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--deterministic", action="store_true", help="--data: a fixed element order (slower parallel stages)")
     ap.add_argument("--strategy", default=d.strategy, help="default | mirrored | multiworker (TF_CONFIG) (default: %(default)s)")
     ap.add_argument("--no-determinism", action="store_true", help="allow non-deterministic TensorFlow ops (other Keras backends: no effect)")
+    ap.add_argument("--init", default=d.init, metavar="MODEL",
+                    help="start from this model's weights: a shipped name (default) or a .keras file with --arch's layers "
+                         "(default: a fresh initialisation)")
     ap.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     ap.add_argument("--quiet", action="store_true", help="no progress bars")
     return ap
@@ -103,7 +113,7 @@ def _run(argv: list[str] | None) -> int:
         seed=args.seed, preset=args.preset, pool_images=args.pool_images, val_images=args.val_images,
         learning_rate=args.learning_rate, workers=args.workers, threshold=args.threshold, focal_gamma=args.focal_gamma,
         determinism=not args.no_determinism, squeeze=args.squeeze, shrink=args.shrink,
-        data=args.data, strategy=args.strategy, deterministic_data=args.deterministic,
+        data=args.data, strategy=args.strategy, deterministic_data=args.deterministic, init=args.init,
     )
     metrics = train(cfg, resume=args.resume, progress=not args.quiet, epochs_given=args.epochs)
     print(f"done: precision {metrics['precision']:.4f}, recall {metrics['recall']:.4f}, "

@@ -26,14 +26,30 @@ from aicalib_tf.cnn.spec import MODELS_DIR, RUNTIME_FILES, write_sha256
 __all__ = ["export_tflite", "write_sha256", "calibration_images", "export_all", "compare_runtime"]
 
 
+CALIBRATION_TRIES = 5  # scenes tried per calibration image before giving up
+
+
 def calibration_images(n: int = 48, seed: int = 0):
-    """``n`` network inputs (1, H, W, 1) float32 of data_gen boards (every preset in turn), for int8 calibration."""
+    """``n`` network inputs (1, H, W, 1) float32 of data_gen boards (every preset in turn), for int8 calibration.
+
+    Image i is scene i of preset i mod P; where data_gen finds no pose for that scene, scene i + n, i + 2n, ...
+    """
     from aicalib_tf.cnn.corner_map import network_input
     from data_gen import PRESETS, make_sample
 
     presets = sorted(PRESETS)
     for i in range(n):
-        yield network_input(make_sample(presets[i % len(presets)], seed=seed, index=i).image)
+        name = presets[i % len(presets)]
+        for index in range(i, i + CALIBRATION_TRIES * n, n):  # a scene data_gen finds no pose for: the next one
+            try:
+                sample = make_sample(name, seed=seed, index=index)
+                break
+            except RuntimeError:
+                continue
+        else:
+            raise RuntimeError(f"int8 calibration: data_gen drew no {name!r} scene at indices {i}, {i + n}, ... "
+                               f"({CALIBRATION_TRIES} tries)")
+        yield network_input(sample.image)
 
 
 def export_tflite(keras_path: Path, out: Path, *, int8: bool = False, images=None) -> Path:

@@ -12,7 +12,7 @@ import time
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
-__all__ = ["TrainConfig", "train", "VALIDATION_SEED"]
+__all__ = ["TrainConfig", "train", "init_weights", "init_record", "VALIDATION_SEED"]
 
 VALIDATION_SEED = 900001
 
@@ -40,6 +40,7 @@ class TrainConfig:
     data: str = ""  # TFRecord shards (globs, comma-separated); "" renders the pool in memory
     strategy: str = "default"
     deterministic_data: bool = False
+    init: str = ""  # start from this model's weights: a shipped name (default) or a .keras path; "" a fresh model
 
     def check(self) -> None:
         """Raise ``ValueError`` naming the first bad option."""
@@ -68,9 +69,64 @@ class TrainConfig:
             raise ValueError(f"--threshold must be in (0, 1), got {self.threshold}")
         if self.strategy not in ("default", "mirrored", "multiworker"):
             raise ValueError(f"--strategy: unknown strategy {self.strategy!r}; choose from: default, mirrored, multiworker")
+        if self.init and self.init not in ARCHITECTURES and not self.init.endswith(".keras"):
+            raise ValueError(f"--init: expected a shipped model name ({', '.join(ARCHITECTURES)}) or a .keras file, "
+                             f"got {self.init!r}")
         if self.data and self.arch == "report":
             raise ValueError("--data: TFRecord shards train corner-map models; the report's patch classifier "
                              "trains on an in-memory pool (leave out --data)")
+
+
+def _layer_signature(model) -> list[tuple]:
+    """What must agree for one model's weights to stand in for another's: per layer its class, its
+    weight shapes, and the settings that change what the weights compute (strides, pooling, activation)."""
+    sig = []
+    for layer in model.layers:
+        conf = layer.get_config()
+        sig.append((type(layer).__name__, tuple(tuple(w.shape) for w in layer.weights),
+                    *(str(conf.get(k)) for k in ("strides", "pool_size", "padding", "activation"))))
+    return sig
+
+
+def _init_path(init: str) -> Path:
+    from aicalib_tf.cnn.model import MODELS_DIR
+    from aicalib_tf.cnn.spec import ARCHITECTURES
+
+    return MODELS_DIR / f"{init}.keras" if init in ARCHITECTURES else Path(init)
+
+
+def init_weights(model, init: str) -> None:
+    """Set ``model``'s weights to those of the ``.keras`` model ``init`` (a shipped name such as
+    ``default``, or a path), loaded with ``safe_mode=True``.
+
+    Raises ``ValueError`` naming the file when it is missing, unreadable, or holds another
+    architecture than ``model`` (layers, weight shapes, strides, pooling).
+    """
+    from aicalib_tf.cnn.model import load_model
+
+    path = _init_path(init)
+    try:
+        source = load_model(path, backend="keras")
+    except (FileNotFoundError, ValueError) as exc:
+        raise ValueError(f"--init: {exc}") from None
+    got, want = _layer_signature(source), _layer_signature(model)
+    if got != want:
+        first = next((i for i, (a, b) in enumerate(zip(got, want)) if a != b), min(len(got), len(want)))
+        raise ValueError(f"--init: {path} holds a {source.name!r} network that does not match --arch {model.name!r} "
+                         f"({len(got)} layers against {len(want)}; first difference at layer {first})")
+    model.set_weights(source.get_weights())
+
+
+def init_record(init: str) -> dict:
+    """What config.json and metrics.json record of ``--init``: the name given, the file and its sha256.
+
+    Raises ``ValueError`` naming the file when there is none."""
+    from aicalib_tf.cnn.model import file_sha256
+
+    path = _init_path(init)
+    if not path.is_file():
+        raise ValueError(f"--init: model file not found: {path}")
+    return {"init": init, "path": str(path), "sha256": file_sha256(path)}
 
 
 def _write_json(path: Path, obj) -> None:
@@ -264,7 +320,8 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
     replicas = int(strategy.num_replicas_in_sync)
     global_batch, global_lr = cfg.batch_size * replicas, cfg.learning_rate * replicas
     _write_json(run / "config.json", {**asdict(cfg), "replicas": replicas, "global_batch_size": global_batch,
-                                      "global_learning_rate": global_lr})
+                                      "global_learning_rate": global_lr,
+                                      **({"init_model": init_record(cfg.init)} if cfg.init else {})})
 
     import keras
 
@@ -290,7 +347,10 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
         if resume:
             model = load_model(out / state["checkpoint"], compile=True)
         else:
-            model = compile_model(build_model(cfg.arch), global_lr, focal_gamma=cfg.focal_gamma)
+            model = build_model(cfg.arch)
+            if cfg.init:
+                init_weights(model, cfg.init)
+            model = compile_model(model, global_lr, focal_gamma=cfg.focal_gamma)
         if cfg.strategy != "default":
             distribute.build_for_fit(model)
     batches = _training_data(cfg, strategy, model_kind(model), global_batch, initial_epoch, progress)
@@ -322,6 +382,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
         "wall_s_this_process": round(time.perf_counter() - t0, 1),
         "wall_s_total": round(wall_before + time.perf_counter() - t0, 1),
         "validation": {"preset": val_preset, "seed": VALIDATION_SEED, "images": cfg.val_images, "match_px": 1.0},
+        "init": init_record(cfg.init) if cfg.init else None,
         "sha256": file_sha256(final),
         "size_bytes": final.stat().st_size,
         **({"previous": previous} if previous else {}),

@@ -246,8 +246,9 @@ def lattice_residuals_loop(ids, pts, k, single):
                 step = min(step, lat)
                 if single:
                     step = np.float32(step)
-        res = math.sqrt((pred[0] - pts[i, 0]) ** 2 + (pred[1] - pts[i, 1]) ** 2) / step
-        if math.isfinite(res):
-            out[i] = res
+        if step > 0.0:  # no step (another corner at the same place): not finite, left 0 as numpy's x / 0 would be
+            res = math.sqrt((pred[0] - pts[i, 0]) ** 2 + (pred[1] - pts[i, 1]) ** 2) / step
+            if math.isfinite(res):
+                out[i] = res
     return out
 

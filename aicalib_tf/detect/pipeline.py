@@ -103,7 +103,7 @@ from aicalib_tf.detect.junctions import dedupe, nearest_spacing, proposer, ring_
 from aicalib_tf.detect.lattice import drop_outliers
 from aicalib_tf.detect.partial import partial_board, relative_board
 from aicalib_tf.detect.pyramid import downscale, quick_scales, quick_shift, refine_full, scales, to_full
-from aicalib_tf.detect.refine import Smoothed, refine_windowed
+from aicalib_tf.detect.refine import Smoothed, refine_candidates
 from aicalib_tf.detect.zoom import from_zoom, zoom_box, zoom_in
 from aicalib_tf.io import load_image
 
@@ -271,7 +271,7 @@ def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed:
 
     gray : (H, W) float32 or uint8. The network's points (:func:`aicalib_tf.cnn.inference.corner_points`,
     at most ``MAX_CANDIDATES``, strongest first) are moved to the saddle point of the image around
-    them (:func:`aicalib_tf.detect.refine.refine_windowed`, a window fitting the local spacing); points
+    them (:func:`aicalib_tf.detect.refine.refine_candidates`, a window fitting the local spacing); points
     whose fit fails are dropped, and of points that meet within 1.5 px the strongest stays.
     smoothed : the image's :class:`~aicalib_tf.detect.refine.Smoothed` when the caller has it.
     min_points : fewer network points than this give no candidates (nothing is refined).
@@ -284,7 +284,7 @@ def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed:
     if len(pts) < max(min_points, 1):
         return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
     smoothed = Smoothed(np.asarray(gray, np.float32)) if smoothed is None else smoothed
-    refined, ok = refine_windowed(smoothed, pts, nearest_spacing(pts))
+    refined, ok = refine_candidates(smoothed, pts, nearest_spacing(pts))
     refined, scores = refined[ok], scores[ok]
     keep = dedupe(refined, scores)
     return refined[keep].astype(np.float32), scores[keep].astype(np.float32)

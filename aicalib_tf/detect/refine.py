@@ -26,7 +26,7 @@ from aicalib_tf.detect.saddle import saddle_fit_matrix
 from aicalib_tf.detect.saddle_kernels import saddle_loop
 from aicalib_tf.geometry.pose import in_frame
 
-__all__ = ["Smoothed", "gaussian", "refine_saddle", "refine_subpix", "refine_windowed", "window_radius"]
+__all__ = ["Smoothed", "gaussian", "refine_saddle", "refine_subpix", "refine_windowed", "refine_candidates", "window_radius"]
 
 
 def refine_saddle(
@@ -142,6 +142,24 @@ def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, ma
     if max_shift is not None:
         ok &= np.linalg.norm(out - pts, axis=1) <= max_shift
     return out, ok
+
+
+SQUEEZED_WINDOW = 0.6  # a failed fit tries again in the window of squares this much narrower
+
+
+def refine_candidates(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray):
+    """:func:`refine_windowed` for the network's corner candidates, with a second, narrower try.
+
+    A corner squeezed towards a fisheye's rim has squares narrower across than the corner spacing
+    says, and the window sized from the spacing straddles them: where that fit fails, the point is
+    fitted again in the window of squares ``SQUEEZED_WINDOW`` times as wide, when that window is
+    smaller. pts : (N, 2) px. spacing : (N,) px. Returns refined (N, 2) float32 and ok (N,) bool.
+    """
+    refined, ok = refine_windowed(smoothed, pts, spacing)
+    again = np.flatnonzero(~ok & (window_radius(SQUEEZED_WINDOW * spacing) < window_radius(spacing)))
+    if len(again):
+        refined[again], ok[again] = refine_windowed(smoothed, np.asarray(pts)[again], SQUEEZED_WINDOW * spacing[again])
+    return refined, ok
 
 
 RESTART = 0.012  # above it (robust_refine.shadow_asymmetry at its result) the shadow-robust fit starts again nearby

@@ -51,6 +51,7 @@ def test_the_command_names_the_crop_options_and_older_runs_get_their_defaults():
     assert "--preset train:0.75,distorted:0.25" in cmd and cmd.endswith("--squeeze 0.5 --shrink 0.25")
     older = {k: v for k, v in config.items() if k not in ("squeeze", "shrink", "focal_gamma")}
     assert train_command(older).endswith("--focal-gamma 0.0 --squeeze 0.0 --shrink 0.0")
+    assert "--init" not in cmd and train_command({**config, "init": "default"}).endswith("--shrink 0.25 --init default")
 
 
 def test_the_card_says_how_much_of_the_wall_time_was_the_image_pool(tmp_path):

@@ -145,3 +145,42 @@ def test_a_pool_cache_renders_a_pool_once(tmp_path, monkeypatch):
     files[0].write_bytes(b"not an npz")
     with pytest.raises(ValueError, match="pool-.*not a readable pool cache"):
         train.cached_pool(3, 5, preset="train", progress=False)
+
+
+def test_init_starts_from_the_given_models_weights_and_records_it(tmp_path):
+    import numpy as np
+
+    from aicalib_tf.cnn.model import build_model, file_sha256, load_model
+    from aicalib_tf.cnn.spec import MODELS_DIR
+    from aicalib_tf.cnn.train import init_weights
+
+    shipped = load_model("default", backend="keras").get_weights()
+    fresh = build_model("default")
+    assert any(not np.array_equal(a, b) for a, b in zip(fresh.get_weights(), shipped))
+    init_weights(fresh, "default")
+    for a, b in zip(fresh.get_weights(), shipped):
+        np.testing.assert_array_equal(a, b)
+    # a run at a vanishing learning rate ends where it started: the shipped weights, not a fresh start
+    run = tmp_path / "run"
+    assert main(["--out", str(run), "--epochs", "1", "--init", "default", "--learning-rate", "1e-9", *TINY]) == 0
+    for a, b in zip(load_model(run / "model.keras").get_weights(), shipped):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-6)
+    sha = file_sha256(MODELS_DIR / "default.keras")
+    assert json.loads((run / "config.json").read_text())["init_model"]["sha256"] == sha
+    assert json.loads((run / "metrics.json").read_text())["init"]["sha256"] == sha
+
+
+def test_init_with_a_bad_or_mismatched_file_exits_2_naming_it(tmp_path, capsys):
+    from aicalib_tf.cnn.model import build_model, save_model
+
+    other = save_model(build_model("default_v1"), tmp_path / "v1.keras")
+    broken = tmp_path / "broken.keras"
+    broken.write_bytes(b"not a zip")
+    cases = [(other, "does not match --arch"), (broken, "not a Keras 3 .keras archive"),
+             (tmp_path / "missing.keras", "not found")]
+    for i, (path, message) in enumerate(cases):
+        assert main(["--out", str(tmp_path / f"run{i}"), "--init", str(path), *TINY]) == 2
+        err = capsys.readouterr().err
+        assert message in err and str(path) in err, err
+    assert main(["--out", str(tmp_path / "run9"), "--init", "weights.h5", *TINY]) == 2
+    assert "--init" in capsys.readouterr().err

@@ -420,3 +420,19 @@ def test_close_up_fisheye_boards_whose_lines_bend_are_found(model, index):
     assert det.complete
     err = min(np.abs(det.corners - t).max() for t in (s.corners, s.corners[::-1]))
     assert err < 0.5
+
+
+@pytest.mark.parametrize("index, near", [(44, (414.5, 322.1)), (71, (268.4, 150.5))])
+def test_refined_points_keep_a_corner_squeezed_at_a_fisheyes_rim(model, index, near):
+    # close-up fisheye boards (evaluate's fisheye_closeup): at the rim the squares are narrower across
+    # than the corner spacing, the window sized from the spacing straddles them and its saddle fit
+    # fails there; a narrower window finds the corner
+    from aicalib_tf.bench.conditions import PATTERN, named_conditions
+
+    cond = next(c for c in named_conditions() if c.name == "fisheye_closeup")
+    s = make_sample(cond.preset, cond.seed, index, size=cond.size, pattern=PATTERN)
+    truth = s.corners[s.visible]
+    rim = truth[np.argmin(np.hypot(*(truth - np.array(near)).T))]
+    assert np.hypot(*(rim - np.array(near))) < 0.2  # the scene is the one measured
+    pts, _ = refined_points(model, s.image)
+    assert np.hypot(*(pts - rim).T).min() < 0.15

@@ -123,6 +123,20 @@ def test_lattice_residuals_match_the_array_code_in_float32_and_float64():
     assert lone > 0
 
 
+def test_lattice_residuals_of_two_corners_at_one_place_are_zero_as_in_the_array_code():
+    # no step to divide by: the reference's x / 0 is not finite and counts 0; the loop must not raise
+    from aicalib_tf.detect.lattice import lattice_residuals
+
+    c, r = np.meshgrid(np.arange(4), np.arange(3))
+    ids = np.stack([c.ravel(), r.ravel()], 1)
+    for dtype in (np.float64, np.float32):
+        pts = (ids * 20.0 + 5.0).astype(dtype)
+        pts[5] = pts[4]
+        got = lattice_residuals(ids, pts)
+        assert got[4] == 0.0 and got[5] == 0.0 and np.isfinite(got).all()
+        assert np.array_equal(got, _residuals_reference(ids, pts))
+
+
 def test_nearest_steps_gives_the_spacing_at_the_nearest_point():
     pts = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 4.0], [30.0, 0.0]])  # spacings 10, 4, 4, 20
     want = np.array([[1.0, 1.0], [9.0, 3.0], [29.0, 0.0], [5.0, 0.0]])  # the last is a tie: the first point counts
