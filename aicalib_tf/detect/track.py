@@ -39,6 +39,7 @@ from aicalib_tf.detect.board_order import full_board_ids, reading
 from aicalib_tf.detect.junctions import nearest_spacing
 from aicalib_tf.detect.pipeline import Detection, detect_corners
 from aicalib_tf.detect.pyramid import refine_full
+from aicalib_tf.geometry.image_circle import thumbnail
 from aicalib_tf.io import load_image, to_gray_float
 
 __all__ = ["FOLLOW_SHIFT", "MAX_BEND", "ROI_STEPS", "STILL_LEVEL", "STILL_MAX", "Tracker", "follow", "lattice_bent",
@@ -93,14 +94,18 @@ def search_box(corners: np.ndarray, size: tuple[int, int], pad: float) -> tuple[
     return int(x0), int(y0), int(x1), int(y1)
 
 
+def _gray(raw: np.ndarray) -> np.ndarray:
+    """A frame as the pipeline takes it: a uint8 grey frame as it is, any other through the image gate
+    ((H, W) float32 in [0, 1]), so that it is converted once."""
+    return raw if raw.ndim == 2 and raw.dtype == np.uint8 else to_gray_float(raw)
+
+
 def scene_thumbnail(raw: np.ndarray) -> np.ndarray:
     """(h, w) float32 grey levels of 255: a frame (any array the image gate takes) shrunk by area
-    averaging to a longer side of ``STILL_SIDE`` px. A uint8 grey frame is shrunk as it is."""
-    from aicalib_tf.geometry.image_circle import thumbnail
-
-    if raw.ndim == 2 and raw.dtype == np.uint8:
-        return thumbnail(raw, STILL_SIDE)
-    return thumbnail(to_gray_float(raw), STILL_SIDE) * np.float32(255.0)
+    averaging to a longer side of ``STILL_SIDE`` px."""
+    gray = _gray(raw)
+    small = thumbnail(gray, STILL_SIDE)
+    return small if gray.dtype == np.uint8 else small * np.float32(255.0)
 
 
 def scene_changed(a: np.ndarray, b: np.ndarray) -> bool:
@@ -187,12 +192,14 @@ class Tracker:
         if self._size != (w, h):
             self.reset()
         self._size, self.how = (w, h), ""
-        thumb = scene_thumbnail(raw) if self._last is None else None
+        gray = _gray(raw) if self._last is None else None  # read whole only when no board is followed
+        thumb = None if gray is None else scene_thumbnail(gray)
         det = self._near(raw, (w, h)) if self._last is not None else self._repeat(thumb)
         if det is None:
-            det = detect_corners(load_image(raw), self.pattern_size, model=self.model, threshold=self.threshold)
+            gray = _gray(raw) if gray is None else gray
+            det = detect_corners(gray, self.pattern_size, model=self.model, threshold=self.threshold)
             self.how = "frame" if det.complete else ""
-            self._still = None if det.complete else (scene_thumbnail(raw) if thumb is None else thumb, det, 0)
+            self._still = None if det.complete else (scene_thumbnail(gray) if thumb is None else thumb, det, 0)
         if det.complete:
             # the motion is taken between the two boards in one order
             self._before = None if self._last is None else _aligned(self._last, det.corners, self.pattern_size)
