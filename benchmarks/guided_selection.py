@@ -134,16 +134,18 @@ def trial(labels, detected, ids, rng, args) -> dict:
     pool = [i for i in sorted(views) if views[i].name not in repeats]
     row = {"frames_read": session.frames_seen, "seen": len(session.ranked_views())}
     redraw = (detected, rng, args.noise, args.redraws) if args.redraws else None
+
+    def random_views(k: int) -> list[View]:  # k distinct frames drawn from the deduplicated detections
+        return [views[i] for i in sorted(rng.choice(pool, size=k, replace=False))]
+
     for name, got in (("guided", final), ("kept", kept)):
         k = len(got)
         row[name] = _score(lab, got, model, redraw)
-        row[f"random@{name}"] = _score(lab, [views[i] for i in sorted(rng.choice(pool, size=k, replace=False))], model,
-                                       redraw)
+        row[f"random@{name}"] = _score(lab, random_views(k), model, redraw)
         row[f"every30@{name}"] = _score(lab, every[:k], model, redraw)
     for k in args.curve:  # random frames at fixed counts: how many it takes for an error
         if k <= len(pool):
-            row[f"curve{k}"] = _score(lab, [views[i] for i in sorted(rng.choice(pool, size=k, replace=False))], model,
-                                      redraw)
+            row[f"curve{k}"] = _score(lab, random_views(k), model, redraw)
     return row
 
 
