@@ -32,6 +32,8 @@ import sys
 from collections import Counter
 from pathlib import Path
 
+from aicalib_tf.cnn.spec import DETECTOR_NETWORK, NETWORK_HELP
+
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,7 +43,7 @@ class CheckConfig:
     calibration: str
     sources: tuple[str, ...]
     detector: str = "cnn"
-    network: str = "default"
+    network: str = DETECTOR_NETWORK
     alpha: float = 0.01
     hold_distortion: bool = True
     every: int = 10
@@ -63,7 +65,7 @@ def build_parser():
     ap.add_argument("--all-intrinsics", action="store_true",
                     help="refit the distortion too for the drift (default: held at the calibration's)")
     ap.add_argument("--detector", default="cnn", choices=DETECTORS, help="corner detector (default: %(default)s)")
-    ap.add_argument("--network", default="default", help="the cnn detector's network (default: %(default)s)")
+    ap.add_argument("--network", default=DETECTOR_NETWORK, help=NETWORK_HELP)
     ap.add_argument("--every", type=int, default=10, help="video: use every Nth frame (default: %(default)s)")
     ap.add_argument("--max-frames", type=int, default=200, help="video: at most this many frames (default: %(default)s)")
     ap.add_argument("--workers", type=int, default=None, help="detection processes for photos (default: one per core)")

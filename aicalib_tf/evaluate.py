@@ -71,6 +71,7 @@ import sys
 import time
 from pathlib import Path
 
+from aicalib_tf.cnn.spec import DETECTOR_NETWORK, NETWORK_HELP
 from aicalib_tf.bench.conditions import PATTERN, select_conditions
 from aicalib_tf.bench.detectors import DETECTORS, make_detectors
 from aicalib_tf.bench.runner import EvalConfig, _split_calib, run
@@ -84,7 +85,7 @@ def build_parser():
     ap = parser("python -m aicalib_tf.evaluate", __doc__)
     ap.add_argument("--out", default=None, help="output folder (default: reports/<YYYYmmdd-HHMMSS>)")
     ap.add_argument("--quick", action="store_true", help="a small suite (about 2 minutes)")
-    ap.add_argument("--model", default="default", help="the cnn detector's model: default, default_int8, report or a .tflite/.keras path")
+    ap.add_argument("--model", default=DETECTOR_NETWORK, help=NETWORK_HELP)
     ap.add_argument("--detectors", default=",".join(DETECTORS), help="comma list from %(default)s")
     ap.add_argument("--conditions", default=None, help="comma list of conditions / sweeps / named / sweeps / calib / all")
     ap.add_argument("--limit", type=int, default=None, help="at most N images per condition (tiny runs)")

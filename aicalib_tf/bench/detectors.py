@@ -11,6 +11,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.bench.metrics import (
     WRONG_PX,
     board_detection_outcome,
@@ -42,7 +43,7 @@ class Found(NamedTuple):
 _NOTHING = Found(np.zeros((0, 2)), np.zeros((0, 2), np.int64), False)
 
 
-def make_detectors(names, pattern: tuple[int, int], model: str = "default", *,
+def make_detectors(names, pattern: tuple[int, int], model: str = DETECTOR_NETWORK, *,
                    relative: bool = False) -> tuple[dict[str, Callable], dict]:
     """Build the detectors: ``{name: f(uint8 (H, W) image) -> Found}`` and their provenance.
 

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.bench.conditions import (
     CALIB_CAMERAS,
     FISHEYE_SEQUENCES,
@@ -43,7 +44,7 @@ class EvalConfig:
 
     out: str
     quick: bool = False
-    model: str = "default"
+    model: str = DETECTOR_NETWORK
     detectors: tuple[str, ...] = DETECTORS
     conditions: str | None = None
     limit: int | None = None
@@ -314,7 +315,7 @@ def _split_calib(spec: str | None) -> tuple[str | None, bool]:
     return (",".join(rest) if rest else ""), len(rest) < len(items)
 
 
-def run_rigs(seeds: int, model: str = "default", *, progress: bool = True) -> list[dict]:
+def run_rigs(seeds: int, model: str = DETECTOR_NETWORK, *, progress: bool = True) -> list[dict]:
     """Every rig of :data:`aicalib_tf.bench.rigs.RIGS` for ``seeds`` seeds, scored against the truth (rigs.csv rows)."""
     from tqdm import tqdm
 

@@ -22,6 +22,8 @@ from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
+from aicalib_tf.cnn.spec import DETECTOR_NETWORK
+
 
 __all__ = ["RigConfig", "Pairing", "parse_rig", "pair_images", "run_rig", "rig_models", "calibrate_views",
            "write_rig_files"]
@@ -114,7 +116,7 @@ class RigConfig:
     square_unit: str = ""
     out: str = "rig"
     detector: str = "cnn"
-    network: str = "default"
+    network: str = DETECTOR_NETWORK
     model: str = "auto"  # one lens model (or auto) for every camera, or a comma list, one per camera
     quiet: bool = False
     workers: int | None = None  # detection processes (None: aicalib_tf.detect.batch's default)

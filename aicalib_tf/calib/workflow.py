@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.calib.fit import Calibration, CalibrationError, View, calibrate_camera, choose_model, fit_views
 from aicalib_tf.calib.quality import assess
 from aicalib_tf.geometry.image_circle import find_image_circle, thumbnail
@@ -51,7 +52,7 @@ def parse_square(text: str) -> tuple[float, str]:
     return value, _UNITS[unit]
 
 
-def make_detector(name: str, pattern_size: tuple[int, int], model: str = "default"):
+def make_detector(name: str, pattern_size: tuple[int, int], model: str = DETECTOR_NETWORK):
     """A function (H, W) grey image (float in [0, 1] or uint8) -> (corners (N, 2), ids (N, 2)) or None.
 
     name : "cnn" (full or partial boards, with ``model``: default, report or a .keras path),
@@ -112,7 +113,7 @@ class CalibrateConfig:
     square_unit: str = ""
     out: str = "calib"
     detector: str = "cnn"
-    network: str = "default"  # the cnn detector's network: default, report or a .keras path
+    network: str = DETECTOR_NETWORK  # the cnn detector's network: default_int8, default, report or a .tflite/.keras path
     model: str = "auto"  # the lens model: auto or a geometry.lens.MODELS name
     fix_k3: bool = False
     rational: bool = False

@@ -143,8 +143,9 @@ def runtime_section(models_dir: Path, checks: dict, int8_detections: str = "") -
     lines += ["", "`tests/test_runtime.py` checks that detection with the runtime gives the Keras model's ids and "
               "corners within 1e-3 px on three real photos."]
     if int8_detections:
-        lines += ["", "`default_int8.tflite` is an option (`load_model(\"default_int8\")`, `--model default_int8` on the "
-                  "command lines); the default stays float32. Detections, " + int8_detections + "."]
+        lines += ["", "`default_int8.tflite` is the network the detector runs unless another is named "
+                  "(`aicalib_tf.cnn.spec.DETECTOR_NETWORK`; `--model default` or `--network default` on the command "
+                  "lines runs the float32 one). Detections, " + int8_detections + "."]
     return "\n".join(lines + [""])
 
 

@@ -7,7 +7,7 @@ import hashlib
 import os
 from pathlib import Path
 
-__all__ = ["ARCHITECTURES", "SHIPPED", "RUNTIME_FILES", "PATCH_SIZE", "MODELS_DIR", "model_kind", "file_sha256",
+__all__ = ["ARCHITECTURES", "SHIPPED", "RUNTIME_FILES", "DETECTOR_NETWORK", "NETWORK_HELP", "PATCH_SIZE", "MODELS_DIR", "model_kind", "file_sha256",
            "expected_sha256", "check_model_file", "write_sha256"]
 
 ARCHITECTURES = ("default", "report", "default_v1", "default_c12", "default_c16", "default_pre")
@@ -15,6 +15,10 @@ SHIPPED = ("default", "report")  # the models shipped in models/ as .keras and .
 # every shipped runtime file (models/<name>.tflite) -> the .keras model it is exported from; default_int8 is
 # default post-training quantised to int8 (weights and activations), calibrated on data_gen renders
 RUNTIME_FILES = {"default": "default", "report": "report", "default_int8": "default"}
+# the network the detector runs when none is named (detect_corners, every command line): int8, whose
+# detections match the float network's (benchmarks/int8_detection.py) in about 2/3 of the time
+DETECTOR_NETWORK = "default_int8"
+NETWORK_HELP = ("the cnn detector's network: default_int8 (the default), default (the same network in float32, the same detections, slower), report, or a .tflite/.keras path")
 PATCH_SIZE = 32
 MODELS_DIR = Path(os.environ.get("AICALIB_MODELS", Path(__file__).resolve().parents[2] / "models"))
 

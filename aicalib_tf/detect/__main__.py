@@ -15,6 +15,8 @@ from __future__ import annotations
 import sys
 from collections import Counter
 
+from aicalib_tf.cnn.spec import DETECTOR_NETWORK, NETWORK_HELP
+
 
 def build_parser():
     """The command line's parser (docs/cli.md is generated from it)."""
@@ -25,7 +27,7 @@ def build_parser():
     ap.add_argument("--pattern", help="inner corners, COLSxROWS, e.g. 9x6 (or --board)")
     ap.add_argument("--board", help="a ChArUco board instead of --pattern: charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100")
     ap.add_argument("--out", required=True, help="folder for <image>.png overlays and <image>.json corners")
-    ap.add_argument("--model", default="default", help="default, default_int8 (int8, about 2x faster), report, or a .tflite/.keras path (default: %(default)s)")
+    ap.add_argument("--model", default=DETECTOR_NETWORK, help=NETWORK_HELP)
     ap.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core, but one per 8 images at most)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     return ap

@@ -97,6 +97,7 @@ from functools import partial as bind
 
 import numpy as np
 
+from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.detect.board_order import full_board, order_full_board
 from aicalib_tf.detect.grid import MIN_CORNERS, Grid, assemble_grids, full_subgrid
 from aicalib_tf.detect.junctions import dedupe, nearest_spacing, proposer, ring_symmetry
@@ -162,7 +163,7 @@ def _default_model():
     if _DEFAULT_MODEL is None:
         from aicalib_tf.cnn.model import load_model
 
-        _DEFAULT_MODEL = load_model("default")
+        _DEFAULT_MODEL = load_model(DETECTOR_NETWORK)
     return _DEFAULT_MODEL
 
 

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.calib.fit import CalibrationError, View
 from aicalib_tf.guided.save import PARTIAL_HEAD
 from aicalib_tf.guided.session import GuidedCalibration, GuidedConfig
@@ -52,7 +53,7 @@ class RigVideoConfig:
     square_unit: str = ""
     out: str = "rig"
     detector: str = "cnn"
-    network: str = "default"
+    network: str = DETECTOR_NETWORK
     model: str = "auto"
     target_px: float = 0.1
     max_views: int = 40

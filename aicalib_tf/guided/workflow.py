@@ -13,6 +13,7 @@ import sys
 import time
 from dataclasses import dataclass
 
+from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.calib.fit import Calibration, CalibrationError
 from aicalib_tf.guided.session import GuidedCalibration, GuidedConfig
 
@@ -30,7 +31,7 @@ class GuidedRunConfig:
     square_unit: str = ""
     out: str = "calib"
     detector: str = "cnn"
-    network: str = "default"
+    network: str = DETECTOR_NETWORK
     model: str = "auto"
     target_px: float = 0.1
     max_views: int = 40

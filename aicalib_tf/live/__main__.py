@@ -28,7 +28,7 @@ def build_parser():
     """The command line's parser (docs/cli.md is generated from it)."""
     from aicalib_tf.calib.workflow import DETECTORS
     from aicalib_tf.cli import parser
-    from aicalib_tf.live.server import LIVE_NETWORK
+    from aicalib_tf.cnn.spec import DETECTOR_NETWORK, NETWORK_HELP
 
     ap = parser("python -m aicalib_tf.live", __doc__)
     ap.add_argument("--pattern", required=True, help="inner corners, COLSxROWS, e.g. 9x6")
@@ -40,9 +40,7 @@ def build_parser():
     ap.add_argument("--port", type=int, default=DEFAULT_PORT, help="port (default: %(default)s; 0 picks a free one)")
     ap.add_argument("--model", default="auto", help="lens model: auto or a forced one (default: %(default)s)")
     ap.add_argument("--detector", default="cnn", choices=DETECTORS, help="corner detector (default: %(default)s)")
-    ap.add_argument("--network", default=LIVE_NETWORK,
-                    help="the cnn detector's network (default: %(default)s: the int8 network, about a third faster "
-                         "a frame, finds the same boards as the float one)")
+    ap.add_argument("--network", default=DETECTOR_NETWORK, help=NETWORK_HELP)
     ap.add_argument("--target", default="0.1px", help="stop when the predicted uncertainty reaches this (default: %(default)s)")
     ap.add_argument("--max-views", type=int, default=40, help="stop after this many kept views (default: %(default)s)")
     return ap

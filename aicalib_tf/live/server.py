@@ -31,15 +31,15 @@ import cv2
 import numpy as np
 
 from aicalib_tf.calib.quality import coverage_counts
+from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 
-__all__ = ["LiveConfig", "LiveState", "make_app", "update_json", "tracking_detector", "COVERAGE_CELLS", "LIVE_NETWORK"]
+__all__ = ["LiveConfig", "LiveState", "make_app", "update_json", "tracking_detector", "COVERAGE_CELLS"]
 
 COVERAGE_CELLS = (8, 6)  # the coverage map the page draws (cols, rows)
 PAGE = Path(__file__).with_name("page.html")
 MAX_FRAME_BYTES = 8 << 20  # a websocket frame larger than this is refused
 JPEG_QUALITY = 80  # frames sent to the page
 FPS_WINDOW = 30  # frames over which the handled frame rate is measured
-LIVE_NETWORK = "default_int8"  # the page's network: its detections match the float network's, in about 2/3 the time
 
 
 @dataclass(frozen=True)
@@ -52,7 +52,7 @@ class LiveConfig:
     out: str = "calib"
     source: str | None = None
     detector: str = "cnn"
-    network: str = LIVE_NETWORK
+    network: str = DETECTOR_NETWORK
     model: str = "auto"
     target_px: float = 0.1
     max_views: int = 40
