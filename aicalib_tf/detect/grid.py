@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aicalib_tf.detect.grid_kernels import seed_block
+from aicalib_tf.detect.grid_kernels import grow_lines, seed_block
 from aicalib_tf.detect.sampling import sample_bilinear
 
 MIN_CORNERS = 9  # fewest corners of a grid, and so of any board returned: a grid grows from a 3x3 seed
@@ -303,6 +303,9 @@ def _grow(lat: _Lattice) -> None:
     """
     asks = lat.propose is not None and lat.limit is not None
     for whole in ((True, False) if asks else (False,)):
+        if not lat.bend and not (asks and not whole):  # candidates alone: the same growth, compiled
+            _grow_compiled(lat, whole)
+            continue
         grown = True
         while grown:
             grown = False
@@ -314,6 +317,15 @@ def _grow(lat: _Lattice) -> None:
                 for sign in (1, -1):
                     while _grow_side(lat, axis, sign, whole):
                         grown = True
+
+
+def _grow_compiled(lat: _Lattice, whole: bool) -> None:
+    """One phase of :func:`_grow` in which ``propose`` is not asked and lines do not bend: the cells
+    :func:`~aicalib_tf.detect.grid_kernels.grow_lines` takes, taken in its order."""
+    seed = np.array([(i, j, k) for (i, j), k in lat.cells.items()], np.int64)
+    limit = -1 if lat.limit is None else int(lat.limit)
+    for i, j, k in grow_lines(lat.pts, lat.free, seed, limit, whole, TOLERANCE).tolist():
+        lat.take((i, j), k)
 
 
 def _parallelogram(lat: _Lattice, cell: tuple[int, int]) -> list[tuple[np.ndarray, float]]:

@@ -10,9 +10,9 @@ import math
 
 import numpy as np
 
-from aicalib_tf.kernels import kernel
+from aicalib_tf.kernels import helper, kernel
 
-__all__ = ['seed_block']
+__all__ = ["seed_block", "grow_lines"]
 
 
 @kernel("f8[:, ::1], i8, i8[::1], f8[::1], b1[::1], f8[:, :, ::1], i8, f8, f8, f8, f8")
@@ -134,3 +134,146 @@ def seed_block(pts, k, near, contrast, free, blocks, orders, tolerance, max_step
                     return bi, ua, va, found
     return -1, 0, 0, np.full(nm, -1, np.int64)
 
+
+
+@helper
+def _cell(g, oi, oj, i, j):
+    """The point index at lattice cell (i, j) of ``g`` (origin at row oi, column oj), or -1."""
+    r, c = i + oi, j + oj
+    if r < 0 or c < 0 or r >= g.shape[0] or c >= g.shape[1]:
+        return -1
+    return g[r, c]
+
+
+@helper
+def _next_line(g, oi, oj, pts, axis, sign, new, olo, ohi, tolerance):
+    """The predictions for line ``new`` beyond one side (:func:`grow_lines`): the other-axis position
+    of each line that predicts, the predicted x and y, and the tolerance, each (C,)."""
+    b1, b2, b3 = new - sign, new - 2 * sign, new - 3 * sign
+    m = ohi - olo + 1
+    cell_o = np.empty(m, np.int64)
+    px, py, tol = np.empty(m), np.empty(m), np.empty(m)
+    c = 0
+    for o in range(olo, ohi + 1):
+        if axis == 0:
+            q1, q2, q3 = _cell(g, oi, oj, b1, o), _cell(g, oi, oj, b2, o), _cell(g, oi, oj, b3, o)
+        else:
+            q1, q2, q3 = _cell(g, oi, oj, o, b1), _cell(g, oi, oj, o, b2), _cell(g, oi, oj, o, b3)
+        if q1 < 0 or q2 < 0:
+            continue
+        if q3 >= 0:  # quadratic where three points are known, as grid._work_out_side
+            px[c] = 3 * pts[q1, 0] - 3 * pts[q2, 0] + pts[q3, 0]
+            py[c] = 3 * pts[q1, 1] - 3 * pts[q2, 1] + pts[q3, 1]
+        else:
+            px[c] = 2 * pts[q1, 0] - pts[q2, 0]
+            py[c] = 2 * pts[q1, 1] - pts[q2, 1]
+        dx, dy = pts[q1, 0] - pts[q2, 0], pts[q1, 1] - pts[q2, 1]
+        tol[c] = tolerance * math.sqrt(dx * dx + dy * dy)
+        cell_o[c] = o
+        c += 1
+    return cell_o[:c], px[:c], py[:c], tol[:c]
+
+
+@helper
+def _nearest_free(pts, fr, px, py, tol):
+    """For each prediction (px, py) the nearest free point (the lowest index of equals) when within
+    its tol, else −1; and how many were found."""
+    found = np.full(px.shape[0], -1, np.int64)
+    hits = 0
+    for e in range(px.shape[0]):
+        best, bd = -1, np.inf
+        for k in range(pts.shape[0]):
+            if fr[k]:
+                dx, dy = px[e] - pts[k, 0], py[e] - pts[k, 1]
+                d = dx * dx + dy * dy
+                if d < bd:
+                    best, bd = k, d
+        if best >= 0 and bd <= tol[e] * tol[e]:
+            found[e] = best
+            hits += 1
+    return found, hits
+
+
+@helper
+def _room(g, oi, oj, at):
+    """``g`` (square) with room for index ``at`` along either axis: twice the size, the content in
+    the middle, where ``at`` lies outside; and the origin moved with it."""
+    if 0 <= at < g.shape[0]:
+        return g, oi, oj
+    q = g.shape[0] // 2
+    g2 = np.full((2 * g.shape[0], 2 * g.shape[0]), -1, np.int64)
+    g2[q: q + g.shape[0], q: q + g.shape[1]] = g
+    return g2, oi + q, oj + q
+
+
+@helper
+def _distinct(found):
+    """True when no point index (≥ 0) appears twice in ``found``."""
+    for e in range(found.shape[0]):
+        for f in range(e):
+            if found[e] >= 0 and found[e] == found[f]:
+                return False
+    return True
+
+
+@kernel("f8[:, ::1], b1[::1], i8[:, ::1], i8, b1, f8")
+def grow_lines(pts, free, seed, limit, whole, tolerance):
+    """Grow a seeded lattice from candidate points alone, one grid line at a time, until no side grows.
+
+    The maths and order of :func:`aicalib_tf.detect.grid._grow` in a phase where ``propose`` is not
+    asked and lines do not bend strongly: the sides in turn (axis 0 then 1, + then −), each grown
+    while it can, until a round adds nothing. A line is added when all (``whole``) or at least half
+    (and 2) of its predictions (:func:`_next_line`) find distinct free points (:func:`_nearest_free`),
+    and not beyond ``limit`` positions along an axis (−1: no limit).
+
+    pts (N, 2) float64 (x, y) px; free (N,) bool (not changed); seed (M, 3) int64 rows (i, j,
+    point index), the cells taken so far. Returns (T, 3) int64: the cells taken, in order.
+    """
+    fr = free.copy()
+    imin, imax, jmin, jmax = seed[:, 0].min(), seed[:, 0].max(), seed[:, 1].min(), seed[:, 1].max()
+    side = max(imax - imin, jmax - jmin) + 9
+    g = np.full((2 * side, 2 * side), -1, np.int64)
+    oi, oj = side - imin, side - jmin
+    for s in range(seed.shape[0]):
+        g[seed[s, 0] + oi, seed[s, 1] + oj] = seed[s, 2]
+    out = np.empty((pts.shape[0], 3), np.int64)
+    t = 0
+    grown = True
+    while grown:
+        grown = False
+        for axis in range(2):
+            for sign in (1, -1):
+                while True:
+                    extent = imax - imin + 1 if axis == 0 else jmax - jmin + 1
+                    if limit >= 0 and extent >= limit:
+                        break
+                    if axis == 0:
+                        new = imax + 1 if sign > 0 else imin - 1
+                        olo, ohi = jmin, jmax
+                    else:
+                        new = jmax + 1 if sign > 0 else jmin - 1
+                        olo, ohi = imin, imax
+                    g, oi, oj = _room(g, oi, oj, new + (oi if axis == 0 else oj))
+                    cell_o, px, py, tol = _next_line(g, oi, oj, pts, axis, sign, new, olo, ohi, tolerance)
+                    c = cell_o.shape[0]
+                    if c == 0:
+                        break
+                    found, hits = _nearest_free(pts, fr, px, py, tol)
+                    if whole and hits < c:
+                        break
+                    if hits < max(2.0, 0.5 * c) or not _distinct(found):
+                        break
+                    for e in range(c):
+                        if found[e] < 0:
+                            continue
+                        i, j = (new, cell_o[e]) if axis == 0 else (cell_o[e], new)
+                        g[i + oi, j + oj] = found[e]
+                        fr[found[e]] = False
+                        out[t, 0], out[t, 1], out[t, 2] = i, j, found[e]
+                        t += 1
+                    if axis == 0:
+                        imin, imax = min(imin, new), max(imax, new)
+                    else:
+                        jmin, jmax = min(jmin, new), max(jmax, new)
+                    grown = True
+    return out[:t]

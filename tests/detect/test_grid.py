@@ -2,6 +2,7 @@ import cv2
 import numpy as np
 import pytest
 
+from aicalib_tf.detect import grid
 from aicalib_tf.detect.grid import assemble_grids, edge_contrast
 from data_gen import make_sample
 from data_gen.presets import get_preset
@@ -184,3 +185,56 @@ def test_line_residuals_follow_a_bent_lattice_and_flag_a_wrong_corner():
     moved[22] = (corners[22] + corners[23]) / 2  # half a step along its line
     res = line_residuals(ids, moved)
     assert int(np.argmax(res)) == 22 and res.max() > 0.5
+
+
+def _python_phase(lat, whole):
+    """grid._grow's loop for one phase, in Python: the reference for the compiled growth."""
+    grown = True
+    while grown:
+        grown = False
+        for axis in (0, 1):
+            for sign in (1, -1):
+                while grid._grow_side(lat, axis, sign, whole):
+                    grown = True
+
+
+def _lattice_with_clutter(rng, a, b):
+    """A rotated, sheared a×b lattice with some corners jittered or missing, and clutter points, shuffled."""
+    ii, jj = np.meshgrid(np.arange(a), np.arange(b), indexing="ij")
+    th, step = rng.uniform(0, np.pi), rng.uniform(5, 30)
+    u = step * np.array([np.cos(th), np.sin(th)])
+    v = step * np.array([-np.sin(th), np.cos(th)]) * rng.uniform(0.6, 1.4)
+    pts = ii.reshape(-1, 1) * u + jj.reshape(-1, 1) * v
+    pts += rng.normal(0, rng.uniform(0, 0.25) * step, pts.shape) * (rng.random(len(pts)) < 0.2)[:, None]
+    pts = pts[rng.random(len(pts)) > rng.uniform(0, 0.2)]
+    clutter = rng.uniform(pts.min(0) - 50, pts.max(0) + 50, (int(rng.integers(0, 60)), 2))
+    pts = np.concatenate([pts, clutter])
+    return pts[rng.permutation(len(pts))]
+
+
+def test_compiled_growth_takes_the_cells_the_python_growth_takes(monkeypatch):
+    # every phase of every assembly (with and without a limit, whole lines or half, 3x3 and strip
+    # seeds, lattices up to 40x40 whose cell grid must grow in the kernel) is run both ways
+    compiled = grid._grow_compiled
+    phases = []
+
+    def both(lat, whole):
+        shadow = grid._Lattice(lat.pts, lat.free.copy(), lat.propose, lat.limit, lat.bend)
+        for cell, k in lat.cells.items():
+            shadow.take(cell, k)
+        _python_phase(shadow, whole)
+        compiled(lat, whole)
+        phases.append(list(lat.cells.items()) == list(shadow.cells.items()) and np.array_equal(lat.free, shadow.free))
+
+    monkeypatch.setattr(grid, "_grow_compiled", both)
+    rng = np.random.default_rng(3)
+    grown = 0
+    for t in range(60):
+        a, b = (int(x) for x in rng.integers(3, 41, 2))
+        pts = _lattice_with_clutter(rng, a, b)
+        limit = (None, max(a, b) + 1, int(rng.integers(4, 12)))[t % 3]
+        grids = assemble_grids(pts, rng.random(len(pts)), limit=limit)
+        assemble_grids(pts, None, limit=limit, strips=True)
+        grown += max((len(g) for g in grids), default=0) > 12 * 12
+    assert len(phases) > 100 and all(phases)
+    assert grown > 5  # some lattices grew well past the kernel's first cell grid
