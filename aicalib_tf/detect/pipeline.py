@@ -277,17 +277,27 @@ def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed:
     min_points : fewer network points than this give no candidates (nothing is refined).
     Returns points (N, 2) float32 (x, y) px and weights (N,) float32, strongest first.
     """
-    from aicalib_tf.cnn.inference import corner_points
+    return _candidates(model, gray, threshold, smoothed, min_points)[:2]
 
-    pts, scores = corner_points(model, gray, threshold)
+
+WEAK = 0.5  # of the threshold: network points this weak confirm a corner where the bent grid predicts one
+
+
+def _candidates(model, gray: np.ndarray, threshold: float, smoothed: Smoothed | None, min_points: int):
+    """:func:`refined_points`, and the network's weak points (weight from ``WEAK``·threshold up
+    to threshold; (K, 2) float32 px, not refined) from the same run."""
+    from aicalib_tf.cnn.inference import weak_corner_points
+
+    pts, scores, weak = weak_corner_points(model, gray, threshold, WEAK * threshold)
     pts, scores = pts[:MAX_CANDIDATES], scores[:MAX_CANDIDATES]  # strongest first; bounds the N² steps
+    weak = weak[:MAX_CANDIDATES]
     if len(pts) < max(min_points, 1):
-        return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
+        return np.zeros((0, 2), np.float32), np.zeros(0, np.float32), weak
     smoothed = Smoothed(np.asarray(gray, np.float32)) if smoothed is None else smoothed
     refined, ok = refine_candidates(smoothed, pts, nearest_spacing(pts))
     refined, scores = refined[ok], scores[ok]
     keep = dedupe(refined, scores)
-    return refined[keep].astype(np.float32), scores[keep].astype(np.float32)
+    return refined[keep].astype(np.float32), scores[keep].astype(np.float32), weak
 
 
 def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, threshold: float,
@@ -307,14 +317,14 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     if h < 8 or w < 8:
         return empty
     smoothed = Smoothed(gray)
-    refined, scores = refined_points(model, gray, threshold, smoothed=smoothed, min_points=MIN_CORNERS)
+    refined, scores, weak = _candidates(model, gray, threshold, smoothed, MIN_CORNERS)
     if len(refined) == 0:
         return empty
     smooth = smoothed.sigma(1.0)
     propose = None
     if len(refined) >= MIN_CORNERS:
         amp, _ = ring_symmetry(smooth, refined.astype(np.float64), 0.3 * nearest_spacing(refined))
-        propose = proposer(smoothed, smooth, float(np.median(amp[: max(MIN_CORNERS, len(amp) // 2)])))
+        propose = proposer(smoothed, smooth, float(np.median(amp[: max(MIN_CORNERS, len(amp) // 2)])), weak=weak)
     if pattern_size is None:
         grids = _own_grids(assemble_grids(refined, scores, gray=smooth, propose=propose))
         for grid in grids:
@@ -333,7 +343,8 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     limit = max(pattern_size) + 1
     grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit, stop=is_board)
     if board is None and not full_only:  # bent strongly (close to a fisheye): a full board or nothing
-        assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit, stop=is_board, bend=True)
+        assemble_grids(refined, scores, gray=smooth, propose=propose and propose.bent, limit=limit, stop=is_board,
+                       bend=True)
     if board is not None or full_only:  # full_only: the quick pass, a full board or nothing
         return Detection(*board, True, (w, h)) if board else replace(empty, reason=NO_MATCH if grids else NO_GRID)
     if not grids:  # no 3×3 block anywhere: strips 2 corners wide (between objects, say)
