@@ -141,23 +141,34 @@ def weak_corner_points(model, gray: np.ndarray, threshold: float = 0.5, weak: fl
     """:func:`corner_points` at ``threshold`` and, from the same network run, the weaker points.
 
     weak : the lower weight; points weighing at least this but under ``threshold`` and not within
-    ``min_distance`` (2.5 px) of a point at ``threshold`` are the weak ones.
-    Returns points (N, 2) float32, weights (N,) float32 (as :func:`corner_points`) and the weak
-    points (K, 2) float32 (x, y) px, strongest first.
+    2.5 px of a point at ``threshold`` are the weak ones.
+    Returns points (N, 2) float32, weights (N,) float32 (as :func:`corner_points`) and
+    ``weak_points() -> (K, 2) float32`` (x, y) px, strongest first, worked out on the first call.
     """
     if model_kind(model) == "map":
         cmap = corner_map(model, gray, precision=precision)
         pts, scores = decode_map(cmap, threshold)
-        low, low_scores = decode_map(cmap, min(weak, threshold))
+
+        def lower():
+            return decode_map(cmap, min(weak, threshold))
     else:
         cand = saddle_points(gray, max_points=max_candidates)
         w = patch_weights(model, gray, cand)
         order = np.argsort(-w, kind="stable")
         cand, w = cand[order].astype(np.float32), w[order]
         pts, scores = cand[w >= threshold], w[w >= threshold]
-        low, low_scores = cand[w >= min(weak, threshold)], w[w >= min(weak, threshold)]
-    low = low[low_scores < threshold]
-    if len(low) and len(pts):
-        d2 = ((low[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
-        low = low[d2.min(axis=1) >= 2.5**2]
-    return pts, scores, low.astype(np.float32).reshape(-1, 2)
+
+        def lower():
+            return cand[w >= min(weak, threshold)], w[w >= min(weak, threshold)]
+    memo = []
+
+    def weak_points() -> np.ndarray:
+        if not memo:
+            low, low_scores = lower()
+            low = low[low_scores < threshold]
+            if len(low) and len(pts):
+                d2 = ((low[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
+                low = low[d2.min(axis=1) >= 2.5**2]
+            memo.append(low.astype(np.float32).reshape(-1, 2))
+        return memo[0]
+    return pts, scores, weak_points

@@ -146,11 +146,12 @@ class _Lattice:
         found, miss = self._nearest_free(pred, tol)
         if self.propose is not None and allow_propose and len(miss):
             got = self.propose(pred[miss], tol[miss] / TOLERANCE)
-            taken = np.array(list(self.at.values())) if self.at else np.zeros((0, 2))
+            taken = None
             for m, q in zip(miss, got):
                 if not np.all(np.isfinite(q)) or np.sum((q - pred[m]) ** 2) > tol[m] ** 2:
                     continue
                 # a squeezed corner's fit can slide onto its neighbour: one corner is never two cells
+                taken = np.array(list(self.at.values())).reshape(-1, 2) if taken is None else taken
                 if len(taken) and np.min(((taken - q) ** 2).sum(axis=1)) < SAME_CORNER**2:
                     continue
                 self.extra.append(np.asarray(q, np.float64))
@@ -623,13 +624,15 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
         if not (_seed(lat, int(k), near[k], edges, strips) or (bend and _bent_seed(lat, int(k), near[k], edges))):
             continue
         _grow(lat)
+        grown = lat.version
         _fill_holes(lat)
-        while bend:  # holes filled give more lines to extrapolate: grow again until nothing is added
-            before = lat.version
+        while bend and lat.version != grown:  # holes filled give lines to extend: grow again while it adds
+            filled = lat.version
             _grow(lat)
-            _fill_holes(lat)
-            if lat.version == before:
+            if lat.version == filled:
                 break
+            grown = lat.version
+            _fill_holes(lat)
         if len(lat.cells) < min_size:
             for kk in lat.cells.values():  # give the points back for other seeds
                 if kk < n:

@@ -91,7 +91,7 @@ def _shadowed_x(smoothed: Smoothed, pts: np.ndarray, radius: np.ndarray) -> np.n
 SAME_CORNER = 1.5  # px: a weak network point this near a saddle marks that corner (dedupe's distance)
 
 
-def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float, weak: np.ndarray | None = None):
+def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float, weak=None):
     """Look for a corner at each grid prediction: saddle refinement plus the ring test.
 
     smoothed : the image for :func:`aicalib_tf.detect.refine.refine_windowed`. ring_image : (H, W)
@@ -111,7 +111,8 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float, weak: n
 
     Its attribute ``bent`` (for a grid bent by a fisheye, :func:`aicalib_tf.detect.grid.assemble_grids`
     with ``bend``) also takes a saddle whose ring test failed where one of the network's ``weak``
-    points ((K, 2) px, weights under the candidate threshold) lies within ``SAME_CORNER`` of it and
+    points (``weak() -> (K, 2)`` px, weights under the candidate threshold; asked only then) lies
+    within ``SAME_CORNER`` of it and
     the ring keeps ``GATE``·``ref_amp``. Towards a fisheye's rim the light falls to black and the
     blur grows: the ring's amplitude falls with the light, its asymmetry grows with the light's
     gradient across it and with the squares' squeeze, and the network's weight falls with the
@@ -119,7 +120,14 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float, weak: n
     fit, and the network's weak point together do.
     """
     h, w = ring_image.shape
-    weak = np.zeros((0, 2)) if weak is None else np.asarray(weak, np.float64).reshape(-1, 2)
+    weak_pts = []  # weak(), once asked
+
+    def weak_near(q: np.ndarray) -> np.ndarray:  # (M,) bool: a weak network point within SAME_CORNER of q
+        if not weak_pts:
+            weak_pts.append(np.zeros((0, 2)) if weak is None else np.asarray(weak(), np.float64).reshape(-1, 2))
+        if len(weak_pts[0]) == 0:
+            return np.zeros(len(q), bool)
+        return ((q[:, None, :] - weak_pts[0][None]) ** 2).sum(-1).min(axis=1) <= SAME_CORNER**2
 
     def look(pred, step, margin, window, shift, ring, memo, bent=False):
         pred, step = np.asarray(pred, np.float64), np.asarray(step, np.float64)
@@ -148,9 +156,9 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float, weak: n
                     ok[odd] = _shadowed_x(smoothed, q[odd], window_radius(window(s[k[odd]])))
                 got[k[ok]] = q[ok]
                 good = ok.copy()
-                if len(weak):  # a saddle the network marks, if weakly
-                    d2 = ((q[:, None, :].astype(np.float64) - weak[None]) ** 2).sum(-1).min(axis=1)
-                    good |= fitted & (d2 <= SAME_CORNER**2)
+                maybe = np.flatnonzero(fitted & ~ok)
+                if len(maybe) and weak is not None:  # a saddle the network marks, if weakly
+                    good[maybe] = weak_near(q[maybe].astype(np.float64))
                 loose[k[good]] = q[good]
             for m, g, g2 in zip(todo.tolist(), got, loose):
                 memo[keys[m]] = (g, g2)

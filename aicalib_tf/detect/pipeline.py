@@ -284,13 +284,12 @@ WEAK = 0.5  # of the threshold: network points this weak confirm a corner where 
 
 
 def _candidates(model, gray: np.ndarray, threshold: float, smoothed: Smoothed | None, min_points: int):
-    """:func:`refined_points`, and the network's weak points (weight from ``WEAK``·threshold up
-    to threshold; (K, 2) float32 px, not refined) from the same run."""
+    """:func:`refined_points`, and the network's weak points from the same run: weight from
+    ``WEAK``·threshold up to threshold, not refined, ``weak() -> (K, 2) float32`` px (decoded when asked)."""
     from aicalib_tf.cnn.inference import weak_corner_points
 
     pts, scores, weak = weak_corner_points(model, gray, threshold, WEAK * threshold)
     pts, scores = pts[:MAX_CANDIDATES], scores[:MAX_CANDIDATES]  # strongest first; bounds the N² steps
-    weak = weak[:MAX_CANDIDATES]
     if len(pts) < max(min_points, 1):
         return np.zeros((0, 2), np.float32), np.zeros(0, np.float32), weak
     smoothed = Smoothed(np.asarray(gray, np.float32)) if smoothed is None else smoothed

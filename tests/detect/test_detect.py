@@ -441,14 +441,14 @@ def test_weak_network_points_confirm_a_darkened_rim_corner_only_for_the_bent_gri
     smoothed = Smoothed(gray)
     pts, _, weak = _candidates(model, gray, 0.5, smoothed, MIN_CORNERS)
     corner = s.corners[0]
-    assert np.hypot(*(pts - corner).T).min() > 1.5 and np.hypot(*(weak - corner).T).min() < 1.5
+    assert np.hypot(*(pts - corner).T).min() > 1.5 and np.hypot(*(weak() - corner).T).min() < 1.5
     smooth = smoothed.sigma(1.0)
     amp, _ = ring_symmetry(smooth, pts.astype(np.float64), 0.3 * nearest_spacing(pts))
     propose = proposer(smoothed, smooth, float(np.median(amp[: max(MIN_CORNERS, len(amp) // 2)])), weak=weak)
     pred, step = np.array([[512.3, 289.3]]), np.array([22.2])  # where the bent grid predicts it
     assert np.isnan(propose(pred, step)).all()
     assert np.hypot(*(propose.bent(pred, step)[0] - corner)) < 0.5
-    far = proposer(smoothed, smooth, float(np.median(amp[: max(MIN_CORNERS, len(amp) // 2)])), weak=weak + 5.0)
+    far = proposer(smoothed, smooth, float(np.median(amp[: max(MIN_CORNERS, len(amp) // 2)])), weak=lambda: weak() + 5.0)
     assert np.isnan(far.bent(pred, step)).all()  # no weak point there: no corner
 
 
