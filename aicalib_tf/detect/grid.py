@@ -578,6 +578,21 @@ def _bent_seed(lat: _Lattice, k: int, neighbours: np.ndarray, contrast: np.ndarr
     return False
 
 
+def _build(lat: _Lattice) -> None:
+    """Grow a seeded lattice and fill its holes; with ``bend``, grow again while filled holes add
+    lines to extend (a hole interpolated beside the lens' centre lets the line through it go on)."""
+    _grow(lat)
+    grown = lat.version
+    _fill_holes(lat)
+    while lat.bend and lat.version != grown:
+        filled = lat.version
+        _grow(lat)
+        if lat.version == filled:
+            break
+        grown = lat.version
+        _fill_holes(lat)
+
+
 def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray: np.ndarray | None = None,
                    min_size: int = MIN_CORNERS, neighbours: int = 12, propose=None, limit: int | None = None,
                    strips: bool = False, stop=None, bend: bool = False) -> list[Grid]:
@@ -599,7 +614,8 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
         the grids that are the full board the first assembled was returned anyway. On a photo
         with clutter (a keyboard, a screen), seeds there cost more than the board itself.
     bend : lines bending strongly, squares shrinking towards a fisheye's rim: :func:`_bent_seed`
-        where :func:`_seed` fails, double steps undone (:func:`_single_steps`).
+        where :func:`_seed` fails, double steps undone (:func:`_single_steps`), lines and holes
+        predicted by :func:`_turned`, :func:`_interpolate` and :func:`_cell_shape`, regrown (:func:`_build`).
     Returns grids, largest first; they share no point.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
@@ -623,16 +639,7 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
         edges = None if contrast is None else contrast[k]
         if not (_seed(lat, int(k), near[k], edges, strips) or (bend and _bent_seed(lat, int(k), near[k], edges))):
             continue
-        _grow(lat)
-        grown = lat.version
-        _fill_holes(lat)
-        while bend and lat.version != grown:  # holes filled give lines to extend: grow again while it adds
-            filled = lat.version
-            _grow(lat)
-            if lat.version == filled:
-                break
-            grown = lat.version
-            _fill_holes(lat)
+        _build(lat)
         if len(lat.cells) < min_size:
             for kk in lat.cells.values():  # give the points back for other seeds
                 if kk < n:

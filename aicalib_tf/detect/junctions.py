@@ -119,6 +119,8 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float, weak=No
     contrast, so none of the three alone tells a corner there; the grid's prediction, the saddle
     fit, and the network's weak point together do.
     """
+    # size: three callbacks sharing the image, the reference amplitude, the weak points and their
+    # memories; apart, each would take all of them
     h, w = ring_image.shape
     weak_pts = []  # weak(), once asked
 

@@ -431,7 +431,6 @@ def test_weak_network_points_confirm_a_darkened_rim_corner_only_for_the_bent_gri
     from aicalib_tf.bench.conditions import PATTERN, named_conditions
     from aicalib_tf.detect.grid import MIN_CORNERS
     from aicalib_tf.detect.junctions import nearest_spacing, proposer, ring_symmetry
-    from aicalib_tf.detect.pipeline import _candidates
     from aicalib_tf.detect.refine import Smoothed
     from aicalib_tf.io import load_image
 
@@ -439,7 +438,7 @@ def test_weak_network_points_confirm_a_darkened_rim_corner_only_for_the_bent_gri
     s = make_sample(cond.preset, cond.seed, 39, size=cond.size, pattern=PATTERN)
     gray = load_image(s.image)
     smoothed = Smoothed(gray)
-    pts, _, weak = _candidates(model, gray, 0.5, smoothed, MIN_CORNERS)
+    pts, _, weak = refined_points(model, gray, smoothed=smoothed, min_points=MIN_CORNERS, weak=0.5)
     corner = s.corners[0]
     assert np.hypot(*(pts - corner).T).min() > 1.5 and np.hypot(*(weak() - corner).T).min() < 1.5
     smooth = smoothed.sigma(1.0)
