@@ -112,8 +112,7 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float, weak=No
     Its attribute ``bent`` (for a grid bent by a fisheye, :func:`aicalib_tf.detect.grid.assemble_grids`
     with ``bend``) also takes a saddle whose ring test failed where one of the network's ``weak``
     points (``weak() -> (K, 2)`` px, weights under the candidate threshold; asked only then) lies
-    within ``SAME_CORNER`` of it and
-    the ring keeps ``GATE``·``ref_amp``. Towards a fisheye's rim the light falls to black and the
+    within ``SAME_CORNER`` of it and the ring keeps ``GATE``·``ref_amp``. Towards a fisheye's rim the light falls to black and the
     blur grows: the ring's amplitude falls with the light, its asymmetry grows with the light's
     gradient across it and with the squares' squeeze, and the network's weight falls with the
     contrast, so none of the three alone tells a corner there; the grid's prediction, the saddle
@@ -137,7 +136,7 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float, weak=No
         todo = np.array([m for m, key in enumerate(keys) if key not in memo], int)
         if len(todo):  # each point's answer depends on it alone: asked again, it is remembered
             got = np.full((len(todo), 2), np.nan)
-            loose = np.full((len(todo), 2), np.nan)  # the answers of ``bent``
+            saddle = np.full((len(todo), 2), np.nan)  # a saddle that failed the ring test alone (``bent``)
             p, s = pred[todo], step[todo]
             k = np.flatnonzero(np.all((p >= margin) & (p <= np.array([w - 1 - margin, h - 1 - margin])), axis=1))
             if len(k):
@@ -157,14 +156,17 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float, weak=No
                 if len(odd):
                     ok[odd] = _shadowed_x(smoothed, q[odd], window_radius(window(s[k[odd]])))
                 got[k[ok]] = q[ok]
-                good = ok.copy()
-                maybe = np.flatnonzero(fitted & ~ok)
-                if len(maybe) and weak is not None:  # a saddle the network marks, if weakly
-                    good[maybe] = weak_near(q[maybe].astype(np.float64))
-                loose[k[good]] = q[good]
-            for m, g, g2 in zip(todo.tolist(), got, loose):
+                saddle[k[fitted & ~ok]] = q[fitted & ~ok]
+            for m, g, g2 in zip(todo.tolist(), got, saddle):
                 memo[keys[m]] = (g, g2)
-        return np.array([memo[key][1 if bent else 0] for key in keys]).reshape(-1, 2)
+        out = np.array([memo[key][0] for key in keys]).reshape(-1, 2)
+        if bent and weak is not None:  # a saddle the network marks, if weakly
+            cand = np.array([memo[key][1] for key in keys]).reshape(-1, 2)
+            ask = np.flatnonzero(np.isfinite(cand[:, 0]))
+            if len(ask):
+                ask = ask[weak_near(cand[ask])]
+                out[ask] = cand[ask]
+        return out
 
     memo_wide, memo_tight = {}, {}
 
