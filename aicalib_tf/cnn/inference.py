@@ -29,7 +29,7 @@ from aicalib_tf.cnn.corner_map import decode_map, network_input, standardize
 from aicalib_tf.cnn.spec import PATCH_SIZE, model_kind
 from aicalib_tf.detect.candidates import saddle_points
 
-__all__ = ["corner_map", "corner_points", "patch_weights", "extract_patches", "native_bfloat16", "resolve_precision"]
+__all__ = ["corner_map", "corner_points", "weak_corner_points", "patch_weights", "extract_patches", "native_bfloat16", "resolve_precision"]
 
 PRECISION_ENV = "AICALIB_PRECISION"
 
@@ -134,3 +134,41 @@ def corner_points(model, gray: np.ndarray, threshold: float = 0.5, *, max_candid
     keep = w >= threshold
     order = np.argsort(-w[keep], kind="stable")
     return cand[keep][order].astype(np.float32), w[keep][order]
+
+
+def weak_corner_points(model, gray: np.ndarray, threshold: float = 0.5, weak: float = 0.25, *,
+                       max_candidates: int = 800, precision: str | None = None):
+    """:func:`corner_points` at ``threshold`` and, from the same network run, the weaker points.
+
+    weak : the lower weight; points weighing at least this but under ``threshold`` and not within
+    2.5 px of a point at ``threshold`` are the weak ones.
+    Returns points (N, 2) float32, weights (N,) float32 (as :func:`corner_points`) and
+    ``weak_points() -> (K, 2) float32`` (x, y) px, strongest first, worked out on the first call.
+    """
+    if model_kind(model) == "map":
+        cmap = corner_map(model, gray, precision=precision)
+        pts, scores = decode_map(cmap, threshold)
+
+        def lower():
+            return decode_map(cmap, min(weak, threshold))
+    else:
+        cand = saddle_points(gray, max_points=max_candidates)
+        w = patch_weights(model, gray, cand)
+        order = np.argsort(-w, kind="stable")
+        cand, w = cand[order].astype(np.float32), w[order]
+        pts, scores = cand[w >= threshold], w[w >= threshold]
+
+        def lower():
+            return cand[w >= min(weak, threshold)], w[w >= min(weak, threshold)]
+    memo = []
+
+    def weak_points() -> np.ndarray:
+        if not memo:
+            low, low_scores = lower()
+            low = low[low_scores < threshold]
+            if len(low) and len(pts):
+                d2 = ((low[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
+                low = low[d2.min(axis=1) >= 2.5**2]
+            memo.append(low.astype(np.float32).reshape(-1, 2))
+        return memo[0]
+    return pts, scores, weak_points

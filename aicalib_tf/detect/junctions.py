@@ -88,7 +88,10 @@ def _shadowed_x(smoothed: Smoothed, pts: np.ndarray, radius: np.ndarray) -> np.n
     return out
 
 
-def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float):
+SAME_CORNER = 1.5  # px: a weak network point this near a saddle marks that corner (dedupe's distance)
+
+
+def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float, weak=None):
     """Look for a corner at each grid prediction: saddle refinement plus the ring test.
 
     smoothed : the image for :func:`aicalib_tf.detect.refine.refine_windowed`. ring_image : (H, W)
@@ -105,15 +108,35 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float):
     the ring test (``0.3``·``ref_amp``) then fails either way (on evaluate's occluded, partial,
     shading, clutter and tilt60 images the gate changed no answer). A point asked again (same prediction and step) is answered from
     memory: each point's answer depends on that point alone (:func:`aicalib_tf.detect.refine.refine_saddle`).
-    """
-    h, w = ring_image.shape
 
-    def look(pred, step, margin, window, shift, ring, memo):
+    Its attribute ``bent`` (for a grid bent by a fisheye, :func:`aicalib_tf.detect.grid.assemble_grids`
+    with ``bend``) also takes a saddle whose ring test failed where one of the network's ``weak``
+    points (``weak() -> (K, 2)`` px, weights under the candidate threshold; asked only then) lies
+    within ``SAME_CORNER`` of it and the ring keeps ``GATE``·``ref_amp``. Towards a fisheye's rim the light falls to black and the
+    blur grows: the ring's amplitude falls with the light, its asymmetry grows with the light's
+    gradient across it and with the squares' squeeze, and the network's weight falls with the
+    contrast, so none of the three alone tells a corner there; the grid's prediction, the saddle
+    fit, and the network's weak point together do.
+    """
+    # size: three callbacks sharing the image, the reference amplitude, the weak points and their
+    # memories; apart, each would take all of them
+    h, w = ring_image.shape
+    weak_pts = []  # weak(), once asked
+
+    def weak_near(q: np.ndarray) -> np.ndarray:  # (M,) bool: a weak network point within SAME_CORNER of q
+        if not weak_pts:
+            weak_pts.append(np.zeros((0, 2)) if weak is None else np.asarray(weak(), np.float64).reshape(-1, 2))
+        if len(weak_pts[0]) == 0:
+            return np.zeros(len(q), bool)
+        return ((q[:, None, :] - weak_pts[0][None]) ** 2).sum(-1).min(axis=1) <= SAME_CORNER**2
+
+    def look(pred, step, margin, window, shift, ring, memo, bent=False):
         pred, step = np.asarray(pred, np.float64), np.asarray(step, np.float64)
         keys = [p.tobytes() + s.tobytes() for p, s in zip(pred, step)]
         todo = np.array([m for m, key in enumerate(keys) if key not in memo], int)
         if len(todo):  # each point's answer depends on it alone: asked again, it is remembered
             got = np.full((len(todo), 2), np.nan)
+            saddle = np.full((len(todo), 2), np.nan)  # a saddle that failed the ring test alone (``bent``)
             p, s = pred[todo], step[todo]
             k = np.flatnonzero(np.all((p >= margin) & (p <= np.array([w - 1 - margin, h - 1 - margin])), axis=1))
             if len(k):
@@ -127,14 +150,23 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float):
                 q, ok = refine_windowed(smoothed, p[k], window(s[k]), max_shift=shift * s[k], restarts=False,
                                         shadow_gate=ringed)
                 amp, asym = ring_symmetry(ring_image, q.astype(np.float64), radius)
+                fitted = ok & (amp >= GATE * ref_amp)
                 ok &= amp >= 0.3 * ref_amp
                 odd = np.flatnonzero(ok & (asym > 0.5 * amp))  # a shadow edge across the ring, or no X-junction
                 if len(odd):
                     ok[odd] = _shadowed_x(smoothed, q[odd], window_radius(window(s[k[odd]])))
                 got[k[ok]] = q[ok]
-            for m, g in zip(todo.tolist(), got):
-                memo[keys[m]] = g
-        return np.array([memo[key] for key in keys]).reshape(-1, 2)
+                saddle[k[fitted & ~ok]] = q[fitted & ~ok]
+            for m, g, g2 in zip(todo.tolist(), got, saddle):
+                memo[keys[m]] = (g, g2)
+        out = np.array([memo[key][0] for key in keys]).reshape(-1, 2)
+        if bent and weak is not None:  # a saddle the network marks, if weakly
+            cand = np.array([memo[key][1] for key in keys]).reshape(-1, 2)
+            ask = np.flatnonzero(np.isfinite(cand[:, 0]))
+            if len(ask):
+                ask = ask[weak_near(cand[ask])]
+                out[ask] = cand[ask]
+        return out
 
     memo_wide, memo_tight = {}, {}
 
@@ -144,5 +176,9 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float):
     def tight(pred: np.ndarray, step: np.ndarray) -> np.ndarray:
         return look(pred, step, 3, lambda s: np.full(len(s), 4.0), 0.1, lambda s: np.maximum(2.0, 0.15 * s), memo_tight)
 
+    def bent(pred: np.ndarray, step: np.ndarray) -> np.ndarray:
+        return look(pred, step, 1, lambda s: s, 0.3, lambda s: 0.3 * s, memo_wide, bent=True)
+
     propose.tight = tight
+    propose.bent = bent
     return propose

@@ -78,7 +78,8 @@ enlarged 3× (at most 240,000 px enlarged) and searched again (:mod:`aicalib_tf.
 board found there is returned, so is a partial one with more than half the pattern's corners;
 otherwise partial boards are looked for at full size too, and the one with more corners is
 returned. Boards close to a fisheye: with no full board assembled, the candidates are assembled again
-with ``bend`` (:func:`aicalib_tf.detect.grid.assemble_grids`); only a full board from it counts.
+with ``bend`` (:func:`aicalib_tf.detect.grid.assemble_grids`); only a full board from it counts. There the
+network's weak points (``WEAK``) confirm saddles the ring test fails at the dark rim (``proposer``'s ``bent``).
 
 Without ``pattern_size``, the largest grid with every corner found is returned, complete, its
 size taken as the pattern (columns counted along the grid direction nearer the image's x axis,
@@ -151,11 +152,9 @@ UNDECIDED = ("part of a board is in view, but the image leaves open where it lie
              "(e.g. one corner of the board, its other two sides cut by the frame)")
 REASONS = (NO_CANDIDATES, NO_GRID, NO_MATCH, UNDECIDED)  # from the least to the furthest the search got
 
-
 _DEFAULT_MODEL = None
-
-
 MAX_CANDIDATES = 3000  # a 20x15 board has 300 corners; more candidates are clutter
+WEAK = 0.5  # of the threshold: network points this weak confirm a corner where the bent grid predicts one
 
 
 def _default_model():
@@ -267,7 +266,7 @@ def _zoomed(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: f
 
 
 def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed: Smoothed | None = None,
-                   min_points: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                   min_points: int = 0, weak: float | None = None):
     """The detector's corner candidates: the CNN's points, refined on the image, duplicates merged.
 
     gray : (H, W) float32 or uint8. The network's points (:func:`aicalib_tf.cnn.inference.corner_points`,
@@ -276,19 +275,21 @@ def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed:
     whose fit fails are dropped, and of points that meet within 1.5 px the strongest stays.
     smoothed : the image's :class:`~aicalib_tf.detect.refine.Smoothed` when the caller has it.
     min_points : fewer network points than this give no candidates (nothing is refined).
-    Returns points (N, 2) float32 (x, y) px and weights (N,) float32, strongest first.
+    weak : also return ``weak_points() -> (K, 2)`` px, the network's points from ``weak``·threshold up to it.
+    Returns points (N, 2) float32 (x, y) px and weights (N,) float32, strongest first (and weak_points).
     """
-    from aicalib_tf.cnn.inference import corner_points
+    from aicalib_tf.cnn.inference import weak_corner_points
 
-    pts, scores = corner_points(model, gray, threshold)
+    pts, scores, lower = weak_corner_points(model, gray, threshold, (weak or 0.0) * threshold)
     pts, scores = pts[:MAX_CANDIDATES], scores[:MAX_CANDIDATES]  # strongest first; bounds the N² steps
-    if len(pts) < max(min_points, 1):
-        return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
-    smoothed = Smoothed(np.asarray(gray, np.float32)) if smoothed is None else smoothed
-    refined, ok = refine_candidates(smoothed, pts, nearest_spacing(pts))
-    refined, scores = refined[ok], scores[ok]
-    keep = dedupe(refined, scores)
-    return refined[keep].astype(np.float32), scores[keep].astype(np.float32)
+    keep = np.zeros(0, int)
+    if len(pts) >= max(min_points, 1):
+        smoothed = Smoothed(np.asarray(gray, np.float32)) if smoothed is None else smoothed
+        pts, ok = refine_candidates(smoothed, pts, nearest_spacing(pts))
+        pts, scores = pts[ok], scores[ok]
+        keep = dedupe(pts, scores)
+    out = pts[keep].astype(np.float32).reshape(-1, 2), scores[keep].astype(np.float32)
+    return out if weak is None else (*out, lower)
 
 
 def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, threshold: float,
@@ -308,14 +309,14 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     if h < 8 or w < 8:
         return empty
     smoothed = Smoothed(gray)
-    refined, scores = refined_points(model, gray, threshold, smoothed=smoothed, min_points=MIN_CORNERS)
+    refined, scores, weak = refined_points(model, gray, threshold, smoothed=smoothed, min_points=MIN_CORNERS, weak=WEAK)
     if len(refined) == 0:
         return empty
     smooth = smoothed.sigma(1.0)
     propose = None
     if len(refined) >= MIN_CORNERS:
         amp, _ = ring_symmetry(smooth, refined.astype(np.float64), 0.3 * nearest_spacing(refined))
-        propose = proposer(smoothed, smooth, float(np.median(amp[: max(MIN_CORNERS, len(amp) // 2)])))
+        propose = proposer(smoothed, smooth, float(np.median(amp[: max(MIN_CORNERS, len(amp) // 2)])), weak=weak)
     if pattern_size is None:
         grids = _own_grids(assemble_grids(refined, scores, gray=smooth, propose=propose))
         for grid in grids:
@@ -334,7 +335,7 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     limit = max(pattern_size) + 1
     grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit, stop=is_board)
     if board is None and not full_only:  # bent strongly (close to a fisheye): a full board or nothing
-        assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit, stop=is_board, bend=True)
+        assemble_grids(refined, scores, gray=smooth, propose=propose and propose.bent, limit=limit, stop=is_board, bend=True)
     if board is not None or full_only:  # full_only: the quick pass, a full board or nothing
         return Detection(*board, True, (w, h)) if board else replace(empty, reason=NO_MATCH if grids else NO_GRID)
     if not grids:  # no 3×3 block anywhere: strips 2 corners wide (between objects, say)

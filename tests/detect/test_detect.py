@@ -408,10 +408,12 @@ def test_strip_seeds_only_where_no_3x3_seed_started_a_grid(model):
     _no_wrong_ids(model, "partial", 21, 66)
 
 
-@pytest.mark.parametrize("index", [27, 29])
+@pytest.mark.parametrize("index", [23, 27, 29, 39])
 def test_close_up_fisheye_boards_whose_lines_bend_are_found(model, index):
-    # the benchmark's fisheye_closeup images 27 (no 3×3 block is a parallelogram) and 29 (a line's
-    # steps grow across the lens' centre, then shrink towards the rim)
+    # the benchmark's fisheye_closeup images 27 (no 3×3 block is a parallelogram), 29 (a line's
+    # steps grow across the lens' centre, then shrink towards the rim), 23 (198°: the same, from
+    # 80 px to 12 px) and 39 (three rim corners, darkened to black, weigh 0.35–0.42 in the network:
+    # its weak points confirm the saddles the bent grid predicts)
     from aicalib_tf.bench.conditions import named_conditions
 
     cond = next(c for c in named_conditions() if c.name == "fisheye_closeup")
@@ -420,6 +422,33 @@ def test_close_up_fisheye_boards_whose_lines_bend_are_found(model, index):
     assert det.complete
     err = min(np.abs(det.corners - t).max() for t in (s.corners, s.corners[::-1]))
     assert err < 0.5
+
+
+def test_weak_network_points_confirm_a_darkened_rim_corner_only_for_the_bent_grid(model):
+    # fisheye_closeup image 39, corner 0 at the rim: vignetting leaves its ring 0.30 of the image's
+    # typical corner (the ring test asks for 0.3) and the network weighs it 0.42; the plain proposer
+    # rejects the saddle there, the bent grid's takes it with the network's weak point beside it
+    from aicalib_tf.bench.conditions import PATTERN, named_conditions
+    from aicalib_tf.detect.grid import MIN_CORNERS
+    from aicalib_tf.detect.junctions import nearest_spacing, proposer, ring_symmetry
+    from aicalib_tf.detect.refine import Smoothed
+    from aicalib_tf.io import load_image
+
+    cond = next(c for c in named_conditions() if c.name == "fisheye_closeup")
+    s = make_sample(cond.preset, cond.seed, 39, size=cond.size, pattern=PATTERN)
+    gray = load_image(s.image)
+    smoothed = Smoothed(gray)
+    pts, _, weak = refined_points(model, gray, smoothed=smoothed, min_points=MIN_CORNERS, weak=0.5)
+    corner = s.corners[0]
+    assert np.hypot(*(pts - corner).T).min() > 1.5 and np.hypot(*(weak() - corner).T).min() < 1.5
+    smooth = smoothed.sigma(1.0)
+    amp, _ = ring_symmetry(smooth, pts.astype(np.float64), 0.3 * nearest_spacing(pts))
+    propose = proposer(smoothed, smooth, float(np.median(amp[: max(MIN_CORNERS, len(amp) // 2)])), weak=weak)
+    pred, step = np.array([[512.3, 289.3]]), np.array([22.2])  # where the bent grid predicts it
+    assert np.isnan(propose(pred, step)).all()
+    assert np.hypot(*(propose.bent(pred, step)[0] - corner)) < 0.5
+    far = proposer(smoothed, smooth, float(np.median(amp[: max(MIN_CORNERS, len(amp) // 2)])), weak=lambda: weak() + 5.0)
+    assert np.isnan(far.bent(pred, step)).all()  # no weak point there: no corner
 
 
 @pytest.mark.parametrize("index, near", [(44, (414.5, 322.1)), (71, (268.4, 150.5))])

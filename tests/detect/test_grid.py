@@ -161,12 +161,14 @@ def _closeup(index):
     return sc.corners, sc.render()
 
 
-@pytest.mark.parametrize("index", [27, 29])
+@pytest.mark.parametrize("index", [23, 27, 29])
 def test_true_corners_of_close_up_fisheye_boards_assemble_into_their_lattice(index):
     # 29: a line's steps grow across the lens' centre and shrink towards the rim, so the quadratic
     # extrapolation lands nearer the corner two steps on (a double step, undone); 27: no 3×3 block
     # is a parallelogram within the tolerance, a bent seed starts the grid (the plain assembly gives
-    # no full lattice on either)
+    # no full lattice on either); 23 (198°): the steps across the centre grow to 80 px and shrink to
+    # 12 px at the rim, so the holes left by extrapolation are filled by interpolating along their
+    # lines, the grid grows again from them, and an edge hole is predicted from its cell's shape
     corners, image = _closeup(index)
     gray = cv2.GaussianBlur(image.astype(np.float32), (0, 0), 1.0)
     grids = assemble_grids(corners, gray=gray, bend=True)
@@ -238,3 +240,27 @@ def test_compiled_growth_takes_the_cells_the_python_growth_takes(monkeypatch):
         grown += max((len(g) for g in grids), default=0) > 12 * 12
     assert len(phases) > 100 and all(phases)
     assert grown > 5  # some lattices grew well past the kernel's first cell grid
+
+
+def test_bent_extrapolation_follows_steps_that_turn_and_shrink_at_a_steady_ratio():
+    # points z_k = c + r^k e^{ik·θ}: each step is the last one turned by θ and scaled by r, as a line's
+    # steps towards a fisheye's rim are, nearly; the steps' ratio predicts the next point exactly
+    from aicalib_tf.detect.grid import _turned
+
+    z = 100 + 40 * (0.7 * np.exp(0.3j)) ** np.arange(4)
+    p = np.stack([z.real, z.imag], 1)
+    got = _turned(p[2][None], p[1][None], p[0][None])[0]
+    assert np.allclose(got, p[3], atol=1e-9)
+    quadratic = 3 * p[2] - 3 * p[1] + p[0]
+    assert np.hypot(*(quadratic - p[3])) > 1.0
+
+
+def test_a_corner_proposed_onto_a_cells_point_is_not_taken_again():
+    # a squeezed rim corner's saddle fit can slide onto its neighbour: that point is not a second cell
+    from aicalib_tf.detect.grid import _Lattice
+
+    pts = np.array([[0.0, 0.0], [10.0, 0.0]])
+    lat = _Lattice(pts, np.ones(2, bool), propose=lambda pred, step: np.array([[10.2, 0.1]] * len(pred)), limit=9)
+    lat.take((0, 0), 0)
+    lat.take((1, 0), 1)
+    assert lat.find(np.array([[12.0, 0.0]]), np.array([3.0]))[0] == -1
