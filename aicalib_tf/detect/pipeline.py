@@ -161,7 +161,6 @@ def _default_model():
     global _DEFAULT_MODEL
     if _DEFAULT_MODEL is None:
         from aicalib_tf.cnn.model import load_model
-
         _DEFAULT_MODEL = load_model(DETECTOR_NETWORK)
     return _DEFAULT_MODEL
 
