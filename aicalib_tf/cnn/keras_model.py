@@ -102,10 +102,12 @@ def build_model(name: str = "default") -> keras.Sequential:
         # depthwise-separable variants, same corner-map output; multiply-adds at 320×240 (default: 141.5 M,
         # 24,739 parameters). sep: default's stem, separable 16/32/32/32: 28.3 M, 4,027 parameters, RF 35 px;
         # sep_s2: no full-resolution conv, separable 16/32/32/32/32: 27.7 M, 5,115 parameters, RF 41 px;
-        # sep_w: sep with separable 24/48/48/48: 46.9 M, 7,755 parameters, RF 35 px
+        # sep_w: sep with separable 24/48/48/48: 46.9 M, 7,755 parameters, RF 35 px;
+        # sep_s2w: sep_s2 wider, conv1 16, separable 24/48/48/48/48: 59.6 M, 10,627 parameters, RF 41 px
         "sep": _separable,
         "sep_s2": lambda: _separable((16, 32, 32, 32, 32), pre=0, name="sep_s2"),
         "sep_w": lambda: _separable((24, 48, 48, 48), name="sep_w"),
+        "sep_s2w": lambda: _separable((24, 48, 48, 48, 48), pre=0, conv1=16, name="sep_s2w"),
     }
     if name not in builders:
         raise ValueError(f"unknown architecture {name!r}; choose from: {', '.join(ARCHITECTURES)}")

@@ -11,7 +11,7 @@ __all__ = ["ARCHITECTURES", "SHIPPED", "RUNTIME_FILES", "PATCH_SIZE", "MODELS_DI
            "expected_sha256", "check_model_file", "write_sha256"]
 
 ARCHITECTURES = ("default", "report", "default_v1", "default_c12", "default_c16", "default_pre",
-                 "sep", "sep_s2", "sep_w")
+                 "sep", "sep_s2", "sep_w", "sep_s2w")
 SHIPPED = ("default", "report")  # the models shipped in models/ as .keras and .tflite
 # every shipped runtime file (models/<name>.tflite) -> the .keras model it is exported from; default_int8 is
 # default post-training quantised to int8 (weights and activations), calibrated on data_gen renders
