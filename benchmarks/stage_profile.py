@@ -63,7 +63,7 @@ def instrument(clock: StageClock) -> None:
 
     targets = [
         (pipeline, "load_image", "gate"), (inference, "network_input", "input"), (inference, "decode_map", "decode"),
-        (refine, "gaussian", "smoothing"), (pipeline, "refine_windowed", "refinement"),
+        (refine, "gaussian", "smoothing"), (pipeline, "refine_candidates", "refinement"),
         (pipeline, "dedupe", "candidates"), (pipeline, "nearest_spacing", "candidates"),
         (pipeline, "ring_symmetry", "candidates"), (pipeline, "assemble_grids", "assembly"),
         (pipeline, "full_board", "ordering"), (pipeline, "partial_board", "partial"),
