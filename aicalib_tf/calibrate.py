@@ -103,7 +103,7 @@ def build_parser():
     ap.add_argument("--model", default="auto",
                     help=f"lens model: auto (chosen on held-out views) or one of {', '.join(MODELS)}; with --rig, one "
                          "for all cameras or a comma list, one per camera (default: %(default)s)")
-    ap.add_argument("--network", default="default", help="the cnn detector's network: default, default_int8 (about 2x faster, int8), report, or a .tflite/.keras path (default: %(default)s)")
+    ap.add_argument("--network", default="default", help="the cnn detector's network: default, default_int8 (about 2x faster, int8), fast (a smaller network), fast_int8, report, or a .tflite/.keras path (default: %(default)s)")
     ap.add_argument("--fix-k3", action="store_true", help="hold k3 at 0 (pinhole models; narrow lenses, few views)")
     ap.add_argument("--rational", action="store_true", help="the same as --model rational_polynomial")
     ap.add_argument("--workers", type=int, default=None,

@@ -84,7 +84,7 @@ def build_parser():
     ap = parser("python -m aicalib_tf.evaluate", __doc__)
     ap.add_argument("--out", default=None, help="output folder (default: reports/<YYYYmmdd-HHMMSS>)")
     ap.add_argument("--quick", action="store_true", help="a small suite (about 2 minutes)")
-    ap.add_argument("--model", default="default", help="the cnn detector's model: default, default_int8, report or a .tflite/.keras path")
+    ap.add_argument("--model", default="default", help="the cnn detector's model: default, default_int8, fast, fast_int8, report or a .tflite/.keras path")
     ap.add_argument("--detectors", default=",".join(DETECTORS), help="comma list from %(default)s")
     ap.add_argument("--conditions", default=None, help="comma list of conditions / sweeps / named / sweeps / calib / all")
     ap.add_argument("--limit", type=int, default=None, help="at most N images per condition (tiny runs)")

@@ -7,15 +7,18 @@ import hashlib
 import os
 from pathlib import Path
 
-__all__ = ["ARCHITECTURES", "SHIPPED", "RUNTIME_FILES", "PATCH_SIZE", "MODELS_DIR", "model_kind", "file_sha256",
+__all__ = ["ARCHITECTURES", "SHIPPED", "SHIPPED_ARCH", "RUNTIME_FILES", "PATCH_SIZE", "MODELS_DIR", "model_kind", "file_sha256",
            "expected_sha256", "check_model_file", "write_sha256"]
 
 ARCHITECTURES = ("default", "report", "default_v1", "default_c12", "default_c16", "default_pre",
                  "sep", "sep_s2", "sep_w", "sep_s2w")
-SHIPPED = ("default", "report")  # the models shipped in models/ as .keras and .tflite
-# every shipped runtime file (models/<name>.tflite) -> the .keras model it is exported from; default_int8 is
-# default post-training quantised to int8 (weights and activations), calibrated on data_gen renders
-RUNTIME_FILES = {"default": "default", "report": "report", "default_int8": "default"}
+SHIPPED = ("default", "report", "fast")  # the models shipped in models/ as .keras and .tflite
+SHIPPED_ARCH = {"fast": "sep_s2w"}  # a shipped model named apart from its architecture -> that architecture
+# every shipped runtime file (models/<name>.tflite) -> the .keras model it is exported from; default_int8 and
+# fast_int8 are default and fast post-training quantised to int8 (weights and activations), calibrated on
+# data_gen renders
+RUNTIME_FILES = {"default": "default", "report": "report", "default_int8": "default", "fast": "fast",
+                 "fast_int8": "fast"}
 PATCH_SIZE = 32
 MODELS_DIR = Path(os.environ.get("AICALIB_MODELS", Path(__file__).resolve().parents[2] / "models"))
 

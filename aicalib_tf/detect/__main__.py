@@ -25,7 +25,7 @@ def build_parser():
     ap.add_argument("--pattern", help="inner corners, COLSxROWS, e.g. 9x6 (or --board)")
     ap.add_argument("--board", help="a ChArUco board instead of --pattern: charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100")
     ap.add_argument("--out", required=True, help="folder for <image>.png overlays and <image>.json corners")
-    ap.add_argument("--model", default="default", help="default, default_int8 (int8, about 2x faster), report, or a .tflite/.keras path (default: %(default)s)")
+    ap.add_argument("--model", default="default", help="default, default_int8 (int8, about 2x faster), fast (a smaller network), fast_int8, report, or a .tflite/.keras path (default: %(default)s)")
     ap.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core, but one per 8 images at most)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     return ap
