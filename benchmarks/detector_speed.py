@@ -1,7 +1,7 @@
 """Detector speed beside OpenCV's classic detector, in one run: 640×480 conditions, 1920×1080, tracked video.
 
     python benchmarks/detector_speed.py [--repeat 2] [--limit N] [--threads 1] [--frames 60] [--hd 2]
-        [--no-before] [--model default_int8]
+        [--no-before] [--model default_int8] [--also default --also PATH.tflite]
 
 Three parts, every figure beside ``cv2.findChessboardCorners`` + ``cornerSubPix``
 (:func:`aicalib_tf.detect.opencv.opencv_classic`) timed on the same image in the same process,
@@ -17,6 +17,9 @@ so that the ratios hold on a shared machine whose absolute times drift:
   smooth path, up to about 10 px a frame), each frame through :class:`aicalib_tf.detect.track.Tracker`,
   ``detect_corners`` and OpenCV's detector: mean and median ms after the first frame, and how the
   tracker found each board.
+
+``--also MODEL`` (repeatable) times ``detect_corners`` with another network too ("cnn:MODEL"), in
+the same round robin, for a before/after comparison of two networks in one run.
 
 ``--threads 1`` runs OpenCV (``cv2.setNumThreads(1)``) and the network's interpreter
 (``AICALIB_THREADS=1``) on one thread each. Also reports the hits (a full board within 2 px of the
@@ -173,7 +176,9 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=60)
     ap.add_argument("--hd", type=int, default=QUICK_COUNTS["hd"], help="1920x1080 images (evaluate --quick's 2)")
     ap.add_argument("--no-before", action="store_true", help="leave out the search without the quick pass")
-    ap.add_argument("--model", default="default", help="default, default_int8 or a .tflite path")
+    ap.add_argument("--model", default="default", help="default, default_int8, fast, fast_int8 or a .tflite path")
+    ap.add_argument("--also", action="append", default=[], metavar="MODEL",
+                    help="another network timed beside --model in the same run (repeatable)")
     a = ap.parse_args(argv)
     import cv2
 
@@ -186,8 +191,10 @@ def main(argv=None) -> int:
     from aicalib_tf.detect.warm import warm
 
     model = load_model(a.model)
-    for size in ((640, 480), (1920, 1080), (1280, 720)):
-        warm(model, size)
+    others = {name: load_model(name) for name in a.also}
+    for m in (model, *others.values()):
+        for size in ((640, 480), (1920, 1080), (1280, 720)):
+            warm(m, size)
 
     def cnn(img):
         d = pipeline.detect_corners(img, PATTERN, model=model)
@@ -205,11 +212,19 @@ def main(argv=None) -> int:
         return np.asarray(c).reshape(-1, 2) if ok else None
 
     detectors = {"cnn": cnn, "opencv": cv} if a.no_before else {"cnn": cnn, "cnn-before": before, "opencv": cv}
+
+    def with_model(m):
+        def fn(img):
+            d = pipeline.detect_corners(img, PATTERN, model=m)
+            return d.corners if d.complete else None
+        return fn
+
+    detectors.update({f"cnn:{name}": with_model(m) for name, m in others.items()})
     t0 = time.time()
     images = quick_images(a.limit, a.hd)
     frames = video_frames(a.frames)
     print(f"{len(images)} images, {len(frames)} frames rendered in {time.time() - t0:.0f} s; "
-          f"model {a.model}; threads: {a.threads or 'default'}; load average {os.getloadavg()[0]:.1f}", flush=True)
+          f"model {a.model}{''.join(f', also {n}' for n in a.also)}; threads: {a.threads or 'default'}; load average {os.getloadavg()[0]:.1f}", flush=True)
     rec = time_images(images, detectors, a.repeat)
     print("\n".join(summarise(rec) + [""] + summarise(rec, "cpu")), flush=True)
     print("\n".join(time_video(frames, model)))

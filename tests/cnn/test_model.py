@@ -51,7 +51,24 @@ def test_default_architecture_is_the_documented_stack():
     assert _stack(pre) == [("Conv2D", 4)] + _stack(v1) and pre.count_params() == 24_739
 
 
-@pytest.mark.parametrize("arch", ["default", "default_v1", "default_c12", "default_c16", "default_pre"])
+def test_separable_variants_are_the_documented_stacks(tmp_path):
+    sep = build_model("sep")
+    assert _stack(sep) == [
+        ("Conv2D", 4), ("Conv2D", 8),
+        ("SeparableConv2D", 16), ("MaxPooling2D", None),
+        ("SeparableConv2D", 32), ("SeparableConv2D", 32), ("SeparableConv2D", 32), ("Conv2D", 3),
+    ]
+    assert sep.get_layer("conv1").strides == (2, 2) and sep.count_params() == 4_027
+    s2 = build_model("sep_s2")  # no full-resolution conv, one more separable layer (receptive field 41 px)
+    assert _stack(s2) == _stack(sep)[1:7] + [("SeparableConv2D", 32), ("Conv2D", 3)] and s2.count_params() == 5_115
+    assert build_model("sep_w").count_params() == 7_755 and build_model("sep_s2w").count_params() == 10_627
+    path = save_model(sep, tmp_path / "sep.keras")  # loads with safe_mode=True
+    x = np.random.default_rng(0).normal(size=(1, 48, 64, 1)).astype(np.float32)
+    np.testing.assert_allclose(np.asarray(load_model(path, backend="keras")(x)), np.asarray(sep(x)), atol=1e-6)
+
+
+@pytest.mark.parametrize("arch", ["default", "default_v1", "default_c12", "default_c16", "default_pre",
+                                  "sep", "sep_s2", "sep_w", "sep_s2w"])
 def test_default_is_fully_convolutional_with_a_stride_4_map(arch):
     m = build_model(arch)
     assert isinstance(m, keras.Sequential) and model_kind(m) == "map"
