@@ -298,9 +298,9 @@ def test_cli_with_two_workers_gives_what_one_process_gives(tmp_path, capsys):
     assert cals["1"].views == cals["2"].views
     # the same detections (bit for bit: one interpreter thread or two give the same corners); the
     # fit's BLAS sums vary in the last bits from run to run, which the weakly determined k3 of five
-    # views turns into up to 1.3e-7 relative (seen once, under load)
+    # views turns into up to 1.03e-6 relative (seen under load; a different detection moves K first)
     np.testing.assert_allclose(cals["1"].K, cals["2"].K, rtol=1e-9)
-    np.testing.assert_allclose(cals["1"].dist, cals["2"].dist, rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(cals["1"].dist, cals["2"].dist, rtol=1e-5, atol=1e-12)
 
 
 def test_the_photos_image_circle_comes_from_their_thumbnails_mean():
