@@ -127,13 +127,9 @@ def corner_points(model, gray: np.ndarray, threshold: float = 0.5, *, max_candid
     precision : corner-map models only, see :func:`corner_map` (patch classifiers run in float32).
     Returns points (N, 2) float32 (x, y) px and weights (N,) float32, strongest first.
     """
-    if model_kind(model) == "map":
-        return decode_map(corner_map(model, gray, precision=precision), threshold)
-    cand = saddle_points(gray, max_points=max_candidates)
-    w = patch_weights(model, gray, cand)
-    keep = w >= threshold
-    order = np.argsort(-w[keep], kind="stable")
-    return cand[keep][order].astype(np.float32), w[keep][order]
+    pts, scores, _ = weak_corner_points(model, gray, threshold, threshold, max_candidates=max_candidates,
+                                        precision=precision)
+    return pts, scores
 
 
 def weak_corner_points(model, gray: np.ndarray, threshold: float = 0.5, weak: float = 0.25, *,

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aicalib_tf.detect.grid_kernels import grow_lines, seed_block
+from aicalib_tf.detect.junctions import SAME_CORNER
 from aicalib_tf.detect.sampling import sample_bilinear
 
 MIN_CORNERS = 9  # fewest corners of a grid, and so of any board returned: a grid grows from a 3x3 seed
@@ -38,7 +39,6 @@ MAX_SPAN_RATIO = 1.15  # seed pairs longer than this times the shortest (|u| + |
 BENT_SEED_TOLERANCE = 0.45  # of the shorter step: a bent seed's opposite neighbours (see _bent_seed)
 BENT_CELL_AREA = 2.0  # MAX_CELL_AREA of bent seeds: beside a fisheye's centre, cells next to each other differ this much
 DOUBLE_STEP_REACH = 1.7  # tolerances from a prediction within which a skipped corner is taken instead
-SAME_CORNER = 1.5  # px: a corner proposed this near a cell's point is that point (junctions.dedupe's distance)
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,10 @@ def nearest_spacing(pts: np.ndarray) -> np.ndarray:
     return np.sqrt(d2.min(axis=1))
 
 
-def dedupe(pts: np.ndarray, scores: np.ndarray, min_distance: float = 1.5) -> np.ndarray:
+SAME_CORNER = 1.5  # px: two points this near are one corner (dedupe; a weak network point or a proposal there)
+
+
+def dedupe(pts: np.ndarray, scores: np.ndarray, min_distance: float = SAME_CORNER) -> np.ndarray:
     """Indices of points to keep: of points closer than ``min_distance`` px, only the strongest."""
     order = np.argsort(-scores, kind="stable")
     d2 = ((pts[order, None, :] - pts[None, order, :]) ** 2).sum(-1)
@@ -86,9 +89,6 @@ def _shadowed_x(smoothed: Smoothed, pts: np.ndarray, radius: np.ndarray) -> np.n
         sel = np.flatnonzero(radius == r)
         out[sel] = shadow_asymmetry(img, pts[sel], int(r) + 1) <= SHADOWED_X
     return out
-
-
-SAME_CORNER = 1.5  # px: a weak network point this near a saddle marks that corner (dedupe's distance)
 
 
 def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float, weak=None):
