@@ -1,7 +1,8 @@
 """The one input gate for images, and atomic file writes.
 
 Every image enters through :func:`load_image` (a path or an array; uint8 or uint16; grey, BGR
-or BGRA) and leaves as float32 grey in [0, 1]. A file is read as bytes (any file name works) and
+or BGRA) and leaves as float32 grey in [0, 1]; :func:`read_image` checks it the same way and leaves it
+unconverted, for a stage that converts only the part it needs (:class:`aicalib_tf.detect.pyramid.Frame`). A file is read as bytes (any file name works) and
 its pixel count is checked from the header before anything is decoded: an image over
 :data:`MAX_PIXELS` (100 MP; ``AICALIB_MAX_PIXELS`` changes it) is refused without allocating it. Every output file is written through
 :func:`atomic_write_bytes` / :func:`atomic_write_text`: a temporary file in the same folder,
@@ -23,7 +24,8 @@ os.environ.setdefault("OPENCV_LOG_LEVEL", "FATAL")
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-__all__ = ["ImageError", "load_image", "to_gray_float", "expand_images", "atomic_write_bytes", "atomic_write_text",
+__all__ = ["ImageError", "load_image", "read_image", "to_gray_float", "checked_image", "as_gray_float", "expand_images",
+           "atomic_write_bytes", "atomic_write_text",
            "display_name", "max_pixels", "image_size_from_header", "IMAGE_SUFFIXES", "MAX_PIXELS"]
 
 MAX_FILE_BYTES = 2 << 30  # an image file larger than this is refused before it is read
@@ -35,10 +37,11 @@ class ImageError(ValueError):
     """An image that cannot be used; the message names the file (or says 'array') and why."""
 
 
-def to_gray_float(image: np.ndarray, name: str = "array") -> np.ndarray:
-    """Convert an image array to (H, W) float32 grey in [0, 1].
+def checked_image(image: np.ndarray, name: str = "array") -> np.ndarray:
+    """The image gate's checks on an array, without converting it.
 
     image : (H, W), (H, W, 1), (H, W, 3) BGR or (H, W, 4) BGRA; uint8, uint16, or float in [0, 1].
+    Returns the same array ((H, W, 1) as (H, W)); raises :class:`ImageError` naming ``name``.
     """
     a = np.asarray(image)
     if a.ndim == 3 and a.shape[2] == 1:
@@ -47,26 +50,38 @@ def to_gray_float(image: np.ndarray, name: str = "array") -> np.ndarray:
         raise ImageError(f"{name}: expected (H, W) grey or (H, W, 3|4) colour, got shape {a.shape}")
     if a.shape[0] < 1 or a.shape[1] < 1:
         raise ImageError(f"{name}: empty image, shape {a.shape}")
-    if a.dtype == np.uint8:
-        scale = 1.0 / 255.0
-    elif a.dtype == np.uint16:
-        scale = 1.0 / 65535.0
-    elif a.dtype in (np.float32, np.float64):
+    if a.dtype in (np.float32, np.float64):
         if not np.all(np.isfinite(a)):
             raise ImageError(f"{name}: float image contains NaN or inf")
         lo, hi = float(a.min()), float(a.max())
         if lo < -1e-3 or hi > 1.0 + 1e-3:  # e.g. 0–255 values in a float array
             raise ImageError(f"{name}: float image must be in [0, 1], got values from {lo:g} to {hi:g}")
-        scale = 1.0
-    else:
+    elif a.dtype not in (np.uint8, np.uint16):
         raise ImageError(f"{name}: unsupported dtype {a.dtype}; use uint8, uint16 or float in [0, 1]")
+    return a
+
+
+def as_gray_float(a: np.ndarray) -> np.ndarray:
+    """A :func:`checked_image` array (or any region of one) as (H, W) float32 grey in [0, 1].
+
+    A new array (the caller's is never changed). Each pixel's value depends on that pixel alone, so a
+    region converted on its own equals the same region of the whole image converted (grey exactly,
+    colour within 1e-7: OpenCV's conversion rounds the last pixels of a row in another order).
+    """
+    scale = {np.dtype(np.uint8): 1.0 / 255.0, np.dtype(np.uint16): 1.0 / 65535.0}.get(a.dtype, 1.0)
     exact = a.ndim == 2 and a.dtype.kind == "u"  # integer grey: already in [0, 1] once scaled
-    # a new array in one pass (the caller's is never changed); float input has scale 1
+    # one pass; float input has scale 1
     a = a.astype(np.float32) if a.dtype.kind == "f" else np.multiply(a, np.float32(scale), dtype=np.float32)
     if a.ndim == 3:
         code = cv2.COLOR_BGRA2GRAY if a.shape[2] == 4 else cv2.COLOR_BGR2GRAY
         a = cv2.cvtColor(a, code)
     return a if exact else np.clip(a, 0.0, 1.0, out=a)
+
+
+def to_gray_float(image: np.ndarray, name: str = "array") -> np.ndarray:
+    """Convert an image array to (H, W) float32 grey in [0, 1] (:func:`checked_image`, then
+    :func:`as_gray_float`)."""
+    return as_gray_float(checked_image(image, name))
 
 
 def display_name(path) -> str:
@@ -127,6 +142,15 @@ def _read_bytes(path: Path) -> np.ndarray:
 def load_image(src) -> np.ndarray:
     """Read a path (any format OpenCV reads) or take an array; return (H, W) float32 grey in [0, 1].
 
+    Raises :class:`ImageError` as :func:`read_image` does.
+    """
+    return as_gray_float(read_image(src))
+
+
+def read_image(src) -> np.ndarray:
+    """Read a path (any format OpenCV reads) or take an array; return it checked (:func:`checked_image`)
+    and unconverted: (H, W) or (H, W, 3|4) BGR(A), uint8, uint16 or float in [0, 1].
+
     Raises :class:`ImageError` naming the file for a missing, unreadable (permissions), corrupt,
     truncated or too large (over :func:`max_pixels`) file.
     """
@@ -151,8 +175,8 @@ def load_image(src) -> np.ndarray:
             raise ImageError(f"{name}: not a readable image (corrupt or unsupported format)")
         if img.shape[0] * img.shape[1] > cap:
             raise ImageError(f"{name}: image of {img.shape[1]}x{img.shape[0]} px is over the limit of {cap / 1e6:g} MP")
-        return to_gray_float(img, name)
-    return to_gray_float(src)
+        return checked_image(img, name)
+    return checked_image(src)
 
 
 def _truncated_jpeg(data: bytes) -> bool:

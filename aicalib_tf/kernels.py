@@ -3,7 +3,7 @@
 Each kernel is written once, as numba-compilable Python, beside the maths it implements
 (``detect/saddle_kernels.py`` and the others in :data:`KERNEL_SOURCES`), and declared with
 ``@kernel("argument types", ...)``, one string per signature in numba's notation (``f4[:, ::1]`` a
-C-ordered 2-D float32 array, ``i8`` an int64, ``b1`` a bool). A function that only kernels call is
+C-ordered 2-D float32 array, ``u1`` uint8, ``i8`` an int64, ``b1`` a bool). A function that only kernels call is
 ``@helper``. Kernels run one of two ways:
 
 * **ahead of time** (``MODE == "aot"``): ``python -m aicalib_tf.kernels`` (run by ``python -m
@@ -50,10 +50,11 @@ KERNEL_SOURCES = (
     "detect/junction_kernels.py",
     "detect/lattice_kernels.py",
     "detect/grid_kernels.py",
+    "detect/pyramid_kernels.py",
 )
-_DTYPES = {"f4": np.float32, "f8": np.float64, "i8": np.int64, "b1": np.bool_}
-_SCALARS = {"f4": np.float32, "f8": float, "i8": int, "b1": bool}
-_ARG = re.compile(r"\s*(f4|f8|i8|b1)\s*(?:\[([^\]]*)\])?\s*$")
+_DTYPES = {"f4": np.float32, "f8": np.float64, "i8": np.int64, "b1": np.bool_, "u1": np.uint8}
+_SCALARS = {"f4": np.float32, "f8": float, "i8": int, "b1": bool, "u1": int}
+_ARG = re.compile(r"\s*(f4|f8|i8|b1|u1)\s*(?:\[([^\]]*)\])?\s*$")
 
 # name -> (module, python function, signatures); filled as kernel modules are imported
 REGISTRY: dict[str, tuple[str, object, tuple[str, ...]]] = {}

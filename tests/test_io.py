@@ -171,3 +171,18 @@ def test_to_gray_float_scales_exactly_into_a_new_array(dtype, channels):
     assert got.dtype == np.float32 and got.min() >= 0.0 and got.max() <= 1.0
     np.testing.assert_array_equal(got, np.clip(want, 0.0, 1.0))
     assert not np.shares_memory(got, a)
+
+
+def test_read_image_checks_like_load_image_and_leaves_the_pixels_as_they_are(tmp_path):
+    from aicalib_tf.io import ImageError, load_image, read_image
+
+    colour = np.random.default_rng(2).integers(0, 256, (12, 17, 3)).astype(np.uint8)
+    path = tmp_path / "c.png"
+    cv2.imwrite(str(path), colour)
+    raw = read_image(path)
+    assert raw.dtype == np.uint8 and raw.shape == (12, 17, 3) and np.array_equal(raw, colour)
+    assert read_image(colour[:, :, :1]).shape == (12, 17)  # one channel: its grey
+    np.testing.assert_array_equal(load_image(path), to_gray_float(raw))
+    for bad in (np.zeros((4, 4, 2), np.uint8), np.full((3, 3), 2.0, np.float32)):
+        with pytest.raises(ImageError):
+            read_image(bad)

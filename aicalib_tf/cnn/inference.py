@@ -28,6 +28,7 @@ import numpy as np
 from aicalib_tf.cnn.corner_map import decode_map, network_input, standardize
 from aicalib_tf.cnn.spec import PATCH_SIZE, model_kind
 from aicalib_tf.detect.candidates import saddle_points
+from aicalib_tf.geometry.points import sq_distances
 
 __all__ = ["corner_map", "corner_points", "weak_corner_points", "patch_weights", "extract_patches", "native_bfloat16", "resolve_precision"]
 
@@ -163,7 +164,7 @@ def weak_corner_points(model, gray: np.ndarray, threshold: float = 0.5, weak: fl
             low, low_scores = lower()
             low = low[low_scores < threshold]
             if len(low) and len(pts):
-                d2 = ((low[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
+                d2 = sq_distances(low, pts)
                 low = low[d2.min(axis=1) >= 2.5**2]
             memo.append(low.astype(np.float32).reshape(-1, 2))
         return memo[0]

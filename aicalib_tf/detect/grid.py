@@ -27,6 +27,7 @@ import numpy as np
 from aicalib_tf.detect.grid_kernels import grow_lines, seed_block
 from aicalib_tf.detect.junctions import SAME_CORNER
 from aicalib_tf.detect.sampling import sample_bilinear
+from aicalib_tf.geometry.points import sq_distances
 
 MIN_CORNERS = 9  # fewest corners of a grid, and so of any board returned: a grid grows from a 3x3 seed
 
@@ -126,7 +127,7 @@ class _Lattice:
         idx = self.free_idx[1]
         if len(idx) == 0:
             return np.full(len(pred), -1), np.arange(len(pred))
-        d2 = ((pred[:, None, :] - self.pts[None, idx, :]) ** 2).sum(-1)
+        d2 = sq_distances(pred, self.pts[idx])
         best = np.argmin(d2, axis=1)
         ok = d2[np.arange(len(pred)), best] <= tol**2
         return np.where(ok, idx[best], -1), np.flatnonzero(~ok)
@@ -635,7 +636,7 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
     if n < MIN_CORNERS:
         return []
     order = np.argsort(-np.asarray(scores), kind="stable") if scores is not None else np.arange(n)
-    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
+    d2 = sq_distances(pts, pts)
     np.fill_diagonal(d2, np.inf)
     near = np.argsort(d2, axis=1)[:, : min(neighbours, n - 1)]
     contrast = None  # of every point's steps to its near points, in one go (seeds use them)

@@ -21,6 +21,7 @@ from aicalib_tf.detect.refine import (
     window_radius,
 )
 from aicalib_tf.detect.shadow import shadow_asymmetry
+from aicalib_tf.geometry.points import sq_distances
 
 __all__ = ["dedupe", "nearest_spacing", "proposer", "ring_symmetry"]
 
@@ -29,7 +30,7 @@ def nearest_spacing(pts: np.ndarray) -> np.ndarray:
     """(N,) distance from each point to its nearest other point (px); 8 when alone."""
     if len(pts) < 2:
         return np.full(len(pts), 8.0)
-    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1)
+    d2 = sq_distances(pts, pts)
     np.fill_diagonal(d2, np.inf)
     return np.sqrt(d2.min(axis=1))
 
@@ -40,14 +41,13 @@ SAME_CORNER = 1.5  # px: two points this near are one corner (dedupe; a weak net
 def dedupe(pts: np.ndarray, scores: np.ndarray, min_distance: float = SAME_CORNER) -> np.ndarray:
     """Indices of points to keep: of points closer than ``min_distance`` px, only the strongest."""
     order = np.argsort(-scores, kind="stable")
-    d2 = ((pts[order, None, :] - pts[None, order, :]) ** 2).sum(-1)
+    d2 = sq_distances(pts[order], pts[order])
     close = d2 < min_distance**2
+    np.fill_diagonal(close, False)
     alive = np.ones(len(order), bool)
-    for a in range(len(order)):
+    for a in np.flatnonzero(close.any(axis=1)).tolist():  # strongest first; a point near none is kept as it is
         if alive[a]:
-            close_after = close[a].copy()
-            close_after[: a + 1] = False
-            alive &= ~close_after
+            alive[a + 1:] &= ~close[a, a + 1:]
     return order[alive]
 
 
@@ -128,7 +128,7 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float, weak=No
             weak_pts.append(np.zeros((0, 2)) if weak is None else np.asarray(weak(), np.float64).reshape(-1, 2))
         if len(weak_pts[0]) == 0:
             return np.zeros(len(q), bool)
-        return ((q[:, None, :] - weak_pts[0][None]) ** 2).sum(-1).min(axis=1) <= SAME_CORNER**2
+        return sq_distances(q, weak_pts[0]).min(axis=1) <= SAME_CORNER**2
 
     def look(pred, step, margin, window, shift, ring, memo, bent=False):
         pred, step = np.asarray(pred, np.float64), np.asarray(step, np.float64)

@@ -29,6 +29,7 @@ from aicalib_tf.detect.lattice import (
     predict_ids,
 )
 from aicalib_tf.detect.refine import window_radius
+from aicalib_tf.geometry.points import sq_distances
 
 __all__ = ["partial_board", "relative_board"]
 MATCH_STEP = 0.3  # of a step: how far a corner found may lie from where the lattice predicts it
@@ -254,7 +255,7 @@ def _complete(ids: np.ndarray, pts: np.ndarray, sc: np.ndarray, pattern_size, pr
             miss = np.flatnonzero(~ok)
             got[miss] = propose.tight(pred[miss], step[miss])
             ok[miss] = by_tight[miss] = np.all(np.isfinite(got[miss]), axis=1)
-        d_old = np.sqrt(((got[:, None, :] - pts[None, :, :]) ** 2).sum(-1)).min(axis=1) if ok.any() else None
+        d_old = np.sqrt(sq_distances(got, pts)).min(axis=1) if ok.any() else None
         if ok.any():
             ok &= d_old >= 0.5 * step
         if not ok.any():

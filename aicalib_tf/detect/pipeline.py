@@ -104,10 +104,10 @@ from aicalib_tf.detect.grid import MIN_CORNERS, Grid, assemble_grids, full_subgr
 from aicalib_tf.detect.junctions import dedupe, nearest_spacing, proposer, ring_symmetry
 from aicalib_tf.detect.lattice import drop_outliers
 from aicalib_tf.detect.partial import partial_board, relative_board
-from aicalib_tf.detect.pyramid import downscale, quick_scales, quick_shift, refine_full, scales, to_full
+from aicalib_tf.detect.pyramid import Frame, quick_scales, quick_shift, refine_full, scales, to_full
 from aicalib_tf.detect.refine import Smoothed, refine_candidates
 from aicalib_tf.detect.zoom import from_zoom, zoom_box, zoom_in
-from aicalib_tf.io import load_image
+from aicalib_tf.io import load_image, read_image
 
 __all__ = ["Detection", "detect_corners", "detect_charuco", "find_chessboard_corners", "order_full_board", "refined_points"]
 
@@ -207,10 +207,10 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     a board partly out of frame or hidden is returned with ``complete=False`` when the image
     decides its ids (module docstring), and not at all otherwise (unless ``relative``).
     """
-    gray = load_image(image)
-    h, w = gray.shape
+    frame = Frame(read_image(image))  # converted to float grey only where needed: a region, a reduced scale
+    w, h = frame.size
     if _charuco_board(pattern_size) is not None:  # a ChArUco board: the largest one found
-        found = detect_charuco(gray, [_charuco_board(pattern_size)], model=model, threshold=threshold)
+        found = detect_charuco(frame.gray, [_charuco_board(pattern_size)], model=model, threshold=threshold)
         return _as_detection(found[0] if found else None, _charuco_board(pattern_size), (w, h))
     if pattern_size is not None:
         from aicalib_tf.geometry.pattern import check_pattern
@@ -220,11 +220,11 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     best, reason = None, REASONS[0]
     quick = quick_scales(w, h) if pattern_size is not None else []
     for f in quick + scales(w, h):
-        look = bind(_zoomed, gray, pattern_size, model, threshold) if f == 1 and pattern_size is not None else None
-        det = _detect_at(downscale(gray, f), pattern_size, model, threshold, second_look=look, relative=relative,
+        look = bind(_zoomed, frame.gray, pattern_size, model, threshold) if f == 1 and pattern_size is not None else None
+        det = _detect_at(frame.reduced(f), pattern_size, model, threshold, second_look=look, relative=relative,
                          full_only=f in quick)
         if det.found and f > 1:
-            corners, ok = refine_full(gray, to_full(det.corners, f), max_shift=quick_shift(f) if f in quick else 2.0)
+            corners, ok = refine_full(frame, to_full(det.corners, f), max_shift=quick_shift(f) if f in quick else 2.0)
             if not ok.all():  # a corner left at its coarse place may be px off: try the finer scales
                 reason = reason if f in quick else max(reason, NO_MATCH, key=REASONS.index)
                 continue

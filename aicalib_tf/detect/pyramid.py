@@ -17,11 +17,13 @@ import cv2
 import numpy as np
 
 from aicalib_tf.detect.junctions import nearest_spacing
+from aicalib_tf.detect.pyramid_kernels import block_mean_colour, block_mean_grey
 from aicalib_tf.detect.refine import Smoothed, refine_windowed, window_radius
 from aicalib_tf.geometry.pose import in_frame
+from aicalib_tf.io import as_gray_float
 
-__all__ = ["MIN_SIDE", "QUICK_SIDE", "QUICK_LEVELS", "scales", "quick_scales", "quick_shift", "downscale", "to_full",
-           "refine_full"]
+__all__ = ["MIN_SIDE", "QUICK_SIDE", "QUICK_LEVELS", "Frame", "scales", "quick_scales", "quick_shift", "downscale",
+           "to_full", "refine_full"]
 
 MIN_SIDE = 800  # px: a reduced scale keeps at least this many pixels along the image's longer side
 QUICK_SIDE = 240  # px: a quick pass keeps at least this many pixels along the image's longer side
@@ -77,12 +79,65 @@ def quick_shift(factor: int) -> float:
     return min(2.0, 0.6 * float(factor))
 
 
+class Frame:
+    """The image searched, converted to float32 grey only where a stage needs it.
+
+    raw : an array the image gate has checked (:func:`aicalib_tf.io.read_image`). A uint8 image
+    stays as it is: its reduced scales come from its bytes (:func:`downscale`) and a region is
+    converted alone (:meth:`region`), so a large frame whose board a quick pass finds is never
+    converted whole. Any other type is converted at once. Every value is the same pixel's of
+    :func:`aicalib_tf.io.as_gray_float` of the whole image (within 1e-7 for colour).
+    """
+
+    def __init__(self, raw: np.ndarray):
+        self.raw = raw
+        self._gray = None if raw.dtype == np.uint8 else as_gray_float(raw)
+
+    @classmethod
+    def of_gray(cls, gray: np.ndarray) -> Frame:
+        """A frame of (H, W) grey in [0, 1], already converted (float32 taken as it is)."""
+        frame = cls.__new__(cls)
+        frame.raw, frame._gray = gray, np.asarray(gray, np.float32)
+        return frame
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) px."""
+        return int(self.raw.shape[1]), int(self.raw.shape[0])
+
+    @property
+    def gray(self) -> np.ndarray:
+        """(H, W) float32 grey in [0, 1], the whole image (converted on first use)."""
+        if self._gray is None:
+            self._gray = as_gray_float(self.raw)
+        return self._gray
+
+    def region(self, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
+        """Pixels x0 … x1 − 1, y0 … y1 − 1 as (y1 − y0, x1 − x0) float32 grey, a C-ordered array of its own."""
+        if self._gray is not None:
+            return np.ascontiguousarray(self._gray[y0:y1, x0:x1])
+        return as_gray_float(self.raw[y0:y1, x0:x1])
+
+    def reduced(self, factor: int) -> np.ndarray:
+        """The image at 1/``factor`` scale (:func:`downscale`); the whole image at factor 1."""
+        if int(factor) == 1:
+            return self.gray
+        return downscale(self.raw if self._gray is None else self._gray, factor)
+
+
 def downscale(gray: np.ndarray, factor: int) -> np.ndarray:
     """Each f×f block's mean: (H // f, W // f) float32 (the last H % f rows and W % f columns are dropped).
 
+    gray : (H, W) float32 grey in [0, 1], or a uint8 image as the image gate takes it ((H, W) or
+    (H, W, 3|4) BGR(A)), whose means come from its bytes in one pass
+    (:mod:`aicalib_tf.detect.pyramid_kernels`), in the gate's grey levels.
     Empty where a side is shorter than f (an 8000×1 image at f = 8: (0, 1000)).
     """
     f = int(factor)
+    if gray.dtype == np.uint8:
+        if f == 1:
+            return as_gray_float(gray)
+        return block_mean_grey(gray, f) if gray.ndim == 2 else block_mean_colour(gray, f)
     g = np.asarray(gray, np.float32)
     if f == 1:
         return g
@@ -99,22 +154,23 @@ def to_full(points: np.ndarray, factor: int) -> np.ndarray:
     return (np.asarray(points, np.float64) * f + (f - 1.0) / 2.0).astype(np.float32)
 
 
-def refine_full(gray: np.ndarray, points: np.ndarray, max_shift: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+def refine_full(image, points: np.ndarray, max_shift: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
     """Refine corners found at a reduced scale on the full image (saddle fit, :mod:`aicalib_tf.detect.refine`).
 
-    gray : (H, W) full image. points : (N, 2) px on it (from :func:`to_full`), N ≥ 2, of one board.
-    Only the board's bounding box (plus the largest window) is smoothed. Returns refined (N, 2)
+    image : a :class:`Frame`, or (H, W) float32 grey, the full image. points : (N, 2) px on it (from :func:`to_full`), N ≥ 2, of one board.
+    Only the board's bounding box (plus the largest window) is converted and smoothed. Returns refined (N, 2)
     float32 and ok (N,) bool; a point whose refinement fails, moves more than ``max_shift`` px or would
     leave the image keeps its given position, with ok False (at a factor f that position is only good
     to a fraction of f px, so the caller should not trust the board).
     """
     pts = np.asarray(points, np.float32).reshape(-1, 2)
-    h, w = gray.shape
+    frame = image if isinstance(image, Frame) else Frame.of_gray(image)
+    w, h = frame.size
     spacing = nearest_spacing(pts)
     margin = int(window_radius(spacing).max()) + 8
     x0, y0 = np.maximum(np.floor(pts.min(axis=0)).astype(int) - margin, 0)
     x1, y1 = np.minimum(np.ceil(pts.max(axis=0)).astype(int) + margin + 1, [w, h])
-    crop = np.ascontiguousarray(gray[y0:y1, x0:x1], dtype=np.float32)
+    crop = frame.region(x0, y0, x1, y1)
     offset = np.array([x0, y0], np.float32)
     shift = np.full(len(pts), float(max_shift))
     refined, ok = refine_windowed(Smoothed(crop), pts - offset, spacing, max_shift=shift)

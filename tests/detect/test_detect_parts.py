@@ -156,3 +156,21 @@ def test_the_proposer_skips_the_shadow_fit_where_the_ring_test_must_fail(monkeyp
     calls.clear()
     got = proposer(Smoothed(gray), smooth, 100 * ref_amp)(shadowed + [0.8, -0.6], np.full(4, 15.5))
     assert calls == [] and np.isnan(got).all()
+
+
+def test_dedupe_keeps_the_strongest_of_points_that_meet_in_turn():
+    from aicalib_tf.detect.junctions import dedupe
+
+    def greedy(pts, scores, d):  # strongest first, each kept point removes the weaker points near it
+        keep = []
+        for k in np.argsort(-scores, kind="stable"):
+            if all(np.hypot(*(pts[k] - pts[j])) >= d for j in keep):
+                keep.append(k)
+        return np.array(keep, int)
+
+    rng = np.random.default_rng(7)
+    for trial in range(300):
+        n = int(rng.integers(0, 40))
+        pts = rng.uniform(0, rng.uniform(2, 40), (n, 2))
+        scores = rng.integers(0, 4, n).astype(np.float32)  # ties keep the earlier point
+        np.testing.assert_array_equal(dedupe(pts, scores, 1.5), greedy(pts, scores, 1.5), err_msg=f"trial {trial}")

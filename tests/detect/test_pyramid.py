@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from aicalib_tf.detect.pyramid import downscale, refine_full, scales, to_full
+from aicalib_tf.detect.pyramid import Frame, downscale, refine_full, scales, to_full
+from aicalib_tf.io import as_gray_float
 from data_gen import make_sample
 
 
@@ -43,7 +44,45 @@ def test_downscale_of_a_side_shorter_than_the_factor_is_empty():
     assert downscale(np.zeros((8000, 7), np.float32), 8).shape == (1000, 0)
 
 
+@pytest.mark.parametrize("shape", [(37, 54), (1080, 1920), (37, 54, 3), (40, 33, 4), (1, 8000), (8000, 7, 3)])
+@pytest.mark.parametrize("factor", [2, 4, 8])
+def test_downscale_of_uint8_pixels_is_the_block_mean_of_the_gates_grey(shape, factor):
+    # the block means come straight from the bytes: the same grey levels as converting first
+    a = np.random.default_rng(sum(shape) + factor).integers(0, 256, shape).astype(np.uint8)
+    got, want = downscale(a, factor), downscale(as_gray_float(a), factor)
+    assert got.dtype == np.float32 and got.shape == want.shape == (shape[0] // factor, shape[1] // factor)
+    np.testing.assert_allclose(got, want, atol=1e-6, rtol=0)
+    assert got.size == 0 or (got.min() >= 0.0 and got.max() <= 1.0)
+
+
+@pytest.mark.parametrize("raw", [np.arange(7 * 9 * 3, dtype=np.uint8).reshape(7, 9, 3),
+                                 np.linspace(0, 1, 63, dtype=np.float32).reshape(7, 9)])
+def test_a_frames_region_is_that_region_of_the_whole_image_converted(raw):
+    frame = Frame(raw)
+    whole = as_gray_float(raw)
+    assert frame.size == (9, 7)
+    # OpenCV's colour conversion rounds a region's last pixels in another order: equal within 1e-7
+    np.testing.assert_allclose(frame.region(2, 1, 8, 6), whole[1:6, 2:8], atol=1e-7, rtol=0)
+    np.testing.assert_array_equal(frame.reduced(1), whole)
+    np.testing.assert_array_equal(frame.region(2, 1, 8, 6), whole[1:6, 2:8])  # once converted whole, its region
+
+
 pytest.importorskip("keras")
+
+
+def test_a_large_uint8_frame_found_by_the_quick_pass_is_never_converted_whole(monkeypatch):
+    import aicalib_tf.detect.pyramid as pyramid
+    from aicalib_tf.detect.pipeline import detect_corners
+
+    s = make_sample("clean", 4, 0, size=(1920, 1080), pattern=(9, 6))
+    converted = []
+    real = pyramid.as_gray_float
+    monkeypatch.setattr(pyramid, "as_gray_float", lambda a: converted.append(a.shape[0] * a.shape[1]) or real(a))
+    det = detect_corners(s.image, (9, 6))
+    monkeypatch.undo()
+    assert det.complete and converted and max(converted) < 0.25 * 1920 * 1080  # the board's region alone
+    as_float = detect_corners(as_gray_float(s.image), (9, 6))  # converted whole first: the same board
+    np.testing.assert_allclose(det.corners, as_float.corners, atol=1e-3)
 
 
 @pytest.mark.parametrize("shape", [(1, 8000), (7, 8000), (8000, 1)])

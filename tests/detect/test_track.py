@@ -22,8 +22,8 @@ def test_quick_scales_go_coarser_than_the_coarsest_scale_while_enough_pixels_are
 def _scales_used(monkeypatch, image, quick=True):
     """detect_corners on image, and the factors it downscaled by (the quick pass off when not quick)."""
     seen = []
-    down = pipeline.downscale
-    monkeypatch.setattr(pipeline, "downscale", lambda g, f: seen.append(f) or down(g, f))
+    reduced = pipeline.Frame.reduced
+    monkeypatch.setattr(pipeline.Frame, "reduced", lambda frame, f: seen.append(f) or reduced(frame, f))
     if not quick:
         monkeypatch.setattr(pipeline, "quick_scales", lambda w, h: [])
     det = detect_corners(image, PATTERN)
