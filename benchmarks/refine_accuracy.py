@@ -46,7 +46,7 @@ def main(argv=None) -> int:
     ap.add_argument("--shading", action="store_true", help="also evaluate's shading condition")
     args = ap.parse_args(argv)
     rng = np.random.default_rng(0)
-    print(f"| condition | refiner | corners | ok % | median px | p95 px |\n|---|---|---|---|---|---|")
+    print("| condition | refiner | corners | ok % | median px | p95 px |\n|---|---|---|---|---|---|")
     presets = [condition(noise) for noise in (0, 10, 20, 40)]
     if args.shading:
         from aicalib_tf.bench.conditions import select_conditions

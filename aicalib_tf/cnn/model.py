@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from aicalib_tf.cnn.spec import (
     ARCHITECTURES,
@@ -36,6 +37,9 @@ from aicalib_tf.cnn.spec import (
     file_sha256,
     model_kind,
 )
+
+if TYPE_CHECKING:  # the Keras-side names, imported on first use (__getattr__)
+    from aicalib_tf.cnn.keras_model import CornerMapLoss, build_model, compile_model, corner_map_loss, save_model
 
 __all__ = [
     "ARCHITECTURES",

@@ -19,7 +19,6 @@ from aicalib_tf.calib.workflow import (
 )
 from aicalib_tf.calibrate import main
 from aicalib_tf.calib.files import load_calibration, save_calibration
-from aicalib_tf.calib.fit import Calibration
 from aicalib_tf.io import load_image
 from aicalib_tf.bench.metrics import calibration_errors
 
