@@ -13,7 +13,7 @@ import pytest
 
 from aicalib_tf import kernels
 from aicalib_tf.detect.lattice_kernels import nearest_steps
-from aicalib_tf.detect.saddle_kernels import saddle_loop
+from aicalib_tf.detect.saddle_kernels import saddle_refine
 from aicalib_tf.detect.saddle import saddle_fit_matrix
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -32,8 +32,8 @@ def test_signatures_parse_and_reject_what_the_extension_cannot_take():
 def test_a_call_of_the_wrong_dtype_is_refused_with_the_kernel_named():
     _, fit = saddle_fit_matrix(3)
     img = np.zeros((20, 20), np.float64)  # the kernel takes float32 images
-    with pytest.raises(TypeError, match=r"kernel saddle_loop: arguments \(float64\[20, 20\]"):
-        saddle_loop(img, np.zeros((1, 2)), fit, 3, 6)
+    with pytest.raises(TypeError, match=r"kernel saddle_refine: arguments \(float64\[20, 20\]"):
+        saddle_refine(img, np.zeros((1, 2)), fit, 3, 6, 3.0)
 
 
 def test_an_array_not_c_ordered_is_copied_and_gives_the_same_result():

@@ -5,7 +5,7 @@ whatever the angles of its two lines. Any symmetric blur keeps that, so the cent
 stationary point (a saddle) of the smoothed image. :func:`refine_saddle` finds it: it fits a
 quadratic surface to a Gaussian-weighted window of the smoothed image around each estimate, moves
 to the quadratic's saddle point and repeats until the step is below 1e-3 px, each point on its
-own (:func:`aicalib_tf.detect.saddle_kernels.saddle_loop`), so its result never depends on the others. :func:`refine_windowed` picks
+own (:func:`aicalib_tf.detect.saddle_kernels.saddle_refine`), so its result never depends on the others. :func:`refine_windowed` picks
 each point's window to fit inside its squares, on an image smoothed once per window size
 (:class:`Smoothed`). A hard shadow edge across the window pulls the saddle up to ~3 px towards it
 (evaluate ``shading``: 15 wrong boards); where the window about the saddle is not point-symmetric
@@ -23,8 +23,7 @@ import cv2
 import numpy as np
 
 from aicalib_tf.detect.saddle import saddle_fit_matrix
-from aicalib_tf.detect.saddle_kernels import saddle_loop
-from aicalib_tf.geometry.pose import in_frame
+from aicalib_tf.detect.saddle_kernels import saddle_refine
 
 __all__ = ["Smoothed", "gaussian", "refine_saddle", "refine_subpix", "refine_windowed", "refine_candidates", "window_radius"]
 
@@ -54,18 +53,7 @@ def refine_saddle(
         g = gaussian(g, sigma)
     _, fit = saddle_fit_matrix(radius)
     max_shift = float(radius if max_shift is None else max_shift)
-    pts, step, saddle = saddle_loop(np.ascontiguousarray(g), pts0, fit, int(radius), int(iterations))
-    x, y = pts[:, 0], pts[:, 1]
-    sx, sy = step[:, 0], step[:, 1]
-    h, w = g.shape
-    dx, dy = x - pts0[:, 0], y - pts0[:, 1]
-    ok = (
-        saddle
-        & (np.sqrt(sx * sx + sy * sy) < 0.05)
-        & (np.sqrt(dx * dx + dy * dy) <= max_shift)
-        & in_frame(np.stack([x, y], axis=1), (w, h))
-    )
-    out = np.where(ok[:, None], pts, pts0)
+    out, ok = saddle_refine(np.ascontiguousarray(g), pts0, fit, int(radius), int(iterations), max_shift)
     return out.astype(np.float32), ok
 
 

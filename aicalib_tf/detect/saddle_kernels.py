@@ -14,25 +14,32 @@ from aicalib_tf.kernels import kernel
 
 from .sampling import _sample_grid
 
-__all__ = ['saddle_loop']
+__all__ = ['saddle_refine']
+
+CONVERGED = 0.05  # px: a fit whose last step is at least this long did not settle
 
 
-@kernel("f4[:, ::1], f8[:, ::1], f8[:, ::1], i8, i8")
-def saddle_loop(img, pts, fit, radius, iterations):
-    """The saddle fit's iterations for each point.
+@kernel("f4[:, ::1], f8[:, ::1], f8[:, ::1], i8, i8, f8")
+def saddle_refine(img, pts, fit, radius, iterations, max_shift):
+    """The saddle fit's iterations for each point, and whether each result holds.
 
-    img (H, W) float32, pts (P, 2) float64, fit (6, (2r+1)²) the quadratic fit operator.
-    Returns (P, 2) positions, (P, 2) the last step (px) and (P,) bool: the last fit was a saddle.
+    img (H, W) float32, pts (P, 2) float64 px, fit (6, (2r+1)²) the quadratic fit operator,
+    max_shift px. A point holds (ok) when its last fit was a saddle, its last step was under
+    ``CONVERGED``, it ended within ``max_shift`` of its start and inside the image's outer edge
+    (x in [−0.5, W − 0.5], y in [−0.5, H − 0.5]). Returns (P, 2) float64, the point's saddle where it
+    holds and its start otherwise, and (P,) bool ok.
     """
     n = pts.shape[0]
+    h, w = img.shape
     side = 2 * radius + 1
     m = side * side
     out = pts.copy()
-    step = np.zeros((n, 2))
-    saddle = np.zeros(n, np.bool_)
+    ok = np.zeros(n, np.bool_)
     vals = np.empty(m)
     for p in range(n):
         x, y = pts[p, 0], pts[p, 1]
+        ux = uy = 0.0
+        sad = False
         for _ in range(iterations):
             _sample_grid(img, x, y, -radius, side, vals)
             a = b = c = d = e = 0.0
@@ -54,9 +61,11 @@ def saddle_loop(img, pts, fit, radius, iterations):
                     ux, uy = ux / norm, uy / norm
             x += ux
             y += uy
-            step[p, 0], step[p, 1], saddle[p] = ux, uy, sad
             if abs(ux) < 1e-3 and abs(uy) < 1e-3:
                 break
-        out[p, 0], out[p, 1] = x, y
-    return out, step, saddle
-
+        dx, dy = x - pts[p, 0], y - pts[p, 1]
+        if (sad and math.sqrt(ux * ux + uy * uy) < CONVERGED and math.sqrt(dx * dx + dy * dy) <= max_shift
+                and x >= -0.5 and x <= w - 0.5 and y >= -0.5 and y <= h - 0.5):
+            ok[p] = True
+            out[p, 0], out[p, 1] = x, y
+    return out, ok
