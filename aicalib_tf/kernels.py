@@ -94,21 +94,35 @@ def parse_signature(sig: str) -> tuple[tuple[str, int], ...]:
     return tuple(out)
 
 
-def _matches(spec, args) -> bool:
+_DTYPE_OF = {code: np.dtype(t) for code, t in _DTYPES.items()}
+
+
+def _prepared(spec, args) -> list | None:
+    """The arguments as the kernel takes them, or None where they do not match ``spec``.
+
+    Each array must have the declared dtype and dimensions (C-ordered: a copy only where it is
+    not; no kernel writes into its arguments); each scalar (not an array of one or more dimensions)
+    is converted to its declared type (float32 stays float32). One pass over the arguments: a kernel
+    is called hundreds of times per image, and this check is its only Python overhead.
+    """
     if len(spec) != len(args):
-        return False
-    for (code, ndim), a in zip(spec, args):
-        if ndim and not (isinstance(a, np.ndarray) and a.dtype == _DTYPES[code] and a.ndim == ndim):
-            return False
-        if not ndim and isinstance(a, np.ndarray) and a.ndim:
-            return False
-    return True
-
-
-def _converted(spec, args) -> tuple:
-    """The arguments as the kernel takes them: each scalar as its declared type (float32 stays
-    float32), each array C-ordered (a copy only where it is not; no kernel writes into its arguments)."""
-    return tuple(np.ascontiguousarray(a) if ndim else _SCALARS[code](a) for (code, ndim), a in zip(spec, args))
+        return None
+    out = list(args)
+    for k, (code, ndim) in enumerate(spec):
+        a = args[k]
+        if ndim:
+            if not isinstance(a, np.ndarray) or a.ndim != ndim:
+                return None
+            want = _DTYPE_OF[code]
+            if a.dtype is not want and a.dtype != want:
+                return None
+            if not a.flags.c_contiguous:
+                out[k] = np.ascontiguousarray(a)
+        elif isinstance(a, np.ndarray) and a.ndim:
+            return None
+        else:
+            out[k] = _SCALARS[code](a)
+    return out
 
 
 def _describe(args) -> str:
@@ -206,8 +220,9 @@ def kernel(*signatures: str):
 
         def call(*args):
             for spec, target in zip(specs, targets):
-                if _matches(spec, args):
-                    return target(*_converted(spec, args))
+                ready = _prepared(spec, args)
+                if ready is not None:
+                    return target(*ready)
             raise TypeError(f"kernel {name}: arguments ({_describe(args)}) match none of its signatures {signatures}")
 
         call.__name__, call.__qualname__, call.__doc__ = name, fn.__qualname__, fn.__doc__
