@@ -9,6 +9,8 @@ boards); see :mod:`aicalib_tf.detect.pipeline` for the rules. :func:`reading` ap
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from aicalib_tf.detect.grid import Grid
@@ -28,10 +30,18 @@ def _parity_contrast(corners: np.ndarray, pattern_size: tuple[int, int], gray: n
     cols, rows = pattern_size
     g = corners.reshape(rows, cols, 2)
     centres = 0.25 * (g[:-1, :-1] + g[1:, :-1] + g[:-1, 1:] + g[1:, 1:])  # (rows-1, cols-1, 2)
-    rr, cc = np.meshgrid(np.arange(1, rows), np.arange(1, cols), indexing="ij")
-    grey = sample_bilinear(gray, centres.reshape(-1, 2)).reshape(centres.shape[:2])
-    even = (rr + cc) % 2 == 0
+    grey = sample_bilinear(gray, centres.reshape(-1, 2))
+    even = _even_squares(cols, rows)
     return float(grey[~even].mean() - grey[even].mean())
+
+
+@functools.lru_cache(maxsize=32)
+def _even_squares(cols: int, rows: int) -> np.ndarray:
+    """((rows−1)·(cols−1),) bool, row-major: inner square (c, r), c, r ≥ 1, has c + r even (read-only)."""
+    rr, cc = np.meshgrid(np.arange(1, rows), np.arange(1, cols), indexing="ij")
+    even = ((rr + cc) % 2 == 0).ravel()
+    even.flags.writeable = False
+    return even
 
 
 def order_full_board(corners: np.ndarray, pattern_size: tuple[int, int], gray: np.ndarray) -> np.ndarray:
@@ -112,8 +122,13 @@ def full_board(grid: Grid, scores: np.ndarray, pattern_size: tuple[int, int] | N
 
 
 def full_board_ids(pattern_size) -> np.ndarray:
-    """(cols·rows, 2) int32 (col, row) of every corner of a full board, in OpenCV order (r·cols + c)."""
-    cols, rows = (int(v) for v in pattern_size)
+    """(cols·rows, 2) int32 (col, row) of every corner of a full board, in OpenCV order (r·cols + c):
+    a new array each call."""
+    return _board_ids(*(int(v) for v in pattern_size)).copy()
+
+
+@functools.lru_cache(maxsize=32)
+def _board_ids(cols: int, rows: int) -> np.ndarray:
     return np.stack(np.meshgrid(np.arange(cols), np.arange(rows)), -1).reshape(-1, 2).astype(np.int32)
 
 
