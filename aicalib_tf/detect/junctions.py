@@ -149,7 +149,10 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float, weak=No
                 # beside objects most windows are asymmetric (restarts doubled evaluate occluded's time)
                 q, ok = refine_windowed(smoothed, p[k], window(s[k]), max_shift=shift * s[k], restarts=False,
                                         shadow_gate=ringed)
-                amp, asym = ring_symmetry(ring_image, q.astype(np.float64), radius)
+                amp, asym = np.zeros(len(q)), np.zeros(len(q))  # the ring asked about the saddles that hold
+                held = np.flatnonzero(ok)
+                if len(held):
+                    amp[held], asym[held] = ring_symmetry(ring_image, q[held].astype(np.float64), radius[held])
                 fitted = ok & (amp >= GATE * ref_amp)
                 ok &= amp >= 0.3 * ref_amp
                 odd = np.flatnonzero(ok & (asym > 0.5 * amp))  # a shadow edge across the ring, or no X-junction
