@@ -39,12 +39,19 @@ def padded_shape(height: int, width: int) -> tuple[int, int]:
 def network_input(gray: np.ndarray) -> np.ndarray:
     """(1, H', W', 1) float32: ``gray`` (H, W) standardised and edge-padded at the bottom and right
     to :func:`padded_shape`, the batch a corner-map model runs on."""
-    g = standardize(gray)
+    g = np.asarray(gray, dtype=np.float32)
     h, w = g.shape
     ph, pw = padded_shape(h, w)
-    if (ph, pw) != (h, w):
-        g = np.pad(g, ((0, ph - h), (0, pw - w)), mode="edge")
-    return g[None, :, :, None]
+    out = np.empty((1, ph, pw, 1), np.float32)
+    body = out[0, :h, :w, 0]
+    # standardize's arithmetic, written straight into the padded batch
+    np.subtract(g, float(g.mean()), out=body)
+    np.divide(body, max(float(g.std()), 1e-3), out=body)
+    if pw > w:  # edge padding: the last column, then the last row (with its padded corner)
+        out[0, :h, w:, 0] = body[:, w - 1 : w]
+    if ph > h:
+        out[0, h:, :, 0] = out[0, h - 1 : h, :, 0]
+    return out
 
 
 def encode_corners(corners: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
