@@ -8,11 +8,11 @@ least total. OpenCV's classic detector is timed on the same images in the same p
 
     python benchmarks/stage_profile.py [--repeat 2] [--limit N] [--conditions LIST] [--model default_int8]
 
-Stages: gate (the image gate), network (the interpreter call), input (standardise and pad the
+Stages: gate (the image gate, and converting the image or a region of it to float), network (the interpreter call), input (standardise and pad the
 image for the network), decode (corner map -> points), smoothing (Gaussian blurs), refinement
 (saddle fits), candidates (merging, spacing, ring tests), proposals (corners the grid predicts,
 fitted during assembly), assembly (grid growth), ordering (full-board order), partial (partial
-boards), pyramid (downscale and the full-size refinement of a coarse scale's corners), zoom
+boards), pyramid (the reduced scales and the full-size refinement of a coarse scale's corners), zoom
 (the enlarged region, its own part), other (the rest of detect_corners).
 """
 
@@ -59,22 +59,28 @@ class StageClock:
 def instrument(clock: StageClock) -> None:
     """Wrap the pipeline's stage functions (module attributes, looked up at call time) by ``clock``."""
     from aicalib_tf.cnn import inference, runtime
-    from aicalib_tf.detect import pipeline, refine
+    from aicalib_tf.detect import pipeline, pyramid, refine
 
     targets = [
-        (pipeline, "load_image", "gate"), (inference, "network_input", "input"), (inference, "decode_map", "decode"),
+        (pipeline, "read_image", "gate"), (pyramid, "as_gray_float", "gate"), (inference, "network_input", "input"), (inference, "decode_map", "decode"),
         (refine, "gaussian", "smoothing"), (pipeline, "refine_candidates", "refinement"),
         (pipeline, "dedupe", "candidates"), (pipeline, "nearest_spacing", "candidates"),
         (pipeline, "ring_symmetry", "candidates"), (pipeline, "assemble_grids", "assembly"),
         (pipeline, "full_board", "ordering"), (pipeline, "partial_board", "partial"),
-        (pipeline, "relative_board", "partial"), (pipeline, "downscale", "pyramid"),
+        (pipeline, "relative_board", "partial"), (pipeline.Frame, "reduced", "pyramid"),
         (pipeline, "refine_full", "pyramid"), (pipeline, "_zoomed", "zoom"), (pipeline, "detect_corners", "other"),
     ]
     for module, name, stage in targets:
         setattr(module, name, clock.wrap(stage, getattr(module, name)))
     runtime.RuntimeModel.__call__ = clock.wrap("network", runtime.RuntimeModel.__call__)
     make_proposer = pipeline.proposer
-    pipeline.proposer = lambda *a, **k: clock.wrap("proposals", make_proposer(*a, **k))
+
+    def proposer(*args, **kwargs):  # the proposer and its tight and bent variants, each timed
+        propose = make_proposer(*args, **kwargs)
+        timed = clock.wrap("proposals", propose)
+        timed.tight, timed.bent = clock.wrap("proposals", propose.tight), clock.wrap("proposals", propose.bent)
+        return timed
+    pipeline.proposer = proposer
 
 
 def quick_images(spec: str | None, limit: int | None) -> list[tuple[str, np.ndarray]]:
