@@ -59,11 +59,22 @@ def test_the_quick_pass_on_odd_sizes_maps_corners_back_exactly(monkeypatch, size
     assert np.abs(fast.corners - full.corners).max() < 0.05
 
 
-@pytest.mark.parametrize("shape", [(1, 1), (2, 641), (479, 9), (17, 640), (480, 640)])
+@pytest.mark.parametrize("shape", [(1, 1), (2, 641), (479, 9), (17, 640), (480, 640), (1, 1, 3), (3, 1700, 4),
+                                   (15, 1920, 3), (1080, 7, 3)])
 def test_the_quick_pass_on_tiny_or_empty_images_is_no_board_not_a_crash(shape):
-    for pattern in (PATTERN, (3, 3)):
+    for pattern in (PATTERN, (3, 3)):  # grey and colour frames: their block means come from the bytes
         det = detect_corners(np.full(shape, 128, np.uint8), pattern)
-        assert not det.found and det.image_size == shape[::-1] and det.reason
+        assert not det.found and det.image_size == shape[1::-1] and det.reason
+
+
+def test_a_colour_frame_gives_the_board_its_grey_gives():
+    import cv2
+
+    grey = synthetic_board(PATTERN, square=30, size=(1920, 1080), angle=12.0)
+    colour = cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
+    a, b = detect_corners(grey, PATTERN), detect_corners(colour, PATTERN)
+    assert a.complete and b.complete
+    np.testing.assert_allclose(a.corners, b.corners, atol=1e-4)
 
 
 def test_the_quick_pass_keeps_partial_boards_to_the_full_size_search(monkeypatch):
