@@ -17,10 +17,11 @@ __all__ = ["block_mean_grey", "block_mean_colour"]
 
 @kernel("u1[:, ::1], i8")
 def block_mean_grey(img, f):
-    """(H // f, W // f) float32: each f×f block's mean of img (H, W) uint8, over 255."""
+    """(H // f, W // f) float32: each f×f block's mean of img (H, W) uint8, over 255 (f ≤ 2048)."""
     h, w = img.shape[0] // f, img.shape[1] // f
     out = np.empty((h, w), np.float32)
-    cols = np.empty(w * f, np.int32)  # a band of f rows summed down each column (vectorised)
+    cols = np.empty(w * f, np.int32)  # a band of f rows summed down each column
+    sums = np.empty(w, np.int32)  # then every f-th column added across (loops over w vectorise; over f, not)
     scale = 1.0 / (255.0 * f * f)
     for i in range(h):
         for c in range(w * f):
@@ -29,23 +30,25 @@ def block_mean_grey(img, f):
             for c in range(w * f):
                 cols[c] += img[r, c]
         for j in range(w):
-            s = 0
-            for c in range(j * f, j * f + f):
-                s += cols[c]
-            out[i, j] = s * scale
+            sums[j] = cols[j * f]
+        for k in range(1, f):
+            for j in range(w):
+                sums[j] += cols[j * f + k]
+        for j in range(w):
+            out[i, j] = sums[j] * scale
     return out
 
 
 @kernel("u1[:, :, ::1], i8")
 def block_mean_colour(img, f):
     """(H // f, W // f) float32: each f×f block's mean grey level of img (H, W, 3|4) uint8 BGR(A),
-    each channel's block sum weighted as OpenCV's BGR-to-grey weights, over 255 (alpha ignored)."""
+    each channel's block sum weighted as OpenCV's BGR-to-grey weights, over 255 (alpha ignored; f ≤ 2048)."""
     h, w = img.shape[0] // f, img.shape[1] // f
     nc = img.shape[2]
-    row = img.shape[1] * nc
+    flat = img.reshape(img.shape[0], img.shape[1] * nc)
     out = np.empty((h, w), np.float32)
-    flat = img.reshape(img.shape[0], row)
     cols = np.empty(w * f * nc, np.int32)  # as block_mean_grey, every channel of a band at once
+    sums = np.empty((3, w), np.int32)
     scale = 1.0 / (255.0 * f * f)
     for i in range(h):
         for c in range(w * f * nc):
@@ -53,11 +56,12 @@ def block_mean_colour(img, f):
         for r in range(i * f + 1, i * f + f):
             for c in range(w * f * nc):
                 cols[c] += flat[r, c]
+        for ch in range(3):
+            for j in range(w):
+                sums[ch, j] = cols[j * f * nc + ch]
+            for k in range(1, f):
+                for j in range(w):
+                    sums[ch, j] += cols[(j * f + k) * nc + ch]
         for j in range(w):
-            b = g = red = 0
-            for c in range(j * f, j * f + f):
-                b += cols[c * nc]
-                g += cols[c * nc + 1]
-                red += cols[c * nc + 2]
-            out[i, j] = min((0.114 * b + 0.587 * g + 0.299 * red) * scale, 1.0)
+            out[i, j] = min((0.114 * sums[0, j] + 0.587 * sums[1, j] + 0.299 * sums[2, j]) * scale, 1.0)
     return out
