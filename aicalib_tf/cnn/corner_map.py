@@ -19,16 +19,20 @@ __all__ = ["STRIDE", "standardize", "padded_shape", "network_input", "encode_cor
 STRIDE = 4
 
 
-def standardize(gray: np.ndarray, mean: float | None = None, std: float | None = None) -> np.ndarray:
+def standardize(gray: np.ndarray, mean: float | None = None, std: float | None = None, *,
+                out: np.ndarray | None = None) -> np.ndarray:
     """Zero-mean, unit-variance copy of a grey image: the network's input.
 
     gray : (H, W) float or uint8. mean, std : the statistics to use (default: ``gray``'s own; a
-    crop passes its whole image's). Returns (H, W) float32. A constant image becomes all zeros.
+    crop passes its whole image's). out : (H, W) float32 to write into (a view into a larger
+    array, say), or None for a new array. Returns (H, W) float32 (``out`` when given). A constant
+    image becomes all zeros.
     """
     g = np.asarray(gray, dtype=np.float32)
     mean = float(g.mean()) if mean is None else float(mean)
     std = float(g.std()) if std is None else float(std)
-    return (g - mean) / max(std, 1e-3)
+    out = np.subtract(g, mean, out=out, dtype=np.float32)
+    return np.divide(out, max(std, 1e-3), out=out)
 
 
 def padded_shape(height: int, width: int) -> tuple[int, int]:
@@ -43,10 +47,7 @@ def network_input(gray: np.ndarray) -> np.ndarray:
     h, w = g.shape
     ph, pw = padded_shape(h, w)
     out = np.empty((1, ph, pw, 1), np.float32)
-    body = out[0, :h, :w, 0]
-    # standardize's arithmetic, written straight into the padded batch
-    np.subtract(g, float(g.mean()), out=body)
-    np.divide(body, max(float(g.std()), 1e-3), out=body)
+    body = standardize(g, out=out[0, :h, :w, 0])  # written straight into the padded batch
     if pw > w:  # edge padding: the last column, then the last row (with its padded corner)
         out[0, :h, w:, 0] = body[:, w - 1 : w]
     if ph > h:

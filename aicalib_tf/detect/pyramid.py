@@ -157,9 +157,9 @@ def to_full(points: np.ndarray, factor: int) -> np.ndarray:
 def refine_full(image, points: np.ndarray, max_shift: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
     """Refine corners found at a reduced scale on the full image (saddle fit, :mod:`aicalib_tf.detect.refine`).
 
-    image : a :class:`Frame`, or (H, W) float32 grey, the full image. points : (N, 2) px on it (from :func:`to_full`), N ≥ 2, of one board.
-    Only the board's bounding box (plus the largest window) is converted and smoothed. Returns refined (N, 2)
-    float32 and ok (N,) bool; a point whose refinement fails, moves more than ``max_shift`` px or would
+    image : a :class:`Frame`, or (H, W) float32 grey, the full image. points : (N, 2) px on it (from
+    :func:`to_full`), N ≥ 2, of one board. Only the board's bounding box (plus the largest window)
+    is converted and smoothed. Returns refined (N, 2) float32 and ok (N,) bool; a point whose refinement fails, moves more than ``max_shift`` px or would
     leave the image keeps its given position, with ok False (at a factor f that position is only good
     to a fraction of f px, so the caller should not trust the board).
     """

@@ -10,9 +10,21 @@ from __future__ import annotations
 
 import numpy as np
 
-from aicalib_tf.kernels import kernel
+from aicalib_tf.kernels import helper, kernel
 
 __all__ = ["block_mean_grey", "block_mean_colour"]
+
+
+@helper
+def _band_sums(rows, r0, f, cols):
+    """cols (n,) int32 = the sums of rows r0 … r0 + f − 1 of rows (H, ≥ n) uint8, column by column
+    (a loop over the columns, which vectorises)."""
+    n = cols.shape[0]
+    for c in range(n):
+        cols[c] = rows[r0, c]
+    for r in range(r0 + 1, r0 + f):
+        for c in range(n):
+            cols[c] += rows[r, c]
 
 
 @kernel("u1[:, ::1], i8")
@@ -24,11 +36,7 @@ def block_mean_grey(img, f):
     sums = np.empty(w, np.int32)  # then every f-th column added across (loops over w vectorise; over f, not)
     scale = 1.0 / (255.0 * f * f)
     for i in range(h):
-        for c in range(w * f):
-            cols[c] = img[i * f, c]
-        for r in range(i * f + 1, i * f + f):
-            for c in range(w * f):
-                cols[c] += img[r, c]
+        _band_sums(img, i * f, f, cols)
         for j in range(w):
             sums[j] = cols[j * f]
         for k in range(1, f):
@@ -45,17 +53,13 @@ def block_mean_colour(img, f):
     each channel's block sum weighted as OpenCV's BGR-to-grey weights, over 255 (alpha ignored; f ≤ 2048)."""
     h, w = img.shape[0] // f, img.shape[1] // f
     nc = img.shape[2]
-    flat = img.reshape(img.shape[0], img.shape[1] * nc)
+    flat = img.reshape(img.shape[0], img.shape[1] * nc)  # a row's channels side by side
     out = np.empty((h, w), np.float32)
     cols = np.empty(w * f * nc, np.int32)  # as block_mean_grey, every channel of a band at once
     sums = np.empty((3, w), np.int32)
     scale = 1.0 / (255.0 * f * f)
     for i in range(h):
-        for c in range(w * f * nc):
-            cols[c] = flat[i * f, c]
-        for r in range(i * f + 1, i * f + f):
-            for c in range(w * f * nc):
-                cols[c] += flat[r, c]
+        _band_sums(flat, i * f, f, cols)
         for ch in range(3):
             for j in range(w):
                 sums[ch, j] = cols[j * f * nc + ch]

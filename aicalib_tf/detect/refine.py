@@ -115,12 +115,12 @@ def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, ma
         sel = np.flatnonzero(radius == r)
         img = smoothed[int(r)]
         out[sel], ok[sel] = refine_saddle(img, pts[sel], sigma=0.0, radius=int(r))
-        if not ok[sel].any():
+        held = np.flatnonzero(ok[sel])
+        if not len(held):
             continue
         # a shadow edge across the window pulls the saddle fit: where the window is not point-symmetric
         # about it, the fit that allows a shadow edge decides (asked only about the saddles that hold)
         asym = np.zeros(len(sel))
-        held = np.flatnonzero(ok[sel])
         asym[held] = asymmetry(img, out[sel[held]], int(r))
         odd = ok[sel] & (asym > MAX_ASYMMETRY)
         if shadow_gate is not None and odd.any():
