@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from aicalib_tf.detect.grid import MIN_CORNERS, assemble_grids
-from aicalib_tf.detect.junctions import dedupe, nearest_spacing, proposer, ring_symmetry
+from aicalib_tf.detect.junctions import dedupe, nearest_spacing, proposer, typical_amplitude
 from aicalib_tf.detect.lattice import drop_outliers
 from aicalib_tf.detect.refine import Smoothed, refine_windowed
 
@@ -102,8 +102,7 @@ def lattices(model, gray: np.ndarray, threshold: float, quads: np.ndarray, margi
     if len(refined) < MIN_CORNERS:
         return []
     smooth = smoothed.sigma(1.0)
-    amp, _ = ring_symmetry(smooth, refined.astype(np.float64), 0.3 * nearest_spacing(refined))
-    propose = proposer(smoothed, smooth, float(np.median(amp[: max(MIN_CORNERS, len(amp) // 2)])))
+    propose = proposer(smoothed, smooth, typical_amplitude(smooth, refined, MIN_CORNERS))
     grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit)
     if not grids:
         grids = assemble_grids(refined, scores, gray=smooth, limit=limit, strips=True)

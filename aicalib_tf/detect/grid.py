@@ -147,10 +147,10 @@ class _Lattice:
         found, miss = self._nearest_free(pred, tol)
         if self.propose is not None and allow_propose and len(miss):
             got = self.propose(pred[miss], tol[miss] / TOLERANCE)
+            near = np.isfinite(got).all(axis=1)
+            near[near] = ((got[near] - pred[miss[near]]) ** 2).sum(axis=1) <= tol[miss[near]] ** 2
             taken = None
-            for m, q in zip(miss, got):
-                if not np.all(np.isfinite(q)) or np.sum((q - pred[m]) ** 2) > tol[m] ** 2:
-                    continue
+            for m, q in zip(miss[near], got[near]):
                 # a squeezed corner's fit can slide onto its neighbour: one corner is never two cells
                 taken = np.array(list(self.at.values())).reshape(-1, 2) if taken is None else taken
                 if len(taken) and np.min(((taken - q) ** 2).sum(axis=1)) < SAME_CORNER**2:
@@ -486,6 +486,36 @@ def edge_contrast(gray: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
     return np.abs(sample(left).mean(axis=1) - sample(right).mean(axis=1)).astype(np.float32)
 
 
+class _SeedContrast:
+    """:func:`edge_contrast` of each point's steps to its near points, worked out as seeds ask.
+
+    A board's first seed usually grows the whole board, so the contrasts of the points it takes are
+    never asked for: rows are computed for the point asked and the next free points in seed order,
+    a batch twice as large each time (1, 2, 4, ...). Each row depends on its own point alone.
+    gray : (H, W) float32. pts : (N, 2) px. near : (N, K) int. order : (N,) seed order. free : (N,) bool,
+    the lattice's (read, not changed). ``row(k)`` : (K,) float64, seed_block's dtype.
+    """
+
+    def __init__(self, gray: np.ndarray, pts: np.ndarray, near: np.ndarray, order: np.ndarray, free: np.ndarray):
+        self.gray, self.pts, self.near, self.order, self.free = gray, pts, near, order, free
+        self.rows = np.full(near.shape, np.nan)
+        self.done = np.zeros(len(pts), bool)
+        self.rank = np.empty(len(order), int)
+        self.rank[order] = np.arange(len(order))
+        self.batch = 1
+
+    def row(self, k: int) -> np.ndarray:
+        if not self.done[k]:
+            later = self.order[self.rank[k]:]
+            ks = later[self.free[later] & ~self.done[later]][: self.batch]
+            self.batch *= 2
+            pairs = self.near[ks]
+            got = edge_contrast(self.gray, np.repeat(self.pts[ks], pairs.shape[1], axis=0), self.pts[pairs.ravel()])
+            self.rows[ks] = got.reshape(pairs.shape)
+            self.done[ks] = True
+        return self.rows[k]
+
+
 _OFFS = np.array([(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)], np.float64)
 # a 3×2 block about the middle of its long side, on either side of it (``strips`` seeds)
 _STRIP_BLOCKS = np.array([[(di, dj) for di in (-1, 0, 1) for dj in (0, s) if (di, dj) != (0, 0)] for s in (1, -1)],
@@ -639,17 +669,14 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
     d2 = sq_distances(pts, pts)
     np.fill_diagonal(d2, np.inf)
     near = np.argsort(d2, axis=1)[:, : min(neighbours, n - 1)]
-    contrast = None  # of every point's steps to its near points, in one go (seeds use them)
-    if gray is not None:
-        contrast = edge_contrast(gray, np.repeat(pts, near.shape[1], axis=0), pts[near.ravel()])
-        contrast = contrast.reshape(near.shape).astype(np.float64)  # seed_block's dtype, converted once
     free = np.ones(n, bool)
+    contrast = None if gray is None else _SeedContrast(gray, pts, near, order, free)
     grids = []
     for k in order:
         if not free[k]:
             continue
         lat = _Lattice(pts, free, propose, limit, bend)
-        edges = None if contrast is None else contrast[k]
+        edges = None if contrast is None else contrast.row(int(k))
         if not (_seed(lat, int(k), near[k], edges, strips) or (bend and _bent_seed(lat, int(k), near[k], edges))):
             continue
         _build(lat)

@@ -23,7 +23,7 @@ from aicalib_tf.detect.refine import (
 from aicalib_tf.detect.shadow import shadow_asymmetry
 from aicalib_tf.geometry.points import sq_distances
 
-__all__ = ["dedupe", "nearest_spacing", "proposer", "ring_symmetry"]
+__all__ = ["dedupe", "nearest_spacing", "proposer", "ring_symmetry", "typical_amplitude"]
 
 
 def nearest_spacing(pts: np.ndarray) -> np.ndarray:
@@ -68,6 +68,19 @@ def ring_symmetry(gray: np.ndarray, pts: np.ndarray, radius: np.ndarray) -> tupl
     return out[:, 0], out[:, 1]
 
 
+def typical_amplitude(ring_image: np.ndarray, pts: np.ndarray, least: int) -> float:
+    """The ring amplitude of a typical corner among ``pts`` (N, 2) px, N ≥ 1, strongest first.
+
+    :func:`ring_symmetry` on a ring of 0.3 of each point's :func:`nearest_spacing`; the median over
+    the stronger half of the points, at least the ``least`` strongest (np.median's value, from one sort).
+    ring_image : (H, W) float32, smoothed (σ = 1 px): :func:`proposer`'s ``ring_image``.
+    """
+    amp, _ = ring_symmetry(ring_image, np.asarray(pts, np.float64), 0.3 * nearest_spacing(pts))
+    a = np.sort(amp[: max(least, len(amp) // 2)])
+    n = len(a)
+    return float(a[n // 2]) if n % 2 else float((a[n // 2 - 1] + a[n // 2]) / 2)
+
+
 GATE = 0.15  # of the reference ring amplitude: below it at the saddle, no shadow-robust fit (see proposer)
 SHADOWED_X = 0.01  # most robust_refine.shadow_asymmetry of an X-junction under a shadow edge
 
@@ -89,6 +102,9 @@ def _shadowed_x(smoothed: Smoothed, pts: np.ndarray, radius: np.ndarray) -> np.n
         sel = np.flatnonzero(radius == r)
         out[sel] = shadow_asymmetry(img, pts[sel], int(r) + 1) <= SHADOWED_X
     return out
+
+
+_KEY = np.dtype((np.void, 24))  # a prediction's memory key: its x, y and step as float64 bytes
 
 
 def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float, weak=None):
@@ -132,7 +148,7 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float, weak=No
 
     def look(pred, step, margin, window, shift, ring, memo, bent=False):
         pred, step = np.asarray(pred, np.float64), np.asarray(step, np.float64)
-        keys = [p.tobytes() + s.tobytes() for p, s in zip(pred, step)]
+        keys = np.column_stack([pred, step]).view(_KEY).ravel().tolist()  # each row's 24 bytes: x, y, step
         todo = np.array([m for m, key in enumerate(keys) if key not in memo], int)
         if len(todo):  # each point's answer depends on it alone: asked again, it is remembered
             got = np.full((len(todo), 2), np.nan)

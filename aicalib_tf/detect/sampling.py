@@ -69,14 +69,16 @@ _REMAP_COLS = 4096  # cv2.remap needs maps of fewer than 32767 rows and columns
 def sample_bilinear(g: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """Bilinear grey values (M,) float32 of g (H, W) float32 at xy (M, 2) px, border replicated, any M.
 
-    The points go to cv2.remap as rows of ``_REMAP_COLS``: assemble_grids asks for 3 samples of
-    ``MAX_CANDIDATES`` · 12 segments on each side, more than 32767 rows of one map.
+    The points go to cv2.remap as rows of at most ``_REMAP_COLS``: assemble_grids asks for 3 samples of
+    ``MAX_CANDIDATES`` · 12 segments on each side, more than 32767 rows of one map. A few points make
+    one short row (each sample depends on its own point alone, so the layout changes no value).
     """
     m = len(xy)
     if m == 0:
         return np.zeros(0, np.float32)
-    rows = -(-m // _REMAP_COLS)
-    flat = np.zeros((rows * _REMAP_COLS, 2), np.float32)
+    cols = min(m, _REMAP_COLS)
+    rows = -(-m // cols)
+    flat = np.zeros((rows * cols, 2), np.float32)
     flat[:m] = xy
-    flat = flat.reshape(rows, _REMAP_COLS, 2)
+    flat = flat.reshape(rows, cols, 2)
     return cv2.remap(g, flat[..., 0], flat[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()[:m]

@@ -140,6 +140,28 @@ def test_edge_contrast_takes_more_segments_than_one_remap_map_holds():
     assert edge_contrast(gray, p[:0], q[:0]).shape == (0,)
 
 
+def test_seed_contrast_rows_are_those_of_one_batch():
+    # the seeds' edge contrasts come in growing batches as seeds ask; each row is the one that
+    # edge_contrast of every point's steps at once gives, bit for bit, and rows are computed once
+    rng = np.random.default_rng(1)
+    gray = rng.random((90, 120)).astype(np.float32)
+    pts = rng.uniform(0, 119, (40, 2))
+    d2 = ((pts[:, None] - pts[None]) ** 2).sum(-1)
+    np.fill_diagonal(d2, np.inf)
+    near = np.argsort(d2, axis=1)[:, :12]
+    whole = edge_contrast(gray, np.repeat(pts, 12, axis=0), pts[near.ravel()]).reshape(near.shape).astype(np.float64)
+    order = rng.permutation(40)
+    free = np.ones(40, bool)
+    free[order[1]] = False  # taken by a grid: never asked, never computed
+    rows = grid._SeedContrast(gray, pts, near, order, free)
+    asked = [k for k in order if free[k]]
+    for n, k in enumerate(asked):
+        np.testing.assert_array_equal(rows.row(int(k)), whole[k])
+        if n == 0:
+            assert rows.done.sum() == 1  # the first seed alone
+    assert not rows.done[order[1]] and rows.done.sum() == 39
+
+
 def test_strip_seeds_assemble_a_strip_two_corners_wide():
     # two whole columns of a board (a bar in front hides the rest): no corner has all 8 neighbours,
     # so no 3×3 seed starts; a 3×2 seed does, with the board's own lattice
