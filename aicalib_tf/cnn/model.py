@@ -31,6 +31,7 @@ from aicalib_tf.cnn.spec import (
     ARCHITECTURES,
     MODELS_DIR,
     PATCH_SIZE,
+    QUICK_NETWORKS,
     RUNTIME_FILES,
     SHIPPED,
     check_model_file,
@@ -87,7 +88,9 @@ def load_model(weights: str | os.PathLike = "default", *, compile: bool = False,
         (default quantised to int8, runtime only: about 2× faster, the same detections on
         evaluate's images; see the model card), ``"fast"`` (the depthwise-separable ``sep_s2w``
         network, about a third of default's time; ``"fast_int8"`` its int8 export), or a path to a
-        ``.tflite`` or ``.keras`` file.
+        ``.tflite`` or ``.keras`` file. ``"default_int8"`` and ``"default"`` on the runtime come with
+        ``quick``, the smaller ``quick`` network (int8 or float32) that the detector's quick passes
+        run (:func:`aicalib_tf.detect.pipeline.detect_corners`); a path loads its network alone.
     backend : ``"auto"`` (a name loads the shipped ``.tflite`` on the LiteRT runtime, a path by
         its suffix), ``"runtime"`` or ``"keras"`` (a name loads ``models/<name>.keras``; for
         training and tests). Both kinds of file are checked against their recorded sha256
@@ -106,7 +109,10 @@ def load_model(weights: str | os.PathLike = "default", *, compile: bool = False,
             raise ValueError(f"compile=True needs a .keras model, got {path}")
         from aicalib_tf.cnn.runtime import load_runtime
 
-        return load_runtime(path)
+        model = load_runtime(path)
+        if isinstance(weights, str) and weights in QUICK_NETWORKS:  # a shipped detector network: its quick passes' one
+            model.quick = load_runtime(_resolve(QUICK_NETWORKS[weights], "runtime"))
+        return model
     check_model_file(path)  # missing, or not the file recorded in <file>.sha256: one line naming both
     try:
         from aicalib_tf.cnn.keras_model import load_keras

@@ -50,13 +50,16 @@ class RuntimeModel:
     """A corner model on the LiteRT interpreter.
 
     kind : ``"map"`` (corner map, (1, H, W, 1) -> (1, H/4, W/4, 3)) or ``"patch"``
-    ((B, 32, 32, 1) -> (B, 1)); aicalib_path : the .tflite file it came from.
+    ((B, 32, 32, 1) -> (B, 1)); aicalib_path : the .tflite file it came from. quick : None, or the
+    smaller network the detector's quick passes run instead of this one
+    (:func:`aicalib_tf.cnn.model.load_model` sets it for the shipped detector networks).
     """
 
     def __init__(self, path: str | os.PathLike, *, num_threads: int | None = None):
         from ai_edge_litert.interpreter import Interpreter
 
         self.aicalib_path = str(path)
+        self.quick: RuntimeModel | None = None
         self.num_threads = num_threads or default_threads()
         self._new = lambda: Interpreter(model_path=str(path), num_threads=self.num_threads)
         first = self._new()

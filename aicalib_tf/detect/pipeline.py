@@ -56,7 +56,8 @@ the candidates are assembled again from 3×2 seeds (:func:`aicalib_tf.detect.gri
 With ``pattern_size``, quick passes come first (:func:`aicalib_tf.detect.pyramid.quick_scales`): the
 image at one or two scales coarser than the coarsest below (640×480 at 320×240; 1920×1080 at
 240×135, then 480×270), for a full board only, its corners refined on the full image as below
-(none may move more than :func:`aicalib_tf.detect.pyramid.quick_shift`); the search goes on as
+(none may move more than :func:`aicalib_tf.detect.pyramid.quick_shift`), with the model's smaller
+``quick`` network when it has one (:func:`aicalib_tf.cnn.model.load_model`). The search goes on as
 below when they find none (small squares, a board cut by the frame or hidden), at 1.2–1.5× the
 time it took without them (evaluate's 640×480 images).
 
@@ -101,7 +102,7 @@ import numpy as np
 from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.detect.board_order import full_board, order_full_board
 from aicalib_tf.detect.grid import MIN_CORNERS, Grid, assemble_grids, full_subgrid
-from aicalib_tf.detect.junctions import dedupe, nearest_spacing, proposer, ring_symmetry
+from aicalib_tf.detect.junctions import dedupe, nearest_spacing, proposer, typical_amplitude
 from aicalib_tf.detect.lattice import drop_outliers
 from aicalib_tf.detect.partial import partial_board, relative_board
 from aicalib_tf.detect.pyramid import Frame, quick_scales, quick_shift, refine_full, scales, to_full
@@ -221,8 +222,8 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     quick = quick_scales(w, h) if pattern_size is not None else []
     for f in quick + scales(w, h):
         look = bind(_zoomed, frame.gray, pattern_size, model, threshold) if f == 1 and pattern_size is not None else None
-        det = _detect_at(frame.reduced(f), pattern_size, model, threshold, second_look=look, relative=relative,
-                         full_only=f in quick)
+        net = (getattr(model, "quick", None) or model) if f in quick else model  # the quick passes' own network
+        det = _detect_at(frame.reduced(f), pattern_size, net, threshold, second_look=look, relative=relative, full_only=f in quick)
         if det.found and f > 1:
             corners, ok = refine_full(frame, to_full(det.corners, f), max_shift=quick_shift(f) if f in quick else 2.0)
             if not ok.all():  # a corner left at its coarse place may be px off: try the finer scales
@@ -314,8 +315,7 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     smooth = smoothed.sigma(1.0)
     propose = None
     if len(refined) >= MIN_CORNERS:
-        amp, _ = ring_symmetry(smooth, refined.astype(np.float64), 0.3 * nearest_spacing(refined))
-        propose = proposer(smoothed, smooth, float(np.median(amp[: max(MIN_CORNERS, len(amp) // 2)])), weak=weak)
+        propose = proposer(smoothed, smooth, typical_amplitude(smooth, refined, MIN_CORNERS), weak=weak)
     if pattern_size is None:
         grids = _own_grids(assemble_grids(refined, scores, gray=smooth, propose=propose))
         for grid in grids:

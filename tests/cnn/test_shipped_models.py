@@ -16,7 +16,7 @@ from aicalib_tf.cnn.train import VALIDATION_SEED  # noqa: E402
 # Floors well below the card's figures and far above an untrained or broken model (which finds
 # no corners: recall 0), on a fixed slice of the validation images.
 FLOORS = {"default": {"precision": 0.6, "recall": 0.45}, "report": {"precision": 0.3, "recall": 0.3},
-          "fast": {"precision": 0.6, "recall": 0.45}}
+          "fast": {"precision": 0.6, "recall": 0.45}, "quick": {"precision": 0.6, "recall": 0.45}}
 
 
 @pytest.fixture(scope="module")
@@ -25,7 +25,7 @@ def images():
     return pool.images, pool.corners
 
 
-@pytest.mark.parametrize("name, kind", [("default", "map"), ("report", "patch"), ("fast", "map")])
+@pytest.mark.parametrize("name, kind", [("default", "map"), ("report", "patch"), ("fast", "map"), ("quick", "map")])
 def test_shipped_model_loads_matches_its_card_and_scores_above_the_floor(images, name, kind):
     path = MODELS_DIR / f"{name}.keras"
     assert path.is_file(), f"{path} is missing"

@@ -186,3 +186,40 @@ def test_a_board_whose_corner_the_full_image_refinement_cannot_place_is_searched
     det = detect.detect_corners(s.image, (9, 6))
     # the quick passes (factors 8 and 4) and the coarse scale all fail the refinement: found again at full size
     assert tried == [(135, 240), (270, 480), (540, 960), (1080, 1920)] and det.complete
+
+
+def test_the_quick_passes_run_the_default_networks_quick_network():
+    # the shipped detector network comes with a smaller one for the quick passes; the finer scales,
+    # and a network loaded from a path (no quick network), run the network itself
+    from aicalib_tf.cnn.model import MODELS_DIR, load_model
+    from aicalib_tf.detect.pipeline import detect_corners
+
+    model = load_model("default_int8")
+    assert model.quick is not None and model.quick.aicalib_path.endswith("quick_int8.tflite")
+    alone = load_model(MODELS_DIR / "default_int8.tflite")
+    assert alone.quick is None
+    s = make_sample("clean", 2, 0, size=(640, 480), pattern=(9, 6))
+    seen = []
+
+    class Spy:  # a model whose two networks record the input shapes they are run on
+        kind = "map"
+
+        def __init__(self, net, tag):
+            self.net, self.tag = net, tag
+            self.quick = None
+
+        def __call__(self, x):
+            seen.append((self.tag, x.shape[1:3]))
+            return self.net(x)
+
+    spy = Spy(model, "default")
+    spy.quick = Spy(model.quick, "quick")
+    det = detect_corners(s.image, (9, 6), model=spy)
+    assert det.complete and seen == [("quick", (240, 320))]  # found by the quick pass at 320×240
+    ref = detect_corners(s.image, (9, 6), model=alone)  # the default network's quick pass
+    assert ref.complete
+    np.testing.assert_array_equal(det.ids, ref.ids)
+    np.testing.assert_allclose(det.corners, ref.corners, atol=1e-2)  # both refined on the full image
+    seen.clear()
+    small = make_sample("clean", 2, 0, size=(320, 240), pattern=(9, 6))  # no quick pass at 320×240
+    assert detect_corners(small.image, (9, 6), model=spy).complete and {t for t, _ in seen} == {"default"}
