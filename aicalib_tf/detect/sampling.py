@@ -31,6 +31,10 @@ def _sample_grid(img, x, y, lo, side, out):
     h, w = img.shape
     x0, y0 = math.floor(x), math.floor(y)
     fx, fy = x - x0, y - y0
+    c, r = x0 + lo, y0 + lo  # the first pixel read
+    if c >= 0 and r >= 0 and c + side < w and r + side < h:
+        _sample_inside(img, c, r, fx, fy, side, out)
+        return
     k = 0
     for j in range(side):
         r0 = min(max(y0 + lo + j, 0), h - 1)
@@ -40,6 +44,25 @@ def _sample_grid(img, x, y, lo, side, out):
             c1 = min(max(x0 + lo + i + 1, 0), w - 1)
             out[k] = _lerp(img, r0, r1, c0, c1, fx, fy)
             k += 1
+
+
+@helper
+def _sample_inside(img, c, r, fx, fy, side, out):
+    """:func:`_sample_grid` where every pixel read lies inside the image (no clamping), with the same
+    arithmetic: a pixel row's interpolation along x is the bottom of one row of samples and the top
+    of the next, so it is worked out once (kept in the next row's slots of ``out`` until used).
+    c, r : the first column and row read."""
+    for i in range(side):
+        out[i] = img[r, c + i] + fx * (img[r, c + i + 1] - img[r, c + i])
+    for j in range(side):
+        row = r + j + 1
+        base = j * side
+        for i in range(side):
+            top = out[base + i]
+            bot = img[row, c + i] + fx * (img[row, c + i + 1] - img[row, c + i])
+            out[base + i] = top + fy * (bot - top)
+            if j + 1 < side:
+                out[base + side + i] = bot
 
 
 @kernel("f4[:, ::1], f8[:, ::1], i8")
