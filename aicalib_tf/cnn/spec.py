@@ -7,9 +7,9 @@ import hashlib
 import os
 from pathlib import Path
 
-__all__ = ["ARCHITECTURES", "SHIPPED", "SHIPPED_ARCH", "RUNTIME_FILES", "QUICK_NETWORKS", "DETECTOR_NETWORK", "NETWORK_HELP",
-           "PATCH_SIZE",
-           "MODELS_DIR", "model_kind", "file_sha256", "expected_sha256", "check_model_file", "write_sha256"]
+__all__ = ["ARCHITECTURES", "SHIPPED", "SHIPPED_ARCH", "RUNTIME_FILES", "QUICK_NETWORKS", "DETECTOR_NETWORK",
+           "NETWORK_HELP", "PATCH_SIZE", "MODELS_DIR", "model_kind", "file_sha256", "expected_sha256",
+           "check_model_file", "write_sha256"]
 
 ARCHITECTURES = ("default", "report", "default_v1", "default_c12", "default_c16", "default_pre",
                  "sep", "sep_s2", "sep_w", "sep_s2w", "quick")
