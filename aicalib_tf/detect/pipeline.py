@@ -56,10 +56,9 @@ the candidates are assembled again from 3×2 seeds (:func:`aicalib_tf.detect.gri
 With ``pattern_size``, quick passes come first (:func:`aicalib_tf.detect.pyramid.quick_scales`): the
 image at one or two scales coarser than the coarsest below (640×480 at 320×240; 1920×1080 at
 240×135, then 480×270), for a full board only, its corners refined on the full image as below
-(none may move more than :func:`aicalib_tf.detect.pyramid.quick_shift`), with the model's smaller
-``quick`` network when it has one (:func:`aicalib_tf.cnn.model.load_model`). The search goes on as
-below when they find none (small squares, a board cut by the frame or hidden), at 1.2–1.5× the
-time it took without them (evaluate's 640×480 images).
+(none may move more than :func:`aicalib_tf.detect.pyramid.quick_shift`), with the model's ``quick`` network
+when it has one (:func:`aicalib_tf.cnn.model.load_model`) and one smoothing for every window. The search
+goes on as below where they find none (small squares, a board cut or hidden), at 1.2–1.5× the time.
 
 Large images (longer side ≥ 1600 px) are searched coarse to fine (:mod:`aicalib_tf.detect.pyramid`):
 first at a reduced scale (block means, the longer side kept ≥ 800 px), the corners found there
@@ -156,6 +155,7 @@ REASONS = (NO_CANDIDATES, NO_GRID, NO_MATCH, UNDECIDED)  # from the least to the
 _DEFAULT_MODEL = None
 MAX_CANDIDATES = 3000  # a 20x15 board has 300 corners; more candidates are clutter
 WEAK = 0.5  # of the threshold: network points this weak confirm a corner where the bent grid predicts one
+RING_SIGMA = 1.0  # px: the smoothing of the ring tests' image; a quick pass refines its windows on it too
 
 
 def _default_model():
@@ -308,11 +308,11 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
                       pattern_size, False, (w, h), NO_CANDIDATES)
     if h < 8 or w < 8:
         return empty
-    smoothed = Smoothed(gray)
+    smoothed = Smoothed(gray, RING_SIGMA if full_only else None)  # a quick pass: one smoothing for all
     refined, scores, weak = refined_points(model, gray, threshold, smoothed=smoothed, min_points=MIN_CORNERS, weak=WEAK)
     if len(refined) == 0:
         return empty
-    smooth = smoothed.sigma(1.0)
+    smooth = smoothed.sigma(RING_SIGMA)
     propose = None
     if len(refined) >= MIN_CORNERS:
         propose = proposer(smoothed, smooth, typical_amplitude(smooth, refined, MIN_CORNERS), weak=weak)

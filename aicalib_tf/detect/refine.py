@@ -65,13 +65,17 @@ def gaussian(gray: np.ndarray, sigma: float) -> np.ndarray:
 
 
 class Smoothed:
-    """The image smoothed for each refinement radius r (σ = 0.4·r) or σ, made once per image on demand."""
+    """The image smoothed for each refinement radius r (σ = 0.4·r) or σ, made once per image on demand.
 
-    def __init__(self, gray: np.ndarray):
-        self.gray, self.cache = gray, {}
+    window_sigma : None, or one σ (px) for every radius: one smoothing serves all windows (the
+    detector's quick passes, whose corners are refined again on the full image).
+    """
+
+    def __init__(self, gray: np.ndarray, window_sigma: float | None = None):
+        self.gray, self.cache, self.window_sigma = gray, {}, window_sigma
 
     def __getitem__(self, r: int) -> np.ndarray:
-        return self.sigma(0.4 * r)
+        return self.sigma(0.4 * r if self.window_sigma is None else self.window_sigma)
 
     def sigma(self, sigma: float) -> np.ndarray:
         """The image smoothed with a Gaussian of ``sigma`` px."""
