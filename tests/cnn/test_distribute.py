@@ -31,13 +31,20 @@ TINY = ["--epochs", str(EPOCHS), "--steps", "2", "--val-images", "1", "--workers
         "--deterministic"]
 
 
+_GIVEN: set[int] = set()  # ports handed out in this process
+
+
 def _ports(n: int) -> list[int]:
-    socks = [socket.socket() for _ in range(n)]
-    for s in socks:
-        s.bind(("localhost", 0))
-    ports = [s.getsockname()[1] for s in socks]
-    for s in socks:
-        s.close()
+    """``n`` free localhost ports, none handed out before in this process: clusters start side by
+    side, and a port is only taken when a worker binds it, so the system could give it out twice."""
+    ports: list[int] = []
+    while len(ports) < n:
+        with socket.socket() as s:
+            s.bind(("localhost", 0))
+            port = s.getsockname()[1]
+        if port not in _GIVEN:
+            _GIVEN.add(port)
+            ports.append(port)
     return ports
 
 
@@ -59,9 +66,19 @@ def _cluster(out: Path, data: str) -> list[subprocess.Popen]:
             for i in range(2)]
 
 
+def _stop(procs) -> str:
+    """Kill every process (a worker whose peer died waits for it forever) and return their output."""
+    for p in procs:
+        p.kill()
+    return "\n".join(p.communicate()[0] or "" for p in procs)
+
+
 def _finish(procs, timeout=240) -> None:
     for p in procs:
-        out, _ = p.communicate(timeout=timeout)
+        try:
+            out, _ = p.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"a training run took over {timeout} s:\n{_stop(procs)}") from None
         assert p.returncode == 0, out
 
 
@@ -83,7 +100,8 @@ def _kill_after_first_backup(out: Path, workers) -> int:
         if meta.is_file() and json.loads(meta.read_text() or "{}").get("epoch", 0) >= 1:
             break
         time.sleep(0.05)
-    assert all(p.poll() is None for p in workers), workers[0].communicate()[0]
+    if not all(p.poll() is None for p in workers):  # one stopped before the first backup
+        raise AssertionError(f"a worker of the cluster stopped early:\n{_stop(workers)}")
     workers[1].send_signal(signal.SIGKILL)  # a worker dies; the chief cannot go on alone
     time.sleep(2.0)
     workers[0].send_signal(signal.SIGKILL)
