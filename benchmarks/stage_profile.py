@@ -10,7 +10,7 @@ least total. OpenCV's classic detector is timed on the same images in the same p
 
 Stages: gate (the image gate, and converting the image or a region of it to float), network (the interpreter call), input (standardise and pad the
 image for the network), decode (corner map -> points), smoothing (Gaussian blurs), refinement
-(saddle fits), candidates (merging, spacing, ring tests), proposals (corners the grid predicts,
+(saddle fits), candidates (merging, spacing, the typical ring amplitude), proposals (corners the grid predicts,
 fitted during assembly), assembly (grid growth), ordering (full-board order), partial (partial
 boards), pyramid (the reduced scales and the full-size refinement of a coarse scale's corners), zoom
 (the enlarged region, its own part), other (the rest of detect_corners).
@@ -65,7 +65,7 @@ def instrument(clock: StageClock) -> None:
         (pipeline, "read_image", "gate"), (pyramid, "as_gray_float", "gate"), (inference, "network_input", "input"), (inference, "decode_map", "decode"),
         (refine, "gaussian", "smoothing"), (pipeline, "refine_candidates", "refinement"),
         (pipeline, "dedupe", "candidates"), (pipeline, "nearest_spacing", "candidates"),
-        (pipeline, "ring_symmetry", "candidates"), (pipeline, "assemble_grids", "assembly"),
+        (pipeline, "typical_amplitude", "candidates"), (pipeline, "assemble_grids", "assembly"),
         (pipeline, "full_board", "ordering"), (pipeline, "partial_board", "partial"),
         (pipeline, "relative_board", "partial"), (pipeline.Frame, "reduced", "pyramid"),
         (pipeline, "refine_full", "pyramid"), (pipeline, "_zoomed", "zoom"), (pipeline, "detect_corners", "other"),
