@@ -18,10 +18,16 @@ __all__ = ['sample_bilinear', 'sample_windows']
 
 
 @helper
+def _along_x(img, r, c0, c1, fx):
+    """Row r's value between pixels (r, c0) and (r, c1) at fraction fx (float32 difference, float64 result)."""
+    return img[r, c0] + fx * (img[r, c1] - img[r, c0])
+
+
+@helper
 def _lerp(img, r0, r1, c0, c1, fx, fy):
     """Bilinear value between pixels (r0, c0), (r0, c1), (r1, c0), (r1, c1) at fractions fx, fy."""
-    top = img[r0, c0] + fx * (img[r0, c1] - img[r0, c0])
-    bot = img[r1, c0] + fx * (img[r1, c1] - img[r1, c0])
+    top = _along_x(img, r0, c0, c1, fx)
+    bot = _along_x(img, r1, c0, c1, fx)
     return top + fy * (bot - top)
 
 
@@ -53,13 +59,13 @@ def _sample_inside(img, c, r, fx, fy, side, out):
     of the next, so it is worked out once (kept in the next row's slots of ``out`` until used).
     c, r : the first column and row read."""
     for i in range(side):
-        out[i] = img[r, c + i] + fx * (img[r, c + i + 1] - img[r, c + i])
+        out[i] = _along_x(img, r, c + i, c + i + 1, fx)
     for j in range(side):
         row = r + j + 1
         base = j * side
         for i in range(side):
             top = out[base + i]
-            bot = img[row, c + i] + fx * (img[row, c + i + 1] - img[row, c + i])
+            bot = _along_x(img, row, c + i, c + i + 1, fx)
             out[base + i] = top + fy * (bot - top)
             if j + 1 < side:
                 out[base + side + i] = bot
