@@ -28,9 +28,13 @@ def standardize(gray: np.ndarray, mean: float | None = None, std: float | None =
     array, say), or None for a new array. Returns (H, W) float32 (``out`` when given). A constant
     image becomes all zeros.
     """
+    from aicalib_tf.cnn.corner_map_kernels import mean_std
+
     g = np.asarray(gray, dtype=np.float32)
-    mean = float(g.mean()) if mean is None else float(mean)
-    std = float(g.std()) if std is None else float(std)
+    if mean is None or std is None:
+        own = mean_std(g)
+        mean, std = own[0] if mean is None else mean, own[1] if std is None else std
+    mean, std = float(mean), float(std)
     out = np.subtract(g, mean, out=out, dtype=np.float32)
     return np.divide(out, max(std, 1e-3), out=out)
 

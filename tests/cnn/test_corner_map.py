@@ -81,3 +81,17 @@ def test_standardize_and_padding():
     assert s.dtype == np.float32 and abs(s.mean()) < 1e-6 and abs(s.std() - 1) < 1e-6
     assert np.all(standardize(np.full((3, 3), 7, np.uint8)) == 0)
     assert padded_shape(481, 640) == (484, 640)
+
+
+@pytest.mark.parametrize("shape", [(240, 320), (7, 5), (1, 1), (0, 4)])
+def test_the_compiled_statistics_are_numpys_in_float64(shape):
+    from aicalib_tf.cnn.corner_map_kernels import mean_std
+
+    g = np.random.default_rng(shape[0]).random(shape).astype(np.float32) * 0.3 + 0.5
+    mean, std = mean_std(g)
+    want = (g.astype(np.float64).mean(), g.astype(np.float64).std()) if g.size else (0.0, 0.0)
+    np.testing.assert_allclose((mean, std), want, rtol=1e-12, atol=1e-15)
+    # the network's input is the same as with numpy's float32 statistics, to float32 rounding
+    if g.size:
+        want_input = (g - np.float32(g.mean())) / np.float32(max(g.std(), 1e-3))
+        np.testing.assert_allclose(standardize(g), want_input, rtol=0, atol=1e-5)

@@ -55,6 +55,17 @@ def test_downscale_of_uint8_pixels_is_the_block_mean_of_the_gates_grey(shape, fa
     assert got.size == 0 or (got.min() >= 0.0 and got.max() <= 1.0)
 
 
+@pytest.mark.parametrize("shape", [(480, 640), (37, 55), (2, 2), (40, 33, 3), (9, 7, 4)])
+def test_the_half_size_loop_gives_the_exact_block_sums(shape):
+    # f = 2 has its own loop: the same integer sums, the same scaling, bit for bit
+    a = np.random.default_rng(sum(shape)).integers(0, 256, shape).astype(np.uint8)
+    h, w = shape[0] // 2, shape[1] // 2
+    blocks = a[: 2 * h, : 2 * w].reshape(h, 2, w, 2, -1).astype(np.int64).sum(axis=(1, 3))
+    sums = blocks[..., 0] if a.ndim == 2 else 0.114 * blocks[..., 0] + 0.587 * blocks[..., 1] + 0.299 * blocks[..., 2]
+    want = np.minimum(sums * (1.0 / (255.0 * 4)), 1.0).astype(np.float32)
+    assert np.array_equal(downscale(a, 2), want)
+
+
 @pytest.mark.parametrize("raw", [np.arange(7 * 9 * 3, dtype=np.uint8).reshape(7, 9, 3),
                                  np.linspace(0, 1, 63, dtype=np.float32).reshape(7, 9)])
 def test_a_frames_region_is_that_region_of_the_whole_image_converted(raw):
