@@ -30,18 +30,18 @@ def _parity_contrast(corners: np.ndarray, pattern_size: tuple[int, int], gray: n
     cols, rows = pattern_size
     g = corners.reshape(rows, cols, 2)
     centres = 0.25 * (g[:-1, :-1] + g[1:, :-1] + g[:-1, 1:] + g[1:, 1:])  # (rows-1, cols-1, 2)
-    grey = sample_bilinear(gray, centres.reshape(-1, 2))
-    even = _even_squares(cols, rows)
-    return float(grey[~even].mean() - grey[even].mean())
+    return float(sample_bilinear(gray, centres.reshape(-1, 2)) @ _parity_weights(cols, rows))
 
 
 @functools.lru_cache(maxsize=32)
-def _even_squares(cols: int, rows: int) -> np.ndarray:
-    """((rows−1)·(cols−1),) bool, row-major: inner square (c, r), c, r ≥ 1, has c + r even (read-only)."""
+def _parity_weights(cols: int, rows: int) -> np.ndarray:
+    """((rows−1)·(cols−1),) float32, row-major over the inner squares (c, r), c, r ≥ 1: 1/n_odd where
+    c + r is odd, −1/n_even where even, so that a dot product is the two means' difference (read-only)."""
     rr, cc = np.meshgrid(np.arange(1, rows), np.arange(1, cols), indexing="ij")
     even = ((rr + cc) % 2 == 0).ravel()
-    even.flags.writeable = False
-    return even
+    weights = np.where(even, -1.0 / max(even.sum(), 1), 1.0 / max((~even).sum(), 1)).astype(np.float32)
+    weights.flags.writeable = False
+    return weights
 
 
 def order_full_board(corners: np.ndarray, pattern_size: tuple[int, int], gray: np.ndarray) -> np.ndarray:
@@ -58,17 +58,17 @@ def reading(corners: np.ndarray, pattern_size: tuple[int, int], gray: np.ndarray
     from aicalib_tf.geometry.pattern import board_symmetries
 
     cols, rows = pattern_size
+    perms = board_symmetries(pattern_size)
+    if (cols + rows) % 2 == 1:
+        # the colour rule: turned by 180°, every inner square's parity flips and the contrast changes
+        # sign, so the given reading's contrast decides (the turned one wins only where it is negative)
+        return perms[1] if _parity_contrast(corners, pattern_size, gray) < 0 else perms[0]
     best, best_key = None, None
-    for perm in board_symmetries(pattern_size):
+    for perm in perms:
         c = corners[perm]
         dy = c[(rows - 1) * cols, 1] - c[0, 1]
         dx = c[cols - 1, 0] - c[0, 0]
-        if (cols + rows) % 2 == 1 and cols != rows:
-            key = (_parity_contrast(c, pattern_size, gray), 0.0)
-        elif cols == rows:
-            key = (float(dx + dy), 0.0)
-        else:
-            key = (float(dy), float(dx))
+        key = (float(dx + dy), 0.0) if cols == rows else (float(dy), float(dx))
         if best_key is None or key > best_key:
             best, best_key = perm, key
     return best

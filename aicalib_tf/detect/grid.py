@@ -259,17 +259,21 @@ def _work_out_side(lat: _Lattice, axis: int, sign: int):
     return cells, preds, TOLERANCE * np.sqrt((d * d).sum(axis=1))
 
 
-def _grow_side(lat: _Lattice, axis: int, sign: int, whole: bool = False) -> bool:
+def _grow_side(lat: _Lattice, axis: int, sign: int, whole: bool = False, answer=None) -> bool:
     """Try to add one row/column beyond the current extent on one side (:func:`_side`). True if added.
 
     The line is added when at least half its predictions (and 2) find a point; with ``whole``, only
-    when all of them find a candidate point (``propose`` is not asked).
+    when all of them find a candidate point (``propose`` is not asked). answer : None, or
+    (version, found) from :func:`_answer_sides`, used while the lattice is still at that version.
     """
     side = _side(lat, axis, sign)
     if side is None:
         return False
     cells, preds, tols = side
-    found = lat.find(preds, tols, allow_propose=lat.limit is not None and not whole)
+    if answer is not None and answer[0] == lat.version:
+        found = answer[1]
+    else:
+        found = lat.find(preds, tols, allow_propose=lat.limit is not None and not whole)
     if lat.bend:
         found = _single_steps(lat, axis, sign, cells, preds, tols, found)
     hits = [(c, k) for c, k in zip(cells, found) if k >= 0]
@@ -280,6 +284,17 @@ def _grow_side(lat: _Lattice, axis: int, sign: int, whole: bool = False) -> bool
     for c, k in hits:
         lat.take(c, k)
     return True
+
+
+def _answer_sides(lat: _Lattice) -> dict:
+    """Every side's next line found in one batch: {(axis, sign): (version, found (M,))}, for
+    :func:`_grow_side` (each prediction's answer is its own: the same as asked side by side)."""
+    sides = {(axis, sign): side for axis in (0, 1) for sign in (1, -1) if (side := _side(lat, axis, sign)) is not None}
+    if len(sides) < 2:
+        return {}
+    found = lat.find(np.concatenate([p for _, p, _ in sides.values()]), np.concatenate([t for _, _, t in sides.values()]))
+    ends = np.cumsum([len(c) for c, _, _ in sides.values()])
+    return {key: (lat.version, part) for key, part in zip(sides, np.split(found, ends[:-1]))}
 
 
 def _single_steps(lat: _Lattice, axis: int, sign: int, cells: list, preds: np.ndarray, tols: np.ndarray,
@@ -326,9 +341,10 @@ def _grow(lat: _Lattice) -> None:
     points no candidate gives): a board's lines come from candidates, ``propose`` only looks where
     they end or have gaps.
 
-    Each round of the second kind first asks ``propose`` about all four sides' next lines in one
-    batch (:meth:`_Lattice.ask_ahead`): a side that does not change before its turn is then answered
-    from ``propose``'s memory (:func:`aicalib_tf.detect.junctions.proposer`), one call instead of four.
+    Each round of the second kind first looks for all four sides' next lines in one batch
+    (:func:`_answer_sides`): a side is decided by that answer while no other side has grown before
+    its turn, and asked again otherwise (``propose`` answers from its memory,
+    :func:`aicalib_tf.detect.junctions.proposer`).
     """
     asks = lat.propose is not None and lat.limit is not None
     for whole in ((True, False) if asks else (False,)):
@@ -338,13 +354,10 @@ def _grow(lat: _Lattice) -> None:
         grown = True
         while grown:
             grown = False
-            if asks and not whole:
-                sides = [side for axis in (0, 1) for sign in (1, -1) if (side := _side(lat, axis, sign)) is not None]
-                if len(sides) > 1:
-                    lat.ask_ahead(np.concatenate([p for _, p, _ in sides]), np.concatenate([t for _, _, t in sides]))
+            answers = _answer_sides(lat) if asks and not whole else {}
             for axis in (0, 1):
                 for sign in (1, -1):
-                    while _grow_side(lat, axis, sign, whole):
+                    while _grow_side(lat, axis, sign, whole, answers.get((axis, sign))):
                         grown = True
 
 

@@ -1,4 +1,5 @@
-"""Ring statistics about candidate corners, compiled (numba): the maths is :func:`aicalib_tf.detect.junctions.ring_symmetry`'s.
+"""Ring statistics about candidate corners and their nearest neighbours' distances, compiled (numba): the maths
+is :func:`aicalib_tf.detect.junctions.ring_symmetry`'s and :func:`aicalib_tf.detect.junctions.nearest_spacing`'s.
 """
 
 from __future__ import annotations
@@ -9,7 +10,28 @@ from aicalib_tf.kernels import kernel
 
 from .sampling import _bilinear
 
-__all__ = ['ring_stats']
+__all__ = ["nearest_distances", "ring_stats"]
+
+
+@kernel("f4[:, ::1]", "f8[:, ::1]")
+def nearest_distances(pts):
+    """(N,) distance from each point of pts (N, 2), N ≥ 2, to its nearest other one, in pts' dtype.
+
+    The same values, bit for bit, as the square root of the row minima of
+    :func:`aicalib_tf.geometry.points.sq_distances` with the diagonal left out (a NaN propagates as there).
+    """
+    n = pts.shape[0]
+    out = np.empty(n, pts.dtype)
+    for i in range(n):
+        out[i] = np.inf
+        for j in range(n):
+            if j != i:
+                dx, dy = pts[i, 0] - pts[j, 0], pts[i, 1] - pts[j, 1]
+                d = dx * dx + dy * dy
+                if out[i] == out[i] and not d >= out[i]:  # smaller, or NaN (which then stays)
+                    out[i] = d
+        out[i] = np.sqrt(out[i])
+    return out
 
 
 @kernel("f4[:, ::1], f8[:, ::1], f8[::1], f8[:, ::1]")

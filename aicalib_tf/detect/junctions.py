@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from aicalib_tf.detect.junction_kernels import ring_stats
+from aicalib_tf.detect.junction_kernels import nearest_distances, ring_stats
 from aicalib_tf.detect.refine import (
     SHADOW_SIGMA,
     Smoothed,
@@ -27,12 +27,15 @@ __all__ = ["dedupe", "nearest_spacing", "proposer", "ring_symmetry", "typical_am
 
 
 def nearest_spacing(pts: np.ndarray) -> np.ndarray:
-    """(N,) distance from each point to its nearest other point (px); 8 when alone."""
+    """(N,) distance from each point of pts (N, 2) to its nearest other point (px); 8 when alone.
+
+    Float32 points give float32 distances, others float64 (a compiled loop,
+    :func:`aicalib_tf.detect.junction_kernels.nearest_distances`: the detector asks three times per image).
+    """
     if len(pts) < 2:
         return np.full(len(pts), 8.0)
-    d2 = sq_distances(pts, pts)
-    np.fill_diagonal(d2, np.inf)
-    return np.sqrt(d2.min(axis=1))
+    pts = np.asarray(pts)
+    return nearest_distances(pts if pts.dtype == np.float32 else pts.astype(np.float64))
 
 
 SAME_CORNER = 1.5  # px: two points this near are one corner (dedupe; a weak network point or a proposal there)

@@ -2,6 +2,7 @@
 
 import cv2
 import numpy as np
+import pytest
 
 from aicalib_tf.detect.board_order import symmetric_ids
 from aicalib_tf.detect.junctions import proposer, ring_symmetry
@@ -174,3 +175,21 @@ def test_dedupe_keeps_the_strongest_of_points_that_meet_in_turn():
         pts = rng.uniform(0, rng.uniform(2, 40), (n, 2))
         scores = rng.integers(0, 4, n).astype(np.float32)  # ties keep the earlier point
         np.testing.assert_array_equal(dedupe(pts, scores, 1.5), greedy(pts, scores, 1.5), err_msg=f"trial {trial}")
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_nearest_spacing_is_the_nearest_other_points_distance_bit_for_bit(dtype):
+    from aicalib_tf.detect.junctions import nearest_spacing
+    from aicalib_tf.geometry.points import sq_distances
+
+    rng = np.random.default_rng(3)
+    for n in (2, 3, 54, 300):
+        pts = (rng.random((n, 2)) * 640).astype(dtype)
+        d2 = sq_distances(pts, pts)
+        np.fill_diagonal(d2, np.inf)
+        got = nearest_spacing(pts)
+        assert got.dtype == dtype and np.array_equal(got, np.sqrt(d2.min(axis=1)))
+    pts = rng.random((6, 2)).astype(dtype)
+    pts[2] = np.nan
+    assert np.isnan(nearest_spacing(pts)).all()  # every point's distance to it is NaN, as numpy's minimum gives
+    np.testing.assert_array_equal(nearest_spacing(np.zeros((1, 2), dtype)), [8.0])
