@@ -133,10 +133,23 @@ def _board_ids(cols: int, rows: int) -> np.ndarray:
 
 
 def _steps(ids: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Mean image displacement (px) per +1 column and per +1 row, by an affine fit."""
-    a = np.concatenate([ids.astype(np.float64), np.ones((len(ids), 1))], axis=1)
-    (u, v, _), *_ = np.linalg.lstsq(a, pts.astype(np.float64), rcond=None)
-    return u, v
+    """Mean image displacement (px) per +1 column and per +1 row, by an affine fit.
+
+    ids : (N, 2) (col, row); pts : (N, 2) px. The least-squares fit's normal equations about the
+    means, solved in closed form (2×2); ids on one line leave it undetermined, then the
+    minimum-norm solution (``lstsq``).
+    """
+    a = ids.astype(np.float64)
+    a -= a.mean(axis=0)
+    p = pts.astype(np.float64)
+    p -= p.mean(axis=0)
+    (sxx, sxy), (_, syy) = (a.T @ a).tolist()
+    det = sxx * syy - sxy * sxy
+    if not det > 1e-9 * max(sxx * syy, 1e-300):
+        (u, v), *_ = np.linalg.lstsq(a, p, rcond=None)
+        return u, v
+    b = a.T @ p  # (2, 2): rows the ids' axes
+    return (syy * b[0] - sxy * b[1]) / det, (sxx * b[1] - sxy * b[0]) / det
 
 
 def choose_reading(ids: np.ndarray, pts: np.ndarray, pattern_size) -> np.ndarray:

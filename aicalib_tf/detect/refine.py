@@ -92,7 +92,7 @@ SHADOW_SIGMA = 0.7  # px, the smoothing of the image for the shadow-robust fit
 
 def window_radius(spacing: np.ndarray) -> np.ndarray:
     """Refinement window half-size (px) that fits inside squares of ``spacing`` px: 2..5."""
-    return np.clip(np.round(0.45 * np.asarray(spacing, np.float64)), 2, 5).astype(int)
+    return np.minimum(np.maximum(np.round(0.45 * np.asarray(spacing, np.float64)), 2), 5).astype(int)  # np.clip's values
 
 
 def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, max_shift: np.ndarray | None = None,
@@ -115,7 +115,7 @@ def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, ma
     radius = window_radius(spacing)
     out = pts.astype(np.float32)
     ok = np.zeros(len(pts), bool)
-    for r in np.unique(radius):
+    for r in sorted(set(radius.tolist())):
         sel = np.flatnonzero(radius == r)
         img = smoothed[int(r)]
         out[sel], ok[sel] = refine_saddle(img, pts[sel], sigma=0.0, radius=int(r))
@@ -136,7 +136,8 @@ def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, ma
             # neither fit to be trusted where the window is far from symmetric and this fit failed
             ok[sel[odd][~got_ok & (asym[odd] > SHADOWED)]] = False
     if max_shift is not None:
-        ok &= np.linalg.norm(out - pts, axis=1) <= max_shift
+        d = out - pts
+        ok &= np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) <= max_shift  # np.linalg.norm's values
     return out, ok
 
 
