@@ -193,3 +193,22 @@ def test_nearest_spacing_is_the_nearest_other_points_distance_bit_for_bit(dtype)
     pts[2] = np.nan
     assert np.isnan(nearest_spacing(pts)).all()  # every point's distance to it is NaN, as numpy's minimum gives
     np.testing.assert_array_equal(nearest_spacing(np.zeros((1, 2), dtype)), [8.0])
+
+
+def test_board_steps_are_the_affine_least_squares_fit():
+    from aicalib_tf.detect.board_order import _steps
+
+    rng = np.random.default_rng(5)
+    for trial in range(200):
+        cols, rows = (int(v) for v in rng.integers(3, 12, 2))
+        ids = np.stack(np.meshgrid(np.arange(cols), np.arange(rows)), -1).reshape(-1, 2)
+        ids = ids[rng.random(len(ids)) < 0.8] if trial % 2 else ids  # holes too
+        pts = ids @ rng.normal(0, 30, (2, 2)) + rng.normal(0, 1, (len(ids), 2)) + 300
+        design = np.concatenate([ids, np.ones((len(ids), 1))], axis=1).astype(np.float64)
+        (u, v, _), *_ = np.linalg.lstsq(design, pts, rcond=None)
+        got = _steps(ids, pts)
+        np.testing.assert_allclose(got, (u, v), rtol=1e-9, atol=1e-9)
+    # ids along one line leave the other step undetermined: the minimum-norm fit, as lstsq gives
+    u, v = _steps(np.array([[0, 0], [1, 0], [2, 0]]), np.array([[0.0, 0.0], [10.0, 1.0], [20.0, 2.0]]))
+    np.testing.assert_allclose(u, [10.0, 1.0])
+    np.testing.assert_allclose(v, [0.0, 0.0], atol=1e-12)
