@@ -24,9 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aicalib_tf.detect.grid_kernels import grow_lines, seed_block
+from aicalib_tf.detect.grid_kernels import edge_contrasts, grow_lines, seed_block
 from aicalib_tf.detect.junctions import SAME_CORNER
-from aicalib_tf.detect.sampling import sample_bilinear
 from aicalib_tf.geometry.points import sq_distances
 
 MIN_CORNERS = 9  # fewest corners of a grid, and so of any board returned: a grid grows from a 3x3 seed
@@ -481,22 +480,13 @@ def edge_contrast(gray: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
 
     Between neighbouring corners along a grid line the board has a black square on one side and a
     white one on the other; along a diagonal both sides are the same square. Samples at 35%, 50%
-    and 65% of the way, a quarter of the length to each side.
+    and 65% of the way, a quarter of the length to each side (a compiled loop,
+    :func:`aicalib_tf.detect.grid_kernels.edge_contrasts`).
     gray : (H, W) float32. p, q : (M, 2) px. Returns (M,) float32, |mean left − mean right|.
     """
     p = np.asarray(p, np.float64).reshape(-1, 2)
     q = np.asarray(q, np.float64).reshape(-1, 2)
-    d = q - p
-    n = np.stack([-d[:, 1], d[:, 0]], axis=1) * 0.25
-    t = np.array([0.35, 0.5, 0.65])[None, :, None]
-    mid = p[:, None, :] + t * d[:, None, :]
-    left, right = mid + n[:, None, :], mid - n[:, None, :]
-    g = np.asarray(gray, np.float32)
-
-    def sample(xy):
-        return sample_bilinear(g, xy.reshape(-1, 2)).reshape(xy.shape[:-1])
-
-    return np.abs(sample(left).mean(axis=1) - sample(right).mean(axis=1)).astype(np.float32)
+    return edge_contrasts(np.asarray(gray, np.float32), p, q)
 
 
 class _SeedContrast:

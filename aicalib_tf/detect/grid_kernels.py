@@ -12,7 +12,31 @@ import numpy as np
 
 from aicalib_tf.kernels import helper, kernel
 
-__all__ = ["seed_block", "grow_lines"]
+from .sampling import _bilinear
+
+__all__ = ["edge_contrasts", "seed_block", "grow_lines"]
+
+EDGE_STEPS = (0.35, 0.5, 0.65)  # where along a segment its two sides are sampled
+EDGE_SIDE = 0.25  # how far to each side, in segment lengths
+
+
+@kernel("f4[:, ::1], f8[:, ::1], f8[:, ::1]")
+def edge_contrasts(img, p, q):
+    """(M,) float32: |mean left − mean right| of img (H, W) along each segment p → q ((M, 2) px),
+    sampled (bilinear, the nearest edge pixel outside) at ``EDGE_STEPS`` of the way, ``EDGE_SIDE``
+    of its length to each side. The maths of :func:`aicalib_tf.detect.grid.edge_contrast`."""
+    m = p.shape[0]
+    out = np.empty(m, np.float32)
+    for k in range(m):
+        dx, dy = q[k, 0] - p[k, 0], q[k, 1] - p[k, 1]
+        nx, ny = -dy * EDGE_SIDE, dx * EDGE_SIDE
+        left = right = 0.0
+        for t in EDGE_STEPS:
+            mx, my = p[k, 0] + t * dx, p[k, 1] + t * dy
+            left += _bilinear(img, mx + nx, my + ny)
+            right += _bilinear(img, mx - nx, my - ny)
+        out[k] = abs(left - right) / len(EDGE_STEPS)
+    return out
 
 
 @kernel("f8[:, ::1], i8, i8[::1], f8[::1], b1[::1], f8[:, :, ::1], i8, f8, f8, f8, f8")

@@ -1,8 +1,9 @@
 """Exact bilinear image samples inside compiled loops (numba), shared by the refinement kernels.
 
 Images are (H, W) float32; points are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0);
-samples outside the image take the nearest edge pixel (OpenCV's BORDER_REPLICATE). ``cv2.remap``
-rounds a sample position to 1/32 px, which is why the fits sample here instead.
+samples outside the image take the nearest edge pixel (OpenCV's BORDER_REPLICATE). The fits sample
+here, in float64 at float64 positions: ``cv2.remap`` (:func:`sample_bilinear`) takes float32
+positions, and OpenCV 4 rounded them to 1/32 px.
 """
 
 from __future__ import annotations

@@ -127,9 +127,31 @@ def test_a_board_tilted_60_degrees_assembles_unsheared(index):
     assert _same_lattice(grids[0].ij, cr[order])
 
 
-def test_edge_contrast_takes_more_segments_than_one_remap_map_holds():
-    # assemble_grids asks for MAX_CANDIDATES (3000) x 12 neighbours = 36000 segments; cv2.remap
-    # refused maps of 32767 rows or more (a checker-like clutter image at 1983x453 crashed)
+def test_edge_contrast_is_the_bilinear_sides_difference():
+    rng = np.random.default_rng(2)
+    gray = rng.random((30, 40)).astype(np.float32)
+    p = rng.uniform(-3, 42, (300, 2))  # some samples beyond the image: the nearest edge pixel
+    q = p + rng.uniform(-8, 8, (300, 2))
+
+    def bilinear(x, y):
+        x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+        fx, fy = x - x0, y - y0
+        c0, c1 = np.clip(x0, 0, 39), np.clip(x0 + 1, 0, 39)
+        r0, r1 = np.clip(y0, 0, 29), np.clip(y0 + 1, 0, 29)
+        g = gray.astype(np.float64)
+        top = g[r0, c0] + fx * (g[r0, c1] - g[r0, c0])
+        bot = g[r1, c0] + fx * (g[r1, c1] - g[r1, c0])
+        return top + fy * (bot - top)
+
+    d = q - p
+    n = np.stack([-d[:, 1], d[:, 0]], 1) * 0.25
+    sides = [sum(bilinear(*(p + t * d + s * n).T) for t in (0.35, 0.5, 0.65)) / 3 for s in (1, -1)]
+    np.testing.assert_allclose(edge_contrast(gray, p, q), np.abs(sides[0] - sides[1]), rtol=0, atol=1e-6)
+
+
+def test_edge_contrast_takes_as_many_segments_as_the_assembly_asks():
+    # assemble_grids asks for MAX_CANDIDATES (3000) x 12 neighbours = 36000 segments (once more
+    # than cv2.remap's maps could hold: a checker-like clutter image at 1983x453 crashed)
     rng = np.random.default_rng(0)
     gray = rng.random((60, 80)).astype(np.float32)
     p = rng.uniform(0, 79, (36000, 2))
