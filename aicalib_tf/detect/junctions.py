@@ -35,7 +35,7 @@ def nearest_spacing(pts: np.ndarray) -> np.ndarray:
     if len(pts) < 2:
         return np.full(len(pts), 8.0)
     pts = np.asarray(pts)
-    return nearest_distances(pts if pts.dtype == np.float32 else pts.astype(np.float64))
+    return nearest_distances(pts if pts.dtype == np.float32 else np.asarray(pts, np.float64))
 
 
 SAME_CORNER = 1.5  # px: two points this near are one corner (dedupe; a weak network point or a proposal there)

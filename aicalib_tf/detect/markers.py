@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from aicalib_tf.detect.sampling import sample_bilinear
 from aicalib_tf.geometry.charuco import CharucoBoard, dictionary
 
 __all__ = ["Placed", "READINGS", "aruco_markers", "noise_sigma", "lattice_coords", "place_marker", "decode_cells", "verify_cells", "MAX_BIT_ERRORS", "MIN_BIT_MARGIN"]
@@ -172,9 +173,7 @@ def _sample(gray: np.ndarray, quad: np.ndarray, unit: np.ndarray) -> np.ndarray:
     """Bilinear samples of gray at unit-cell points (..., 2) mapped through the cell's homography."""
     H = cv2.getPerspectiveTransform(np.float32([[0, 0], [1, 0], [1, 1], [0, 1]]), quad.astype(np.float32))
     xy = cv2.perspectiveTransform(unit.reshape(-1, 1, 2).astype(np.float64), H).reshape(-1, 2).astype(np.float32)
-    vals = cv2.remap(gray, xy[:, 0].reshape(1, -1), xy[:, 1].reshape(1, -1), cv2.INTER_LINEAR,
-                     borderMode=cv2.BORDER_REPLICATE)
-    return vals.reshape(unit.shape[:-1])
+    return sample_bilinear(gray, xy).reshape(unit.shape[:-1])
 
 
 def _board_codes(board: CharucoBoard) -> tuple[np.ndarray, np.ndarray]:

@@ -99,9 +99,9 @@ _REMAP_COLS = 4096  # cv2.remap needs maps of fewer than 32767 rows and columns
 def sample_bilinear(g: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """Bilinear grey values (M,) float32 of g (H, W) float32 at xy (M, 2) px, border replicated, any M.
 
-    The points go to cv2.remap as rows of at most ``_REMAP_COLS``: assemble_grids asks for 3 samples of
-    ``MAX_CANDIDATES`` · 12 segments on each side, more than 32767 rows of one map. A few points make
-    one short row (each sample depends on its own point alone, so the layout changes no value).
+    The points go to cv2.remap as rows of at most ``_REMAP_COLS`` (its maps hold fewer than 32767 rows
+    and columns, so one row of every point would fail past that). A few points make one short row
+    (each sample depends on its own point alone, so the layout changes no value).
     """
     m = len(xy)
     if m == 0:
