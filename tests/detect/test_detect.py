@@ -122,6 +122,21 @@ def test_find_chessboard_corners_has_opencvs_output_shape(model):
     assert found and corners.shape == (54, 1, 2) and corners.dtype == np.float32
 
 
+def test_find_chessboard_corners_takes_opencvs_full_signature(model):
+    # the tutorials' call: find_chessboard_corners(gray, (9, 6), None), and with flags and an output array
+    s = make_sample("clean", 21, 0, pattern=(9, 6))
+    flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
+    found, corners = find_chessboard_corners(s.image, (9, 6), None, model=model)
+    found_f, corners_f = find_chessboard_corners(s.image, (9, 6), None, flags, model=model)
+    out = np.zeros((54, 1, 2), np.float32)
+    found_o, corners_o = find_chessboard_corners(s.image, (9, 6), out, flags=flags, model=model)
+    assert found and found_f and found_o and corners_o is out
+    np.testing.assert_array_equal(corners, corners_f)
+    np.testing.assert_array_equal(out, corners)
+    with pytest.raises(TypeError, match="flags"):
+        find_chessboard_corners(s.image, (9, 6), None, "fast", model=model)
+
+
 def test_board_free_images_give_no_board(model):
     # clutter images hold checker-like patches: partial boards must not come from them either
     for i in range(10):
