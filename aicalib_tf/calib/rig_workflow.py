@@ -264,7 +264,10 @@ def calibrate_views(views: dict, sizes: dict, pairing, skipped: dict, cfg, model
                         image_circles=[(circles or {}).get(c) for c in names])
     rig = assess_rig(rig, [views[c] for c in names])
     problems = rig_problems(rig)
-    rig = dataclasses.replace(rig, quality=dict(rig.quality, status="failed" if problems else "ok", problems=problems))
+    quality = dict(rig.quality, status="failed" if problems else "ok", problems=problems)
+    if problems:  # one verdict per run: a rig that fails its sanity checks is never also called good
+        quality["verdict"] = "failed: not a usable rig calibration (" + "; ".join(problems) + ")"
+    rig = dataclasses.replace(rig, quality=quality)
     report = format_rig_report(rig, pairing, skipped)
     if problems:
         report += "\n\nFAILED: this is not a usable rig calibration\n" + "\n".join(f"  - {p}" for p in problems) + \

@@ -105,8 +105,11 @@ def test_rig_of_one_camera_with_copies_of_its_images_is_failed_not_good(rig_phot
                  "--square", "25mm", "--model", "plumb_bob", "--out", str(out), "--quiet"])
     text = capsys.readouterr().out
     assert code == 1 and "FAILED" in text and "same images" in text
+    verdicts = [line for line in text.splitlines() if line.startswith("verdict:")]
+    assert verdicts and all("failed" in v and "good" not in v for v in verdicts), verdicts  # one verdict per run
     rig = json.loads((out / "rig.json").read_text())
     assert rig["quality"]["status"] == "failed" and rig["quality"]["problems"]
+    assert rig["quality"]["verdict"].startswith("failed")
     assert (out / "cam0" / "camera.yaml").exists() and not (out / "intrinsics.yml").exists()
 
 
