@@ -34,7 +34,7 @@ import numpy as np
 from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.calib.fit import CalibrationError, View
 from aicalib_tf.guided.save import PARTIAL_HEAD
-from aicalib_tf.guided.session import GuidedCalibration, GuidedConfig
+from aicalib_tf.guided.session import GuidedCalibration, GuidedConfig, check_max_views
 
 __all__ = ["RigVideoConfig", "run_rig_video", "is_rig_video", "parse_tolerance", "pair_overlap", "SYNC_CHECK_EVERY"]
 
@@ -63,6 +63,9 @@ class RigVideoConfig:
     save_partial: bool = False  # a reading stopped early (Ctrl-C, a stream that fails) still calibrates
     quiet: bool = False
     workers: int | None = None  # unused: frames come one at a time
+
+    def __post_init__(self):
+        check_max_views(self.max_views)
 
 
 def is_rig_video(cameras) -> bool:

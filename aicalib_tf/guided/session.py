@@ -47,6 +47,16 @@ _CELLS = (8, 6)  # the coverage grid of the keep rule
 _POOL = 240  # candidate views remembered beyond the kept ones (the most recent)
 
 
+MIN_MAX_VIEWS = 3  # a calibration needs at least three views of the board
+
+
+def check_max_views(n) -> int:
+    """``n`` if it is a usable cap on the kept views (an int of at least :data:`MIN_MAX_VIEWS`); else ValueError."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < MIN_MAX_VIEWS:
+        raise ValueError(f"--max-views must be an integer of at least {MIN_MAX_VIEWS}, got {n!r}")
+    return int(n)
+
+
 @dataclass(frozen=True)
 class GuidedConfig:
     """The loop's settings (module docstring). pattern : (cols, rows); square : board units."""
@@ -69,6 +79,9 @@ class GuidedConfig:
     gate_moving: float = 2.0
     gate_changed: float = 1.5
     gate_max_gap: int = 30
+
+    def __post_init__(self):
+        check_max_views(self.max_views)
 
 
 @dataclass(frozen=True)

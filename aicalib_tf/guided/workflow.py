@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.calib.fit import Calibration, CalibrationError
-from aicalib_tf.guided.session import GuidedCalibration, GuidedConfig
+from aicalib_tf.guided.session import GuidedCalibration, GuidedConfig, check_max_views
 
 __all__ = ["GuidedRunConfig", "run_guided", "progress_line", "summary_lines", "guided_source", "parse_target"]
 
@@ -39,6 +39,9 @@ class GuidedRunConfig:
     quiet: bool = False
     examine_all: bool = False
     workers: int | None = None  # unused: frames come one at a time
+
+    def __post_init__(self):
+        check_max_views(self.max_views)
 
 
 def guided_source(images, camera) -> str | None:

@@ -62,6 +62,7 @@ def _config(args):
     from aicalib_tf.calib.workflow import parse_square
     from aicalib_tf.geometry.lens import MODELS
     from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
+    from aicalib_tf.guided.session import check_max_views
     from aicalib_tf.guided.workflow import parse_target
     from aicalib_tf.live.server import LiveConfig
     from aicalib_tf.outfolder import check_out_path
@@ -72,8 +73,7 @@ def _config(args):
         raise ValueError(f"unknown --model {args.model!r}; choose auto or one of {', '.join(MODELS)}")
     if not 0 <= args.port <= 65535:
         raise ValueError(f"--port must be in 0..65535, got {args.port}")
-    if args.max_views < 3:
-        raise ValueError(f"--max-views must be at least 3, got {args.max_views}")
+    check_max_views(args.max_views)
     check_out_path(args.out)
     square, unit = parse_square(args.square)
     return LiveConfig(pattern=check_pattern(parse_pattern(args.pattern)), square=square, square_unit=unit,

@@ -95,3 +95,14 @@ def test_a_charuco_board_with_a_video_is_one_line(tmp_path, capsys):
     assert main(["--rig", f"cam0={tmp_path}/a.mp4", f"cam1={tmp_path}/b.mp4", "--board", spec, "--out",
                  str(tmp_path / "o"), "--quiet"]) == 2
     assert "takes photos" in _one_error_line(capsys)
+
+
+@pytest.mark.parametrize("n", ["0", "-1", "2"])
+def test_max_views_under_three_is_refused(video, tmp_path, capsys, n):
+    out = tmp_path / "o"
+    assert main([str(video / "video.avi"), "--pattern", "9x6", "--max-views", n, "--out", str(out), "--quiet"]) == 2
+    assert f"--max-views must be an integer of at least 3, got {n}" in _one_error_line(capsys)
+    assert not out.exists()
+    assert main(["--rig", f"cam0={video}/video.avi", f"cam1={video}/video.avi", "--pattern", "9x6", "--max-views", n,
+                 "--out", str(out), "--quiet"]) == 2
+    assert "--max-views must be" in _one_error_line(capsys)
