@@ -30,7 +30,7 @@ import tensorflow as tf
 from aicalib_tf.cnn.corner_map import STRIDE
 from aicalib_tf.cnn.training_data import CROP_SIZE, corner_crop
 
-__all__ = ["find_shards", "corner_dataset", "SHUFFLE_BUFFER"]
+__all__ = ["find_shards", "check_shard", "corner_dataset", "SHUFFLE_BUFFER"]
 
 SHUFFLE_BUFFER = 512  # examples (~0.3 MB each at 640x480)
 _FEATURES = {
@@ -66,7 +66,66 @@ def find_shards(spec: str) -> list[str]:
         if missing:
             raise ValueError(f"--data: {folder} lacks {len(missing)} of its {len(meta['files'])} shards "
                              f"(first: {missing[0]}); render them first")
-    return sorted(files)
+    return [check_shard(f) for f in sorted(files)]
+
+
+_HEADER = 12  # a record's length (uint64) and its masked CRC (uint32); the data's masked CRC follows the data
+
+
+def check_shard(path: str) -> str:
+    """``path`` if it reads as a TFRecord file of data_gen examples; ``ValueError`` naming the file and
+    the record otherwise.
+
+    Every record's framing is read (its length and the length's checksum, without reading the data),
+    so a truncated file, a text file or another format is refused before training starts; the first
+    record's data checksum and its example (image bytes = height × width, corners in pairs) are
+    checked in full. A checksum broken in a later record is reported when training reaches it.
+    """
+    from data_gen.tfrecord import masked_crc32c
+
+    p = Path(path)
+    if p.is_dir():
+        raise ValueError(f"--data: {path}: a folder; give its shards, e.g. {p / '*.tfrecord'}")
+    if not p.is_file():
+        raise ValueError(f"--data: {path}: not a file")
+    size, offset, count = p.stat().st_size, 0, 0
+    with open(p, "rb") as f:
+        while offset < size:
+            head = f.read(_HEADER)
+            if len(head) < _HEADER:
+                what = "too short to be a TFRecord file" if count == 0 else f"record {count} is cut short (truncated file)"
+                raise ValueError(f"--data: {path}: {what}")
+            length = int.from_bytes(head[:8], "little")
+            if masked_crc32c(head[:8]) != int.from_bytes(head[8:], "little"):
+                raise ValueError(f"--data: {path}: record {count} has a bad length checksum (not a TFRecord file?)")
+            if offset + _HEADER + length + 4 > size:
+                raise ValueError(f"--data: {path}: record {count} is cut short (truncated file)")
+            if count == 0:
+                data, crc = f.read(length), f.read(4)
+                if masked_crc32c(data) != int.from_bytes(crc, "little"):
+                    raise ValueError(f"--data: {path}: record 0 has a bad data checksum (corrupted file)")
+                _check_example(path, data)
+            else:
+                f.seek(length + 4, 1)
+            offset += _HEADER + length + 4
+            count += 1
+    if count == 0:
+        raise ValueError(f"--data: {path}: holds no records")
+    return path
+
+
+def _check_example(path: str, record: bytes) -> None:
+    """ValueError unless ``record`` is one of data_gen's corner examples (see ``_FEATURES``)."""
+    try:
+        ex = tf.io.parse_single_example(record, _FEATURES)
+        h, w = int(ex["height"][0]), int(ex["width"][0])
+        n_bytes, n_xy = len(ex["image"].numpy()), int(tf.size(ex["corners"].values))
+    except (tf.errors.OpError, ValueError, IndexError) as exc:
+        raise ValueError(f"--data: {path}: record 0 is not a data_gen corner example "
+                         f"({str(exc).splitlines()[0][:120]})") from None
+    if h < 1 or w < 1 or n_bytes != h * w or n_xy % 2:
+        raise ValueError(f"--data: {path}: record 0 has another shape ({n_bytes} image bytes for {w}x{h}, "
+                         f"{n_xy} corner values)")
 
 
 def _crop(image, stats, corners, key, squeeze: float, shrink: float):

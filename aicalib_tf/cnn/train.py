@@ -282,6 +282,12 @@ def _training_data(cfg: TrainConfig, strategy, kind: str, global_batch: int, ini
     return batches_cls(pool, batch_size=global_batch, steps=cfg.steps, seed=cfg.seed, epoch=initial_epoch, **extra)
 
 
+def _op_message(exc) -> str:
+    """A TensorFlow error's own message in one line, without the graph's trace."""
+    text = " ".join(str(getattr(exc, "message", exc)).split())
+    return text.split(" [[")[0][:300]
+
+
 def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epochs_given: int | None = None) -> dict:
     """Train as ``cfg`` says and write RUN_DIR; returns the final metrics dict.
 
@@ -324,6 +330,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
                                       **({"init_model": init_record(cfg.init)} if cfg.init else {})})
 
     import keras
+    import tensorflow as tf
 
     from aicalib_tf.cnn.model import (
         build_model,
@@ -362,9 +369,12 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
         backup = [distribute.WorkerBackup(out / distribute.BACKUP_DIR, run / distribute.BACKUP_DIR)] if multiworker else []
         # shuffle=False: batches are already random per (seed, epoch, index); Keras's own shuffle
         # draws from Python's global random, which a resumed process cannot replay
-        model.fit(batches, epochs=cfg.epochs, initial_epoch=initial_epoch, verbose=1 if progress else 2, shuffle=False,
-                  steps_per_epoch=cfg.steps,
-                  callbacks=[schedule, *_callbacks(cfg, run, val, initial_epoch, wall_before, t0, backup)])
+        try:
+            model.fit(batches, epochs=cfg.epochs, initial_epoch=initial_epoch, verbose=1 if progress else 2,
+                      shuffle=False, steps_per_epoch=cfg.steps,
+                      callbacks=[schedule, *_callbacks(cfg, run, val, initial_epoch, wall_before, t0, backup)])
+        except tf.errors.DataLossError as exc:  # a record's checksum broken past the first (check_shard reads those)
+            raise ValueError(f"--data: a shard could not be read: {_op_message(exc)}") from None
     final = run / "model.keras"
     save_model(model, final)
     stats = evaluate_points(model, *val, cfg.threshold)

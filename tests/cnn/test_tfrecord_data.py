@@ -79,3 +79,43 @@ def test_train_refuses_shards_for_the_patch_classifier(capsys):
 
     assert main(["--out", "unused", "--arch", "report", "--data", "x/*.tfrecord"]) == 2
     assert capsys.readouterr().err.strip().startswith("error: --data: TFRecord shards train corner-map models")
+
+
+def _broken_shards(folder, good: bytes) -> dict:
+    """Files that are not data_gen shards: {name: words the error must hold}."""
+    from data_gen.tfrecord import encode_example, frame_record
+
+    other = frame_record(encode_example({"image": b"\0" * 10, "height": np.array([3]), "width": np.array([4]),
+                                         "mean": np.array([0.5], np.float32), "std": np.array([0.2], np.float32),
+                                         "corners": np.array([1.0, 2.0], np.float32)}))
+    crc = bytearray(good)
+    crc[40] ^= 0xFF
+    cases = {"empty.tfrecord": (b"", "holds no records"), "text.tfrecord": (b"hello, world\n" * 3, "length checksum"),
+             "short.tfrecord": (b"hi\n", "too short"), "cut.tfrecord": (good[:-9], "record 1 is cut short"),
+             "crc.tfrecord": (bytes(crc), "record 0 has a bad data checksum"),
+             "shape.tfrecord": (other, "record 0 has another shape")}
+    for name, (data, _) in cases.items():
+        (folder / name).write_bytes(data)
+    return {name: words for name, (_, words) in cases.items()}
+
+
+def test_files_that_are_not_shards_are_refused_naming_the_file_and_record(shards, tmp_path):
+    good = (shards / "data-00000-of-00002.tfrecord").read_bytes()
+    for name, words in _broken_shards(tmp_path, good).items():
+        with pytest.raises(ValueError, match=words) as err:
+            find_shards(str(tmp_path / name))
+        assert str(tmp_path / name) in str(err.value)
+    with pytest.raises(ValueError, match="a folder; give its shards"):
+        find_shards(str(shards))
+
+
+def test_train_on_a_broken_shard_is_one_line_and_exit_2(shards, tmp_path, capsys):
+    from aicalib_tf.train import main
+
+    _broken_shards(tmp_path, (shards / "data-00000-of-00002.tfrecord").read_bytes())
+    for name in ("empty.tfrecord", "crc.tfrecord"):
+        out = tmp_path / f"run-{name}"
+        assert main(["--data", str(tmp_path / name), "--out", str(out), "--steps", "1", "--epochs", "1", "--quiet"]) == 2
+        err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error")]
+        assert len(err) == 1 and name in err[0], err
+        assert not (out / "model.keras").exists()
