@@ -30,6 +30,7 @@ ENTRY_POINTS: tuple[tuple[str, str, str], ...] = (
     ("python -m aicalib_tf.calibrate", "aicalib_tf.calibrate", "calibrate a camera or a rig from photos, a video or a camera"),
     ("python -m aicalib_tf.live", "aicalib_tf.live.__main__", "calibrate from a web page showing the camera"),
     ("python -m aicalib_tf.check", "aicalib_tf.check", "check that a calibration still holds"),
+    ("python -m aicalib_tf.compare", "aicalib_tf.compare", "compare two calibrations of one camera (rotation fitted)"),
     ("python -m aicalib_tf.detect", "aicalib_tf.detect.__main__", "detect chessboard or ChArUco corners in images"),
     ("python -m aicalib_tf.board", "aicalib_tf.board", "write a printable ChArUco board"),
     ("python -m aicalib_tf.evaluate", "aicalib_tf.evaluate", "benchmark the detectors against OpenCV"),

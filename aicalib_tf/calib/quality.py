@@ -3,7 +3,9 @@
 * :func:`projection_uncertainty`: the 1σ projection uncertainty (px) over the image, propagated
   from the covariance of the intrinsics (``cal.covariance``, poses marginalised).
 * :func:`half_difference`: calibrate two disjoint halves of the views and measure how far apart
-  their projections are after the best rotation of the camera frame (mrcal's ``projection_diff``).
+  their projections are after the best rotation of the camera frame (mrcal's ``projection_diff``;
+  the difference itself is :func:`aicalib_tf.calib.diff.projection_diff`, which
+  ``python -m aicalib_tf.compare`` uses too).
 * :func:`predicted_half_difference`: what the two halves' covariances predict for that number.
 * :func:`verdict` and :func:`assess`: one line for the user and the dict kept in ``cal.quality``.
 
@@ -32,9 +34,9 @@ import inspect
 import cv2
 import numpy as np
 
+from aicalib_tf.calib.diff import cell_counts, grid_points, projection_diff, rotation_compensated_diff, split_views
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.pattern import board_points
-from aicalib_tf.geometry.pose import best_rotation
 
 # size: the uncertainty map, its reusable basis (for guided calibration's many predicted covariances),
 # one view's information and the half-vs-half test share the private Jacobian helpers below.
@@ -60,23 +62,10 @@ def lens_of(cal) -> L.Lens:
     return L.Lens(model, cal.K, cal.dist, tuple(cal.image_size))
 
 
-def grid_points(image_size, grid=(32, 24)) -> np.ndarray:
-    """(gy·gx, 2) float64 px: the centres of a gx × gy grid of cells over the image, row-major."""
-    w, h = (int(v) for v in image_size)
-    gx, gy = (int(v) for v in grid)
-    xs = (np.arange(gx) + 0.5) * w / gx - 0.5
-    ys = (np.arange(gy) + 0.5) * h / gy - 0.5
-    X, Y = np.meshgrid(xs, ys)
-    return np.stack([X.ravel(), Y.ravel()], axis=1)
-
-
 def coverage_counts(views, image_size, cells=(16, 12)) -> np.ndarray:
     """(cells_y, cells_x) int64: how many detected corners of ``views`` fall in each image cell."""
-    w, h = (int(v) for v in image_size)
     pts = np.concatenate([np.asarray(v.corners, np.float64).reshape(-1, 2) for v in views]) if len(views) else np.zeros((0, 2))
-    counts, _, _ = np.histogram2d(pts[:, 1], pts[:, 0], bins=(int(cells[1]), int(cells[0])),
-                                  range=((-0.5, h - 0.5), (-0.5, w - 0.5)))
-    return counts.astype(np.int64)
+    return cell_counts(pts, image_size, cells)
 
 
 _REGIONS = {"top-left": (0, 0), "top": (0, 1), "top-right": (0, 2), "left": (1, 0), "centre": (1, 1),
@@ -214,41 +203,6 @@ def projection_uncertainty(cal, grid=(32, 24), distance=None, *, covariance=None
     return pts, np.where(ok & inside & np.all(np.isfinite(G), axis=(1, 2)), sigma, np.nan)
 
 
-def rotation_compensated_diff(lens_a: L.Lens, lens_b: L.Lens, pixels, fit_mask=None) -> tuple[np.ndarray, np.ndarray]:
-    """mrcal-style projection difference of two lenses, px.
-
-    Each pixel q (M, 2) is unprojected with ``lens_a`` to a ray v; the rotation R minimising
-    Σ |project_b(R·v) − q|² over the ``fit_mask`` pixels (default all) is found from R = I
-    (:func:`aicalib_tf.geometry.pose.best_rotation`). Returns (diff (M,) px = |project_b(R·v) − q|,
-    NaN where either lens has no ray; R (3, 3)).
-    """
-    q = np.asarray(pixels, np.float64).reshape(-1, 2)
-    v = lens_a.unproject(q)
-    ok = np.all(np.isfinite(v), axis=1) & np.all(np.isfinite(lens_b.project(v)), axis=1)
-    fit = ok if fit_mask is None else ok & np.asarray(fit_mask, bool)
-    if fit.sum() < 3:
-        raise ValueError(f"only {int(fit.sum())} pixels are imaged by both lenses; cannot compare them")
-    R = best_rotation(lens_b, v[fit], q[fit])
-    d = np.full(len(q), np.nan)
-    d[ok] = np.linalg.norm(lens_b.project(v[ok] @ R.T) - q[ok], axis=1)
-    return d, R
-
-
-def _split(views, split: str) -> tuple[list, list]:
-    views = list(views)
-    if split == "evenodd":
-        return views[0::2], views[1::2]
-    if split == "halves":
-        k = (len(views) + 1) // 2
-        return views[:k], views[k:]
-    raise ValueError(f"split must be 'evenodd' or 'halves', got {split!r}")
-
-
-def _stats(d: np.ndarray, mask: np.ndarray) -> tuple[float, float]:  # (median, mean) of the finite d[mask]
-    x = d[mask & np.isfinite(d)]
-    return (float(np.median(x)), float(np.mean(x))) if x.size else (float("nan"), float("nan"))
-
-
 def half_difference(views, fit, pattern_size, square_size, image_size, model, split="evenodd", *,
                     grid=(32, 24), start=None, circle=None) -> dict:
     """Calibrate two disjoint halves of ``views`` and compare them (rotation-compensated), px.
@@ -264,22 +218,20 @@ def half_difference(views, fit, pattern_size, square_size, image_size, model, sp
     (px), "rotation_deg", "points" (M, 2) px, "diff" (M,) px, "covered" (M,) bool, "grid",
     "cal_a", "cal_b", "views_a", "views_b"}. Raises ValueError with fewer than 3 views in a half.
     """
-    a, b = _split(views, split)
+    a, b = split_views(views, split)
     if min(len(a), len(b)) < 3:
         raise ValueError(f"half_difference needs at least 3 views in each half, got {len(a)} and {len(b)}")
     kw = {} if start is None else {"start": start}
     cal_a = fit(a, pattern_size, square_size, image_size, model, **kw)
     cal_b = fit(b, pattern_size, square_size, image_size, model, **kw)
-    pts = grid_points(image_size, grid)
-    covered = _covered_mask(views, image_size, grid)
-    diff, R = rotation_compensated_diff(lens_of(cal_a), lens_of(cal_b), pts, covered)
-    med_c, mean_c = _stats(diff, covered)
-    med_a, mean_a = _stats(diff, in_circle(image_size, grid, circle))
-    return {"split": split, "n_a": len(a), "n_b": len(b), "median_covered": med_c, "mean_covered": mean_c,
-            "median_all": med_a, "mean_all": mean_a,
-            "rotation_deg": float(np.degrees(np.linalg.norm(cv2.Rodrigues(R)[0]))),
-            "points": pts, "diff": diff, "covered": covered, "grid": tuple(grid), "cal_a": cal_a, "cal_b": cal_b,
-            "views_a": a, "views_b": b}
+    inside = in_circle(image_size, grid, circle)
+    d = projection_diff(lens_of(cal_a), lens_of(cal_b), grid=grid, covered=_covered_mask(views, image_size, grid) & inside,
+                        inside=inside)
+    c, w = d["covered_stats"], d["all_stats"]
+    return {"split": split, "n_a": len(a), "n_b": len(b), "median_covered": c["median"], "mean_covered": c["mean"],
+            "p95_covered": c["p95"], "median_all": w["median"], "mean_all": w["mean"], "rotation_deg": d["rotation_deg"],
+            "points": d["points"], "diff": d["diff"], "covered": d["covered"], "grid": tuple(grid), "cal_a": cal_a,
+            "cal_b": cal_b, "views_a": a, "views_b": b}
 
 
 def predicted_half_difference(cal_a, cal_b, covered=None, *, grid=(32, 24), samples: int = 400, seed: int = 0,
