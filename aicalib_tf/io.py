@@ -12,6 +12,7 @@ then ``os.replace``, so a reader never sees half a file.
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 from pathlib import Path
 
@@ -26,7 +27,7 @@ import numpy as np  # noqa: E402
 
 __all__ = ["ImageError", "load_image", "read_image", "to_gray_float", "checked_image", "as_gray_float", "expand_images",
            "atomic_write_bytes", "atomic_write_text",
-           "display_name", "max_pixels", "image_size_from_header", "IMAGE_SUFFIXES", "MAX_PIXELS"]
+           "display_name", "redact_credentials", "max_pixels", "image_size_from_header", "IMAGE_SUFFIXES", "MAX_PIXELS"]
 
 MAX_FILE_BYTES = 2 << 30  # an image file larger than this is refused before it is read
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm", ".pbm", ".pnm", ".jp2",
@@ -88,6 +89,15 @@ def display_name(path) -> str:
     """A path as text that prints on any terminal (undecodable bytes of a file name shown as \\xNN)."""
     text = os.fsdecode(path) if isinstance(path, bytes) else str(path)
     return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
+_CREDENTIALS = re.compile(r"(?i)\b([a-z][a-z0-9+.-]*://[^/\s:@]*):[^/\s]*@")  # the last @ ends the password
+
+
+def redact_credentials(text: str) -> str:
+    """``text`` with the password of every URL in it replaced by ``***`` (``rtsp://user:***@host/``),
+    for anything printed or written: messages, reports, a calibration's ``source``."""
+    return _CREDENTIALS.sub(r"\1:***@", str(text))
 
 
 def max_pixels() -> int:
@@ -197,8 +207,9 @@ def expand_images(patterns) -> list[str]:
 
     An existing file is taken as it is, even when its name holds ``[`` or ``*``; a folder stands
     for the image files in it (by suffix, :data:`IMAGE_SUFFIXES`); a pattern with ``*``, ``?`` or
-    ``[`` is globbed (``**`` recurses); anything else is taken as a path, whether or not it exists
-    (the loader reports missing files by name).
+    ``[`` is globbed (``**`` recurses, each real folder once, so a symbolic-link loop ends:
+    :func:`_recursive_glob`); anything else is taken as a path, whether or not it exists (the loader
+    reports missing files by name).
     """
     import glob
 
@@ -210,13 +221,81 @@ def expand_images(patterns) -> list[str]:
             matches = sorted(str(p) for p in Path(item).iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
         elif os.path.isfile(item) or not any(ch in item for ch in "*?["):
             matches = [item]
+        elif "**" in Path(item).parts:
+            matches = sorted(_recursive_glob(item))
         else:
-            matches = sorted(glob.glob(item, recursive=True))
+            matches = sorted(glob.glob(item))
         for m in matches:
             if m not in seen:
                 seen.add(m)
                 out.append(m)
     return out
+
+
+def _recursive_glob(pattern: str) -> list[str]:
+    """The paths a pattern with a ``**`` component matches, as ``glob.glob(pattern, recursive=True)``
+    gives them (``**`` is zero or more folders; wildcards skip hidden names), except that every real
+    folder is walked once: the folders under the pattern's fixed start by their own paths, and a
+    linked folder outside them once, by the first link met walking down (sorted). A symbolic-link loop
+    therefore ends instead of recursing until the path is too long."""
+    import fnmatch
+
+    parts = Path(pattern).parts
+    magic = next(k for k, p in enumerate(parts) if any(ch in p for ch in "*?["))
+    root, pats = (os.path.join(*parts[:magic]) if magic else ""), [_part_matcher(p, fnmatch) for p in parts[magic:]]
+    top = root or os.curdir
+    if not os.path.isdir(top):
+        return []
+    inside = {_folder_key(f) for f, _, _ in os.walk(top)} - {None}  # no links followed: no loop
+    outside: set = set()  # linked folders walked so far (and the folders under them)
+    out = []
+    for folder, dirs, files in os.walk(top, followlinks=True):
+        dirs.sort()
+        names, keep = [*dirs, *files], []
+        for d in dirs:
+            key = _folder_key(os.path.join(folder, d))
+            link = os.path.islink(os.path.join(folder, d))
+            if key is None or key in outside or (link and key in inside):
+                continue
+            if key not in inside:
+                outside.add(key)
+            keep.append(d)
+        dirs[:] = keep
+        rel = os.path.relpath(folder, top)
+        base = [] if rel == os.curdir else rel.split(os.sep)
+        out.extend(os.path.join(root, *base, name) for name in names if _match_parts([*base, name], pats))
+    return out
+
+
+def _folder_key(path) -> tuple[int, int] | None:
+    """(device, inode) of a folder, None when it cannot be read."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
+
+
+def _part_matcher(part: str, fnmatch):
+    """A pattern component as ``"**"`` or a predicate on one name (hidden names only for a pattern starting with '.')."""
+    if part == "**":
+        return part
+    if not any(ch in part for ch in "*?["):
+        return lambda name: name == part
+    rx = re.compile(fnmatch.translate(part))
+    return lambda name: (part.startswith(".") or not name.startswith(".")) and rx.match(name) is not None
+
+
+def _match_parts(names: list[str], pats: list) -> bool:
+    """Whether a relative path's components match the pattern's (``**``: zero or more non-hidden folders)."""
+    if not pats:
+        return not names
+    if pats[0] == "**":
+        if _match_parts(names, pats[1:]):
+            return True
+        return bool(names) and not names[0].startswith(".") and (len(pats) == 1 or len(names) > 1) \
+            and _match_parts(names[1:], pats)
+    return bool(names) and pats[0](names[0]) and _match_parts(names[1:], pats[1:])
 
 
 def atomic_write_bytes(path, data: bytes) -> Path:

@@ -11,8 +11,18 @@ folder beside ``--out`` (:attr:`OutputFolder.path`), and :meth:`OutputFolder.com
 
 A lock file beside the folder (``.aicalib-<hash>.lock``, ``flock``) keeps two runs from writing
 one ``--out`` at the same time: the second fails with a clear error. Staging folders left by
-killed runs are removed by the next run that takes the lock. A marker file (``.aicalib``) in
-every folder written this way tells a later run that the folder is its own to replace.
+killed runs are removed by the next run that takes the lock.
+
+**Whose files are whose.** A marker file (``.aicalib``, JSON ``{"kind", "files"}``) in every folder
+written this way lists the names the run wrote there. A later run replaces exactly those: a file or
+folder the user added since (``notes.txt`` beside the calibration) is **kept**, carried into the new
+folder before the swap (as a hard link, or a copy where links cannot be made), so the swap stays
+atomic and a run killed at any moment loses none of the user's files. A user's file with the name
+of one the new run writes is not overwritten: the run fails with an error naming it, and the old
+folder stays as it was. An existing folder without the marker is replaced only when it holds
+nothing but the files an older aicalib_tf wrote (:data:`_KNOWN_NAMES`); otherwise the run is
+refused before any work. A marker of an older version (no file list) counts the same known names
+as the run's own.
 """
 
 from __future__ import annotations
@@ -72,15 +82,64 @@ def check_out_path(out) -> Path:
     return path
 
 
+def _ours(name: str) -> bool:
+    """Whether a name is one an older aicalib_tf (before the marker listed its files) may have written."""
+    return name in _KNOWN_NAMES or (name.startswith("undistorted_") and name.endswith(".png"))
+
+
 def _foreign_entries(path: Path) -> list[str]:
-    """Entries of an existing folder that show it is not aicalib_tf's to replace ([] if it is)."""
+    """Entries of an existing folder without the marker that show it is not aicalib_tf's to replace."""
     try:
         names = sorted(os.listdir(path))
     except OSError as exc:
         raise OSError(exc.errno, exc.strerror, str(path)) from None
     if not names or MARKER in names:
         return []
-    return [n for n in names if n not in _KNOWN_NAMES and not (n.startswith("undistorted_") and n.endswith(".png"))]
+    return [n for n in names if not _ours(n)]
+
+
+def _marker(kind: str, files: list[str]) -> str:
+    """The marker file's text: what the folder holds and the names the run wrote into it."""
+    from aicalib_tf.jsonio import dumps
+
+    return dumps({"kind": kind, "files": files}) + "\n"
+
+
+def _user_entries(path: Path) -> list[str]:
+    """Entries of a marked folder that the run which wrote it did not write (the user's, to keep)."""
+    try:
+        names = sorted(os.listdir(path))
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
+    if MARKER not in names:
+        return []
+    try:
+        from aicalib_tf.jsonio import loads
+
+        written = loads((path / MARKER).read_text(encoding="utf-8"), str(path / MARKER)).get("files")
+    except (OSError, ValueError, AttributeError):  # an older marker: one line, the kind
+        written = None
+    if not isinstance(written, list):
+        return [n for n in names if n != MARKER and not _ours(n)]
+    return [n for n in names if n != MARKER and n not in set(written)]
+
+
+def _carry(src: Path, dst: Path) -> None:
+    """Put ``src`` (a file, link or folder) at ``dst`` by hard links, copying where a link cannot be made."""
+    def link_or_copy(a, b):
+        try:
+            os.link(a, b, follow_symlinks=False)
+        except OSError:
+            shutil.copy2(a, b, follow_symlinks=False)
+
+    try:
+        if src.is_dir() and not src.is_symlink():
+            shutil.copytree(src, dst, symlinks=True, copy_function=link_or_copy)
+        else:
+            link_or_copy(src, dst)
+    except (OSError, shutil.Error) as exc:
+        raise OSError(errno.EIO, f"cannot keep the file aicalib_tf did not write ({exc}); nothing was replaced",
+                      str(src)) from None
 
 
 class OutputFolder:
@@ -106,7 +165,7 @@ class OutputFolder:
                 raise ValueError(f"{out}: the folder holds files aicalib_tf did not write ({shown}); "
                                  "choose a new or empty --out, so that nothing of yours is replaced")
             self.path = Path(tempfile.mkdtemp(prefix=f"{self._tag}.tmp-", dir=parent))
-            (self.path / MARKER).write_text(f"{kind}\n", encoding="utf-8")
+            (self.path / MARKER).write_text(_marker(kind, []), encoding="utf-8")  # its file list at commit
         except BaseException:
             self._unlock()
             raise
@@ -135,10 +194,12 @@ class OutputFolder:
             shutil.rmtree(stale, ignore_errors=True)
 
     def commit(self) -> Path:
-        """Swap the staging folder in for ``out``; returns ``out``. The old folder's files are removed."""
+        """Swap the staging folder in for ``out``; returns ``out``. The old run's files are removed, the
+        user's kept (module docstring); ValueError naming a user's file that the run would overwrite."""
         if self._done:
             return self.out
         try:
+            self._seal()
             if not self.out.exists():
                 os.rename(self.path, self.out)
             elif not _exchange(self.path, self.out):
@@ -149,10 +210,25 @@ class OutputFolder:
             else:
                 shutil.rmtree(self.path, ignore_errors=True)  # now holds the old files
             _fsync_dir(self.out.parent)
+        except BaseException:
+            shutil.rmtree(self.path, ignore_errors=True)
+            raise
         finally:
             self._done = True
             self._unlock()
         return self.out
+
+    def _seal(self) -> None:
+        """Write the marker (the names this run wrote) and carry the user's files of ``out`` into the staging folder."""
+        written = sorted(n for n in os.listdir(self.path) if n != MARKER)
+        (self.path / MARKER).write_text(_marker(self.kind, written), encoding="utf-8")
+        keep = _user_entries(self.out) if self.out.is_dir() else []
+        clash = sorted(set(keep) & set(written))
+        if clash:
+            raise ValueError(f"{self.out / clash[0]}: a file aicalib_tf did not write has the name of one this run "
+                             "writes; move it away (or choose another --out) and run again; nothing was replaced")
+        for name in keep:
+            _carry(self.out / name, self.path / name)
 
     def abort(self) -> None:
         """Remove the staging folder and leave ``out`` as it was."""

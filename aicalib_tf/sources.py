@@ -11,7 +11,11 @@
 * a camera (``0``, ``1``, ...) or a stream URL (``rtsp://``, ``http://``, ...): a live source. A
   reader thread keeps only the newest frame, so a slow consumer drops frames instead of falling
   behind; ``dropped`` counts them. A camera that cannot be opened, or a stream that stops giving
-  frames, is an :class:`OSError` naming the source.
+  frames, is an :class:`OSError` naming the source. A URL's password is never printed:
+  ``name`` (and every message) shows ``rtsp://user:***@host/`` (:func:`source_name`).
+
+A frame rate outside :data:`FPS_RANGE` (a container claiming 0.001 fps) is taken as unknown
+(``fps`` None): frames are then timed by their index and never paced by that rate.
 
 :func:`pair_frames` pairs two cameras' frames (by index, or by timestamp within a tolerance) for
 a rig, reports the unpaired ones, and refuses streams that drift out of sync. Errors name the
@@ -31,15 +35,33 @@ from typing import Callable, Iterator
 import cv2
 import numpy as np
 
-from aicalib_tf.io import IMAGE_SUFFIXES
+from aicalib_tf.io import IMAGE_SUFFIXES, redact_credentials
 
 __all__ = ["Frame", "FrameSource", "VideoFile", "ImageSequence", "LiveSource", "open_source", "is_video",
-           "pair_frames", "Pairing", "is_stream", "VIDEO_EXTENSIONS", "IMAGE_EXTENSIONS"]
+           "pair_frames", "Pairing", "is_stream", "source_name", "plausible_fps", "VIDEO_EXTENSIONS", "IMAGE_EXTENSIONS",
+           "FPS_RANGE"]
 
 VIDEO_EXTENSIONS = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".y4m", ".mpg", ".mpeg", ".wmv", ".mjpeg",
                     ".mjpg", ".ts", ".flv", ".3gp")
 IMAGE_EXTENSIONS = IMAGE_SUFFIXES  # the image gate's: a file of these is never taken for a video
 _STREAM_PREFIXES = ("rtsp://", "rtmp://", "http://", "https://", "udp://", "tcp://", "srt://")
+FPS_RANGE = (1.0, 240.0)  # a frame rate a source claims outside this is taken as unknown
+
+
+def plausible_fps(fps) -> float | None:
+    """A frame rate a container or device reports, or None when it is outside :data:`FPS_RANGE` (or
+    not a number): a video that claims 0.001 fps would otherwise be paced at 1000 s a frame."""
+    try:
+        value = float(fps or 0.0)
+    except (TypeError, ValueError):
+        return None
+    return value if FPS_RANGE[0] <= value <= FPS_RANGE[1] else None
+
+
+def source_name(spec) -> str:
+    """What the user typed, as it may be printed or written: a camera index as ``camera N``, a URL
+    without its password (``rtsp://user:***@host/``)."""
+    return f"camera {spec}" if isinstance(spec, int) else redact_credentials(str(spec))
 
 
 @dataclass(frozen=True)
@@ -118,8 +140,7 @@ class VideoFile(FrameSource):
             self._cap.release()
             raise ValueError(f"{self.name}: not a readable video (OpenCV cannot decode it)")
         self._first = first[1]
-        fps = float(self._cap.get(cv2.CAP_PROP_FPS) or 0.0)
-        self.fps = fps if 0 < fps < 1000 else None
+        self.fps = plausible_fps(self._cap.get(cv2.CAP_PROP_FPS))
         n = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
         self.count = n if n > 0 else None
         self.size = (self._first.shape[1], self._first.shape[0])
@@ -177,15 +198,14 @@ class LiveSource(FrameSource):
     """
 
     def __init__(self, device, open_capture: Callable | None = None, timeout_s: float = 5.0):
-        self.name = f"camera {device}" if isinstance(device, int) else str(device)
+        self.name = source_name(device)
         self.live, self.timeout_s = True, float(timeout_s)
         self._cap = _quiet_capture(open_capture or (lambda: cv2.VideoCapture(device)))
         if not self._cap.isOpened():
             self._cap.release()
             raise OSError(f"{self.name}: cannot open it (no such device, or it is busy)" if isinstance(device, int)
                           else f"{self.name}: cannot open the stream (unreachable, or not a video stream)")
-        fps = float(getattr(self._cap, "get", lambda _: 0.0)(cv2.CAP_PROP_FPS) or 0.0)
-        self.fps = fps if 0 < fps < 1000 else None
+        self.fps = plausible_fps(getattr(self._cap, "get", lambda _: 0.0)(cv2.CAP_PROP_FPS))
         self.read_count = 0
         self._slot, self._ended, self._stop = None, False, False
         self._cond = threading.Condition()

@@ -186,3 +186,55 @@ def test_read_image_checks_like_load_image_and_leaves_the_pixels_as_they_are(tmp
     for bad in (np.zeros((4, 4, 2), np.uint8), np.full((3, 3), 2.0, np.float32)):
         with pytest.raises(ImageError):
             read_image(bad)
+
+
+def _tree(root: Path) -> None:
+    """A folder of images with hidden entries, a linked folder outside, and two symbolic-link loops."""
+    for name in ("x.png", "a/y.png", "a/b/z.png", "a/.dot.png", ".hid/v.png", "a/b/.h/w.png", "other/q.png"):
+        (root / name).parent.mkdir(parents=True, exist_ok=True)
+        (root / name).write_bytes(b"")
+    (root / "tree" / "a").mkdir(parents=True)
+    for name in ("x.png", "a", ".hid"):
+        (root / name).rename(root / "tree" / name)
+    (root / "tree" / "a" / "b" / "up").symlink_to("../..")  # a loop back to the tree's top
+    (root / "tree" / "a" / "self").symlink_to(".")  # a loop onto itself
+    (root / "tree" / "a" / "ext").symlink_to(root / "other")  # a folder outside the tree: followed once
+    (root / "tree" / "ext2").symlink_to(root / "other")
+
+
+def test_a_recursive_glob_over_symlink_loops_ends_and_takes_each_folder_once(tmp_path):
+    import time
+
+    from aicalib_tf.io import expand_images
+
+    _tree(tmp_path)
+    t0 = time.monotonic()
+    got = expand_images([str(tmp_path / "tree" / "**" / "*.png")])
+    assert time.monotonic() - t0 < 2.0
+    rel = sorted(str(Path(p).relative_to(tmp_path / "tree")) for p in got)
+    assert rel == ["a/b/z.png", "a/y.png", "ext2/q.png", "x.png"]  # hidden names skipped, as glob does
+
+
+def test_a_recursive_glob_matches_what_glob_gives_on_a_tree_without_loops(tmp_path, monkeypatch):
+    import glob
+
+    from aicalib_tf.io import expand_images
+
+    for name in ("x.png", "a/y.jpg", "a/b/z.png", "a/.d.png", "c/d/e/f.png", ".h/g.png"):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_bytes(b"")
+    monkeypatch.chdir(tmp_path)
+    for pattern in ("**/*.png", "**/*.*", "*/**/*.png", "**/b/*.png", "**/.*", "a/**/*", str(tmp_path / "**" / "*.jpg")):
+        assert expand_images([pattern]) == sorted(p.rstrip("/") for p in glob.glob(pattern, recursive=True)), pattern
+
+
+@pytest.mark.parametrize("text, shown", [
+    ("http://user:secret@host/cam.mjpg", "http://user:***@host/cam.mjpg"),
+    ("error: rtsp://admin:p@ss:w0rd@10.0.0.1:554/s: cannot open", "error: rtsp://admin:***@10.0.0.1:554/s: cannot open"),
+    ("rtsp://admin@host/s and HTTPS://:tok@h/x", "rtsp://admin@host/s and HTTPS://:***@h/x"),
+    ("http://host:8080/a.mp4 photos/left:01.png", "http://host:8080/a.mp4 photos/left:01.png"),
+])
+def test_a_urls_password_is_redacted(text, shown):
+    from aicalib_tf.io import redact_credentials
+
+    assert redact_credentials(text) == shown

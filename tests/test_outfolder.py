@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -46,12 +47,53 @@ def test_new_folder_gets_the_files_and_the_marker_and_nothing_is_left_beside(tmp
     assert sorted(p.name for p in tmp_path.iterdir() if not p.name.endswith(".lock")) == ["c"]
 
 
-def test_a_second_run_replaces_the_whole_set(tmp_path):
+def test_a_second_run_replaces_the_whole_set_of_the_first_runs_files(tmp_path):
+    out = tmp_path / "c"
+    with OutputFolder(out) as f:
+        for name in (*FILES, "undistorted_old.png"):
+            (f.path / name).write_text("run00001" * 2000)
+    _write(out, "run00002")  # does not write undistorted_old.png: the first run's copy goes
+    assert _run_ids(out) == {"run00002"} and not (out / "undistorted_old.png").exists()
+    assert json.loads((out / MARKER).read_text()) == {"kind": "output", "files": sorted(FILES)}
+
+
+def test_the_users_files_in_a_written_folder_are_kept(tmp_path):
     out = tmp_path / "c"
     _write(out, "run00001")
-    (out / "undistorted_old.png").write_text("x")  # a file the new run does not write
+    (out / "notes.txt").write_text("mine")
+    (out / "undistorted_extra.png").write_text("mine too")  # a name aicalib_tf could write, but this run did not
+    (out / "sub").mkdir()
+    (out / "sub" / "a.txt").write_text("deep")
+    os.symlink("notes.txt", out / "link")
     _write(out, "run00002")
-    assert _run_ids(out) == {"run00002"} and not (out / "undistorted_old.png").exists()
+    _write(out, "run00003")
+    assert _run_ids(out) == {"run00003"}
+    assert (out / "notes.txt").read_text() == "mine" and (out / "undistorted_extra.png").read_text() == "mine too"
+    assert (out / "sub" / "a.txt").read_text() == "deep" and os.readlink(out / "link") == "notes.txt"
+    assert json.loads((out / MARKER).read_text())["files"] == sorted(FILES)
+    assert sorted(p.name for p in tmp_path.iterdir() if not p.name.endswith(".lock")) == ["c"]
+
+
+def test_a_users_file_with_the_name_of_a_new_file_stops_the_run_and_keeps_the_folder(tmp_path):
+    out = tmp_path / "c"
+    with OutputFolder(out) as f:
+        (f.path / "camera.yaml").write_text("run00001")
+    (out / "report.txt").write_text("my own report")  # the next run writes report.txt
+    with pytest.raises(ValueError, match=r"report\.txt: a file aicalib_tf did not write"):
+        _write(out, "run00002")
+    assert (out / "report.txt").read_text() == "my own report" and (out / "camera.yaml").read_text() == "run00001"
+    assert not list(tmp_path.glob(".aicalib-*.tmp-*"))
+
+
+def test_an_older_marker_without_a_file_list_keeps_unknown_names(tmp_path):
+    out = tmp_path / "c"
+    out.mkdir()
+    (out / MARKER).write_text("calibration\n")  # the marker of an older version
+    for name in ("camera.yaml", "undistorted_a.png", "notes.txt"):
+        (out / name).write_text("old")
+    _write(out, "run00005")
+    assert _run_ids(out) == {"run00005"} and (out / "notes.txt").read_text() == "old"
+    assert not (out / "undistorted_a.png").exists()
 
 
 def test_an_error_leaves_the_old_folder_untouched(tmp_path):
@@ -110,9 +152,10 @@ def test_a_symlink_to_a_folder_replaces_the_target(tmp_path):
 
 
 def test_kills_inside_the_write_phase_leave_the_old_set_or_the_new_set(tmp_path):
-    """60 runs killed (SIGKILL) at spread-out moments after their write phase began."""
+    """60 runs killed (SIGKILL) at spread-out moments after their write phase began; the user's file survives."""
     out = tmp_path / "c"
     _write(out, "run00000")
+    (out / "notes.txt").write_text("the user's")  # kept through every kill
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     kills, outcomes = 60, set()
     for k in range(1, kills + 1):
@@ -126,7 +169,23 @@ def test_kills_inside_the_write_phase_leave_the_old_set_or_the_new_set(tmp_path)
         ids = _run_ids(out) if out.exists() else set()
         assert ids in (before, {run}), f"kill {k}: a mix of runs {ids}"
         assert len([n for n in FILES if (out / n).exists()]) == len(FILES)
+        assert (out / "notes.txt").read_text() == "the user's", f"kill {k}"
         outcomes.add("new" if ids == {run} else "old")
     assert outcomes == {"old", "new"}  # the kills landed both before and after the swap
     _write(out, "run99999")  # the next run cleans up what the killed ones left
     assert not list(tmp_path.glob(".aicalib-*.tmp-*")) and not list(tmp_path.glob(".aicalib-*.old-*"))
+
+
+def test_calibrate_twice_into_one_folder_keeps_the_users_notes(tmp_path, capsys):
+    from aicalib_tf.calibrate import main
+
+    out = tmp_path / "calib"
+    args = [str(ROOT / "tests" / "data" / "opencv_left" / "left0[1-5].jpg"), "--pattern", "9x6", "--square", "25mm",
+            "--detector", "opencv", "--model", "plumb_bob", "--out", str(out)]
+    assert main(args) == 0
+    (out / "notes.txt").write_text("lens cap was dusty")
+    os.utime(out / "camera.json", (0, 0))
+    assert main(args) == 0, capsys.readouterr().err
+    assert (out / "notes.txt").read_text() == "lens cap was dusty" and (out / "camera.json").stat().st_mtime > 0
+    written = json.loads((out / MARKER).read_text())["files"]
+    assert "camera.json" in written and written == sorted(p.name for p in out.iterdir() if p.name not in (MARKER, "notes.txt"))

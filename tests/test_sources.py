@@ -105,3 +105,41 @@ def test_pairing_by_time_reports_unpaired_and_refuses_drift():
     drift = a + np.linspace(0.0, 0.03, 60)  # fine at the start, 30 ms off at the end
     with pytest.raises(ValueError, match="out of sync: from frame"):
         pair_frames(a, drift, tolerance_s=0.010)
+
+
+def test_a_streams_password_is_never_printed(tmp_path, capsys):
+    from aicalib_tf.calibrate import main
+
+    url = "http://user:secret@127.0.0.1:1/cam.mjpg"  # nothing listens on port 1
+    with pytest.raises(OSError) as exc:
+        LiveSource(url, open_capture=lambda: _FakeCamera(opened=False))
+    assert "secret" not in str(exc.value) and "http://user:***@127.0.0.1:1/cam.mjpg" in str(exc.value)
+    assert main([url, "--pattern", "9x6", "--out", str(tmp_path / "c"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "secret" not in err and "user:***@127.0.0.1" in err and not (tmp_path / "c").exists()
+
+
+def _y4m(path, fps_ratio="1:1000", n=3, size=(32, 24)):
+    """A tiny y4m video whose header claims the frame rate ``fps_ratio`` (1:1000 is 0.001 fps)."""
+    w, h = size
+    head = f"YUV4MPEG2 W{w} H{h} F{fps_ratio} Ip A1:1 C420jpeg\n".encode()
+    path.write_bytes(head + b"".join(b"FRAME\n" + bytes([40 * k]) * (w * h) + bytes([128]) * (w * h // 2)
+                                     for k in range(n)))
+    return path
+
+
+def test_a_frame_rate_out_of_range_is_unknown_and_never_paces_the_live_loop(tmp_path):
+    from aicalib_tf.live.server import _paced
+    from aicalib_tf.sources import plausible_fps
+
+    assert [plausible_fps(x) for x in (0.001, 0.5, 1, 30, 240, 1000, float("nan"), None, "x")] == \
+        [None, None, 1.0, 30.0, 240.0, None, None, None, None]
+    with open_source(str(_y4m(tmp_path / "slow.y4m"))) as src:
+        assert src.fps is None
+        t0 = time.monotonic()
+        frames = list(_paced(src, threading.Event()))
+    assert len(frames) == 3 and time.monotonic() - t0 < 1.0 and [f.time_s for f in frames] == [0.0, 1.0, 2.0]
+    with open_source(str(_y4m(tmp_path / "ok.y4m", "20:1"))) as src:
+        t0 = time.monotonic()
+        assert src.fps == 20 and len(list(_paced(src, threading.Event()))) == 3
+    assert 0.08 < time.monotonic() - t0 < 1.0  # 3 frames at 20 fps: paced, 0.1 s
