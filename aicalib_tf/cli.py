@@ -43,7 +43,10 @@ def parser(prog: str, doc: str | None) -> argparse.ArgumentParser:
 def describe_error(exc: BaseException) -> str:
     """One line for an expected error: ``<what>: <why>`` where the exception knows both (printable:
     undecodable bytes of a file name shown as \\xNN, :func:`aicalib_tf.io.display_name`)."""
-    from aicalib_tf.io import display_name as _printable
+    from aicalib_tf.io import display_name, redact_credentials
+
+    def _printable(text) -> str:  # and a URL's password never printed
+        return redact_credentials(display_name(text))
 
     if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
         name = os.fsdecode(exc.filename) if isinstance(exc.filename, bytes) else str(exc.filename)
