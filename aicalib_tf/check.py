@@ -7,21 +7,29 @@ The calibration is a camera.json, a camera.yaml (OpenCV; it carries no covarianc
 takes its intrinsics as exact and flags more readily) or a folder holding camera.json. Show the
 same board (the calibration's pattern and square size) in about 15 new photos or a short video
 from varied angles. Every image goes through the detector; the intrinsics stay as calibrated and
-only the boards' poses are fitted. Two tests follow (:mod:`aicalib_tf.calib.check`), each at
-level --alpha (default 0.01):
+only the boards' poses are fitted; a second fit refits every intrinsic, and its residuals give
+the corner noise of the new footage (its light, blur and distance, whatever they are). Two tests
+follow (:mod:`aicalib_tf.calib.check`), each at level --alpha (default 0.01), both at the new
+footage's own noise:
 
-- the residual RMS against what the calibration's corner noise and its own uncertainty predict;
 - the drift of fx, fy, cx, cy, refitted to the new views with the distortion held, against
-  the calibration's values, with both uncertainties combined (a chi-square test over the four).
+  the calibration's values, with both uncertainties combined (a chi-square test over the four);
+- the lens test: how much refitting every intrinsic lowers the residuals (a changed distortion
+  leaves a radial pattern; blur and noise do not), beyond what the calibration's uncertainty allows.
 
-It prints the verdict, the views used and skipped with reasons, the residual RMS against the
-expected and its limit, and each drift with ±1σ; --out writes the same as JSON (atomically).
+It prints the verdict, the views used and skipped with reasons, the corner noise of both footages,
+each drift with ±1σ, and the smallest fx change and principal-point shift these views detect 95% of
+the time (with a note when the new footage is much noisier than the calibration's); --out writes
+the same as JSON (atomically). --out must be a new file or one an earlier check wrote, never one
+of the inputs.
 
 A video file (.mp4, .avi, .mov, .mkv, .webm, .m4v, .mpg) is sampled every --every frames
 (default 10, at most --max-frames of them).
 
-Exit codes: 0 the calibration holds; 1 it does not; 2 bad input (an unreadable calibration, no
-images, fewer than 3 usable views, images of another size than the calibration's).
+Exit codes: 0 the calibration holds; 1 it does not; 2 bad input (an unreadable calibration or one
+the check cannot use, such as a covariance that is not one or too large to detect a change, no
+images, fewer than 3 usable views, images of another size than the calibration's, an --out that
+is an input or a file this command did not write).
 """
 
 from __future__ import annotations
@@ -34,6 +42,8 @@ from pathlib import Path
 
 from aicalib_tf.cnn.spec import DETECTOR_NETWORK, NETWORK_HELP
 
+WRITTEN_BY = "aicalib_tf.check"  # the --out file's "written_by": a later run may replace such a file
+MAX_OUT_BYTES = 64 << 20  # an existing --out larger than this is not a check result
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,9 +111,10 @@ def run_check(cfg: CheckConfig):
 
     Raises FileNotFoundError / ValueError / CalibrationError for bad input, before writing anything.
     """
-    from aicalib_tf.calib.check import MIN_CHECK_VIEWS, check_calibration, format_check
+    from aicalib_tf.calib.check import MIN_CHECK_VIEWS, check_calibration, check_fields, format_check
+    from aicalib_tf.calib.files import existing_file, load_calibration
     from aicalib_tf.calib.fit import CalibrationError
-    from aicalib_tf.calib.files import load_calibration
+    from aicalib_tf.calib.schema import file_errors
     from aicalib_tf.jsonio import dumps
     from aicalib_tf.io import atomic_write_text, expand_images
 
@@ -112,9 +123,14 @@ def run_check(cfg: CheckConfig):
     if cfg.every < 1 or cfg.max_frames < 1:
         raise ValueError(f"--every and --max-frames must be >= 1, got {cfg.every} and {cfg.max_frames}")
     cal = load_calibration(cfg.calibration)
+    cal_file = existing_file(cfg.calibration, "camera.json", "calibration")
+    with file_errors(cal_file, "calibration for a field check"):
+        check_fields(cal)
     files = expand_images(cfg.sources)
     if not files:
         raise ValueError(f"no photos or video match {' '.join(cfg.sources)}")
+    if cfg.out:
+        check_out_file(cfg.out, [cal_file, *files])
     views, skipped = _detect(files, cal, cfg)
     if len(views) < MIN_CHECK_VIEWS:
         why = "; ".join(f"{k}: {v}" for k, v in list(skipped.items())[:3]) + ("; ..." if len(skipped) > 3 else "")
@@ -125,10 +141,44 @@ def run_check(cfg: CheckConfig):
     result = dataclasses.replace(result, skipped={**skipped, **result.skipped})
     report = format_check(result, source=str(cfg.calibration))
     if cfg.out:
-        doc = {"calibration": str(cfg.calibration), "sources": list(cfg.sources), "detector": cfg.detector,
-               **result.to_dict()}
+        doc = {"written_by": WRITTEN_BY, "calibration": str(cfg.calibration), "sources": list(cfg.sources),
+               "detector": cfg.detector, **result.to_dict()}
         atomic_write_text(Path(cfg.out), dumps(doc) + "\n")
     return result, report
+
+
+def _written_by_check(path: Path) -> bool:
+    """Whether an existing file is a result this command wrote (strict JSON with ``written_by``, or an
+    older result: an object with the calibration, sources, verdict and drift test)."""
+    from aicalib_tf.jsonio import read_json
+
+    try:
+        if path.stat().st_size > MAX_OUT_BYTES:
+            return False
+        doc = read_json(path, max_bytes=MAX_OUT_BYTES)
+    except (OSError, ValueError):
+        return False
+    return isinstance(doc, dict) and (doc.get("written_by") == WRITTEN_BY
+                                      or {"calibration", "sources", "holds", "drift_test"} <= doc.keys())
+
+
+def check_out_file(out: str, inputs) -> Path:
+    """The --out file after refusing, with a ValueError naming it: an empty name, a folder, a path
+    whose folder does not exist, one of ``inputs`` (the calibration, photos, videos; links followed),
+    or an existing file that this command did not write (:func:`_written_by_check`)."""
+    if not str(out).strip():
+        raise ValueError("--out: an empty file name")
+    path = Path(os.path.realpath(out))
+    if path.is_dir():
+        raise ValueError(f"{out}: is a folder; --out takes a file name such as check.json")
+    if not path.parent.is_dir():
+        raise ValueError(f"{out}: the folder {path.parent} does not exist")
+    if any(path == Path(os.path.realpath(f)) for f in inputs):
+        raise ValueError(f"{out}: is one of the inputs of this check; --out would overwrite it, choose another file")
+    if path.exists() and not _written_by_check(path):
+        raise ValueError(f"{out}: exists and is not a result of python -m aicalib_tf.check; --out replaces only "
+                         "those, so remove it or choose another file")
+    return path
 
 
 def _detect(files: list[str], cal, cfg: CheckConfig):

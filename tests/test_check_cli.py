@@ -37,8 +37,10 @@ def test_the_same_photos_hold(calibration, tmp_path, capsys):
     rc, out, err = _run(capsys, calibration, LEFT / "*.jpg", "--out", tmp_path / "check.json")
     assert rc == 0, out + err
     assert "the calibration HOLDS" in out and "13 views: 13 used, 0 skipped" in out
+    assert "corner noise per axis: these views" in out and "detects (95% of the time)" in out
     d = json.loads((tmp_path / "check.json").read_text())
-    assert d["holds"] is True and len(d["views"]) == 13 and abs(d["drift"]["fx"]) < 0.05
+    assert d["holds"] is True and len(d["views"]) == 13 and abs(d["drift"]["fx"]) < 0.3 * d["drift_std"]["fx"]
+    assert d["written_by"] == "aicalib_tf.check" and d["noise"]["check_px"] > 0
 
 
 def test_photos_shifted_by_8px_do_not_hold(calibration, tmp_path, capsys):
@@ -92,3 +94,68 @@ def test_bad_input_is_one_line_and_exit_2(calibration, tmp_path, capsys, case):
     assert err.startswith("error: ") and err.count("\n") == 1, err
     if case == "wrong size":
         assert "small.png: image is 320x240, the calibration is for 640x480" in err
+
+
+def _edited(calibration, tmp_path, edit) -> Path:
+    d = json.loads((calibration / "camera.json").read_text())
+    edit(d)
+    path = tmp_path / "camera.json"
+    path.write_text(json.dumps(d))
+    return path
+
+
+def _scaled_covariance(d, factor):
+    d["covariance"] = (np.eye(len(d["covariance"])) * factor).tolist()
+
+
+def _not_psd(d):
+    c = np.array(d["covariance"])
+    c[0, 1] = c[1, 0] = 10 * np.sqrt(c[0, 0] * c[1, 1])
+    d["covariance"] = c.tolist()
+
+
+@pytest.mark.parametrize("edit, expected", [
+    (lambda d: _scaled_covariance(d, 1e300), "field covariance gives σ"),
+    (lambda d: _scaled_covariance(d, -1.0), "field covariance holds a negative variance"),
+    (_not_psd, "field covariance is not positive semi-definite"),
+    (lambda d: d["camera_matrix"][0].__setitem__(0, 1e300), "field camera_matrix fx 1e+300 px is not a focal length"),
+    (lambda d: d["camera_matrix"][0].__setitem__(0, True), "field camera_matrix must be a 3x3 matrix of numbers"),
+], ids=["covariance 1e300", "negative variance", "not psd", "fx 1e300", "fx true"])
+def test_an_absurd_calibration_is_refused_naming_the_file_and_field(calibration, tmp_path, capsys, edit, expected):
+    path = _edited(calibration, tmp_path, edit)
+    rc, out, err = _run(capsys, path, LEFT / "left01.jpg", LEFT / "left02.jpg", LEFT / "left03.jpg")
+    assert rc == 2 and out == "" and err.count("\n") == 1, err
+    assert err.startswith(f"error: {path}: ") and expected in err
+    assert "nan" not in err.lower() and "Traceback" not in err
+
+
+@pytest.mark.parametrize("target", ["the calibration", "a photo", "a foreign file", "a folder"])
+def test_out_never_replaces_an_input_or_a_file_it_did_not_write(calibration, tmp_path, capsys, target):
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for f in sorted(LEFT.glob("left0[1-3].jpg")):
+        (photos / f.name).write_bytes(f.read_bytes())
+    notes = tmp_path / "notes.txt"
+    notes.write_text("mine")
+    out = {"the calibration": calibration / "camera.json", "a photo": photos / "left01.jpg", "a foreign file": notes,
+           "a folder": photos}[target]
+    before = {p: p.read_bytes() for p in [calibration / "camera.json", notes, *photos.iterdir()]}
+    rc, stdout, err = _run(capsys, calibration, photos / "*.jpg", "--out", out)
+    assert rc == 2 and stdout == "" and err.count("\n") == 1, err
+    assert err.startswith(f"error: {out}: ")
+    assert {p: p.read_bytes() for p in before} == before
+
+
+def test_out_replaces_an_earlier_result(tmp_path):
+    from aicalib_tf.check import WRITTEN_BY, check_out_file
+
+    old = tmp_path / "check.json"
+    old.write_text(json.dumps({"written_by": WRITTEN_BY, "holds": True}))
+    assert check_out_file(str(old), [tmp_path / "camera.json"]) == old.resolve()
+    assert check_out_file(str(tmp_path / "new.json"), []) == (tmp_path / "new.json").resolve()
+    link = tmp_path / "link.json"
+    link.symlink_to(tmp_path / "camera.json")
+    with pytest.raises(ValueError, match="one of the inputs"):
+        check_out_file(str(link), [tmp_path / "camera.json"])
+    with pytest.raises(ValueError, match="does not exist"):
+        check_out_file(str(tmp_path / "no" / "check.json"), [])

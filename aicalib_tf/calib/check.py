@@ -1,30 +1,46 @@
 """Field check: does an existing calibration still hold for new views of the board?
 
-The intrinsics stay as calibrated and only the new views' poses are fitted; two tests then ask
-whether the new corners agree with the calibration within its own uncertainty, each at level α:
+Every view's pose is fitted in three fits of the new views:
 
-* **Drift.** fx, fy, cx, cy are fitted to the new views with the distortion held at the
-  calibration's (or, ``hold_distortion=False``, every intrinsic fitted). The difference d from the
-  calibration has covariance C = κ·(Σ_new + M·Σ·Mᵀ): Σ the calibration's covariance, M = [−I, B]
-  with B = −S_ff⁻¹·S_fd saying how the held distortion's own error moves the new fit (S: the new
-  views' JᵀJ over the intrinsics with their poses eliminated, the Schur complement). dᵀC⁻¹d is
-  compared with χ²(4)'s (1 − α) quantile.
-* **Residuals.** With the calibration's intrinsics fixed, the mean squared residual per corner is
-  about 2σ²·(2N − 6V)/(2N) + tr(S·κΣ)/N under "nothing changed": σ the corner noise per axis that
-  the calibration's RMS implies (:func:`corner_noise`), N corners in V views. Its spread is the
-  scatter of the calibration's per-view RMS (views differ more than pure noise says: blur,
-  lighting), over the new views and the calibration's own; a one-sided t test.
+* **held**: the calibration's intrinsics θ₀ kept (its residual RMS is reported; outlier views are
+  found here);
+* **free**: every intrinsic refitted. Its residual variance σ̂² = RSS/(2N − 6V − p) (N corners in V
+  views, p intrinsics) is the corner noise per axis of the *check footage*, with its degrees of
+  freedom: light, blur and the detector of the new views are measured, not assumed;
+* **drift**: fx, fy, cx, cy refitted with the distortion held at the calibration's
+  (``hold_distortion=False``: taken from the free fit).
+
+Two tests at level α each, both scaled by σ̂ (never by the calibration's footage noise):
+
+* **Drift.** d = (fx, fy, cx, cy) − calibrated, T = dᵀC⁻¹d with C = κ·(σ̂²·P + M·Σ·Mᵀ): S the new views'
+  JᵀJ over the intrinsics with their poses eliminated (the Schur complement), P = S₄⁻¹ (its fx..cy
+  block) or [S⁻¹]₄ (every intrinsic free), Σ the calibration's covariance, M = [−I, B] with
+  B = −S₄⁻¹·S_fd saying how the held distortion's own error moves the fit (B = 0 when it is refitted).
+  T/4 against F(4, dof).
+* **Lens** (structured residuals). The likelihood ratio of the held and the free fit: linearised,
+  RSS_held − RSS_free = dᵀS·d for d = θ_free − θ₀, and (RSS_held − RSS_free)/(p·σ̂²) is the F test of
+  the p freed intrinsics when θ₀ is exact (reported as ``lr_f``). With the calibration's own
+  uncertainty the statistic is T = dᵀ(σ̂²S⁻¹ + Σ)⁻¹d/κ = dᵀS(σ̂²I + ΣS)⁻¹d/κ (no inverse of S:
+  directions the views do not determine drop out); T/p against F(p, dof). A changed distortion
+  leaves a radial pattern that the free fit removes; blur and noise raise σ̂ and both sums alike.
 
 κ >= 1 (:func:`_view_inflation`) is what the scatter between the new views asks for beyond the
-formal σ²·(JᵀJ)⁻¹: 1 for independent corner noise (the synthetic trials of
-``benchmarks/field_check.py``), a median of 5 on real photos, where the formal covariance alone failed
-unchanged subsets of OpenCV's left photos in 68% of splits (docs/benchmark.md, "Field check").
+formal σ̂²·S⁻¹: about 1 for independent corner noise, a median of 5 on real photos, where the
+formal covariance alone failed unchanged subsets of OpenCV's left photos in 68% of splits
+(docs/benchmark.md, "Field check").
 
-The calibration holds when neither test rejects (α = 0.01 each: an unchanged camera fails at most
-about 2% of checks). Poses come from rays (:func:`~aicalib_tf.calib.bundle.poses_from_rays`), so
-every lens model works, fisheye included. Views without a pose and outlier views
-(:func:`~aicalib_tf.calib.fit.outlier_threshold` of the fixed-intrinsics RMS; a misread board sits
-tens of px off) are skipped with the reason. Pure numpy/OpenCV.
+Beside the verdict: the corner noise of both footages (the calibration's from its RMS,
+:func:`corner_noise`) and what the drift test detects 95% of the time: a relative change of fx and
+a principal-point shift in its worst direction (the noncentral χ²(4) at C). When the check footage
+is much noisier than the calibration's, a note says so with those figures.
+
+The calibration must be one the check can use (:func:`check_fields`): focal lengths and principal
+point of a camera of its image size, a symmetric positive semi-definite covariance, and an
+uncertainty small enough to detect a change; otherwise a :class:`~aicalib_tf.calib.schema.FieldError`
+names the field. Poses come from rays (:func:`~aicalib_tf.calib.bundle.poses_from_rays`), so every
+lens model works, fisheye included. Views without a pose and outlier views
+(:func:`~aicalib_tf.calib.fit.outlier_threshold` of the held RMS; a misread board sits tens of px
+off) are skipped with the reason. Pure numpy/OpenCV.
 """
 
 from __future__ import annotations
@@ -36,17 +52,18 @@ import numpy as np
 
 from aicalib_tf.calib.bundle import CalibrationError, _Problem, bundle_adjust, poses_from_rays, schur_complement
 from aicalib_tf.calib.fit import _sort_views, outlier_threshold
+from aicalib_tf.calib.check_prior import PARAMS, calibration_covariance, check_fields, corner_noise
 from aicalib_tf.calib.quality import lens_of
-from aicalib_tf.calib.significance import chi2_quantile, chi2_sf, t_quantile, t_sf
+from aicalib_tf.calib.significance import chi2_noncentrality, f_quantile, f_sf
 from aicalib_tf.geometry.pattern import board_points
 
-__all__ = ["CheckResult", "check_calibration", "format_check", "corner_noise", "calibration_covariance", "ALPHA",
-           "MIN_CHECK_VIEWS", "PARAMS"]
+__all__ = ["CheckResult", "check_calibration", "check_fields", "format_check", "corner_noise", "calibration_covariance",
+           "ALPHA", "MIN_CHECK_VIEWS", "PARAMS", "POWER", "NOISIER"]
 
 ALPHA = 0.01  # each test's false-alarm rate for an unchanged camera
+POWER = 0.95  # the detection probability of the reported smallest detectable changes
+NOISIER = 1.5  # check footage noisier than the calibration's by this factor gets a note
 MIN_CHECK_VIEWS = 3
-MIN_NOISE_PX = 0.01  # floor of the corner noise per axis (a noise-free calibration would make any change significant)
-PARAMS = ("fx", "fy", "cx", "cy")
 
 
 @dataclass(frozen=True)
@@ -55,12 +72,16 @@ class CheckResult:
 
     holds : neither test rejects at level ``alpha``. model : the lens model. views : names of the
     used views; per_view_rms (V,) px with the calibration's intrinsics. skipped : {name: why}.
-    rms, expected_rms, limit_rms : residual RMS over the used corners, px, what the calibration
-    predicts, and the (1 − alpha) limit; residual_p : its p-value. noise_px : corner noise per axis.
+    rms : residual RMS px over the used corners with the calibration's intrinsics; free_rms : with
+    every intrinsic refitted. noise_px, noise_dof : the check footage's corner noise per axis (px,
+    from the free fit) and its degrees of freedom; calibration_noise_px : the calibration's.
     calibrated, calibrated_std, measured, measured_std, drift, drift_std : (4,) float64 px for
     fx, fy, cx, cy (measured: fitted to the new views; drift = measured − calibrated, its σ with
-    both uncertainties). drift_chi2, drift_limit, drift_p : the drift test. inflation : κ >= 1, the
-    factor on both covariances that the scatter between the new views asks for. notes : caveats.
+    both uncertainties). drift_chi2, drift_limit, drift_p : the drift test (T, its limit, p).
+    lens_chi2, lens_limit, lens_p, lens_dof : the lens test; lr_f : the held-vs-free F statistic
+    as if the calibration were exact. detectable_fx, detectable_pp : the fx change (fraction of fx)
+    and principal-point shift (px, worst direction) the drift test detects with probability
+    :data:`POWER`. inflation : κ >= 1. notes : caveats.
     """
 
     holds: bool
@@ -69,10 +90,10 @@ class CheckResult:
     per_view_rms: np.ndarray
     skipped: dict
     rms: float
-    expected_rms: float
-    limit_rms: float
-    residual_p: float
+    free_rms: float
     noise_px: float
+    noise_dof: float
+    calibration_noise_px: float
     calibrated: np.ndarray
     calibrated_std: np.ndarray
     measured: np.ndarray
@@ -82,6 +103,13 @@ class CheckResult:
     drift_chi2: float
     drift_limit: float
     drift_p: float
+    lens_chi2: float
+    lens_limit: float
+    lens_p: float
+    lens_dof: int
+    lr_f: float
+    detectable_fx: float
+    detectable_pp: float
     alpha: float
     hold_distortion: bool = True
     inflation: float = 1.0
@@ -91,14 +119,15 @@ class CheckResult:
     def failures(self) -> list[str]:
         """Why the calibration does not hold, one line per failed test ([] when it holds)."""
         out = []
-        if self.residual_p < self.alpha:
-            out.append(f"residual RMS {self.rms:.3f} px is above the limit {self.limit_rms:.3f} px "
-                       f"(expected {self.expected_rms:.3f} px)")
         if self.drift_p < self.alpha:
             z = self.drift / self.drift_std
             k = int(np.argmax(np.abs(z)))
             out.append(f"the intrinsics drifted (chi2 {self.drift_chi2:.1f} > {self.drift_limit:.1f}; largest: "
                        f"{PARAMS[k]} {self.drift[k]:+.2f} ± {self.drift_std[k]:.2f} px)")
+        if self.lens_p < self.alpha:
+            out.append(f"the lens no longer fits its calibration: refitting all {self.lens_dof} intrinsics lowers the "
+                       f"residuals by chi2 {self.lens_chi2:.1f} > {self.lens_limit:.1f} at the new views' noise "
+                       f"{self.noise_px:.3f} px, beyond the calibration's uncertainty")
         return out
 
     def to_dict(self) -> dict:
@@ -111,58 +140,26 @@ class CheckResult:
 
         return {
             "holds": bool(self.holds), "model": self.model, "alpha": self.alpha,
-            "hold_distortion": self.hold_distortion, "inflation": num(self.inflation), "failures": self.failures, "notes": list(self.notes),
+            "hold_distortion": self.hold_distortion, "inflation": num(self.inflation), "failures": self.failures,
+            "notes": list(self.notes),
             "views": [{"name": n, "rms": num(e)} for n, e in zip(self.views, self.per_view_rms)],
             "skipped": dict(self.skipped),
-            "residuals": {"rms": num(self.rms), "expected_rms": num(self.expected_rms),
-                          "limit_rms": num(self.limit_rms), "p": num(self.residual_p), "noise_px": num(self.noise_px)},
+            "noise": {"check_px": num(self.noise_px), "check_dof": num(self.noise_dof),
+                      "calibration_px": num(self.calibration_noise_px)},
+            "residuals": {"rms": num(self.rms), "free_rms": num(self.free_rms)},
             "calibrated": per_param(self.calibrated), "calibrated_std": per_param(self.calibrated_std),
             "measured": per_param(self.measured), "measured_std": per_param(self.measured_std),
             "drift": per_param(self.drift), "drift_std": per_param(self.drift_std),
             "drift_test": {"chi2": num(self.drift_chi2), "limit": num(self.drift_limit), "p": num(self.drift_p),
                            "dof": len(PARAMS)},
+            "lens_test": {"chi2": num(self.lens_chi2), "limit": num(self.lens_limit), "p": num(self.lens_p),
+                          "dof": int(self.lens_dof), "lr_f": num(self.lr_f)},
+            "detectable": {"power": POWER, "fx_fraction": num(self.detectable_fx),
+                           "principal_point_px": num(self.detectable_pp)},
         }
 
 
-# ----------------------------------------------------------------------------- statistics
-def corner_noise(cal) -> tuple[float, float]:
-    """(σ px per axis, degrees of freedom) of the corner noise the calibration's RMS implies.
-
-    σ² = rms²·N / (2N − 6V − n): N corners of V views (``cal.corner_counts``, or full boards of
-    ``cal.pattern_size`` when a file does not say, as an OpenCV camera.yaml), n free intrinsics.
-    Floored at :data:`MIN_NOISE_PX`.
-    """
-    V = len(cal.views)
-    counts = np.asarray(cal.corner_counts, np.float64)
-    N = float(counts.sum()) if counts.size and counts.sum() > 0 else float(V * cal.pattern_size[0] * cal.pattern_size[1])
-    n = 4 + np.asarray(cal.dist).size
-    dof = 2 * N - 6 * V - n
-    if not (dof > 0 and N > 0 and np.isfinite(cal.rms)):
-        return max(float(cal.rms) / math.sqrt(2), MIN_NOISE_PX), math.inf
-    return max(float(cal.rms) * math.sqrt(N / dof), MIN_NOISE_PX), dof
-
-
-def calibration_covariance(cal) -> tuple[np.ndarray, str]:
-    """((4+n, 4+n) covariance of [fx, fy, cx, cy, *dist], note): ``cal.covariance``, else the diagonal
-    of ``cal.std``, else zeros; the note says when the file did not carry the full covariance."""
-    lens = lens_of(cal)
-    n = 4 + lens.dist.size
-    cov = getattr(cal, "covariance", None)
-    if cov is not None and np.asarray(cov).shape == (n, n) and np.all(np.isfinite(cov)):
-        return np.asarray(cov, np.float64), ""
-    names = ("fx", "fy", "cx", "cy") + tuple(f"d{k}" for k in range(n - 4))
-    std = getattr(cal, "std", {}) or {}
-    if all(k in std for k in PARAMS):
-        from aicalib_tf.geometry.lens import COEFF_NAMES
-
-        names = PARAMS + COEFF_NAMES[lens.model]
-        return np.diag([float(std.get(k, 0.0)) ** 2 for k in names]), (
-            "the calibration file carries σ but no covariance: correlations ignored")
-    return np.zeros((n, n)), ("the calibration file carries no uncertainty (e.g. an OpenCV camera.yaml): its "
-                              "intrinsics are taken as exact, which flags changes more readily; check against camera.json")
-
-
-# ----------------------------------------------------------------------------- the check
+# ----------------------------------------------------------------------------- the fits
 def _poses(lens, obj, px, names, skipped):
     """Start poses per view from rays; views without one go to ``skipped``. Returns kept indices and poses."""
     keep, rv, tv = [], [], []
@@ -209,42 +206,9 @@ def _schur(model, obj, px, intrinsics, rvecs, tvecs) -> np.ndarray:
     return schur_complement(U, W, Vb)[0]
 
 
-def _view_scatter(cal) -> tuple[float, float]:
-    """(relative variance of one view's mean squared residual, its degrees of freedom) from the
-    calibration's per-view RMS; never below what pure corner noise gives (2 / (2·54 − 6) for a 9x6 board)."""
-    per_view = np.asarray(cal.per_view_rms, np.float64) ** 2
-    per_view = per_view[np.isfinite(per_view) & (per_view > 0)]
-    floor = 2.0 / max(2 * cal.pattern_size[0] * cal.pattern_size[1] - 6, 1)
-    if per_view.size < 3:
-        return floor, math.inf
-    return max(float(np.var(per_view, ddof=1) / np.mean(per_view) ** 2), floor), per_view.size - 1.0
-
-
-def _residual_test(fit, S, cov, sigma, scatter, alpha):
-    """(rms, expected rms, limit rms, p) of the fixed-intrinsics residuals (module docstring).
-
-    The mean squared residual per corner M is compared with its expectation E; its variance is the
-    views' scatter (``scatter``: (relative variance of one view's mean square, dof), :func:`_view_scatter`)
-    over the new views and over the calibration's, plus what the intrinsics' uncertainty adds; a
-    one-sided t test with the calibration's views' dof."""
-    counts = np.array([len(r) for r in fit.residuals], np.float64)
-    N, V = counts.sum(), len(counts)
-    ss = float(sum(np.sum(r * r) for r in fit.residuals))
-    SC = S @ cov
-    noise = 2 * sigma * sigma * (2 * N - 6 * V) / (2 * N)  # per corner, after the poses took their share
-    mean = noise + float(np.trace(SC)) / N
-    rel, nu = scatter
-    var = (noise ** 2 * rel * (float(np.sum(counts ** 2)) / N ** 2 + 1.0 / max(nu + 1, 1))
-           + (2 * float(np.trace(SC @ SC)) + 4 * sigma * sigma * float(np.trace(SC))) / N ** 2)
-    sd = math.sqrt(var)
-    z = (ss / N - mean) / sd
-    limit = mean + t_quantile(1 - alpha, nu) * sd
-    return math.sqrt(ss / N), math.sqrt(mean), math.sqrt(limit), t_sf(z, nu)
-
-
 def _view_inflation(model, obj, px, new, free) -> float:
     """κ >= 1: the views-as-clusters (sandwich) covariance of fx, fy, cx, cy over the formal one
-    (mean of the eigenvalue ratios; 1 with fewer than 5 views).
+    (mean of the eigenvalue ratios; 1 with fewer than 5 views or a singular fit).
 
     With each view's pose eliminated, view v adds S_v to JᵀJ and g_v to the gradient; the robust
     covariance is S⁻¹·(Σ g_v g_vᵀ)·S⁻¹·V/(V − 1), the linearised leave-one-view-out jackknife. Real
@@ -259,34 +223,84 @@ def _view_inflation(model, obj, px, new, free) -> float:
     nf = int(np.sum(free))
     S, G = np.zeros((nf, nf)), np.zeros((nf, nf))
     start = 0
-    for o in obj:
-        sl = slice(start, start + len(o))
-        start += len(o)
-        ji, jp, rv = Ji[sl].reshape(-1, nf), Jp[sl].reshape(-1, 6), r[sl].ravel()
-        WVinv = (ji.T @ jp) @ np.linalg.inv(jp.T @ jp)
-        S += ji.T @ ji - WVinv @ (jp.T @ ji)
-        g = ji.T @ rv - WVinv @ (jp.T @ rv)
-        G += np.outer(g, g)
-    Sinv = np.linalg.inv(S)
-    robust = (Sinv @ G @ Sinv * V / (V - 1))[:4, :4]
-    formal = new.sigma2 * Sinv[:4, :4]
-    return max(1.0, float(np.trace(np.linalg.solve(formal, robust))) / 4)
+    try:
+        for o in obj:
+            sl = slice(start, start + len(o))
+            start += len(o)
+            ji, jp, rv = Ji[sl].reshape(-1, nf), Jp[sl].reshape(-1, 6), r[sl].ravel()
+            WVinv = (ji.T @ jp) @ np.linalg.inv(jp.T @ jp)
+            S += ji.T @ ji - WVinv @ (jp.T @ ji)
+            g = ji.T @ rv - WVinv @ (jp.T @ rv)
+            G += np.outer(g, g)
+        Sinv = np.linalg.inv(S)
+        robust = (Sinv @ G @ Sinv * V / (V - 1))[:4, :4]
+        kappa = float(np.trace(np.linalg.solve(new.sigma2 * Sinv[:4, :4], robust))) / 4
+    except np.linalg.LinAlgError:
+        return 1.0
+    return max(1.0, kappa) if np.isfinite(kappa) else 1.0
 
 
-def _drift_test(lens, obj, px, fit, S, cov, hold_distortion):
-    """(measured (4,), its covariance (4, 4), drift covariance (4, 4), κ) from a fit of fx, fy, cx, cy
-    (module docstring); both covariances are scaled by κ (:func:`_view_inflation`)."""
+def _precision(S, A, sigma2, kappa) -> np.ndarray:
+    """(σ²·S⁻¹ + A)⁻¹ / κ = S·(σ²·I + A·S)⁻¹ / κ, symmetrised: the inverse covariance of a difference
+    whose two parts are the new views' (σ², JᵀJ-like S) and a known covariance A (no inverse of S)."""
+    P = S @ np.linalg.inv(sigma2 * np.eye(len(S)) + A @ S) / kappa
+    return 0.5 * (P + P.T)
+
+
+def _smallest_changes(precision, alpha) -> tuple[float, float]:
+    """(fx change in px, principal-point shift in px in its worst direction) that the drift test
+    (χ²(4) at ``alpha``, inverse covariance ``precision`` (4, 4)) detects with probability :data:`POWER`."""
+    lam = chi2_noncentrality(len(PARAMS), alpha, POWER)
+    fx = math.sqrt(lam / precision[0, 0]) if precision[0, 0] > 0 else math.inf
+    w = float(np.linalg.eigvalsh(precision[2:4, 2:4])[0])
+    return fx, (math.sqrt(lam / w) if w > 0 else math.inf)
+
+
+def _free_fit(lens, obj, px, fit):
+    """(every-intrinsic fit or None, σ̂² px², dof) of the new views: the check footage's noise."""
     n = 4 + lens.dist.size
-    free = np.zeros(n, bool)
-    free[:4 if hold_distortion else n] = True
-    new = bundle_adjust(lens.model, obj, px, lens.intrinsics(), fit.rvecs, fit.tvecs, free=free, rank_strict=False)
-    M = np.zeros((4, n))
-    M[:, :4] = -np.eye(4)
-    if hold_distortion and n > 4:
-        M[:, 4:] = -np.linalg.solve(S[:4, :4], S[:4, 4:])
-    kappa = _view_inflation(lens.model, obj, px, new, free)
-    cnew = kappa * new.covariance[:4, :4]
-    return new.intrinsics[:4], cnew, cnew + kappa * (M @ cov @ M.T), kappa
+    N, V = sum(len(p) for p in px), len(px)
+    try:
+        free = bundle_adjust(lens.model, obj, px, lens.intrinsics(), fit.rvecs, fit.tvecs, rank_strict=False)
+    except CalibrationError:
+        return None, float(2 * fit.cost / max(2 * N - 6 * V, 1)), float(max(2 * N - 6 * V, 1))
+    dof = max(2 * N - 6 * V - n, 1)
+    return free, float(2 * free.cost / dof), float(dof)
+
+
+def _drift(lens, obj, px, fit, free, S, cov, sigma2, hold_distortion):
+    """(measured (4,), the new views' covariance of it at σ̂² (4, 4), M·Σ·Mᵀ (4, 4), κ) (module docstring)."""
+    n = 4 + lens.dist.size
+    M = np.hstack([-np.eye(4), np.zeros((4, n - 4))])
+    if hold_distortion or free is None:
+        mask = np.arange(n) < 4
+        new = bundle_adjust(lens.model, obj, px, lens.intrinsics(), fit.rvecs, fit.tvecs, free=mask, rank_strict=False)
+        cnew = new.covariance[:4, :4] * (sigma2 / max(new.sigma2, 1e-300))
+        if n > 4:
+            M[:, 4:] = -np.linalg.solve(S[:4, :4], S[:4, 4:])
+    else:
+        mask, new = np.ones(n, bool), free
+        cnew = free.covariance[:4, :4] * (sigma2 / max(free.sigma2, 1e-300))
+    return new.intrinsics[:4], cnew, M @ cov @ M.T, _view_inflation(lens.model, obj, px, new, mask)
+
+
+def _inverse(C) -> np.ndarray:
+    try:
+        return np.linalg.inv(C)
+    except np.linalg.LinAlgError:
+        return np.linalg.pinv(C, hermitian=True)
+
+
+def _lens_test(lens, free, fit, S, cov, sigma2, kappa):
+    """(T, dof, held-vs-free F as if the calibration were exact) of the lens test (module docstring)."""
+    if free is None:
+        return 0.0, 1, 0.0
+    d = free.intrinsics - lens.intrinsics()
+    T = float(d @ _precision(S, cov, sigma2, kappa) @ d)
+    g = np.sqrt(np.maximum(np.diag(S), 1e-300))
+    w = np.linalg.eigvalsh(S / np.outer(g, g))
+    dof = int(np.sum(w > 1e-10 * w[-1]))
+    return T, dof, float(2 * (fit.cost - free.cost) / (len(d) * sigma2))
 
 
 def check_calibration(cal, views, *, alpha: float = ALPHA, hold_distortion: bool = True) -> CheckResult:
@@ -296,11 +310,14 @@ def check_calibration(cal, views, *, alpha: float = ALPHA, hold_distortion: bool
     it has one). views : sequence of :class:`~aicalib_tf.calib.fit.View` seen by the same camera,
     of ``cal.pattern_size`` boards (full or partial). alpha : each test's level in (0, 0.5).
     hold_distortion : fit fx, fy, cx, cy with the distortion held (default) or every intrinsic.
-    Raises ValueError for bad arguments and CalibrationError with fewer than
+    Raises ValueError for bad arguments, :class:`~aicalib_tf.calib.schema.FieldError` for a
+    calibration the check cannot use (:func:`check_fields`) and CalibrationError with fewer than
     :data:`MIN_CHECK_VIEWS` usable views.
     """
     if not 0.0 < float(alpha) < 0.5:
         raise ValueError(f"alpha must be in (0, 0.5), got {alpha!r}")
+    cov = check_fields(cal)
+    _, note = calibration_covariance(cal)
     lens = lens_of(cal)
     usable, skipped = _sort_views(views, tuple(cal.pattern_size))
     if len(usable) < MIN_CHECK_VIEWS:
@@ -311,27 +328,43 @@ def check_calibration(cal, views, *, alpha: float = ALPHA, hold_distortion: bool
     px = [v.corners for v in usable]
     kept, fit = _fixed_fit(lens, obj, px, names, skipped)
     obj, px = [obj[k] for k in kept], [px[k] for k in kept]
-    cov, note = calibration_covariance(cal)
+    free, sigma2, dof = _free_fit(lens, obj, px, fit)
+    sigma2 = max(sigma2, 1e-6)  # (1e-3 px)²: noise-free views still give a finite test
     S = _schur(lens.model, obj, px, lens.intrinsics(), fit.rvecs, fit.tvecs)
-    measured, cnew, cdrift, kappa = _drift_test(lens, obj, px, fit, S, cov, hold_distortion)
-    sigma, _ = corner_noise(cal)
-    rms, expected, limit, p_res = _residual_test(fit, S, kappa * cov, sigma, _view_scatter(cal), alpha)
+    measured, cnew, carried, kappa = _drift(lens, obj, px, fit, free, S, cov, sigma2, hold_distortion)
+    C = kappa * (cnew + carried)
+    precision = _inverse(C)
     calibrated = lens.intrinsics()[:4]
     drift = measured - calibrated
-    chi2 = float(drift @ np.linalg.solve(cdrift, drift))
-    p_drift = chi2_sf(chi2, 4)
+    chi2 = float(drift @ precision @ drift)
+    T, lens_dof, lr_f = _lens_test(lens, free, fit, S, cov, sigma2, kappa)
+    small_fx, small_pp = _smallest_changes(0.5 * (precision + precision.T), alpha)
+    noise, cal_noise = math.sqrt(sigma2), corner_noise(cal)[0]
+    notes = [note] if note else []
+    if free is None:
+        notes.append("every intrinsic could not be refitted to these views: the lens test was not run")
+    if noise > NOISIER * cal_noise:
+        notes.append(f"the check footage is {noise / cal_noise:.1f}x noisier than the calibration's (corner noise "
+                     f"{noise:.3f} against {cal_noise:.3f} px per axis); it still detects fx changed by "
+                     f"{100 * small_fx / calibrated[0]:.2f}% or the principal point moved {small_pp:.1f} px "
+                     f"({100 * POWER:g}% of the time)")
+    p_drift = f_sf(chi2 / 4, 4, dof)
+    p_lens = f_sf(T / lens_dof, lens_dof, dof) if free is not None else 1.0
     return CheckResult(
-        holds=bool(p_res >= alpha and p_drift >= alpha), model=lens.model, views=tuple(names[k] for k in kept),
-        per_view_rms=fit.per_view_rms, skipped=skipped, rms=rms, expected_rms=expected, limit_rms=limit,
-        residual_p=p_res, noise_px=sigma, calibrated=calibrated, calibrated_std=np.sqrt(np.diag(cov)[:4]),
-        measured=measured, measured_std=np.sqrt(np.diag(cnew)), drift=drift, drift_std=np.sqrt(np.diag(cdrift)),
-        drift_chi2=chi2, drift_limit=chi2_quantile(1 - alpha, 4), drift_p=p_drift, alpha=float(alpha),
-        hold_distortion=hold_distortion, inflation=kappa, notes=(note,) if note else ())
+        holds=bool(p_drift >= alpha and p_lens >= alpha), model=lens.model, views=tuple(names[k] for k in kept),
+        per_view_rms=fit.per_view_rms, skipped=skipped, rms=fit.rms, free_rms=free.rms if free else fit.rms,
+        noise_px=noise, noise_dof=dof, calibration_noise_px=cal_noise, calibrated=calibrated,
+        calibrated_std=np.sqrt(np.diag(cov)[:4]), measured=measured, measured_std=np.sqrt(kappa * np.diag(cnew)),
+        drift=drift, drift_std=np.sqrt(np.diag(C)), drift_chi2=chi2, drift_limit=4 * f_quantile(1 - alpha, 4, dof),
+        drift_p=p_drift, lens_chi2=T, lens_limit=lens_dof * f_quantile(1 - alpha, lens_dof, dof), lens_p=p_lens,
+        lens_dof=lens_dof, lr_f=lr_f, detectable_fx=small_fx / calibrated[0], detectable_pp=small_pp,
+        alpha=float(alpha), hold_distortion=hold_distortion, inflation=kappa, notes=tuple(notes))
 
 
 def format_check(result: CheckResult, *, source: str = "", total: int | None = None) -> str:
-    """The printed report: the verdict, views used and skipped with reasons, the residual RMS
-    against the expected and its limit, and the drift of fx, fy, cx, cy (±1σ of the difference)."""
+    """The printed report: the verdict, views used and skipped with reasons, both footages' corner
+    noise, the residual RMS, the drift of fx, fy, cx, cy (±1σ of the difference), both tests, and
+    the smallest changes the check detects."""
     used, skipped = len(result.views), len(result.skipped)
     given = total if total is not None else used + skipped
     head = "HOLDS" if result.holds else "DOES NOT HOLD"
@@ -340,8 +373,10 @@ def format_check(result: CheckResult, *, source: str = "", total: int | None = N
     lines += [f"  skipped  {name}: {why}" for name, why in result.skipped.items()]
     ok = lambda p: "ok" if p >= result.alpha else "FAIL"  # noqa: E731
     q = 100 * (1 - result.alpha)
-    lines.append(f"  residual RMS {result.rms:.3f} px with the calibrated intrinsics (expected {result.expected_rms:.3f}, "
-                 f"limit {result.limit_rms:.3f} at {q:g}%): {ok(result.residual_p)}")
+    lines.append(f"  corner noise per axis: these views {result.noise_px:.3f} px, the calibration's "
+                 f"{result.calibration_noise_px:.3f} px")
+    lines.append(f"  residual RMS {result.rms:.3f} px with the calibrated intrinsics, {result.free_rms:.3f} px with "
+                 "every intrinsic refitted")
     what = "distortion held" if result.hold_distortion else "every intrinsic refitted"
     lines.append(f"  drift, new views − calibration ({what}; ±1σ of the difference):")
     for k, p in enumerate(PARAMS):
@@ -350,6 +385,10 @@ def format_check(result: CheckResult, *, source: str = "", total: int | None = N
                      f"± {result.drift_std[k]:.2f} px{rel}")
     lines.append(f"  drift test: chi2 {result.drift_chi2:.1f} for 4 parameters (limit {result.drift_limit:.1f} at "
                  f"{q:g}%): {ok(result.drift_p)}")
+    lines.append(f"  lens test: chi2 {result.lens_chi2:.1f} for {result.lens_dof} intrinsics refitted (limit "
+                 f"{result.lens_limit:.1f} at {q:g}%): {ok(result.lens_p)}")
+    lines.append(f"  detects ({100 * POWER:g}% of the time): fx changed by {100 * result.detectable_fx:.2f}%, the "
+                 f"principal point moved {result.detectable_pp:.1f} px")
     if result.inflation > 1.05:
         lines.append(f"  (σ × {np.sqrt(result.inflation):.2f}: the new views scatter more than independent corner noise)")
     lines += [f"  note: {n}" for n in result.notes]

@@ -270,8 +270,18 @@ def require_number(d: dict, key: str, *, positive: bool = False, nonnegative: bo
     return f
 
 
+def _has_bool(value) -> bool:
+    """Whether a JSON value (nested lists) holds true or false, which numpy would read as 1 or 0."""
+    if isinstance(value, (bool, np.bool_)):
+        return True
+    return isinstance(value, (list, tuple)) and any(_has_bool(v) for v in value)
+
+
 def _floats(value, key: str, want: str) -> np.ndarray:
-    """``value`` (numbers, nested lists of numbers, or an array) as float64; FieldError otherwise."""
+    """``value`` (numbers, nested lists of numbers, or an array) as float64; FieldError otherwise
+    (true and false are not numbers here)."""
+    if _has_bool(value):
+        raise FieldError(key, f"must be a {want} matrix of numbers, got {_short(value)}")
     try:
         a = np.asarray(value)
     except (TypeError, ValueError, OverflowError):

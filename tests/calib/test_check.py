@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import doctest
 import json
+import math
 
 import numpy as np
 import pytest
@@ -15,8 +16,18 @@ from aicalib_tf.calib.check import (
     corner_noise,
     format_check,
 )
-from aicalib_tf.calib.significance import chi2_quantile, chi2_sf, t_quantile, t_sf
 from aicalib_tf.calib.fit import View, calibrate_camera
+from aicalib_tf.calib.schema import FieldError
+from aicalib_tf.calib.significance import (
+    chi2_noncentrality,
+    chi2_quantile,
+    chi2_sf,
+    f_quantile,
+    f_sf,
+    ncx2_sf,
+    t_quantile,
+    t_sf,
+)
 from aicalib_tf.geometry import lens as L
 from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views
 
@@ -48,9 +59,33 @@ def test_an_unchanged_camera_holds(calibrated):
     r = check_calibration(cal, _new_views(lens))
     assert r.holds, format_check(r)
     assert len(r.views) == 15 and not r.skipped and r.failures == []
-    assert abs(r.rms / r.expected_rms - 1) < 0.1 and r.rms < r.limit_rms
+    assert abs(r.noise_px / 0.15 - 1) < 0.1 and abs(r.calibration_noise_px / 0.15 - 1) < 0.1
     assert np.all(np.abs(r.drift) < 3 * r.drift_std)
-    assert r.drift_chi2 < r.drift_limit
+    assert r.drift_chi2 < r.drift_limit and r.lens_chi2 < r.lens_limit and r.lens_dof == 4 + lens.dist.size
+    assert not any("noisier" in n for n in r.notes)
+
+
+@pytest.mark.parametrize("noise", [0.45, 0.9])
+def test_noisier_footage_of_an_unchanged_camera_holds_and_says_what_it_can_detect(calibrated, noise):
+    """Footage 3-6x noisier than the calibration's (dim light, blur) is judged at its own noise."""
+    lens, cal = calibrated
+    r = check_calibration(cal, _new_views(lens, noise=noise))
+    assert r.holds, format_check(r)
+    assert abs(r.noise_px / noise - 1) < 0.1
+    clean = check_calibration(cal, _new_views(lens))
+    assert r.detectable_fx > 1.5 * clean.detectable_fx and r.detectable_pp > 1.5 * clean.detectable_pp
+    note = next(n for n in r.notes if "noisier" in n)
+    assert f"{100 * r.detectable_fx:.2f}%" in note and f"{r.detectable_pp:.1f} px" in note
+    assert "detects (95% of the time)" in format_check(r)
+
+
+def test_a_changed_distortion_is_flagged_by_the_lens_test():
+    views = synthetic_views(PINHOLE, 20, 0.15, seed=3)
+    cal = calibrate_camera(views, PATTERN, SQUARE, PINHOLE.image_size, model="plumb_bob")
+    lens = L.Lens("plumb_bob", PINHOLE.K, PINHOLE.dist + [0.02, 0, 0, 0, 0], PINHOLE.image_size)
+    r = check_calibration(cal, _new_views(lens))
+    assert not r.holds and r.lens_p < r.alpha and any("lens no longer fits" in f for f in r.failures)
+    assert r.lr_f > 10
 
 
 def test_one_percent_of_fx_is_flagged(calibrated):
@@ -111,6 +146,52 @@ def test_the_result_is_strict_json(calibrated):
     text = json.dumps(d, allow_nan=False)
     assert json.loads(text)["drift"].keys() == {"fx", "fy", "cx", "cy"}
     assert d["drift_test"]["dof"] == 4 and d["holds"] is True
+    assert d["noise"]["check_px"] > 0 and d["lens_test"]["dof"] >= 6 and d["detectable"]["power"] == 0.95
+
+
+def _absurd(cal, case):
+    cov = np.array(cal.covariance)
+    if case == "covariance 1e300":
+        return dataclasses.replace(cal, covariance=np.eye(len(cov)) * 1e300)
+    if case == "negative variance":
+        return dataclasses.replace(cal, covariance=-np.eye(len(cov)))
+    if case == "not positive semi-definite":
+        cov[0, 1] = cov[1, 0] = 10 * np.sqrt(cov[0, 0] * cov[1, 1])
+        return dataclasses.replace(cal, covariance=cov)
+    if case == "not symmetric":
+        cov[0, 1] += 1.0
+        return dataclasses.replace(cal, covariance=cov)
+    if case == "σ 1e200, no covariance":
+        return dataclasses.replace(cal, covariance=None, std={**cal.std, "fx": 1e200})
+    K = cal.K.copy()
+    K[0, 0] = 1e300 if case == "fx 1e300" else 1.0
+    return dataclasses.replace(cal, K=K)
+
+
+@pytest.mark.parametrize("case, field, why", [
+    ("covariance 1e300", "covariance", "too large to detect a change"),
+    ("negative variance", "covariance", "negative variance"),
+    ("not positive semi-definite", "covariance", "not positive semi-definite"),
+    ("not symmetric", "covariance", "symmetric"),
+    ("σ 1e200, no covariance", "std.fx", "too large to detect a change"),
+    ("fx 1e300", "camera_matrix", r"fx 1e\+300 px is not a focal length"),
+    ("fx 1", "camera_matrix", "fx 1 px is not a focal length"),
+])
+def test_an_absurd_calibration_is_refused_with_the_field_named(calibrated, case, field, why):
+    lens, cal = calibrated
+    with pytest.raises(FieldError, match=why) as info:
+        check_calibration(_absurd(cal, case), _new_views(lens, n=3))
+    assert info.value.field == field
+
+
+def test_f_and_noncentral_chi_square():
+    assert f_sf(2.5, 9, 300) == pytest.approx(0.0090483759, rel=1e-8)  # scipy.stats.f.sf
+    assert f_sf(5.0, 2, 20) == pytest.approx(0.0173415299, rel=1e-8)
+    assert f_sf(3.0, 4, math.inf) == pytest.approx(chi2_sf(12.0, 4))
+    assert f_quantile(0.99, 4, 1000) == pytest.approx(3.33795, rel=1e-5)
+    assert ncx2_sf(13.28, 4, 20) == pytest.approx(0.8855065062, rel=1e-8)  # scipy.stats.ncx2.sf
+    assert ncx2_sf(20.0, 9, 5) == pytest.approx(0.1591234853, rel=1e-8)
+    assert chi2_noncentrality(4, 0.01, 0.95) == pytest.approx(24.3291, rel=1e-4)
 
 
 def test_chi_square_and_t_tails():
