@@ -3,7 +3,9 @@
     python -m aicalib_tf.live --pattern 9x6 --square 25mm [--out calib/] [--port 8765]
         [--source video.mp4 | --camera 0 | --source rtsp://...] [--target 0.1px] [--max-views 40]
 
-Open the printed address in a browser. Without ``--source``/``--camera`` the page asks for the
+Open the printed address in a browser: it holds a random token made for this run (as Jupyter's
+does), without which the page's data and its Save are refused; requests that do not name this
+server's address, or come from another web site, are refused too. Without ``--source``/``--camera`` the page asks for the
 browser's own camera (a laptop's or a phone's; browsers allow cameras on ``localhost`` or over
 https), and sends its frames to this server; with one, the server reads the source and the page
 shows it. Each frame goes through the guided loop of ``python -m aicalib_tf.calibrate video.mp4``:
@@ -100,16 +102,24 @@ def _main(args) -> int:
         detector = tracking_detector(cfg.pattern, cfg.network, detector)
     state = LiveState(cfg, detector)
     try:
-        asyncio.run(_serve(make_app(state), args.host, args.port))
+        asyncio.run(_serve(make_app(state, host=args.host), args.host, args.port))
     except KeyboardInterrupt:
         print("stopped", file=sys.stderr)
     return 0
+
+
+def page_url(host: str, port: int, token: str) -> str:
+    """The address to open: ``http://localhost:PORT/?token=...`` (the bound host when it is not this machine's any/loopback)."""
+    shown = "localhost" if host in ("127.0.0.1", "0.0.0.0", "::", "") else (f"[{host}]" if ":" in host else host)
+    return f"http://{shown}:{port}/?token={token}"
 
 
 async def _serve(app, host: str, port: int) -> None:
     import asyncio
 
     from aiohttp import web
+
+    from aicalib_tf.live.server import token_of
 
     runner = web.AppRunner(app, access_log=None)
     await runner.setup()
@@ -120,7 +130,7 @@ async def _serve(app, host: str, port: int) -> None:
         await runner.cleanup()
         raise OSError(exc.errno, f"cannot serve on {host}:{port}: {exc.strerror}") from None
     bound = runner.addresses[0][1] if runner.addresses else port
-    print(f"live calibration page: http://{'localhost' if host in ('127.0.0.1', '0.0.0.0') else host}:{bound}/", flush=True)
+    print(f"live calibration page: {page_url(host, bound, token_of(app))}", flush=True)
     try:
         await asyncio.Event().wait()
     finally:

@@ -12,13 +12,21 @@ Two ways frames arrive, one loop (:class:`~aicalib_tf.guided.session.GuidedCalib
 Routes: ``GET /`` the page, ``GET /config`` its settings (JSON), ``GET /ws`` the websocket,
 ``GET /state`` the last update (JSON), ``POST /save`` the calibration so far into ``--out``
 (the files of ``python -m aicalib_tf.calibrate``; JSON ``{"ok", "out", "report"}`` or
-``{"ok": false, "error"}``). The server is aiohttp; detection and fitting run in one worker thread
-so that the page stays responsive.
+``{"ok": false, "error"}``). Every request must name the served address, come from the page
+itself, and (all but ``/``) carry the run's token (:mod:`aicalib_tf.live.guard`). The server is
+aiohttp; detection and fitting run in one worker thread so that the page stays responsive.
+
+A frame the page sends that cannot be used (empty, not a JPEG or PNG, over
+:data:`MAX_FRAME_PIXELS` such as a decompression bomb, or of another size than the first) is
+answered on the socket with ``{"error", "bad_frames"}`` and counted; the connection stays open.
+When views stop coming the update carries ``stall``, the explanation of
+:mod:`aicalib_tf.live.stall` (why, what would help, the verdict Save would keep).
 """
 
 from __future__ import annotations
 
 import asyncio
+import functools
 import sys
 import threading
 import time
@@ -33,11 +41,13 @@ import numpy as np
 from aicalib_tf.calib.quality import coverage_counts
 from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 
-__all__ = ["LiveConfig", "LiveState", "make_app", "update_json", "tracking_detector", "COVERAGE_CELLS"]
+__all__ = ["LiveConfig", "LiveState", "make_app", "token_of", "update_json", "tracking_detector", "COVERAGE_CELLS"]
 
 COVERAGE_CELLS = (8, 6)  # the coverage map the page draws (cols, rows)
 PAGE = Path(__file__).with_name("page.html")
 MAX_FRAME_BYTES = 8 << 20  # a websocket frame larger than this is refused
+MAX_FRAME_PIXELS = 7680 * 4320  # a frame larger than 8K UHD is refused before it is decoded
+MAX_PACE_S = 1.0  # the longest wait for a file's next frame (a frame rate is at least 1 fps)
 JPEG_QUALITY = 80  # frames sent to the page
 FPS_WINDOW = 30  # frames over which the handled frame rate is measured
 
@@ -81,6 +91,7 @@ def update_json(update, session) -> dict:
             "sigma_px": _finite(est.sigma_px), "covered": _finite(est.covered)},
         "coverage": cover.astype(int).tolist(),
         "frames": int(session.frames_seen), "examined_frames": int(session.examined), "views": len(session.views),
+        "target_px": _finite(session.cfg.target_px),
     }
 
 
@@ -106,15 +117,17 @@ def tracking_detector(pattern: tuple[int, int], network: str, base):
 class LiveState:
     """The loop and what the page needs of it; one per server. ``detector`` as for the guided loop."""
 
-    def __init__(self, cfg: LiveConfig, detector):
+    def __init__(self, cfg: LiveConfig, detector, clock=time.monotonic):
         from aicalib_tf.guided.session import GuidedCalibration, GuidedConfig
+        from aicalib_tf.live.stall import StallWatch
 
-        self.cfg = cfg
+        self.cfg, self.clock = cfg, clock  # clock: () -> s, for the stall rule
         self.detector = detector
         self.session = GuidedCalibration(GuidedConfig(cfg.pattern, cfg.square, cfg.square_unit, cfg.model,
                                                       cfg.target_px, cfg.max_views, gate=False), detector)
+        self.watch = StallWatch(cfg.target_px)
         self.last: dict = {}
-        self.index = 0
+        self.index, self.bad_frames = 0, 0
         self.times: deque = deque(maxlen=FPS_WINDOW)  # when the last frames were handled (monotonic s)
         self.lock = threading.Lock()  # the session is used from the worker thread only; saves take it too
 
@@ -125,6 +138,8 @@ class LiveState:
             update = self.session.add((self.index, t, gray))
             self.index += 1
             self.last = update_json(update, self.session)
+            self.last["stall"] = self.watch.note(update, len(self.session.views), self.clock())
+            self.last["bad_frames"] = self.bad_frames
             now = time.monotonic()
             self.times.append(now)
             span = now - self.times[0]
@@ -133,32 +148,61 @@ class LiveState:
         return self.last
 
     def add_jpeg(self, data: bytes) -> dict:
-        """Decode one frame the page sent (JPEG or PNG bytes) and run it; ValueError when it is not an image."""
-        from aicalib_tf.io import quantize, to_gray_float
-
-        if len(data) > MAX_FRAME_BYTES:
-            raise ValueError(f"frame of {len(data)} bytes is larger than {MAX_FRAME_BYTES}")
-        buf = np.frombuffer(data, np.uint8)
-        if data[:3] == b"\xff\xd8\xff":  # JPEG (8-bit): decoding its luma alone is about 4x faster at 720p
-            gray = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)
-            if gray is not None:
-                return self.add_gray(gray)
-        img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
-        if img is None:
-            raise ValueError("the page sent a frame that is not a JPEG or PNG image")
-        return self.add_gray(quantize(to_gray_float(img, "frame")))
+        """Decode one frame the page sent (JPEG or PNG bytes) and run it; ValueError when it cannot be used
+        (module docstring), counted in ``bad_frames``."""
+        try:
+            gray = _decode_frame(data)
+        except (ValueError, cv2.error) as exc:
+            self.bad_frames += 1
+            raise ValueError(str(exc) if isinstance(exc, ValueError) else "the frame could not be decoded") from None
+        try:
+            return self.add_gray(gray)
+        except Exception:  # a frame of another size than the first, or a fault: counted, then reported
+            self.bad_frames += 1
+            raise
 
     def save(self) -> tuple[str, str]:
         """Calibrate the kept views and write the files into ``cfg.out``; returns (out, report)."""
         from aicalib_tf.guided.save import save_session
 
-        meta = {"source": self.cfg.source or "browser camera", "detector": self.cfg.detector,
+        from aicalib_tf.sources import source_name
+
+        meta = {"source": source_name(self.cfg.source or "browser camera"), "detector": self.cfg.detector,
                 "model": self.detector.info.get("model"), "model_sha256": self.detector.info.get("sha256"),
                 "lens_model": self.cfg.model, "frames": self.session.frames_seen, "examined": self.session.examined,
                 "kept_frames": self.session.kept_frames, "target_px": self.cfg.target_px, "live": True}
         with self.lock:
             report = save_session(self.session, self.cfg.out, meta, head=[f"live page: {meta['source']}"])
         return self.cfg.out, report
+
+
+def _decode_frame(data: bytes) -> np.ndarray:
+    """A frame the page sent (JPEG or PNG bytes) -> (H, W) uint8 grey; ValueError (or cv2.error) when it cannot be used."""
+    from aicalib_tf.io import image_size_from_header, quantize, to_gray_float
+
+    if not data:
+        raise ValueError("the page sent an empty frame")
+    if len(data) > MAX_FRAME_BYTES:
+        raise ValueError(f"frame of {len(data)} bytes is larger than {MAX_FRAME_BYTES}")
+    size = image_size_from_header(data)
+    if size is not None and size[0] * size[1] > MAX_FRAME_PIXELS:
+        raise ValueError(f"frame of {size[0]}x{size[1]} px is larger than {MAX_FRAME_PIXELS / 1e6:.0f} MP")
+    buf = np.frombuffer(data, np.uint8)
+    if data[:3] == b"\xff\xd8\xff":  # JPEG (8-bit): decoding its luma alone is about 4x faster at 720p
+        gray = _quiet(cv2.imdecode, buf, cv2.IMREAD_GRAYSCALE)
+        if gray is not None:
+            return gray
+    img = _quiet(cv2.imdecode, buf, cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise ValueError("the page sent a frame that is not a JPEG or PNG image")
+    return quantize(to_gray_float(img, "frame"))
+
+
+def _quiet(fn, *args):
+    """``fn(*args)`` with OpenCV's own log lines off (a broken frame is reported once, on the page)."""
+    from aicalib_tf.sources import _quiet_capture
+
+    return _quiet_capture(lambda: fn(*args))
 
 
 def _paced(source, stop: threading.Event):
@@ -176,7 +220,7 @@ def _paced(source, stop: threading.Event):
             source.dropped += 1
             continue
         if ahead > 0:
-            time.sleep(ahead)
+            time.sleep(min(ahead, MAX_PACE_S))
         yield frame
 
 
@@ -194,7 +238,11 @@ def _source_thread(state: LiveState, loop: asyncio.AbstractEventLoop, queue: asy
     except Exception as exc:  # noqa: BLE001 - reported on the page and the console, one line
         from aicalib_tf.cli import describe_error
 
-        loop.call_soon_threadsafe(_offer, queue, (b"", {"error": f"{state.cfg.source}: {describe_error(exc)}"}))
+        from aicalib_tf.sources import source_name
+
+        why = describe_error(exc)
+        name = source_name(state.cfg.source)
+        loop.call_soon_threadsafe(_offer, queue, (b"", {"error": why if why.startswith(name) else f"{name}: {why}"}))
 
 
 def _offer(queue: asyncio.Queue, item) -> None:
@@ -259,8 +307,8 @@ class _Routes:
                     continue
                 try:
                     update = await self._in_worker(self.state.add_jpeg, msg.data)
-                except ValueError as exc:
-                    update = {"error": str(exc)}
+                except Exception as exc:  # noqa: BLE001 - a bad frame never ends the connection
+                    update = {"error": _frame_error(exc), "bad_frames": self.state.bad_frames}
                 await ws.send_str(_strict_dumps(update))
         finally:
             self.listeners.discard(ws)
@@ -290,18 +338,47 @@ class _Routes:
         self.executor.shutdown(wait=False, cancel_futures=True)
 
 
+def _frame_error(exc: BaseException) -> str:
+    """The page's line for a frame that failed: the reason of an expected error, else one console line too."""
+    from aicalib_tf.cli import describe_error
+
+    if isinstance(exc, ValueError):
+        return describe_error(exc)
+    line = f"frame not used: unexpected {type(exc).__name__}: {describe_error(exc)}"
+    print(line, file=sys.stderr, flush=True)
+    return line
+
+
 def _strict_dumps(obj) -> str:
     from aicalib_tf.jsonio import dumps
 
     return dumps(obj, indent=None)
 
 
-def make_app(state: LiveState):
-    """The aiohttp application serving the page for ``state`` (routes in the module docstring)."""
+@functools.cache
+def _token_key():
     from aiohttp import web
 
+    return web.AppKey("token", str)
+
+
+def token_of(app) -> str:
+    """The token the application of :func:`make_app` requires."""
+    return app[_token_key()]
+
+
+def make_app(state: LiveState, *, token: str | None = None, host: str = "127.0.0.1"):
+    """The aiohttp application serving the page for ``state`` (routes in the module docstring), to be
+    bound to ``host``, that requires the run's token (``token``, or a new random one; :func:`token_of`)
+    in the page's address (:mod:`aicalib_tf.live.guard`)."""
+    from aiohttp import web
+
+    from aicalib_tf.live.guard import guard_middleware, new_token
+
+    token = token or new_token()
     routes = _Routes(state)
-    app = web.Application(client_max_size=MAX_FRAME_BYTES)
+    app = web.Application(client_max_size=MAX_FRAME_BYTES, middlewares=[guard_middleware(token, host)])
+    app[_token_key()] = token
     app.router.add_get("/", routes.page)
     app.router.add_get("/config", routes.config)
     app.router.add_get("/state", routes.last)

@@ -10,6 +10,7 @@ import shutil
 import subprocess
 import sys
 import time
+import urllib.error
 import urllib.request
 from pathlib import Path
 
@@ -48,6 +49,13 @@ def _start(args, tmp_path) -> tuple[subprocess.Popen, str]:
     raise AssertionError(f"the server did not start (exit {proc.wait()})")
 
 
+def _route(url: str, path: str) -> str:
+    """The printed page address (``http://localhost:PORT/?token=...``) -> one of its routes, with the token."""
+    base, _, query = url.partition("?")
+    assert query.startswith("token="), url
+    return f"{base}{path}?{query}"
+
+
 def _get(url: str) -> dict:
     with urllib.request.urlopen(url, timeout=10) as r:
         return json.loads(r.read())
@@ -73,11 +81,11 @@ def test_browser_camera_page_ends_with_a_calibration_file(video, tmp_path):
     out = tmp_path / "calib"
     server, url = _start(["--out", str(out)], tmp_path)
     chrome = subprocess.Popen([browser, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'profile'}",
-                               f"--use-file-for-fake-video-capture={video / 'video.y4m'}", url + "?autostart=1&autosave=1"],
+                               f"--use-file-for-fake-video-capture={video / 'video.y4m'}", url + "&autostart=1&autosave=1"],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         saved = _wait_for(out / "camera.json", 240, [server, chrome])
-        state = _get(url + "state")
+        state = _get(_route(url, "state"))
     finally:
         chrome.kill()
         server.kill()
@@ -95,11 +103,13 @@ def test_server_side_video_source_and_save(video, tmp_path):
         ws_free_state = {}
         end = time.monotonic() + 120
         while time.monotonic() < end:
-            ws_free_state = _get(url + "state")
+            ws_free_state = _get(_route(url, "state"))
             if ws_free_state.get("views", 0) >= 3 and (ws_free_state.get("done") or ws_free_state.get("frames", 0) > 40):
                 break
             time.sleep(1)
-        req = urllib.request.Request(url + "save", method="POST")
+        with pytest.raises(urllib.error.HTTPError, match="403"):  # the token is required
+            urllib.request.urlopen(urllib.request.Request(url.partition("?")[0] + "save", method="POST"), timeout=10)
+        req = urllib.request.Request(_route(url, "save"), method="POST")
         with urllib.request.urlopen(req, timeout=120) as r:
             reply = json.loads(r.read())
     finally:
