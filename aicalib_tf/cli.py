@@ -8,6 +8,7 @@ adds ``--debug``) and runs its body through :func:`run_main`:
   ``error: <what>: <why>`` on stderr and exits 2;
 - any other exception is a bug: one line that says so and asks for a report, exit 2, and the
   traceback only with ``--debug``;
+- running out of memory is one line too (exit 2), its traceback with ``--debug`` as for every error;
 - Ctrl-C prints ``interrupted`` and exits 130.
 
 Exit codes, as in every command: 0 done, 1 a check that did not pass, 2 bad input.
@@ -82,6 +83,8 @@ def run_main(body: Callable[[], int], *, debug: bool = False, stderr=None) -> in
         raise
     except MemoryError:
         print("error: out of memory (try fewer or smaller images, or fewer --workers)", file=err)
+        if debug:
+            traceback.print_exc(file=err)
         return EXIT_BAD_INPUT
     except Exception as exc:  # noqa: BLE001 - the one place every error is turned into a line
         if _expected(exc):

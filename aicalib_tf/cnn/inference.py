@@ -15,6 +15,15 @@ project's 2-core CPUs a 640×480 map takes about 2.5–4 ms instead of 4–7 ms;
 from float32's by about 0.01 and subpixel offsets by under 0.07 px, before the refinement on the
 image, which does not use them. Elsewhere, where a bfloat16 run fails, and with the environment
 variable ``AICALIB_PRECISION=float32``, float32 is used (``bfloat16`` asks for it regardless).
+
+Memory. A network run holds about 150 bytes of activations per input pixel (the shipped
+``default`` on LiteRT: 720 MB at 2048×2048), and the runtime's planner fails beyond a few tens
+of megapixels. An image of more than ``MAX_RUN_PIXELS`` is therefore run in windows of at most
+``TILE``×``TILE`` px, standardised by the whole image's mean and deviation, each keeping the map
+cells at least ``TILE_MARGIN`` px inside it (or on the image's border): the networks see no further
+than 16 px, so the map is the one a single run would give, bit for bit (measured on the shipped
+networks). The map itself is (H/4, W/4, 3) float32, 0.75 byte per pixel. The weak points are told
+from the strong ones through :func:`aicalib_tf.geometry.points.any_within` (a k-d tree for large sets).
 """
 
 from __future__ import annotations
@@ -25,14 +34,17 @@ import os
 import cv2
 import numpy as np
 
-from aicalib_tf.cnn.corner_map import decode_map, network_input, standardize
+from aicalib_tf.cnn.corner_map import STRIDE, decode_map, network_input, padded_shape, standardize
 from aicalib_tf.cnn.spec import PATCH_SIZE, model_kind
 from aicalib_tf.detect.candidates import saddle_points
-from aicalib_tf.geometry.points import sq_distances
+from aicalib_tf.geometry.points import any_within
 
 __all__ = ["corner_map", "corner_points", "weak_corner_points", "patch_weights", "extract_patches", "native_bfloat16", "resolve_precision"]
 
 PRECISION_ENV = "AICALIB_PRECISION"
+MAX_RUN_PIXELS = 2_200_000  # network input pixels in one run (a 1920×1080 image is one); larger images run in tiles
+TILE = 1024  # px: the side of a tile's window (a multiple of the map's stride; 1024² runs fastest per pixel)
+TILE_MARGIN = 32  # px: context kept on each inner side of a tile (the networks see 16 px at most)
 
 
 @functools.lru_cache(maxsize=1)
@@ -80,12 +92,68 @@ def corner_map(model, gray: np.ndarray, *, precision: str | None = None) -> np.n
     ``"float32"``, ``"bfloat16"`` or ``"auto"`` (default: ``AICALIB_PRECISION``, else auto; see
     the module docstring). Returns (ceil(H/4), ceil(W/4), 3) float32.
     """
-    x = network_input(gray)
-    if not _is_keras(model):
-        return model(x)[0]
-    from aicalib_tf.cnn.keras_inference import run_map
+    if _is_keras(model):
+        from aicalib_tf.cnn.keras_inference import run_map
 
-    return run_map(model, x, resolve_precision(precision))
+        want = resolve_precision(precision)
+
+        def run(x):
+            return run_map(model, x, want)
+    else:
+        def run(x):
+            return model(x)[0]
+    h, w = np.shape(gray)[:2]
+    ph, pw = padded_shape(h, w)
+    if ph * pw <= MAX_RUN_PIXELS:
+        return run(network_input(gray))
+    return _tiled_map(run, gray)
+
+
+def _windows(length: int) -> list[tuple[int, int, int]]:
+    """Along one padded axis of ``length`` px: (window start, kept start, kept end) per tile, windows
+    ``TILE`` long (or the whole axis), kept parts abutting, ``TILE_MARGIN`` px inside any inner window edge."""
+    if length <= TILE:
+        return [(0, 0, length)]
+    step = TILE - 2 * TILE_MARGIN
+    return [(min(max(k - TILE_MARGIN, 0), length - TILE), k, min(k + step, length)) for k in range(0, length, step)]
+
+
+def _image_stats(g: np.ndarray) -> tuple[float, float]:
+    """The whole image's mean and standard deviation, as :func:`standardize` takes them, without a float copy of it."""
+    from aicalib_tf.cnn.corner_map_kernels import mean_std
+
+    if g.dtype == np.float32 and g.flags.c_contiguous:
+        return mean_std(g)
+    rows = max(1, (1 << 22) // max(g.shape[1], 1))  # blocks of about 16 MB as float32
+    blocks = range(0, g.shape[0], rows)
+    total = sum(float(np.sum(g[y:y + rows], dtype=np.float64)) for y in blocks)
+    mean = total / max(g.size, 1)
+    sq = sum(float(np.sum((np.asarray(g[y:y + rows], np.float64) - mean) ** 2)) for y in blocks)
+    return mean, float(np.sqrt(sq / max(g.size, 1)))
+
+
+def _tiled_map(run, gray: np.ndarray) -> np.ndarray:
+    """The corner map of a large image from windows of it (module docstring): (ceil(H/4), ceil(W/4), 3) float32.
+
+    run : ``run(x (1, h, w, 1) float32) -> (h/4, w/4, 3)``. Only one window's input and activations
+    exist at a time.
+    """
+    g = np.asarray(gray)
+    h, w = g.shape
+    ph, pw = padded_shape(h, w)
+    mean, std = _image_stats(g)
+    out = None
+    for wy, ky0, ky1 in _windows(ph):
+        for wx, kx0, kx1 in _windows(pw):
+            sy, sx = min(TILE, ph), min(TILE, pw)
+            body = standardize(g[wy:min(wy + sy, h), wx:min(wx + sx, w)], mean, std)
+            x = np.pad(body, ((0, sy - body.shape[0]), (0, sx - body.shape[1])), mode="edge")  # as network_input pads
+            m = run(x[None, :, :, None])
+            if out is None:
+                out = np.empty((ph // STRIDE, pw // STRIDE, m.shape[2]), np.float32)
+            out[ky0 // STRIDE:ky1 // STRIDE, kx0 // STRIDE:kx1 // STRIDE] = \
+                m[(ky0 - wy) // STRIDE:(ky1 - wy) // STRIDE, (kx0 - wx) // STRIDE:(kx1 - wx) // STRIDE]
+    return out
 
 
 def extract_patches(image: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -163,9 +231,8 @@ def weak_corner_points(model, gray: np.ndarray, threshold: float = 0.5, weak: fl
         if not memo:
             low, low_scores = lower()
             low = low[low_scores < threshold]
-            if len(low) and len(pts):
-                d2 = sq_distances(low, pts)
-                low = low[d2.min(axis=1) >= 2.5**2]
+            if len(low) and len(pts):  # not within 2.5 px of a strong point (any number of points: a k-d tree)
+                low = low[~any_within(low, pts, 2.5, strict=True)]
             memo.append(low.astype(np.float32).reshape(-1, 2))
         return memo[0]
     return pts, scores, weak_points

@@ -26,7 +26,7 @@ import numpy as np
 
 from aicalib_tf.detect.grid_kernels import edge_contrasts, grow_lines, seed_block
 from aicalib_tf.detect.junctions import SAME_CORNER
-from aicalib_tf.geometry.points import sq_distances
+from aicalib_tf.geometry.points import nearest_k, sq_distances
 
 MIN_CORNERS = 9  # fewest corners of a grid, and so of any board returned: a grid grows from a 3x3 seed
 
@@ -669,9 +669,7 @@ def assemble_grids(points: np.ndarray, scores: np.ndarray | None = None, *, gray
     if n < MIN_CORNERS:
         return []
     order = np.argsort(-np.asarray(scores), kind="stable") if scores is not None else np.arange(n)
-    d2 = sq_distances(pts, pts)
-    np.fill_diagonal(d2, np.inf)
-    near = np.argsort(d2, axis=1)[:, : min(neighbours, n - 1)]
+    near = nearest_k(pts, neighbours)  # in row blocks: memory O(N) per row, not an (N, N) matrix
     free = np.ones(n, bool)
     contrast = None if gray is None else _SeedContrast(gray, pts, near, order, free)
     grids = []

@@ -21,7 +21,7 @@ from aicalib_tf.detect.refine import (
     window_radius,
 )
 from aicalib_tf.detect.shadow import shadow_asymmetry
-from aicalib_tf.geometry.points import sq_distances
+from aicalib_tf.geometry.points import any_within, close_pairs
 
 __all__ = ["dedupe", "nearest_spacing", "proposer", "ring_symmetry", "typical_amplitude"]
 
@@ -42,15 +42,20 @@ SAME_CORNER = 1.5  # px: two points this near are one corner (dedupe; a weak net
 
 
 def dedupe(pts: np.ndarray, scores: np.ndarray, min_distance: float = SAME_CORNER) -> np.ndarray:
-    """Indices of points to keep: of points closer than ``min_distance`` px, only the strongest."""
+    """Indices of points to keep: of points closer than ``min_distance`` px, only the strongest.
+
+    The close pairs come from :func:`aicalib_tf.geometry.points.close_pairs` (memory O(N + pairs)).
+    """
     order = np.argsort(-scores, kind="stable")
-    d2 = sq_distances(pts[order], pts[order])
-    close = d2 < min_distance**2
-    np.fill_diagonal(close, False)
+    p = pts[order]
+    i, j = close_pairs(p, p, min_distance, strict=True)
+    later = j > i  # each pair once, from its stronger point
+    i, j = i[later], j[later]
     alive = np.ones(len(order), bool)
-    for a in np.flatnonzero(close.any(axis=1)).tolist():  # strongest first; a point near none is kept as it is
+    starts = np.searchsorted(i, np.arange(len(order) + 1))
+    for a in np.unique(i).tolist():  # strongest first; a point near none is kept as it is
         if alive[a]:
-            alive[a + 1:] &= ~close[a, a + 1:]
+            alive[j[starts[a]:starts[a + 1]]] = False
     return order[alive]
 
 
@@ -147,7 +152,7 @@ def proposer(smoothed: Smoothed, ring_image: np.ndarray, ref_amp: float, weak=No
             weak_pts.append(np.zeros((0, 2)) if weak is None else np.asarray(weak(), np.float64).reshape(-1, 2))
         if len(weak_pts[0]) == 0:
             return np.zeros(len(q), bool)
-        return sq_distances(q, weak_pts[0]).min(axis=1) <= SAME_CORNER**2
+        return any_within(q, weak_pts[0], SAME_CORNER)  # any number of weak points: memory O(M + K)
 
     def look(pred, step, margin, window, shift, ring, memo, bent=False):
         pred, step = np.asarray(pred, np.float64), np.asarray(step, np.float64)

@@ -22,20 +22,27 @@ from aicalib_tf.detect.refine import Smoothed, refine_windowed, window_radius
 from aicalib_tf.geometry.pose import in_frame
 from aicalib_tf.io import as_gray_float
 
-__all__ = ["MIN_SIDE", "QUICK_SIDE", "QUICK_LEVELS", "Frame", "scales", "quick_scales", "quick_shift", "downscale",
+__all__ = ["MIN_SIDE", "MAX_SEARCH_PIXELS", "QUICK_SIDE", "QUICK_LEVELS", "Frame", "scales", "quick_scales", "quick_shift", "downscale",
            "to_full", "refine_full"]
 
 MIN_SIDE = 800  # px: a reduced scale keeps at least this many pixels along the image's longer side
+MAX_SEARCH_PIXELS = 16_000_000  # px: the most pixels of a scale searched whole (a 48 MP photo's finest is f = 2)
+MAX_REFINE_PIXELS = 4_000_000  # px: a board's region refined at once; larger ones in windows about their corners
+REFINE_TILE = 1024  # px: the side of those windows' cells
 QUICK_SIDE = 240  # px: a quick pass keeps at least this many pixels along the image's longer side
 QUICK_LEVELS = 2  # quick passes at most (measured on evaluate --quick: 640x480 at 160x120 found no clean board,
 # 1920x1080 at 240x135 found all)
 
 
-def scales(width: int, height: int, min_side: int = MIN_SIDE) -> list[int]:
-    """Reduction factors to try, coarsest first, ending with 1 (full size).
+def scales(width: int, height: int, min_side: int = MIN_SIDE, max_pixels: int = MAX_SEARCH_PIXELS) -> list[int]:
+    """Reduction factors to try, coarsest first, ending with the finest searched whole.
 
     The coarsest is the largest power of two that leaves ``min_side`` px along the longer side:
-    [1] up to 1599 px, [2, 1] for 1920×1080, [8, 4, 2, 1] for 8000×6000.
+    [1] up to 1599 px, [2, 1] for 1920×1080, [4, 2, 1] for 4000×3000. The finest is 1 (full
+    size) unless that has more than ``max_pixels`` px: then the finest power of two within them
+    (never coarser than the coarsest): [8, 4, 2] for 8000×6000, whose corners are refined on the
+    full image in windows about them (:func:`refine_full`). Memory and time then stay bounded, and
+    a board any scale finds is one a quarter of the photo (f = 2) shows as well.
     """
     f = 1
     while max(int(width), int(height)) // (2 * f) >= min_side:
@@ -44,7 +51,8 @@ def scales(width: int, height: int, min_side: int = MIN_SIDE) -> list[int]:
     while f >= 1:
         out.append(f)
         f //= 2
-    return out
+    whole = [f for f in out if (int(width) // f) * (int(height) // f) <= max_pixels]
+    return whole or out[:1]
 
 
 def quick_scales(width: int, height: int, min_side: int = QUICK_SIDE, levels: int = QUICK_LEVELS) -> list[int]:
@@ -168,12 +176,30 @@ def refine_full(image, points: np.ndarray, max_shift: float = 2.0) -> tuple[np.n
     w, h = frame.size
     spacing = nearest_spacing(pts)
     margin = int(window_radius(spacing).max()) + 8
-    x0, y0 = np.maximum(np.floor(pts.min(axis=0)).astype(int) - margin, 0)
-    x1, y1 = np.minimum(np.ceil(pts.max(axis=0)).astype(int) + margin + 1, [w, h])
-    crop = frame.region(x0, y0, x1, y1)
-    offset = np.array([x0, y0], np.float32)
-    shift = np.full(len(pts), float(max_shift))
-    refined, ok = refine_windowed(Smoothed(crop), pts - offset, spacing, max_shift=shift)
-    refined = refined + offset
+    refined, ok = pts.copy(), np.zeros(len(pts), bool)
+    for sel in _refine_groups(pts, margin, (w, h)):
+        p = pts[sel]
+        x0, y0 = np.maximum(np.floor(p.min(axis=0)).astype(int) - margin, 0)
+        x1, y1 = np.minimum(np.ceil(p.max(axis=0)).astype(int) + margin + 1, [w, h])
+        offset = np.array([x0, y0], np.float32)
+        got, got_ok = refine_windowed(Smoothed(frame.region(x0, y0, x1, y1)), p - offset, spacing[sel],
+                                      max_shift=np.full(len(p), float(max_shift)))
+        refined[sel], ok[sel] = got + offset, got_ok
     ok &= in_frame(refined, (w, h))
     return np.where(ok[:, None], refined, pts).astype(np.float32), ok
+
+
+def _refine_groups(pts: np.ndarray, margin: int, size: tuple[int, int]) -> list[np.ndarray]:
+    """Index sets of pts (N, 2) px refined together: all of them when their region (bounding box
+    plus ``margin``) holds at most ``MAX_REFINE_PIXELS``, else those in each ``REFINE_TILE`` cell
+    (a board filling a 48 MP photo: a few dozen small windows, only where its corners are). Each
+    point's window keeps ``margin`` px of its own image about it either way, so its fit is the same."""
+    lo = np.floor(pts.min(axis=0)) - margin
+    hi = np.ceil(pts.max(axis=0)) + margin + 1
+    area = np.prod(np.minimum(hi, size) - np.maximum(lo, 0))
+    if not np.all(np.isfinite(pts)) or area <= MAX_REFINE_PIXELS:
+        return [np.arange(len(pts))]
+    cell = np.floor(pts / REFINE_TILE).astype(np.int64)
+    _, group = np.unique(cell, axis=0, return_inverse=True)
+    group = group.ravel()
+    return [np.flatnonzero(group == g) for g in range(int(group.max()) + 1)]

@@ -9,7 +9,8 @@ from data_gen import make_sample
 
 
 @pytest.mark.parametrize("size, want", [((640, 480), [1]), ((1599, 1200), [1]), ((1600, 1200), [2, 1]),
-                                        ((1920, 1080), [2, 1]), ((8000, 6000), [8, 4, 2, 1]), ((32, 32), [1])])
+                                        ((1920, 1080), [2, 1]), ((8000, 6000), [8, 4, 2]), ((5656, 4242), [4, 2]),
+                                            ((4000, 4000), [4, 2, 1]), ((32, 32), [1])])
 def test_scales_keep_at_least_min_side_pixels(size, want):
     assert scales(*size) == want
 
