@@ -30,6 +30,7 @@ ENTRY_POINTS: tuple[tuple[str, str, str], ...] = (
     ("python -m aicalib_tf.calibrate", "aicalib_tf.calibrate", "calibrate a camera or a rig from photos, a video or a camera"),
     ("python -m aicalib_tf.live", "aicalib_tf.live.__main__", "calibrate from a web page showing the camera"),
     ("python -m aicalib_tf.check", "aicalib_tf.check", "check that a calibration still holds"),
+    ("python -m aicalib_tf.handeye", "aicalib_tf.handeye", "hand-eye calibration: a robot's camera from its poses and board views"),
     ("python -m aicalib_tf.compare", "aicalib_tf.compare", "compare two calibrations of one camera (rotation fitted)"),
     ("python -m aicalib_tf.detect", "aicalib_tf.detect.__main__", "detect chessboard or ChArUco corners in images"),
     ("python -m aicalib_tf.board", "aicalib_tf.board", "write a printable ChArUco board"),
@@ -39,6 +40,7 @@ ENTRY_POINTS: tuple[tuple[str, str, str], ...] = (
     ("python -m aicalib_tf.export", "aicalib_tf.export", "export the runtime models, or compile the kernels"),
     ("python -m data_gen", "data_gen.__main__", "render synthetic chessboard images with exact truth"),
     ("python -m data_gen.video", "data_gen.video", "render a hand-held calibration video with exact truth"),
+    ("python -m data_gen.handeye", "data_gen.handeye", "render a hand-eye calibration set with exact truth"),
     ("python -m aicalib_tf.docs", "aicalib_tf.docs", "write this page"),
 )
 
