@@ -12,7 +12,7 @@ median and 95th percentile taken, over the grid cells the boards covered. For tw
 set of views (:func:`aicalib_tf.calib.quality.half_difference`) that is the cells holding a
 detected corner of any view; for two calibration files (:func:`compare_calibrations`) it is the
 cells both files' boards cover, each board projected through its own calibration at its stored
-pose (:func:`board_coverage`). Cells outside a circular fisheye's image circle are never counted.
+pose, its convex hull filled (:func:`board_coverage`). Cells outside a circular fisheye's image circle are never counted.
 
 Everything here is numpy/OpenCV on :class:`~aicalib_tf.geometry.lens.Lens` objects; the
 ``calibrate`` command's half-vs-half line, ``python -m aicalib_tf.compare`` and the real-photo
@@ -29,7 +29,7 @@ from aicalib_tf.geometry.pattern import board_points, pattern_ids
 from aicalib_tf.geometry.pose import best_rotation
 
 __all__ = ["GRID", "grid_points", "cell_counts", "rotation_compensated_diff", "diff_stats", "projection_diff",
-           "board_coverage", "central_scale", "compare_calibrations", "split_views", "SCALE_MISMATCH"]
+           "view_coverage", "board_coverage", "central_scale", "compare_calibrations", "split_views", "SCALE_MISMATCH"]
 
 GRID = (32, 24)  # (gx, gy) cells over the image: the default sampling of every difference
 SCALE_MISMATCH = 1.3  # two lenses whose central pixel scales differ by more than this are different cameras
@@ -110,16 +110,42 @@ def projection_diff(lens_a: L.Lens, lens_b: L.Lens, *, grid=GRID, covered=None, 
             "covered_stats": diff_stats(diff, cov), "all_stats": diff_stats(diff, inside)}
 
 
+def view_coverage(corner_sets, image_size, grid=GRID) -> np.ndarray:
+    """(gy·gx,) bool over :func:`grid_points`: the cells that hold a corner of any view, or that a
+    view's convex hull covers or touches (the area its board covered, as mrcal outlines it).
+
+    corner_sets : iterable of (N, 2) px arrays, one per view (points outside the image are clipped
+    by the grid; a view with fewer than 3 points adds its cells only)."""
+    w, h = (int(v) for v in image_size)
+    gx, gy = (int(v) for v in grid)
+    mask = np.zeros((gy, gx), np.uint8)
+    pts_all = []
+    for pts in corner_sets:
+        pts = np.asarray(pts, np.float64).reshape(-1, 2)
+        pts = pts[np.all(np.isfinite(pts), axis=1)]
+        pts_all.append(pts)
+        if len(pts) >= 3:  # cell coordinates: cell (i, j)'s centre is at (j, i)
+            cell = (pts + 0.5) * [gx / w, gy / h] - 0.5
+            hull = cv2.convexHull(np.round(np.clip(cell, -4 * gx, 4 * gx) * 256).astype(np.int32))
+            cv2.fillConvexPoly(mask, hull, 1, lineType=cv2.LINE_8, shift=8)
+    hit = cell_counts(np.concatenate(pts_all) if pts_all else np.zeros((0, 2)), image_size, grid) > 0
+    return (mask.astype(bool) | hit).ravel()
+
+
 def board_coverage(lens: L.Lens, pattern_size, square_size: float, rvecs, tvecs, grid=GRID) -> np.ndarray:
-    """(gy·gx,) bool over :func:`grid_points`: the cells that the whole board, at each pose
-    (``rvecs``, ``tvecs`` (V, 3), board-to-camera, in the unit of ``square_size``) and projected
-    through ``lens``, puts a corner in (a file keeps no corner positions; a partial board counts
-    whole, its corners outside the image left out)."""
+    """(gy·gx,) bool over :func:`grid_points`: :func:`view_coverage` of the whole board at each pose
+    (``rvecs``, ``tvecs`` (V, 3), board-to-camera, in the unit of ``square_size``) projected through
+    ``lens`` (a file keeps no corner positions; a partial board counts whole, its corners outside
+    the image left out)."""
     P = board_points(pattern_ids(tuple(pattern_size)), float(square_size))
     rv, tv = np.asarray(rvecs, np.float64).reshape(-1, 3), np.asarray(tvecs, np.float64).reshape(-1, 3)
-    uv = [lens.project(P @ cv2.Rodrigues(r)[0].T + t) for r, t in zip(rv, tv)]
-    uv = np.concatenate(uv) if uv else np.zeros((0, 2))
-    return cell_counts(uv[np.all(np.isfinite(uv), axis=1)], lens.image_size, grid).ravel() > 0
+    w, h = lens.image_size
+    views = []
+    for r, t in zip(rv, tv):
+        uv = lens.project(P @ cv2.Rodrigues(r)[0].T + t)
+        ok = np.all(np.isfinite(uv), axis=1) & (uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5)
+        views.append(uv[ok & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5)])
+    return view_coverage(views, lens.image_size, grid)
 
 
 def central_scale(lens: L.Lens, center=None, step: float = 4.0) -> float:

@@ -68,7 +68,7 @@ def test_two_calibrations_of_one_camera_differ_little(two_fits):
     assert r["covered_stats"]["p95"] >= r["covered_stats"]["median"]
     assert r["all_stats"]["cells"] == 32 * 24 and r["covered_stats"]["cells"] < r["all_stats"]["cells"]
     # the boards' stored poses cover about the cells the detected corners do
-    from_corners = Q.coverage_counts(views, SIZE, D.GRID).ravel() > 0
+    from_corners = D.view_coverage([v.corners for v in views], SIZE)
     from_poses = D.board_coverage(a.lens, PATTERN, SQUARE, a.rvecs, a.tvecs) | D.board_coverage(
         b.lens, PATTERN, SQUARE, b.rvecs, b.tvecs)
     assert np.mean(from_corners == from_poses) > 0.95
@@ -95,3 +95,11 @@ def test_different_sizes_or_cameras_are_refused(two_fits):
         D.compare_calibrations(a, dataclasses.replace(b, K=K2))
     with pytest.raises(ValueError, match="split must be"):
         D.split_views([1, 2, 3], "thirds")
+
+
+def test_view_coverage_fills_each_views_hull():
+    square = [[100.0, 100.0], [500.0, 100.0], [500.0, 380.0], [100.0, 380.0]]
+    m = D.view_coverage([square], SIZE).reshape(24, 32)
+    assert m[12, 15] and m[5, 5] and not m[2, 2] and not m[20, 28]
+    assert 280 <= m.sum() <= 315  # centres inside: 20 x 14; the cells the edges touch: 21 x 15
+    assert D.view_coverage([[[10.0, 10.0]]], SIZE).sum() == 1
