@@ -235,35 +235,38 @@ def expand_images(patterns) -> list[str]:
 def _recursive_glob(pattern: str) -> list[str]:
     """The paths a pattern with a ``**`` component matches, as ``glob.glob(pattern, recursive=True)``
     gives them (``**`` is zero or more folders; wildcards skip hidden names), except that every real
-    folder is walked once: the folders under the pattern's fixed start by their own paths, and a
-    linked folder outside them once, by the first link met walking down (sorted). A symbolic-link loop
-    therefore ends instead of recursing until the path is too long."""
+    folder is walked once: first the folders under the pattern's fixed start by their own paths,
+    then each linked folder not walked yet, by the first link to it (sorted, nearest first). A
+    symbolic-link loop therefore ends instead of recursing until the path is too long."""
     import fnmatch
 
     parts = Path(pattern).parts
     magic = next(k for k, p in enumerate(parts) if any(ch in p for ch in "*?["))
     root, pats = (os.path.join(*parts[:magic]) if magic else ""), [_part_matcher(p, fnmatch) for p in parts[magic:]]
     top = root or os.curdir
-    if not os.path.isdir(top):
-        return []
-    inside = {_folder_key(f) for f, _, _ in os.walk(top)} - {None}  # no links followed: no loop
-    outside: set = set()  # linked folders walked so far (and the folders under them)
-    out = []
-    for folder, dirs, files in os.walk(top, followlinks=True):
-        dirs.sort()
-        names, keep = [*dirs, *files], []
-        for d in dirs:
-            key = _folder_key(os.path.join(folder, d))
-            link = os.path.islink(os.path.join(folder, d))
-            if key is None or key in outside or (link and key in inside):
-                continue
-            if key not in inside:
-                outside.add(key)
-            keep.append(d)
-        dirs[:] = keep
-        rel = os.path.relpath(folder, top)
-        base = [] if rel == os.curdir else rel.split(os.sep)
-        out.extend(os.path.join(root, *base, name) for name in names if _match_parts([*base, name], pats))
+    out: list[str] = []
+    seen: set = set()  # (device, inode) of the folders walked or about to be
+    queue = [(top, [])]  # (a folder to walk without following links, its components under ``top``)
+    while queue:
+        start, above = queue.pop(0)
+        key = _folder_key(start)
+        if key is None or key in seen:
+            continue
+        seen.add(key)
+        for folder, dirs, files in os.walk(start):  # links to folders are listed in dirs, not entered
+            rel = os.path.relpath(folder, start)
+            base = above + ([] if rel == os.curdir else rel.split(os.sep))
+            dirs.sort()
+            out.extend(os.path.join(root, *base, n) for n in [*dirs, *files] if _match_parts([*base, n], pats))
+            keep = []
+            for d in dirs:
+                path = os.path.join(folder, d)
+                if os.path.islink(path):
+                    queue.append((path, [*base, d]))
+                elif (k := _folder_key(path)) is not None and k not in seen:
+                    seen.add(k)
+                    keep.append(d)
+            dirs[:] = keep
     return out
 
 

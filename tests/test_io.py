@@ -200,6 +200,8 @@ def _tree(root: Path) -> None:
     (root / "tree" / "a" / "self").symlink_to(".")  # a loop onto itself
     (root / "tree" / "a" / "ext").symlink_to(root / "other")  # a folder outside the tree: followed once
     (root / "tree" / "ext2").symlink_to(root / "other")
+    (root / "tree" / "a" / "b" / "out").symlink_to(root)  # the folder above the tree (holding it): walked once
+    (root / "stray.png").write_bytes(b"")
 
 
 def test_a_recursive_glob_over_symlink_loops_ends_and_takes_each_folder_once(tmp_path):
@@ -212,7 +214,7 @@ def test_a_recursive_glob_over_symlink_loops_ends_and_takes_each_folder_once(tmp
     got = expand_images([str(tmp_path / "tree" / "**" / "*.png")])
     assert time.monotonic() - t0 < 2.0
     rel = sorted(str(Path(p).relative_to(tmp_path / "tree")) for p in got)
-    assert rel == ["a/b/z.png", "a/y.png", "ext2/q.png", "x.png"]  # hidden names skipped, as glob does
+    assert rel == ["a/b/out/stray.png", "a/b/z.png", "a/y.png", "ext2/q.png", "x.png"]  # no hidden names, as glob
 
 
 def test_a_recursive_glob_matches_what_glob_gives_on_a_tree_without_loops(tmp_path, monkeypatch):
@@ -238,3 +240,25 @@ def test_a_urls_password_is_redacted(text, shown):
     from aicalib_tf.io import redact_credentials
 
     assert redact_credentials(text) == shown
+
+
+@pytest.mark.parametrize("command", ["calibrate", "detect"])
+def test_calibrate_and_detect_end_over_a_symlink_loop(tmp_path, command):
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    (tmp_path / "photos" / "a").mkdir(parents=True)
+    (tmp_path / "photos" / "a" / "up").symlink_to("..")
+    (tmp_path / "photos" / "a" / "twice").symlink_to("../..")
+    shutil.copy(root / "tests" / "data" / "opencv_left" / "left01.jpg", tmp_path / "photos" / "a")
+    args = [str(tmp_path / "photos" / "**" / "*.jpg"), "--pattern", "9x6", "--out", str(tmp_path / "out")]
+    args += ["--detector", "opencv"] if command == "calibrate" else []
+    proc = subprocess.run([sys.executable, "-m", f"aicalib_tf.{command}", *args], capture_output=True, text=True,
+                          timeout=120, cwd=root, env=dict(os.environ, PYTHONPATH=str(root)))
+    if command == "calibrate":  # one photo found, once: too few views
+        assert proc.returncode == 2 and "error: 1 usable views" in proc.stderr, proc.stderr
+    else:
+        assert proc.returncode == 0 and "1 images: 1 full boards" in proc.stdout + proc.stderr, proc.stderr

@@ -45,7 +45,8 @@ __all__ = ["LiveConfig", "LiveState", "make_app", "token_of", "update_json", "tr
 
 COVERAGE_CELLS = (8, 6)  # the coverage map the page draws (cols, rows)
 PAGE = Path(__file__).with_name("page.html")
-MAX_FRAME_BYTES = 8 << 20  # a websocket frame larger than this is refused
+MAX_FRAME_BYTES = 8 << 20  # a websocket frame larger than this is refused (answered, counted)
+MAX_MESSAGE_BYTES = 4 * MAX_FRAME_BYTES  # a websocket message larger than this closes the connection (code 1009)
 MAX_FRAME_PIXELS = 7680 * 4320  # a frame larger than 8K UHD is refused before it is decoded
 MAX_PACE_S = 1.0  # the longest wait for a file's next frame (a frame rate is at least 1 fps)
 JPEG_QUALITY = 80  # frames sent to the page
@@ -298,7 +299,7 @@ class _Routes:
         """The browser's frames in (binary JPEG), one update out per frame (JSON)."""
         from aiohttp import WSMsgType, web
 
-        ws = web.WebSocketResponse(max_msg_size=MAX_FRAME_BYTES)
+        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES)
         await ws.prepare(request)
         self.listeners.add(ws)
         try:

@@ -12,8 +12,9 @@ import cv2
 import numpy as np
 import pytest
 
-from aicalib_tf.live.server import LiveConfig, LiveState, make_app
+from aicalib_tf.live.server import MAX_FRAME_BYTES, LiveConfig, LiveState, make_app
 from aicalib_tf.live.stall import STALL_S
+from aicalib_tf.outfolder import OutputFolder
 
 TOKEN = "test-token-0123456789"
 K = np.array([[600.0, 0, 319.5], [0, 600.0, 239.5], [0, 0, 1]])
@@ -159,7 +160,8 @@ def test_bad_frames_are_answered_counted_and_keep_the_connection(tmp_path, capfd
     state = _state(tmp_path)
     good = cv2.imencode(".jpg", np.zeros((480, 640), np.uint8))[1].tobytes()
     small = cv2.imencode(".png", np.zeros((100, 80), np.uint8))[1].tobytes()
-    bad = [b"", _png_bomb(), b"\xff\xd8\xff" + b"junk" * 10, b"\x89PNG\r\n\x1a\n" + b"\0" * 50, small]
+    bad = [b"", _png_bomb(), b"\xff\xd8\xff" + b"junk" * 10, b"\x89PNG\r\n\x1a\n" + b"\0" * 50, small,
+           b"\0" * (MAX_FRAME_BYTES + 1)]
 
     async def body(c, port):
         replies = []
@@ -174,7 +176,8 @@ def test_bad_frames_are_answered_counted_and_keep_the_connection(tmp_path, capfd
     errors = [r.get("error") for r in replies]
     assert errors[0] is None and errors[-1] is None and all(errors[1:-1]), errors
     assert "empty" in errors[1] and "10000x10000" in errors[2] and "640x480" in errors[5], errors
-    assert [r["bad_frames"] for r in replies[1:-1]] == [1, 2, 3, 4, 5] and last["bad_frames"] == 5
+    assert "larger than" in errors[6], errors
+    assert [r["bad_frames"] for r in replies[1:-1]] == [1, 2, 3, 4, 5, 6] and last["bad_frames"] == 6
     assert last["frames"] == 3  # the frame of another size was seen, then refused
     err = capfd.readouterr().err
     assert "Traceback" not in err and "ERROR" not in err, err
@@ -232,8 +235,9 @@ def test_save_keeps_the_users_files_in_the_out_folder(tmp_path):
     for _ in range(len(poses)):
         state.add_gray(np.zeros((480, 640), np.uint8))
     out = tmp_path / "calib"
-    state.save()
+    with OutputFolder(out, "calibration") as folder:  # as an earlier Save left it
+        (folder.path / "camera.json").write_text("{}")
     (out / "notes.txt").write_text("tripod at 1.2 m")
-    state.save()
-    assert (out / "notes.txt").read_text() == "tripod at 1.2 m" and (out / "camera.json").is_file()
+    assert state.save()[0] == str(out)
+    assert (out / "notes.txt").read_text() == "tripod at 1.2 m"
     assert json.loads((out / "camera.json").read_text())["meta"]["source"] == "browser camera"
