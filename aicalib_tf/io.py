@@ -235,18 +235,28 @@ def expand_images(patterns) -> list[str]:
 def _recursive_glob(pattern: str) -> list[str]:
     """The paths a pattern with a ``**`` component matches, as ``glob.glob(pattern, recursive=True)``
     gives them (``**`` is zero or more folders; wildcards skip hidden names), except that every real
-    folder is walked once: first the folders under the pattern's fixed start by their own paths,
-    then each linked folder not walked yet, by the first link to it (sorted, nearest first). A
-    symbolic-link loop therefore ends instead of recursing until the path is too long."""
+    folder is walked once: the part before the first ``**`` is globbed as usual (no recursion), then
+    under each folder it names, first the folders by their own paths, then each linked folder not
+    walked yet, by the first link to it (sorted, nearest first). A symbolic-link loop therefore ends
+    instead of recursing until the path is too long."""
     import fnmatch
+    import glob
 
     parts = Path(pattern).parts
-    magic = next(k for k, p in enumerate(parts) if any(ch in p for ch in "*?["))
-    root, pats = (os.path.join(*parts[:magic]) if magic else ""), [_part_matcher(p, fnmatch) for p in parts[magic:]]
-    top = root or os.curdir
+    k = parts.index("**")
+    prefix, pats = (os.path.join(*parts[:k]) if k else ""), [_part_matcher(p, fnmatch) for p in parts[k:]]
+    tops = sorted(glob.glob(prefix)) if any(ch in prefix for ch in "*?[") else [prefix]
     out: list[str] = []
     seen: set = set()  # (device, inode) of the folders walked or about to be
-    queue = [(top, [])]  # (a folder to walk without following links, its components under ``top``)
+    for top in tops:
+        _walk_once(top, pats, seen, out)
+    return out
+
+
+def _walk_once(root: str, pats: list, seen: set, out: list) -> None:
+    """Append to ``out`` the paths under ``root`` ("" for the current folder) whose components below it
+    match ``pats``, walking no folder in ``seen`` and adding each walked one (:func:`_recursive_glob`)."""
+    queue = [(root or os.curdir, [])]  # (a folder to walk without following links, its components under root)
     while queue:
         start, above = queue.pop(0)
         key = _folder_key(start)
@@ -267,7 +277,6 @@ def _recursive_glob(pattern: str) -> list[str]:
                     seen.add(k)
                     keep.append(d)
             dirs[:] = keep
-    return out
 
 
 def _folder_key(path) -> tuple[int, int] | None:
