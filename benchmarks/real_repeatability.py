@@ -111,7 +111,7 @@ def _mrcal_diff(models, covered_cells, size, grid):
         d = difflen[cov]
         d = d[np.isfinite(d)]
         out[name] = {"median": float(np.median(d)), "p95": float(np.percentile(d, 95)),
-                     "rotation_deg": float(np.degrees(np.linalg.norm(mrcal.r_from_R(Rt10[:3]))))}
+                     "rotation_deg": float(np.degrees(np.linalg.norm(mrcal.r_from_R(Rt10[:3])))), "cells": int(d.size)}
     return {**out["pixel"], "mrcal_fit": out["mrcal"]}
 
 
@@ -286,7 +286,8 @@ def _diff_entry(lens_a, lens_b, covered_cells, size) -> dict:
     covered = np.zeros(GRID[0] * GRID[1], bool)
     covered[covered_cells] = True
     d = projection_diff(lens_a, lens_b, grid=GRID, covered=covered)
-    return {"median": d["covered_stats"]["median"], "p95": d["covered_stats"]["p95"], "rotation_deg": d["rotation_deg"]}
+    return {"median": d["covered_stats"]["median"], "p95": d["covered_stats"]["p95"], "rotation_deg": d["rotation_deg"],
+            "cells": d["covered_stats"]["cells"]}
 
 
 def _attempt(fn, *args) -> dict:
@@ -419,8 +420,8 @@ def _cell(entry) -> str:
 
 def table(results: list[dict]) -> str:
     """The markdown table: each set and split, every tool's halves difference (px), the best anchor."""
-    head = "| set | split | " + " | ".join(t for _, t in COLUMNS) + " | best anchor |"
-    lines = [head, "|" + "---|" * (len(COLUMNS) + 3)]
+    head = "| set | split | " + " | ".join(t for _, t in COLUMNS) + " | best anchor | aicalib_tf ≤ best |"
+    lines = [head, "|" + "---|" * (len(COLUMNS) + 4)]
     for r in results:
         for split, row in r["splits"].items():
             cells = [_cell(row.get(k)) for k, _ in COLUMNS]
@@ -428,16 +429,19 @@ def table(results: list[dict]) -> str:
                 cells[0] += f" ({'/'.join(sorted(set(row['aicalib_tf']['models'])))})"
             anchors = [(_median(row.get(k)), t) for k, t in COLUMNS[1:] if _median(row.get(k)) is not None]
             best = min(anchors) if anchors else None
+            ours = _median(row.get("aicalib_tf"))
+            lead = "-" if best is None or ours is None else ("yes" if ours <= best[0] else "no")
             lines.append(f"| {r['set']} ({r['photos']} photos) | {split} | " + " | ".join(cells)
-                         + f" | {'-' if best is None else f'{best[0]:.3g} ({best[1]})'} |")
+                         + f" | {'-' if best is None else f'{best[0]:.3g} ({best[1]})'} | {lead} |")
     return "\n".join(lines)
 
 
 def cross_table(results: list[dict]) -> str:
     """The same pairs of models diffed both ways (median over the covered cells, px): mrcal.projection_diff
     with the rotation fitted by pixel least squares / aicalib_tf's projection_diff / mrcal.projection_diff
-    with mrcal's own implied_Rt10__from_unprojections rotation."""
-    f = lambda e: "-" if not e or e.get("median") is None else f"{e['median']:.3g}"  # noqa: E731
+    with mrcal's own implied_Rt10__from_unprojections rotation; in brackets the covered cells each could
+    unproject."""
+    f = lambda e: "-" if not e or e.get("median") is None else f"{e['median']:.3g} ({e.get('cells', '?')})"  # noqa: E731
     lines = ["| set | split | mrcal OPENCV8 halves: mrcal / aicalib_tf / mrcal's own rotation fit "
              "| OpenCV rational halves: mrcal / aicalib_tf / mrcal's own rotation fit |", "|---|---|---|---|"]
     for r in results:
@@ -451,22 +455,22 @@ def cross_table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def find_sets(names) -> list[tuple[str, Path]]:
+def find_sets(names, data: Path = SHARED) -> list[tuple[str, Path]]:
     """(name, folder) of each known set present; tests/data/opencv_left joins only if its photos differ
     from the shared copy's."""
     import hashlib
 
     out = []
     for name in names:
-        folder = SHARED / name
+        folder = data / name
         if folder.is_dir():
             out.append((name, folder))
         else:
-            print(f"{name}: not in {SHARED}; skipped")
+            print(f"{name}: not in {data}; skipped")
     local = ROOT / "tests" / "data" / "opencv_left"
     if "opencv_left" in names and local.is_dir():
         digest = lambda d: sorted(hashlib.sha256(p.read_bytes()).hexdigest() for p in d.glob("*.jpg"))  # noqa: E731
-        shared = SHARED / "opencv_left"
+        shared = data / "opencv_left"
         if not shared.is_dir() or digest(shared) != digest(local):
             out.append(("opencv_left", local))
         else:
@@ -482,6 +486,7 @@ def main(argv=None) -> int:
     ap.add_argument("--mrcal-venv", default="/work/scratch/mrcal-venv", help="mrcal's own Python environment")
     ap.add_argument("--skip-mrcal", action="store_true")
     ap.add_argument("--json", default=None, help="write every figure as JSON here")
+    ap.add_argument("--data", default=str(SHARED), help="the real sets' folder (default: ../shared/data)")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT))
     venv = None if args.skip_mrcal else Path(args.mrcal_venv)
@@ -491,7 +496,7 @@ def main(argv=None) -> int:
         venv = None
     results = []
     with tempfile.TemporaryDirectory(prefix="real_repeatability_") as tmp:
-        for name, folder in find_sets(args.sets):
+        for name, folder in find_sets(args.sets, Path(args.data)):
             results.append(run_set(name, folder, venv, Path(tmp)))
     print()
     print(table(results))

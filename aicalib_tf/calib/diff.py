@@ -55,24 +55,43 @@ def cell_counts(points, image_size, cells=GRID) -> np.ndarray:
     return counts.astype(np.int64)
 
 
+def _ray_rotation(rays_a: np.ndarray, rays_b: np.ndarray) -> np.ndarray:
+    """(3, 3) the rotation R minimising Σ |R·a − b|² over unit rays (Kabsch, by SVD): the start of the
+    pixel fit, so that it need not cross a lens's valid range on its way from the identity."""
+    a = rays_a / np.linalg.norm(rays_a, axis=1, keepdims=True)
+    b = rays_b / np.linalg.norm(rays_b, axis=1, keepdims=True)
+    U, _, Vt = np.linalg.svd(a.T @ b)
+    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+    return Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
+
+
 def rotation_compensated_diff(lens_a: L.Lens, lens_b: L.Lens, pixels, fit_mask=None, *,
                               rotation: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """mrcal-style projection difference of two lenses, px.
 
     Each pixel q (M, 2) is unprojected with ``lens_a`` to a ray v; the rotation R minimising
-    Σ |project_b(R·v) − q|² over the ``fit_mask`` pixels (default all) is found from R = I
-    (:func:`aicalib_tf.geometry.pose.best_rotation`; R = I with ``rotation=False``). Returns
-    (diff (M,) px = |project_b(R·v) − q|, NaN where either lens has no ray; R (3, 3)).
+    Σ |project_b(R·v) − q|² over the ``fit_mask`` pixels (default all) is found
+    (:func:`aicalib_tf.geometry.pose.best_rotation`, started from the rotation that best maps A's
+    rays onto B's rays of the same pixels; R = I with ``rotation=False``). Returns
+    (diff (M,) px = |project_b(R·v) − q|, NaN where A has no ray or B no projection; R (3, 3)).
     Raises ValueError when fewer than 3 fit pixels are imaged by both lenses.
     """
     q = np.asarray(pixels, np.float64).reshape(-1, 2)
     v = lens_a.unproject(q)
     ok = np.all(np.isfinite(v), axis=1)
-    ok[ok] &= np.all(np.isfinite(lens_b.project(v[ok])), axis=1)
     fit = ok if fit_mask is None else ok & np.asarray(fit_mask, bool)
+    R0 = np.eye(3)
+    if rotation and fit.sum() >= 3:
+        vb = lens_b.unproject(q[fit])
+        both = np.all(np.isfinite(vb), axis=1)
+        if both.sum() >= 3:
+            R0 = _ray_rotation(v[fit][both], vb[both])
+    imaged = np.zeros(len(q), bool)
+    imaged[ok] = np.all(np.isfinite(lens_b.project(v[ok] @ R0.T)), axis=1)
+    fit &= imaged
     if fit.sum() < 3:
         raise ValueError(f"only {int(fit.sum())} pixels are imaged by both lenses; cannot compare them")
-    R = best_rotation(lens_b, v[fit], q[fit]) if rotation else np.eye(3)
+    R = best_rotation(lens_b, v[fit] @ R0.T, q[fit]) @ R0 if rotation else np.eye(3)
     d = np.full(len(q), np.nan)
     d[ok] = np.linalg.norm(lens_b.project(v[ok] @ R.T) - q[ok], axis=1)
     return d, R
