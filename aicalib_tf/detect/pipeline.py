@@ -100,14 +100,15 @@ import numpy as np
 
 from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.detect.board_order import full_board, order_full_board
+from aicalib_tf.detect.corner_sigma import with_sigmas
 from aicalib_tf.detect.grid import MIN_CORNERS, Grid, assemble_grids, full_subgrid
 from aicalib_tf.detect.junctions import dedupe, nearest_spacing, proposer, typical_amplitude
 from aicalib_tf.detect.lattice import drop_outliers
 from aicalib_tf.detect.partial import partial_board, relative_board
-from aicalib_tf.detect.pyramid import Frame, quick_scales, quick_shift, refine_full, scales, to_full
+from aicalib_tf.detect.pyramid import Frame, boards_to_full, charuco_scales, quick_scales, quick_shift, refine_full, scales, to_full
 from aicalib_tf.detect.refine import Smoothed, refine_candidates
 from aicalib_tf.detect.zoom import from_zoom, zoom_box, zoom_in
-from aicalib_tf.io import load_image, read_image
+from aicalib_tf.io import read_image
 
 __all__ = ["Detection", "detect_corners", "detect_charuco", "find_chessboard_corners", "order_full_board", "refined_points"]
 
@@ -129,6 +130,8 @@ class Detection:
         search got on any scale.
     relative : the ids are relative to the visible grid, not fixed on the pattern (asked for with
         ``detect_corners(..., relative=True)``; a board larger than the frame, say).
+    sigmas : (N,) float32 px, each corner's expected error, one standard deviation per axis
+        (:mod:`aicalib_tf.detect.corner_sigma`); None from a detector that does not give it.
     """
 
     corners: np.ndarray
@@ -139,6 +142,7 @@ class Detection:
     image_size: tuple[int, int]
     reason: str = ""
     relative: bool = False
+    sigmas: np.ndarray | None = None
 
     @property
     def found(self) -> bool:
@@ -211,8 +215,8 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     frame = Frame(read_image(image))  # converted to float grey only where needed: a region, a reduced scale
     w, h = frame.size
     if _charuco_board(pattern_size) is not None:  # a ChArUco board: the largest one found
-        found = detect_charuco(frame.gray, [_charuco_board(pattern_size)], model=model, threshold=threshold)
-        return _as_detection(found[0] if found else None, _charuco_board(pattern_size), (w, h))
+        found = detect_charuco(frame.raw, [_charuco_board(pattern_size)], model=model, threshold=threshold)
+        return with_sigmas(_as_detection(found[0] if found else None, _charuco_board(pattern_size), (w, h)), frame.region)
     if pattern_size is not None:
         from aicalib_tf.geometry.pattern import check_pattern
 
@@ -231,7 +235,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
                 continue
             det = replace(det, corners=corners, image_size=(w, h))
         if det.complete and pattern_size is not None:
-            return det
+            return with_sigmas(det, frame.region)
         if f in quick:  # a quick pass counts only with a complete board
             continue
         if not det.found:
@@ -241,7 +245,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
         if best is None or (best.relative and not det.relative and det.found) or (
                 det.relative <= best.relative and len(det.corners) > len(best.corners)):
             best = det  # a board with fixed ids beats one with relative ids
-    return replace(best, image_size=(w, h), reason="" if best.found else reason)
+    return with_sigmas(replace(best, image_size=(w, h), reason="" if best.found else reason), frame.region)
 
 
 def _zoomed(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: float, seen: Grid,
@@ -380,16 +384,24 @@ def detect_charuco(image, boards, *, model=None, threshold: float = 0.5) -> list
     """
     from aicalib_tf.detect.charuco import detect_charuco_boards
 
-    gray = load_image(image)
+    frame = Frame(read_image(image))  # a large photo: coarse to fine (pyramid.charuco_scales), refined on the full image
     boards = [_charuco_board(b) for b in ([boards] if isinstance(boards, str) or not hasattr(boards, "__iter__") else boards)]
     if not boards or any(b is None for b in boards):
         raise ValueError("boards must be ChArUco boards or descriptions such as charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100")
     model = model if model is not None else _default_model()
 
-    def chessboard_search(pattern):  # the chessboard search's grid, ids relative to it allowed
-        det = detect_corners(gray, pattern, model=model, threshold=threshold, relative=True)
-        return [(det.ids.astype(np.int64), det.corners.astype(np.float64))] if det.found else []
-    return detect_charuco_boards(gray, boards, model, threshold, more_lattices=chessboard_search)
+    best = []
+    for scale in charuco_scales(*frame.size):
+        gray = frame.reduced(scale)
+
+        def chessboard_search(pattern, gray=gray):  # the chessboard search's grid, ids relative to it allowed
+            det = detect_corners(gray, pattern, model=model, threshold=threshold, relative=True)
+            return [(det.ids.astype(np.int64), det.corners.astype(np.float64))] if det.found else []
+        found = boards_to_full(frame, detect_charuco_boards(gray, boards, model, threshold, more_lattices=chessboard_search), scale)
+        best = max(best, found, key=lambda d: sum(len(b.corners) for b in d))  # the coarsest of equal ones
+        if any(d.complete for d in found):
+            break
+    return best
 
 
 def find_chessboard_corners(image, pattern_size: tuple[int, int], corners=None, flags: int = 0, *,

@@ -23,7 +23,7 @@ from aicalib_tf.geometry.pose import in_frame
 from aicalib_tf.io import as_gray_float
 
 __all__ = ["MIN_SIDE", "MAX_SEARCH_PIXELS", "QUICK_SIDE", "QUICK_LEVELS", "Frame", "scales", "quick_scales", "quick_shift", "downscale",
-           "to_full", "refine_full"]
+           "to_full", "refine_full", "charuco_scales", "boards_to_full"]
 
 MIN_SIDE = 800  # px: a reduced scale keeps at least this many pixels along the image's longer side
 MAX_SEARCH_PIXELS = 16_000_000  # px: the most pixels of a scale searched whole (a 48 MP photo's finest is f = 2)
@@ -193,7 +193,8 @@ def _refine_groups(pts: np.ndarray, margin: int, size: tuple[int, int]) -> list[
     """Index sets of pts (N, 2) px refined together: all of them when their region (bounding box
     plus ``margin``) holds at most ``MAX_REFINE_PIXELS``, else those in each ``REFINE_TILE`` cell
     (a board filling a 48 MP photo: a few dozen small windows, only where its corners are). Each
-    point's window keeps ``margin`` px of its own image about it either way, so its fit is the same."""
+    point's window keeps ``margin`` px of its own image about it either way, so its fit is the same
+    (to the float32 rounding of the window's offset, under 1e-3 px)."""
     lo = np.floor(pts.min(axis=0)) - margin
     hi = np.ceil(pts.max(axis=0)) + margin + 1
     area = np.prod(np.minimum(hi, size) - np.maximum(lo, 0))
@@ -203,3 +204,40 @@ def _refine_groups(pts: np.ndarray, margin: int, size: tuple[int, int]) -> list[
     _, group = np.unique(cell, axis=0, return_inverse=True)
     group = group.ravel()
     return [np.flatnonzero(group == g) for g in range(int(group.max()) + 1)]
+
+
+CHARUCO_WHOLE_PIXELS = 4_200_000  # px: a ChArUco search up to this size runs on the full image alone
+
+
+def charuco_scales(width: int, height: int) -> list[int]:
+    """The reduction factors of a ChArUco search, coarsest first: [1] up to ``CHARUCO_WHOLE_PIXELS``
+    (2560×1600, 2048×2048), else :func:`scales` (12 MP: [4, 2, 1]; 48 MP: [8, 4, 2]). The search
+    stops at the first scale where a board is complete: its markers and corners are read at 1/f² of
+    the cost, and its corners refined on the full image (:func:`boards_to_full`)."""
+    if int(width) * int(height) <= CHARUCO_WHOLE_PIXELS:
+        return [1]
+    return scales(width, height)
+
+
+def boards_to_full(frame: Frame, found: list, factor: int) -> list:
+    """ChArUco detections (:class:`aicalib_tf.detect.charuco.CharucoDetection`) made on the image
+    reduced by ``factor``, brought to the full image (a :class:`Frame`).
+
+    Corners go through :func:`to_full` and :func:`refine_full` (windows about them, at most 2 px
+    moved); a corner whose refinement fails is left out (its id stays decided by the markers),
+    and a board left without corners is dropped. Marker corners are scaled as points.
+    """
+    from dataclasses import replace
+
+    f = int(factor)
+    if f == 1:
+        return list(found)
+    out = []
+    for det in found:
+        pts = to_full(det.corners, f)
+        refined, ok = refine_full(frame, pts) if len(pts) >= 2 else (pts, np.zeros(len(pts), bool))
+        markers = np.asarray(det.marker_corners, np.float64) * f + (f - 1.0) / 2.0
+        if ok.any():
+            out.append(replace(det, corners=refined[ok], ids=det.ids[ok], marker_corners=markers,
+                               complete=bool(det.complete and ok.all()), image_size=frame.size))
+    return out

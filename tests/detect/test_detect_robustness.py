@@ -1,4 +1,8 @@
-"""Property-based robustness of detect_corners: random images, sizes, dtypes and patterns."""
+"""Property-based robustness of detect_corners: random images, sizes, dtypes and patterns.
+
+The large images run in a child process under an address-space limit (:mod:`tests.detect.bounded`):
+a detector whose memory grows past it fails the test instead of taking the machine's memory.
+"""
 
 import numpy as np
 import pytest
@@ -11,6 +15,7 @@ from hypothesis import strategies as st  # noqa: E402
 from aicalib_tf.detect.pipeline import detect_corners  # noqa: E402
 from aicalib_tf.cnn.model import MODELS_DIR, load_model  # noqa: E402
 from data_gen import make_sample  # noqa: E402
+from tests.detect.bounded import BoundedDetector  # noqa: E402
 
 pytestmark = pytest.mark.skipif(not (MODELS_DIR / "default.keras").is_file(), reason="no shipped default model")
 MODEL = None
@@ -21,6 +26,13 @@ def _model():
     if MODEL is None:
         MODEL = load_model("default")
     return MODEL
+
+
+@pytest.fixture(scope="module")
+def bounded():
+    detector = BoundedDetector(model="default")
+    yield detector
+    detector.close()
 
 
 def _draw_image(draw, sizes, block_max: int, board_size=(320, 240)):
@@ -66,8 +78,8 @@ def large_images(draw):
 patterns = st.tuples(st.integers(3, 12), st.integers(3, 9)) | st.none()
 
 
-def _check_invariants(img, pattern):
-    det = detect_corners(img, pattern, model=_model())
+def _check_invariants(img, pattern, detect=None):
+    det = detect(img, pattern) if detect is not None else detect_corners(img, pattern, model=_model())
     h, w = img.shape[:2]
     n = len(det.corners)
     assert det.corners.shape == (n, 2) and det.ids.shape == (n, 2) and det.scores.shape == (n,)
@@ -90,7 +102,8 @@ def test_invariants_hold_on_any_image(img, pattern):
     _check_invariants(img, pattern)
 
 
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
+                                                                   HealthCheck.function_scoped_fixture])
 @given(img=large_images(), pattern=patterns)
-def test_invariants_hold_on_large_images(img, pattern):
-    _check_invariants(img, pattern)
+def test_invariants_hold_on_large_images(bounded, img, pattern):
+    _check_invariants(img, pattern, bounded)
