@@ -8,9 +8,9 @@ reach it. Every request passes three checks (an aiohttp middleware, :func:`guard
   ``[::1]:PORT``, the ``--host`` given, or the address the connection came in on (with
   ``--host 0.0.0.0``, the machine's address on the network), or the machine's name when serving
   other machines. PORT is the port the connection came in on.
-* **Origin** (against cross-site requests and websocket hijacking): a request that carries an
-  ``Origin`` (a browser sends one with every websocket and every POST) must come from
-  ``http://`` one of those addresses. A client that is not a browser sends none; it still needs
+* **Origin** (against cross-site requests and websocket hijacking): any request that carries an
+  ``Origin`` (a browser sends one with every websocket, every POST and every cross-site fetch)
+  must come from ``http://`` one of those addresses. A client that is not a browser sends none; it still needs
   the token.
 * **Token** (as Jupyter's): ``/ws``, ``/state``, ``/config`` and ``/save`` need ``?token=`` (or an
   ``X-Aicalib-Token`` header) equal to the run's random token, which is only in the address the
@@ -73,7 +73,7 @@ def _allowed_hosts(bind_host: str, local_ip: str) -> set[str]:
     return hosts - {""}
 
 
-def refusal(method: str, path: str, headers, query, *, token: str, bind_host: str, local: tuple) -> str | None:
+def refusal(path: str, headers, query, *, token: str, bind_host: str, local: tuple) -> str | None:
     """Why a request is refused (one line), or None when it may go on.
 
     headers, query : mappings (case-insensitive headers); local : (ip, port) the connection came in on.
@@ -106,8 +106,7 @@ def guard_middleware(token: str, bind_host: str):
     async def guard(request, handler):
         sock = request.transport.get_extra_info("sockname") if request.transport is not None else None
         local = (sock[0], sock[1]) if sock else ("", -1)
-        why = refusal(request.method, request.path, request.headers, request.query, token=token,
-                      bind_host=bind_host, local=local)
+        why = refusal(request.path, request.headers, request.query, token=token, bind_host=bind_host, local=local)
         if why is None:
             return await handler(request)
         logged[0] += 1

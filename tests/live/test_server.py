@@ -241,3 +241,23 @@ def test_save_keeps_the_users_files_in_the_out_folder(tmp_path):
     assert state.save()[0] == str(out)
     assert (out / "notes.txt").read_text() == "tripod at 1.2 m"
     assert json.loads((out / "camera.json").read_text())["meta"]["source"] == "browser camera"
+
+
+@pytest.mark.parametrize("bind, host, local, ok", [
+    ("127.0.0.1", "127.0.0.1:8765", ("127.0.0.1", 8765), True),
+    ("127.0.0.1", "LOCALHOST:8765", ("127.0.0.1", 8765), True),
+    ("::1", "[::1]:8765", ("::1", 8765, 0, 0), True),
+    ("0.0.0.0", "192.168.1.20:8765", ("192.168.1.20", 8765), True),  # a phone on the network
+    ("0.0.0.0", "192.168.1.21:8765", ("192.168.1.20", 8765), False),
+    ("cam-pc.local", "cam-pc.local:8765", ("192.168.1.20", 8765), True),
+    ("127.0.0.1", "attacker.example:8765", ("127.0.0.1", 8765), False),
+    ("127.0.0.1", "127.0.0.1.attacker.example:8765", ("127.0.0.1", 8765), False),
+    ("127.0.0.1", "127.0.0.1:8765@evil", ("127.0.0.1", 8765), False),
+    ("127.0.0.1", "[::1", ("127.0.0.1", 8765), False),
+    ("127.0.0.1", "", ("127.0.0.1", 8765), False),
+])
+def test_the_host_rule(bind, host, local, ok):
+    from aicalib_tf.live.guard import refusal
+
+    why = refusal("/", {"Host": host}, {}, token=TOKEN, bind_host=bind, local=local)
+    assert (why is None) == ok, why
