@@ -105,7 +105,7 @@ from aicalib_tf.detect.grid import MIN_CORNERS, Grid, assemble_grids, full_subgr
 from aicalib_tf.detect.junctions import dedupe, nearest_spacing, proposer, typical_amplitude
 from aicalib_tf.detect.lattice import drop_outliers
 from aicalib_tf.detect.partial import partial_board, relative_board
-from aicalib_tf.detect.pyramid import Frame, boards_to_full, charuco_scales, quick_scales, quick_shift, refine_full, scales, to_full
+from aicalib_tf.detect.pyramid import Frame, boards_coarse_to_fine, quick_scales, quick_shift, refine_full, scales, to_full
 from aicalib_tf.detect.refine import Smoothed, refine_candidates
 from aicalib_tf.detect.zoom import from_zoom, zoom_box, zoom_in
 from aicalib_tf.io import read_image
@@ -390,18 +390,12 @@ def detect_charuco(image, boards, *, model=None, threshold: float = 0.5) -> list
         raise ValueError("boards must be ChArUco boards or descriptions such as charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100")
     model = model if model is not None else _default_model()
 
-    best = []
-    for scale in charuco_scales(*frame.size):
-        gray = frame.reduced(scale)
-
-        def chessboard_search(pattern, gray=gray):  # the chessboard search's grid, ids relative to it allowed
+    def search(gray):
+        def chessboard_search(pattern):  # the chessboard search's grid, ids relative to it allowed
             det = detect_corners(gray, pattern, model=model, threshold=threshold, relative=True)
             return [(det.ids.astype(np.int64), det.corners.astype(np.float64))] if det.found else []
-        found = boards_to_full(frame, detect_charuco_boards(gray, boards, model, threshold, more_lattices=chessboard_search), scale)
-        best = max(best, found, key=lambda d: sum(len(b.corners) for b in d))  # the coarsest of equal ones
-        if any(d.complete for d in found):
-            break
-    return best
+        return detect_charuco_boards(gray, boards, model, threshold, more_lattices=chessboard_search)
+    return boards_coarse_to_fine(frame, search)
 
 
 def find_chessboard_corners(image, pattern_size: tuple[int, int], corners=None, flags: int = 0, *,

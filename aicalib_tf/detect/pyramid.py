@@ -23,7 +23,7 @@ from aicalib_tf.geometry.pose import in_frame
 from aicalib_tf.io import as_gray_float
 
 __all__ = ["MIN_SIDE", "MAX_SEARCH_PIXELS", "QUICK_SIDE", "QUICK_LEVELS", "Frame", "scales", "quick_scales", "quick_shift", "downscale",
-           "to_full", "refine_full", "charuco_scales", "boards_to_full"]
+           "to_full", "refine_full", "charuco_scales", "boards_to_full", "boards_coarse_to_fine"]
 
 MIN_SIDE = 800  # px: a reduced scale keeps at least this many pixels along the image's longer side
 MAX_SEARCH_PIXELS = 16_000_000  # px: the most pixels of a scale searched whole (a 48 MP photo's finest is f = 2)
@@ -241,3 +241,17 @@ def boards_to_full(frame: Frame, found: list, factor: int) -> list:
             out.append(replace(det, corners=refined[ok], ids=det.ids[ok], marker_corners=markers,
                                complete=bool(det.complete and ok.all()), image_size=frame.size))
     return out
+
+
+def boards_coarse_to_fine(frame: Frame, search) -> list:
+    """ChArUco boards by ``search(gray (h, w) float32) -> [CharucoDetection]`` at each of
+    :func:`charuco_scales`, coarsest first, brought to the full image (:func:`boards_to_full`).
+    Stops at the first scale with a complete board; else the scale whose boards hold the most
+    corners (the coarsest of equal ones)."""
+    best = []
+    for f in charuco_scales(*frame.size):
+        found = boards_to_full(frame, search(frame.reduced(f)), f)
+        best = max(best, found, key=lambda dets: sum(len(d.corners) for d in dets))
+        if any(d.complete for d in found):
+            break
+    return best
