@@ -23,7 +23,7 @@ from pathlib import Path
 
 from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
 
-from .dataset import MAX_COUNT, DatasetConfig, check_count, check_output_dir, write_dataset
+from .dataset import MAX_COUNT, DatasetConfig, check_count, check_output_dir, check_pixels, write_dataset
 from .presets import PRESETS
 from .shards import ShardConfig, check_shards, with_default_shards, write_shards
 
@@ -37,6 +37,7 @@ def _parse_size(text: str) -> tuple[int, int]:
     w, h = int(parts[0]), int(parts[1])
     if not (32 <= w <= 8000 and 32 <= h <= 8000):
         raise ValueError(f"--size must be between 32x32 and 8000x8000, got {w}x{h}")
+    check_pixels(w, h)
     return w, h
 
 
@@ -54,7 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--count", required=True, type=int, help="number of images")
     ap.add_argument("--preset", required=True, help=f"one of: {', '.join(PRESETS)}")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--size", help="WIDTHxHEIGHT (default: the preset's sizes)")
+    ap.add_argument("--size", help="WIDTHxHEIGHT, at most 12,000,000 pixels (default: the preset's sizes)")
     ap.add_argument("--pattern", help="COLSxROWS inner corners (default: the preset's)")
     ap.add_argument("--workers", type=int, default=1, help="processes (output does not depend on it)")
     ap.add_argument("--board", help="a ChArUco board instead of chessboards: charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100")

@@ -33,9 +33,10 @@ from aicalib_tf.jsonio import dumps
 from .presets import get_preset
 from .sample import GENERATOR_VERSION, make_sample
 
-__all__ = ["DatasetConfig", "write_dataset", "check_output_dir", "check_count", "iter_samples", "imap_ordered", "MAX_COUNT"]
+__all__ = ["DatasetConfig", "write_dataset", "check_output_dir", "check_count", "iter_samples", "imap_ordered", "MAX_COUNT", "MAX_PIXELS", "check_pixels"]
 
 MAX_COUNT = 1_000_000  # images in one folder dataset (6-digit names); --format tfrecord allows more
+MAX_PIXELS = 12_000_000  # px of one rendered image: 12 MP renders at about 1.1 GB peak (memory grows with the pixels)
 INDEX_COLUMNS = ("file", "label", "condition", "camera_id", "seed", "index", "width", "height")
 
 
@@ -75,6 +76,14 @@ def check_count(count: int, limit: int = MAX_COUNT, hint: str = "") -> None:
         raise ValueError(f"--count must be >= 1, got {count}")
     if count > limit:
         raise ValueError(f"--count must be at most {limit}, got {count}{hint}")
+
+
+def check_pixels(width: int, height: int, limit: int = MAX_PIXELS) -> None:
+    """Raise ``ValueError`` when a width×height image has more than ``limit`` pixels (its render would not fit in
+    bounded memory); the message says how to get a larger frame."""
+    if int(width) * int(height) > limit:
+        raise ValueError(f"--size {width}x{height} has {int(width) * int(height):,} pixels; data_gen renders at most "
+                         f"{limit:,} (e.g. 4000x3000) in bounded memory; resize a render for larger frames")
 
 
 def imap_ordered(fn: Callable, jobs: Iterable, workers: int = 1, window: int = 16) -> Iterator:

@@ -50,6 +50,7 @@ from aicalib_tf.geometry.pose import in_frame
 from .background import make_background
 from .board import Board
 from .camera import sample_camera, sample_fisheye
+from .dataset import check_pixels
 from .degrade import gaussian_blur, gaussian_noise
 from .path import HandPath, RigPath, hand_path
 from .pose import corner_visibility
@@ -63,6 +64,7 @@ __all__ = ["VideoConfig", "VideoScene", "make_scene", "rig_pose", "render_frame"
 LENSES = ("mild", "strong", "fisheye150")
 _STEP = 8  # px between the rays of the per-pixel motion map
 _MAX_SUBFRAMES = 16
+MAX_FRAMES = 1_000_000  # frames of one video (--seconds × --fps), the bound --count has on a dataset
 
 
 @dataclass(frozen=True)
@@ -95,6 +97,9 @@ class VideoConfig:
                 and self.rig_baseline >= 0):
             raise ValueError("--seconds, --fps and --pace must be > 0, --shutter, --rolling-shutter and "
                              "--rig-baseline >= 0")
+        if not self.seconds * self.fps <= MAX_FRAMES:  # --seconds 1e9 would render for ever, as --count 1e9 would
+            raise ValueError(f"--seconds × --fps must give at most {MAX_FRAMES:,} frames, got {self.seconds * self.fps:.3g}")
+        check_pixels(*self.size)
         if self.shutter > 1.0 / self.fps:
             raise ValueError(f"--shutter {self.shutter:g} s is longer than a frame (1/{self.fps:g} s)")
 

@@ -132,3 +132,14 @@ def test_calibrate_argument_fuzz_exits_0_or_2_with_one_line(tmp_path, capsys, op
     assert code == 2
     _one_error_line(err)
     assert not (tmp_path / "out").exists()
+
+
+def test_out_of_memory_is_one_line_and_debug_shows_its_traceback(capsys):
+    def body():
+        raise MemoryError()
+
+    assert run_main(body) == 2
+    _one_error_line(capsys.readouterr().err)
+    assert run_main(body, debug=True) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: out of memory") and "Traceback" in err and "MemoryError" in err
