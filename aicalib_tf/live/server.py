@@ -17,8 +17,9 @@ itself, and (all but ``/``) carry the run's token (:mod:`aicalib_tf.live.guard`)
 aiohttp; detection and fitting run in one worker thread so that the page stays responsive.
 
 A frame the page sends that cannot be used (empty, not a JPEG or PNG, over
-:data:`MAX_FRAME_PIXELS` such as a decompression bomb, or of another size than the first) is
-answered on the socket with ``{"error", "bad_frames"}`` and counted; the connection stays open.
+:data:`MAX_FRAME_PIXELS` such as a decompression bomb, under :data:`MIN_FRAME_SIDE`, or of
+another size than the first) is answered on the socket with ``{"error", "bad_frames"}`` and
+counted; the connection stays open.
 When views stop coming the update carries ``stall``, the explanation of
 :mod:`aicalib_tf.live.stall` (why, what would help, the verdict Save would keep).
 """
@@ -48,6 +49,7 @@ PAGE = Path(__file__).with_name("page.html")
 MAX_FRAME_BYTES = 8 << 20  # a websocket frame larger than this is refused (answered, counted)
 MAX_MESSAGE_BYTES = 4 * MAX_FRAME_BYTES  # a websocket message larger than this closes the connection (code 1009)
 MAX_FRAME_PIXELS = 7680 * 4320  # a frame larger than 8K UHD is refused before it is decoded
+MIN_FRAME_SIDE = 32  # a frame narrower or lower than this (px) cannot show a board: refused
 MAX_PACE_S = 1.0  # the longest wait for a file's next frame (a frame rate is at least 1 fps)
 JPEG_QUALITY = 80  # frames sent to the page
 FPS_WINDOW = 30  # frames over which the handled frame rate is measured
@@ -192,11 +194,18 @@ def _decode_frame(data: bytes) -> np.ndarray:
     if data[:3] == b"\xff\xd8\xff":  # JPEG (8-bit): decoding its luma alone is about 4x faster at 720p
         gray = _quiet(cv2.imdecode, buf, cv2.IMREAD_GRAYSCALE)
         if gray is not None:
-            return gray
+            return _big_enough(gray)
     img = _quiet(cv2.imdecode, buf, cv2.IMREAD_UNCHANGED)
     if img is None:
         raise ValueError("the page sent a frame that is not a JPEG or PNG image")
-    return quantize(to_gray_float(img, "frame"))
+    return _big_enough(quantize(to_gray_float(img, "frame")))
+
+
+def _big_enough(gray: np.ndarray) -> np.ndarray:
+    if min(gray.shape[:2]) < MIN_FRAME_SIDE:
+        raise ValueError(f"frame of {gray.shape[1]}x{gray.shape[0]} px is too small for a board "
+                         f"(at least {MIN_FRAME_SIDE} px each way)")
+    return gray
 
 
 def _quiet(fn, *args):

@@ -161,7 +161,7 @@ def test_bad_frames_are_answered_counted_and_keep_the_connection(tmp_path, capfd
     good = cv2.imencode(".jpg", np.zeros((480, 640), np.uint8))[1].tobytes()
     small = cv2.imencode(".png", np.zeros((100, 80), np.uint8))[1].tobytes()
     bad = [b"", _png_bomb(), b"\xff\xd8\xff" + b"junk" * 10, b"\x89PNG\r\n\x1a\n" + b"\0" * 50, small,
-           b"\0" * (MAX_FRAME_BYTES + 1)]
+           b"\0" * (MAX_FRAME_BYTES + 1), cv2.imencode(".png", np.zeros((1, 1), np.uint8))[1].tobytes()]
 
     async def body(c, port):
         replies = []
@@ -176,8 +176,8 @@ def test_bad_frames_are_answered_counted_and_keep_the_connection(tmp_path, capfd
     errors = [r.get("error") for r in replies]
     assert errors[0] is None and errors[-1] is None and all(errors[1:-1]), errors
     assert "empty" in errors[1] and "10000x10000" in errors[2] and "640x480" in errors[5], errors
-    assert "larger than" in errors[6], errors
-    assert [r["bad_frames"] for r in replies[1:-1]] == [1, 2, 3, 4, 5, 6] and last["bad_frames"] == 6
+    assert "larger than" in errors[6] and "1x1 px is too small" in errors[7], errors
+    assert [r["bad_frames"] for r in replies[1:-1]] == [1, 2, 3, 4, 5, 6, 7] and last["bad_frames"] == 7
     assert last["frames"] == 3  # the frame of another size was seen, then refused
     err = capfd.readouterr().err
     assert "Traceback" not in err and "ERROR" not in err, err
