@@ -207,16 +207,18 @@ def _refine_groups(pts: np.ndarray, margin: int, size: tuple[int, int]) -> list[
 
 
 CHARUCO_WHOLE_PIXELS = 4_200_000  # px: a ChArUco search up to this size runs on the full image alone
+CHARUCO_MIN_SIDE = 640  # px: the coarsest ChArUco scale keeps at least this many along the longer side
 
 
 def charuco_scales(width: int, height: int) -> list[int]:
     """The reduction factors of a ChArUco search, coarsest first: [1] up to ``CHARUCO_WHOLE_PIXELS``
-    (2560×1600, 2048×2048), else :func:`scales` (12 MP: [4, 2, 1]; 48 MP: [8, 4, 2]). The search
+    (2560×1600, 2048×2048), else :func:`scales` down to ``CHARUCO_MIN_SIDE`` px (12 MP: [4, 2, 1];
+    24 MP: [8, 4, 2]; 48 MP: [8, 4, 2]). The search
     stops at the first scale where a board is complete: its markers and corners are read at 1/f² of
     the cost, and its corners refined on the full image (:func:`boards_to_full`)."""
     if int(width) * int(height) <= CHARUCO_WHOLE_PIXELS:
         return [1]
-    return scales(width, height)
+    return scales(width, height, CHARUCO_MIN_SIDE)
 
 
 def boards_to_full(frame: Frame, found: list, factor: int) -> list:
