@@ -90,6 +90,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="TFRecord shards of data_gen --format tfrecord (globs, comma-separated); default: render a pool in memory")
     ap.add_argument("--deterministic", action="store_true", help="--data: a fixed element order (slower parallel stages)")
     ap.add_argument("--strategy", default=d.strategy, help="default | mirrored | multiworker (TF_CONFIG) (default: %(default)s)")
+    ap.add_argument("--connect-timeout", type=float, default=d.connect_timeout, metavar="SECONDS",
+                    help="multiworker: give up when the cluster's other workers do not answer within this time "
+                         "(default: %(default)s)")
     ap.add_argument("--no-determinism", action="store_true", help="allow non-deterministic TensorFlow ops (other Keras backends: no effect)")
     ap.add_argument("--init", default=d.init, metavar="MODEL",
                     help="start from this model's weights: a shipped name (default) or a .keras file with --arch's layers "
@@ -114,6 +117,7 @@ def _run(argv: list[str] | None) -> int:
         learning_rate=args.learning_rate, workers=args.workers, threshold=args.threshold, focal_gamma=args.focal_gamma,
         determinism=not args.no_determinism, squeeze=args.squeeze, shrink=args.shrink,
         data=args.data, strategy=args.strategy, deterministic_data=args.deterministic, init=args.init,
+        connect_timeout=args.connect_timeout,
     )
     metrics = train(cfg, resume=args.resume, progress=not args.quiet, epochs_given=args.epochs)
     print(f"done: precision {metrics['precision']:.4f}, recall {metrics['recall']:.4f}, "

@@ -24,6 +24,9 @@ import atexit
 import json
 import os
 import shutil
+import signal
+import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -53,16 +56,67 @@ def _check_tf_config() -> None:
         raise ValueError(f"TF_CONFIG: not a cluster with this worker's task in it: {text[:200]}")
 
 
-def make_strategy(name: str) -> tf.distribute.Strategy:
-    """The strategy ``name`` (see the module docstring). Call it before any other TensorFlow work."""
+def make_strategy(name: str, connect_timeout_s: float | None = None) -> tf.distribute.Strategy:
+    """The strategy ``name`` (see the module docstring). Call it before any other TensorFlow work.
+
+    ``multiworker`` waits for every worker of TF_CONFIG to answer, at most ``connect_timeout_s``
+    seconds (None: as long as TensorFlow waits): then one line names the peers and the process ends.
+    Ctrl-C ends the wait at once; TensorFlow's own wait would ignore it.
+    """
     if name not in STRATEGIES:
         raise ValueError(f"--strategy: unknown strategy {name!r}; choose from: {', '.join(STRATEGIES)}")
     if name == "mirrored":
         return tf.distribute.MirroredStrategy()
     if name == "multiworker":
         _check_tf_config()
-        return tf.distribute.MultiWorkerMirroredStrategy()
+        return _interruptible(tf.distribute.MultiWorkerMirroredStrategy, connect_timeout_s or float("inf"), _peers())
     return tf.distribute.get_strategy()
+
+
+def _peers() -> str:
+    """The other tasks of TF_CONFIG's cluster, as ``worker 1 at host:port, ...``."""
+    cfg = json.loads(os.environ["TF_CONFIG"])
+    me = (cfg["task"]["type"], int(cfg["task"]["index"]))
+    return ", ".join(f"{kind} {i} at {addr}" for kind, addrs in cfg["cluster"].items() for i, addr in enumerate(addrs)
+                     if (kind, i) != me)
+
+
+# the watchdog's program: wait for the parent to close our stdin (it is connected) or for the deadline
+_WATCHDOG = """
+import os, select, signal, sys
+pid, timeout, peers = int(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
+if not select.select([sys.stdin], [], [], timeout)[0]:
+    print(f"error: --strategy multiworker: the cluster did not come up within {timeout:g} s (waiting for {peers}); "
+          "start every worker of TF_CONFIG with the same command, or correct its addresses", file=sys.stderr, flush=True)
+    os.kill(pid, signal.SIGTERM)
+    if not select.select([sys.stdin], [], [], 2.0)[0]:  # TensorFlow catches SIGTERM while it waits
+        os.kill(pid, signal.SIGKILL)
+"""
+
+
+def _interruptible(build, timeout_s: float, peers: str):
+    """``build()``, which blocks in TensorFlow's C++ code (holding the GIL) until every peer answers,
+    with a deadline, and with Ctrl-C honoured.
+
+    No Python code of this process runs during that wait, so Ctrl-C gets its default action (the
+    process ends) while it lasts, and a watchdog process, told by a closed pipe that the wait is over,
+    prints one error line at the deadline and ends this process (SIGTERM, then SIGKILL: TensorFlow
+    catches SIGTERM during the wait).
+    """
+    sigs = (signal.SIGINT,)
+    watchdog = None
+    if timeout_s < float("inf"):
+        watchdog = subprocess.Popen([sys.executable, "-c", _WATCHDOG, str(os.getpid()), str(timeout_s), peers],
+                                    stdin=subprocess.PIPE)
+    old = {sig: signal.signal(sig, signal.SIG_DFL) for sig in sigs}
+    try:
+        return build()
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+        if watchdog is not None:
+            watchdog.stdin.close()
+            watchdog.wait()
 
 
 def is_chief(strategy: tf.distribute.Strategy) -> bool:

@@ -41,6 +41,7 @@ class TrainConfig:
     strategy: str = "default"
     deterministic_data: bool = False
     init: str = ""  # start from this model's weights: a shipped name (default) or a .keras path; "" a fresh model
+    connect_timeout: float = 300.0  # multiworker: seconds to wait for the cluster's other workers
 
     def check(self) -> None:
         """Raise ``ValueError`` naming the first bad option."""
@@ -56,6 +57,8 @@ class TrainConfig:
         for name in ("epochs", "steps", "batch_size", "pool_images", "val_images", "workers"):
             if getattr(self, name) < 1:
                 raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
+        if not 0 < self.connect_timeout < float("inf"):
+            raise ValueError(f"--connect-timeout must be a positive number of seconds, got {self.connect_timeout}")
         if self.seed < 0:
             raise ValueError(f"--seed must be >= 0, got {self.seed}")
         if not 0.0 < self.learning_rate < 1.0:
@@ -300,7 +303,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
     cfg.check()
     from aicalib_tf.cnn import distribute
 
-    strategy = distribute.make_strategy(cfg.strategy)  # before any other TensorFlow work (MultiWorkerMirrored)
+    strategy = distribute.make_strategy(cfg.strategy, cfg.connect_timeout)  # before any other TensorFlow work (MultiWorkerMirrored)
     out = Path(cfg.out)
     multiworker = cfg.strategy == "multiworker"
     if multiworker and resume:

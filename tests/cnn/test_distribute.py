@@ -161,3 +161,19 @@ def test_multiworker_without_tf_config_is_one_line_exit_2(tmp_path, monkeypatch,
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: --strategy multiworker needs TF_CONFIG") and len(err.splitlines()) == 1
     assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.slow
+def test_a_worker_that_never_comes_is_one_error_line_after_the_connect_timeout(tmp_path):
+    """TF_CONFIG names a second worker that is never started: TensorFlow would wait forever (and
+    ignore SIGTERM); the run ends after --connect-timeout with one line naming the missing worker."""
+    mine, absent = _ports(2)
+    env = dict(os.environ, TF_CONFIG=json.dumps({"cluster": {"worker": [f"localhost:{mine}", f"localhost:{absent}"]},
+                                                 "task": {"type": "worker", "index": 0}}))
+    t0 = time.monotonic()
+    proc = subprocess.run([sys.executable, "-m", "aicalib_tf.train", "--strategy", "multiworker", "--connect-timeout", "3",
+                           "--out", str(tmp_path / "run"), "--quiet"], env=env, capture_output=True, text=True, timeout=240)
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("error")]
+    assert proc.returncode != 0 and time.monotonic() - t0 < 200
+    assert len(errors) == 1 and f"worker 1 at localhost:{absent}" in errors[0] and "within 3 s" in errors[0], proc.stderr[-2000:]
+    assert not (tmp_path / "run" / "model.keras").exists()
