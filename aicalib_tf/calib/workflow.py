@@ -39,6 +39,9 @@ def undistort(image, calibration: Calibration, *, alpha: float = 0.0):
     return _undistort(image, calibration, alpha=alpha)
 
 
+MAX_SQUARE = 1e5  # a square's size in its unit: 100 m in metres, beyond any printed or painted board
+
+
 def parse_square(text: str) -> tuple[float, str]:
     """``"25mm"`` -> (25.0, "mm"). Units: mm, cm, m, in; a bare number is unitless."""
     m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*([a-zA-Z]*)\s*", str(text))
@@ -47,8 +50,8 @@ def parse_square(text: str) -> tuple[float, str]:
     value, unit = float(m.group(1)), m.group(2).lower()
     if unit not in _UNITS:
         raise ValueError(f"--square unit {m.group(2)!r} is not one of mm, cm, m, in (got {text!r})")
-    if not value > 0:
-        raise ValueError(f"--square must be positive, got {text!r}")
+    if not 0 < value <= MAX_SQUARE:
+        raise ValueError(f"--square must be positive and at most {MAX_SQUARE:g} {unit or 'units'}, got {text!r}")
     return value, _UNITS[unit]
 
 

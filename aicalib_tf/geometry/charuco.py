@@ -32,6 +32,8 @@ from aicalib_tf.geometry.pattern import board_points, check_pattern, pattern_ids
 
 __all__ = ["CharucoBoard", "parse_board", "is_charuco", "DICTIONARIES", "dictionary", "marker_bits", "layout_image"]
 
+MAX_BOARD_EXTENT = 1e6  # board units (1 km in mm); OpenCV's board geometry is float32
+
 _UNIT_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4, "": None}
 PREFIX = "charuco:"
 
@@ -88,6 +90,9 @@ class CharucoBoard:
         check_pattern((X - 1, Y - 1))
         if not (self.square > 0 and self.marker > 0):
             raise ValueError(f"square and marker must be > 0, got square={self.square}, marker={self.marker}")
+        if not self.square * max(X, Y) <= MAX_BOARD_EXTENT:  # NaN and infinity too
+            raise ValueError(f"square={self.square:g} is too large: the board would be {self.square * max(X, Y):g} "
+                             f"units wide (at most {MAX_BOARD_EXTENT:g})")
         if self.marker >= self.square:
             raise ValueError(f"marker ({self.marker:g}) must be smaller than square ({self.square:g})")
         size = int(dictionary(self.dictionary).bytesList.shape[0])

@@ -125,7 +125,7 @@ def test_parse_square(text, value, unit):
     assert parse_square(text) == (value, unit)
 
 
-@pytest.mark.parametrize("text", ["25furlongs", "-3mm", "0mm", "mm", ""])
+@pytest.mark.parametrize("text", ["25furlongs", "-3mm", "0mm", "mm", "", "1e308mm", "1e6m", "inf"])
 def test_parse_square_rejects(text):
     with pytest.raises(ValueError, match="--square"):
         parse_square(text)

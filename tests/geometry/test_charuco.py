@@ -28,6 +28,8 @@ def test_parse_round_trip_and_units():
     ("charuco:11x8,square=30mm,marker=22mm,dict=DICT_4X4_50,colour=red", "unexpected"),
     ("charuco:2x2,square=30mm,marker=22mm,dict=DICT_4X4_50", "pattern_size"),
     ("chess:9x6", "charuco:"),
+    ("charuco:11x8,square=1e308mm,marker=1e307mm,dict=DICT_4X4_50", "too large"),
+    ("charuco:11x8,square=200km,marker=22mm,dict=DICT_4X4_50", "square must be a length"),
 ])
 def test_bad_descriptions_are_errors(text, words):
     with pytest.raises(ValueError, match=words):
