@@ -208,7 +208,7 @@ def _detect(files: list[str], cal, cfg: CheckConfig):
         elif res[1] is None:
             skipped[label] = f"no {cols}x{rows} board found" + (f": {res[2]}" if res[2] else "")
         else:
-            views.append(View(label, *res[1], relative=res[3]))
+            views.append(View(label, *res[1], relative=res[3], sigmas=res[5]))
     return views, skipped
 
 
@@ -222,7 +222,7 @@ def _detect_frames(video: str, cal, cfg: CheckConfig):
     for index, frame in video_frames(video, cfg.every, cfg.max_frames):
         gray = load_image(frame)
         hit = detect(gray)
-        yield f"{video}#{index}", (gray.shape[::-1], hit, detect.why, detect.relative)
+        yield f"{video}#{index}", (gray.shape[::-1], hit, detect.why, detect.relative, None, detect.sigmas)
 
 
 def video_frames(path: str, every: int = 10, limit: int = 200):

@@ -51,6 +51,7 @@ KERNEL_SOURCES = (
     "detect/lattice_kernels.py",
     "detect/grid_kernels.py",
     "detect/pyramid_kernels.py",
+    "detect/corner_sigma_kernels.py",
 )
 _DTYPES = {"f4": np.float32, "f8": np.float64, "i8": np.int64, "b1": np.bool_, "u1": np.uint8}
 _SCALARS = {"f4": np.float32, "f8": float, "i8": int, "b1": bool, "u1": int}

@@ -31,6 +31,8 @@ class Found(NamedTuple):
     ids : (N, 2) int (col, row). complete : a full board (N = cols·rows).
     why : when nothing was found, why, if the detector says (the CNN's ``Detection.reason``).
     relative : the ids are relative to the visible grid (``make_detectors(..., relative=True)``).
+    sigmas : (N,) float32 px, each corner's σ (:attr:`aicalib_tf.detect.pipeline.Detection.sigmas`), or
+        None (the OpenCV detectors).
     """
 
     corners: np.ndarray
@@ -38,6 +40,7 @@ class Found(NamedTuple):
     complete: bool
     why: str = ""
     relative: bool = False
+    sigmas: np.ndarray | None = None
 
 
 _NOTHING = Found(np.zeros((0, 2)), np.zeros((0, 2), np.int64), False)
@@ -68,7 +71,8 @@ def make_detectors(names, pattern: tuple[int, int], model: str = DETECTOR_NETWOR
             d = detect_corners(img, pattern, model=m, relative=relative)
             if not d.found:
                 return _NOTHING._replace(why=d.reason)
-            return Found(d.corners.astype(np.float64), d.ids.astype(np.int64), bool(d.complete), relative=d.relative)
+            return Found(d.corners.astype(np.float64), d.ids.astype(np.int64), bool(d.complete), relative=d.relative,
+                         sigmas=d.sigmas)
         return f
 
     def cv(fn):

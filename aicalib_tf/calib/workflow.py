@@ -64,7 +64,9 @@ def make_detector(name: str, pattern_size: tuple[int, int], model: str = DETECTO
     sha256 for the CNN detectors; after a call that found nothing, its ``why`` attribute says why
     where the detector tells (the CNN detectors), else "". After each call its ``relative``
     attribute says whether the ids are relative to the visible grid (the CNN detectors return a
-    board larger than the frame that way). The detectors are those of :mod:`aicalib_tf.bench.detectors`.
+    board larger than the frame that way), and its ``sigmas`` attribute holds the corners' σ (N,) px
+    (:mod:`aicalib_tf.detect.corner_sigma`) or None (the OpenCV detectors, nothing found).
+    The detectors are those of :mod:`aicalib_tf.bench.detectors`.
     """
     from aicalib_tf.bench.detectors import make_detectors
     from aicalib_tf.io import quantize
@@ -80,9 +82,10 @@ def make_detector(name: str, pattern_size: tuple[int, int], model: str = DETECTO
         g = np.asarray(gray)
         found = found_by(g if g.dtype == np.uint8 else quantize(g))
         detect.why, detect.relative = found.why, found.relative
+        detect.sigmas = found.sigmas if len(found.corners) else None
         return (found.corners, found.ids) if len(found.corners) else None
 
-    detect.info, detect.why, detect.relative = info.get(name, {}), "", False
+    detect.info, detect.why, detect.relative, detect.sigmas = info.get(name, {}), "", False, None
     return detect
 
 
@@ -102,7 +105,7 @@ def _charuco_detector(name: str, board, model: str):
         return (found[0].corners, found[0].ids) if found else None
 
     detect.info = {"model": str(net.aicalib_path), "sha256": file_sha256(net.aicalib_path), "board": board.describe()}
-    detect.why, detect.relative = "", False
+    detect.why, detect.relative, detect.sigmas = "", False, None
     return detect
 
 
@@ -159,7 +162,7 @@ def _file_detector(name: str, pattern: tuple[int, int], network: str):
             return str(exc)
         hit = detect(gray)
         small = np.round(np.clip(thumbnail(gray), 0.0, 1.0) * 255).astype(np.uint8)  # 0.3 MB a photo at most
-        return gray.shape[::-1], hit, detect.why, detect.relative, small
+        return gray.shape[::-1], hit, detect.why, detect.relative, small, detect.sigmas
     return work
 
 
@@ -176,8 +179,9 @@ def _detect_all(files: list[str], labels: dict[str, str], cfg: "CalibrateConfig"
         if isinstance(res, str):
             skipped[labels[f]] = res.removeprefix(f"{display_name(f)}: ")
             continue
-        size, hit, why, relative, thumb = res
-        found.append(_Found(labels[f], f, size, View(labels[f], *hit, relative=relative) if hit is not None else None,
+        size, hit, why, relative, thumb, sigmas = res
+        view = View(labels[f], *hit, relative=relative, sigmas=sigmas) if hit is not None else None
+        found.append(_Found(labels[f], f, size, view,
                             "" if hit is not None else why, thumb))
     return found, skipped
 
@@ -217,10 +221,12 @@ def _apply_size_policy(found: list[_Found], policy: str, skipped: dict) -> tuple
         view = f.view
         if view is not None and policy == "crop":
             inside = (view.corners[:, 0] <= size[0] - 0.5) & (view.corners[:, 1] <= size[1] - 0.5)
-            view = View(view.name, view.corners[inside], view.ids[inside], view.relative)
+            view = View(view.name, view.corners[inside], view.ids[inside], view.relative,
+                        None if view.sigmas is None else view.sigmas[inside])
         elif view is not None:  # scale
             s = np.array([size[0] / f.size[0], size[1] / f.size[1]])
-            view = View(view.name, (view.corners + 0.5) * s - 0.5, view.ids, view.relative)
+            sig = None if view.sigmas is None else view.sigmas * float(np.sqrt(s[0] * s[1]))
+            view = View(view.name, (view.corners + 0.5) * s - 0.5, view.ids, view.relative, sig)
         print(f"note: {f.label} is {tag}; {'cropped' if policy == 'crop' else 'scaled'} to {size[0]}x{size[1]}",
               file=sys.stderr)
         out.append(_Found(f.label, f.file, size, view, f.why))  # no thumbnail: not the photos' frame

@@ -36,6 +36,7 @@ import cv2
 import numpy as np
 
 from aicalib_tf.detect.board_order import full_board_ids, reading
+from aicalib_tf.detect.corner_sigma import with_sigmas
 from aicalib_tf.detect.junctions import nearest_spacing
 from aicalib_tf.detect.pipeline import Detection, detect_corners
 from aicalib_tf.detect.pyramid import refine_full
@@ -226,7 +227,8 @@ class Tracker:
         if got is not None:
             self.how, (perm, corners) = "follow", got
             ids = full_board_ids(self.pattern_size)
-            return Detection(corners, ids, self._scores[perm], self.pattern_size, True, size)
+            det = Detection(corners, ids, self._scores[perm], self.pattern_size, True, size)
+            return with_sigmas(det, lambda x0, y0, x1, y1: _crop_gray(raw, (x0, y0, x1, y1)))
         spacing = float(np.median(nearest_spacing(self._last)))
         pad = ROI_STEPS * spacing + float(np.abs(motion).max())
         box = search_box(np.concatenate([self._last, predicted]), size, pad)

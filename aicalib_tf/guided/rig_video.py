@@ -131,7 +131,8 @@ def _take(cams: list[_Camera], k: int, frame, cfg: RigVideoConfig, window: float
     update = cam.session.add(frame)
     if update.examined:
         cam.found[frame.index] = None if update.corners is None else (
-            update.corners, update.ids, bool(getattr(cam.session.detect, "relative", False)))
+            update.corners, update.ids, bool(getattr(cam.session.detect, "relative", False)),
+            getattr(cam.session.detect, "sigmas", None))
     if not update.kept:
         return
     cam.held[frame.index] = frame.gray
@@ -227,13 +228,14 @@ def _partner_view(cam: _Camera, name: str, idx: int, detect) -> tuple[View | Non
         if hit is None:
             why = getattr(detect, "why", "")
             return None, "no board found" + (f": {why}" if why else ""), True
-        cam.found[idx] = (np.asarray(hit[0], np.float64), np.asarray(hit[1]), bool(getattr(detect, "relative", False)))
+        cam.found[idx] = (np.asarray(hit[0], np.float64), np.asarray(hit[1]), bool(getattr(detect, "relative", False)),
+                          getattr(detect, "sigmas", None))
     if cam.found[idx] is None:
         return None, "no board found", False
-    corners, ids, relative = cam.found[idx]
+    corners, ids, relative, sigmas = cam.found[idx]
     if len(ids) < cam.session.cfg.min_corners:
         return None, f"too few corners ({len(ids)})", ran
-    return View(name, corners, ids, relative=relative), "", ran
+    return View(name, corners, ids, relative=relative, sigmas=sigmas), "", ran
 
 
 def _views(cams: list[_Camera], groups: list, detect, cfg: RigVideoConfig):
@@ -251,7 +253,7 @@ def _views(cams: list[_Camera], groups: list, detect, cfg: RigVideoConfig):
                 if view is None:
                     skipped[f"{cam.name}/{name}"] = f"partner frame {idx}: {why}"
                     continue
-            views[cam.name].append(View(name, view.corners, view.ids, view.relative))
+            views[cam.name].append(View(name, view.corners, view.ids, view.relative, view.sigmas))
             if idx in cam.held:
                 shown[cam.name] = cam.held[idx]
         images.append((name, shown))

@@ -210,7 +210,9 @@ class GuidedCalibration:
         pose = board_pose(corners, ids, cfg.square, self.image_size, lens)
         if pose is None:
             return False, "no pose for the board"
-        view = View(f"frame{index:06d}", corners, ids, relative=relative)
+        sigmas = getattr(self.detect, "sigmas", None)  # the detection's per-corner σ (None: equal weights)
+        view = View(f"frame{index:06d}", corners, ids, relative=relative,
+                    sigmas=sigmas if sigmas is not None and len(sigmas) == len(corners) else None)
         dup = near_duplicate(pose, s.poses, self.image_size)
         if dup is not None:
             return False, f"near-duplicate of frame {s.frames[dup]}"
