@@ -51,12 +51,15 @@ class View:
     ids : (N, 2) int (col, row) of each corner on the board.
     relative : the ids are relative to the visible part (a board larger than the frame): they keep
         the lattice but not the place on the board, which a view's own pose absorbs.
+    sigmas : (N,) float64 px, each corner's σ (isotropic, per axis): its weight in the fit is 1/σ
+        (:mod:`aicalib_tf.calib.robust`); None: all corners equal.
     """
 
     name: str
     corners: np.ndarray
     ids: np.ndarray
     relative: bool = False
+    sigmas: np.ndarray | None = None
 
     def __post_init__(self):
         c = np.asarray(self.corners, dtype=np.float64).reshape(-1, 2)
@@ -65,6 +68,11 @@ class View:
             raise ValueError(f"{self.name}: {len(c)} corners but {len(i)} ids")
         object.__setattr__(self, "corners", c)
         object.__setattr__(self, "ids", i)
+        if self.sigmas is not None:
+            sig = np.asarray(self.sigmas, dtype=np.float64).ravel()
+            if len(sig) != len(c) or not np.all(np.isfinite(sig)) or np.any(sig <= 0):
+                raise ValueError(f"{self.name}: sigmas must be {len(c)} finite values > 0 px, one per corner")
+            object.__setattr__(self, "sigmas", sig)
 
 
 @dataclass(frozen=True)
