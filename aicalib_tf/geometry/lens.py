@@ -254,15 +254,19 @@ def undistort_maps(model: str, K, dist, image_size, *, new_K=None, R=None,
     Rm = np.eye(3) if R is None else np.asarray(R, dtype=np.float64)
     if Rm.shape != (3, 3):
         raise ValueError(f"R must be a 3x3 rotation matrix, got shape {Rm.shape}")
-    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    rays = np.stack([(u - P[0, 2]) / P[0, 0], (v - P[1, 2]) / P[1, 1], np.ones_like(u)], axis=-1)
-    uv = project(rays @ Rm, model, K, d)  # row vectors: (Rᵀ·p)ᵀ = pᵀ·R
-    if circle is not None:
-        ccx, ccy, r = circle_tuple(circle)
-        with np.errstate(invalid="ignore"):
-            uv[np.hypot(uv[..., 0] - ccx, uv[..., 1] - ccy) > r] = np.nan
-    uv = np.where(np.isfinite(uv), uv, -1.0).astype(np.float32)
-    return uv[..., 0], uv[..., 1]
+    maps = np.empty((2, h, w), np.float32)
+    band = max(1, (1 << 18) // w)  # rows at a time: a 12 MP image's float64 rays and their temporaries took 1.5 GB at once
+    for y0 in range(0, h, band):
+        u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(y0, min(h, y0 + band), dtype=np.float64))
+        rays = np.stack([(u - P[0, 2]) / P[0, 0], (v - P[1, 2]) / P[1, 1], np.ones_like(u)], axis=-1)
+        uv = project(rays @ Rm, model, K, d)  # row vectors: (Rᵀ·p)ᵀ = pᵀ·R
+        if circle is not None:
+            ccx, ccy, r = circle_tuple(circle)
+            with np.errstate(invalid="ignore"):
+                uv[np.hypot(uv[..., 0] - ccx, uv[..., 1] - ccy) > r] = np.nan
+        uv = np.where(np.isfinite(uv), uv, -1.0).astype(np.float32)
+        maps[0, y0:y0 + band], maps[1, y0:y0 + band] = uv[..., 0], uv[..., 1]
+    return maps[0], maps[1]
 
 
 def projection_jacobian(points, model: str, K, dist) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
