@@ -16,9 +16,12 @@ even/odd and first/second half, and each half is calibrated by:
 - mrcal (a yardstick, never a dependency: run as a subprocess in its own Python, ``--mrcal-venv``,
   default /work/scratch/mrcal-venv; skipped with a message when absent):
   ``mrcal-calibrate-cameras`` with LENSMODEL_OPENCV8 and with
-  LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=(16·H/W)_fov_x_deg=(the aicalib_tf half's
-  horizontal field of view), on the same classic corners, with its board flex and outlier
-  rejection (its defaults), seeded with the aicalib_tf half's fx.
+  LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=10_Ny=(10·H/W)_fov_x_deg=(the aicalib_tf half's
+  horizontal field of view; --spline-nx: 10 knots across suit halves of 6-10 photos better than
+  16 or 24), on the same classic corners, with its board flex and outlier
+  rejection (its defaults), seeded with the aicalib_tf half's fx. Its solves of one half do not
+  always reach the same minimum, so each is run --mrcal-repeats times (default 3): the table gives
+  the repeat with the median difference, and the range over the repeats where it exceeds 20%.
 
 The number per split is the halves' projection difference, rotation fitted out, median over the
 area the boards covered (a 32x24 grid of cells; a cell is covered when a corner of a view of either
@@ -123,10 +126,11 @@ def _mrcal_solve(job, half, model, workdir):
     if model == "opencv8":
         lensmodel = "LENSMODEL_OPENCV8"
     else:
-        ny = max(4, round(16 * h / w))
-        lensmodel = f"LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny={ny}_fov_x_deg={job['fov_deg'][half]:.0f}"
+        nx = int(job.get("spline_nx", 10))
+        ny = max(4, round(nx * h / w))
+        lensmodel = f"LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx={nx}_Ny={ny}_fov_x_deg={job['fov_deg'][half]:.0f}"
     out = Path(workdir) / f"{half}_{model}"
-    out.mkdir(exist_ok=True)
+    out.mkdir(parents=True, exist_ok=True)
     cmd = [str(Path(sys.executable).parent / "mrcal-calibrate-cameras"), "--corners-cache", job["vnl"][half],
            "--lensmodel", lensmodel, "--focal", f"{job['focal'][half]:.3f}", "--imagersize", str(w), str(h),
            "--object-spacing", str(job["spacing"]), "--object-width-n", str(job["pattern"][0]),
@@ -149,7 +153,11 @@ def _mrcal_solve(job, half, model, workdir):
 
 
 def mrcal_worker(job_path: str) -> int:
-    """Read a job (JSON), solve both halves with each mrcal model, diff them; print the result as JSON."""
+    """Read a job (JSON), solve both halves with each mrcal model ``job["repeats"]`` times, diff them;
+    print the result as JSON: per model the repeat with the median difference, and the spread.
+
+    mrcal's solves of one half do not always land on the same minimum (OPENCV8 on the 185° fisheye:
+    k1 from -3.8 to +0.5 between runs on the same corners), hence the repeats."""
     import mrcal
     import numpy as np
 
@@ -157,12 +165,20 @@ def mrcal_worker(job_path: str) -> int:
     size, grid, cells = tuple(job["size"]), tuple(job["grid"]), np.asarray(job["covered_cells"], int)
     out = {}
     for model in MRCAL_MODELS:
-        try:
-            solved = [_mrcal_solve(job, half, model, job["workdir"]) for half in (0, 1)]
-            out[model] = {"diff": _mrcal_diff([s[0] for s in solved], cells, size, grid),
-                          "halves": [s[1] for s in solved]}
-        except Exception as exc:  # noqa: BLE001 - a failed solve is a table entry, not the end of the run
-            out[model] = {"error": f"{type(exc).__name__}: {exc}"}
+        runs, errors = [], []
+        for k in range(int(job.get("repeats", 1))):
+            try:
+                solved = [_mrcal_solve(job, half, model, Path(job["workdir"]) / f"r{k}") for half in (0, 1)]
+                runs.append({"diff": _mrcal_diff([s[0] for s in solved], cells, size, grid),
+                             "halves": [s[1] for s in solved]})
+            except Exception as exc:  # noqa: BLE001 - a failed solve is a table entry, not the end of the run
+                errors.append(f"{type(exc).__name__}: {exc}")
+        if not runs:
+            out[model] = {"error": errors[0]}
+            continue
+        runs.sort(key=lambda r: r["diff"]["median"])
+        out[model] = {**runs[(len(runs) - 1) // 2], "spread": [runs[0]["diff"]["median"], runs[-1]["diff"]["median"]],
+                      "repeats": len(runs), "failed": len(errors)}
     if job.get("cross"):  # OpenCV's rational halves, diffed by mrcal
         models = [mrcal.cameramodel(intrinsics=("LENSMODEL_OPENCV8", np.asarray(p, float)), imagersize=size)
                   for p in job["cross"]["params"]]
@@ -342,7 +358,8 @@ def _opencv_split(corners_halves, pattern, size) -> dict:
     return out
 
 
-def _mrcal_split(venv: Path, names_halves, corners_halves, set_cfg, size, seeds, cross, work: Path) -> dict:
+def _mrcal_split(venv: Path, names_halves, corners_halves, set_cfg, size, seeds, cross, work: Path,
+                 repeats: int = 3, spline_nx: int = 10) -> dict:
     """mrcal on both halves (a subprocess in its own Python); its results plus the cross-check."""
     import numpy as np
 
@@ -356,7 +373,8 @@ def _mrcal_split(venv: Path, names_halves, corners_halves, set_cfg, size, seeds,
     found = [c for half in corners_halves for c in half if c is not None]
     job = {"size": list(size), "grid": list(GRID), "pattern": list(pattern), "spacing": spacing, "vnl": vnl,
            "focal": [s[0] for s in seeds], "fov_deg": [s[1] for s in seeds], "workdir": str(work),
-           "covered_cells": _covered_cells(found, size), "cross": cross}
+           "covered_cells": _covered_cells(found, size), "cross": cross, "repeats": repeats,
+           "spline_nx": spline_nx}
     (work / "job.json").write_text(json.dumps(job))
     run = subprocess.run([str(venv / "bin" / "python"), __file__, "--mrcal-worker", str(work / "job.json")],
                          capture_output=True, text=True, timeout=3600)
@@ -373,7 +391,7 @@ def _mrcal_split(venv: Path, names_halves, corners_halves, set_cfg, size, seeds,
     return res
 
 
-def run_set(name: str, folder: Path, venv: Path | None, tmp: Path) -> dict:
+def run_set(name: str, folder: Path, venv: Path | None, tmp: Path, repeats: int = 3, spline_nx: int = 10) -> dict:
     """Every split of one set through every tool; {"set", "photos", "size", "left_out", "splits": {...}}."""
     from aicalib_tf.calib.diff import split_views
 
@@ -396,7 +414,8 @@ def run_set(name: str, folder: Path, venv: Path | None, tmp: Path) -> dict:
             seeds = [(c.fx, horizontal_fov_deg(c.lens)) if c is not None else (0.5 * size[0], 90.0) for c in cals]
             cross = ({"params": cv["rational_polynomial"]["params"], "covered_cells": cv["covered_cells"]}
                      if "params" in cv.get("rational_polynomial", {}) else None)
-            m = _mrcal_split(venv, names, [[corners[p] for p in h] for h in halves], cfg, size, seeds, cross, work)
+            m = _mrcal_split(venv, names, [[corners[p] for p in h] for h in halves], cfg, size, seeds, cross, work,
+                             repeats, spline_nx)
             row["mrcal_opencv8"] = m.get("opencv8", m) if "error" not in m else m
             row["mrcal_splined"] = m.get("splined", m) if "error" not in m else m
             row["cross"] = {"mrcal_opencv8_by_aicalib": row["mrcal_opencv8"].get("ours"),
@@ -414,8 +433,12 @@ def _median(entry) -> float | None:
 
 
 def _cell(entry) -> str:
+    """The median (px); for mrcal, the range over its repeats when they differ by more than 20%."""
     m = _median(entry)
-    return "failed" if m is None else f"{m:.3g}"
+    if m is None:
+        return "failed"
+    lo, hi = entry.get("spread") or (m, m)
+    return f"{m:.3g} ({lo:.3g}-{hi:.3g})" if hi > 1.2 * lo else f"{m:.3g}"
 
 
 def table(results: list[dict]) -> str:
@@ -485,6 +508,8 @@ def main(argv=None) -> int:
     ap.add_argument("--sets", nargs="+", default=list(SETS), choices=list(SETS))
     ap.add_argument("--mrcal-venv", default="/work/scratch/mrcal-venv", help="mrcal's own Python environment")
     ap.add_argument("--skip-mrcal", action="store_true")
+    ap.add_argument("--mrcal-repeats", type=int, default=3, help="mrcal solves per half and model (default: 3)")
+    ap.add_argument("--spline-nx", type=int, default=10, help="mrcal splined model's knots across (default: 10)")
     ap.add_argument("--json", default=None, help="write every figure as JSON here")
     ap.add_argument("--data", default=str(SHARED), help="the real sets' folder (default: ../shared/data)")
     args = ap.parse_args(argv)
@@ -497,7 +522,7 @@ def main(argv=None) -> int:
     results = []
     with tempfile.TemporaryDirectory(prefix="real_repeatability_") as tmp:
         for name, folder in find_sets(args.sets, Path(args.data)):
-            results.append(run_set(name, folder, venv, Path(tmp)))
+            results.append(run_set(name, folder, venv, Path(tmp), args.mrcal_repeats, args.spline_nx))
     print()
     print(table(results))
     if venv is not None:
