@@ -2,7 +2,7 @@
 
     python benchmarks/corner_sigma.py [--images 6] [--conditions named,sweeps] [--cache DIR]
     python benchmarks/corner_sigma.py --fit [--fit-on sweeps,named] [--images 6]   # refit COEFFS, LOW, HIGH
-    python benchmarks/corner_sigma.py --calibrate [--views 20]   # calibration with and without the σ weights
+    python benchmarks/corner_sigma.py --calibrate [--views 20] [--as-rendered]   # calibration with and without σ
 
 Renders the benchmark's conditions (:mod:`aicalib_tf.bench.conditions`, with their own seeds), detects
 each board with the shipped model and matches every detected corner to the nearest visible true
@@ -173,8 +173,9 @@ def _degraded(image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.clip(np.round(out), 0, 255).astype(np.uint8)
 
 
-def calibrate_weighted(views: int) -> None:
-    """Print each camera's calibration errors with the σ weights and without them (``--calibrate``)."""
+def calibrate_weighted(views: int, degrade: bool = True) -> None:
+    """Print each camera's calibration errors with the σ weights and without them (``--calibrate``;
+    ``degrade`` False: the views as rendered, noise σ 2)."""
     from aicalib_tf.bench.conditions import calibration_sequences
     from aicalib_tf.bench.metrics import calibration_errors
     from aicalib_tf.calib.fit import View, calibrate_camera
@@ -184,7 +185,7 @@ def calibrate_weighted(views: int) -> None:
         rng = np.random.default_rng(1000 + cam)
         found = []
         for k, s in enumerate(samples):
-            det = detect_corners(_degraded(s.image, rng), PATTERN)
+            det = detect_corners(_degraded(s.image, rng) if degrade else s.image, PATTERN)
             if det.found:
                 found.append((f"view{k:02d}", det))
         lab = samples[0].label
@@ -207,10 +208,11 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", type=Path, help="folder for the collected corners (read when present, else written)")
     ap.add_argument("--calibrate", action="store_true", help="calibrate mixed-degradation sequences with and without σ")
     ap.add_argument("--views", type=int, default=20, help="views per calibration sequence (--calibrate)")
+    ap.add_argument("--as-rendered", action="store_true", help="--calibrate on the views as rendered, not degraded")
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     if a.calibrate:
-        calibrate_weighted(a.views)
+        calibrate_weighted(a.views, degrade=not a.as_rendered)
         print(f"{time.perf_counter() - t0:.0f} s")
         return 0
     if a.cache:

@@ -49,9 +49,9 @@ MEASURES = ("odd", "odd_median", "even", "residual", "curvature", "bend", "spaci
 COLUMNS = ("noise/contrast", "own excess asymmetry", "residual/contrast", "impulsive noise", "bend/spacing", "score",
            "(noise/contrast)²")
 # log σ = COEFFS[0] + Σ COEFFS[1 + k] · clip(design[:, k], LOW[k], HIGH[k]); refit: python benchmarks/corner_sigma.py --fit
-COEFFS = np.array([0.362, 1.104, 2.385, 0.119, 0.152, 0.156, -0.652, 0.0])
-LOW = np.array([-5.523, -0.810, -2.127, 0.321, -6.022, -0.693, 0.0])
-HIGH = np.array([-1.344, 0.678, -0.248, 1.732, -1.660, 0.000, 30.0])
+COEFFS = np.array([-0.450, 0.571, 2.395, 0.191, 0.249, 0.145, -0.538, -0.081])
+LOW = np.array([-5.523, -0.810, -2.127, 0.321, -6.022, -0.693, 1.808])
+HIGH = np.array([-1.344, 0.678, -0.248, 1.732, -1.660, 0.000, 30.503])
 MIN_SCORE = 0.05  # a corner the network missed (score 0) counts as this weak
 _TINY = 1e-6  # grey levels (px for the bend): keeps the logarithms finite in a flat window
 _MAX_RADIUS = 5  # window_radius's largest
