@@ -374,13 +374,9 @@ def build_parser():
     return ap
 
 
-def _parse_args(argv):
-    return build_parser().parse_args(argv)
-
-
 def main(argv: list[str] | None = None) -> int:
     """CLI entry: 0 on success, 2 on bad arguments (one line on stderr)."""
-    args = _parse_args(argv)
+    args = build_parser().parse_args(argv)
     try:
         size = tuple(int(v) for v in args.size.lower().split("x"))
         if len(size) != 2 or min(size) < 32 or size[0] % 2 or size[1] % 2:

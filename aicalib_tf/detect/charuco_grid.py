@@ -24,6 +24,7 @@ from aicalib_tf.detect.grid import MIN_CORNERS, assemble_grids
 from aicalib_tf.detect.junctions import dedupe, nearest_spacing, proposer, typical_amplitude
 from aicalib_tf.detect.lattice import drop_outliers
 from aicalib_tf.detect.refine import Smoothed, refine_windowed
+from aicalib_tf.geometry.points import BLOCK, nearest_index
 
 __all__ = ["MARKER_GROW", "outside_markers", "corner_candidates", "lattices"]
 
@@ -43,10 +44,13 @@ def outside_markers(points: np.ndarray, marker_corners: np.ndarray, grow: float 
     c = quads.mean(axis=1, keepdims=True)
     q = c + grow * (quads - c)  # (M, 4, 2)
     side = np.roll(q, -1, axis=1) - q
-    rel = pts[None, None] - q[:, :, None]  # (M, 4, N, 2)
-    cross = side[:, :, None, 0] * rel[..., 1] - side[:, :, None, 1] * rel[..., 0]
-    inside = (cross >= 0).all(axis=1) | (cross <= 0).all(axis=1)  # (M, N)
-    return ~inside.any(axis=0)
+    out = np.ones(len(pts), bool)
+    step = max(1, BLOCK // (8 * len(pts)))  # markers at a time: memory bounded whatever M is
+    for m in range(0, len(q), step):
+        rel = pts[None, None] - q[m:m + step, :, None]  # (step, 4, N, 2)
+        cross = side[m:m + step, :, None, 0] * rel[..., 1] - side[m:m + step, :, None, 1] * rel[..., 0]
+        out &= ~((cross >= 0).all(axis=1) | (cross <= 0).all(axis=1)).any(axis=0)
+    return out
 
 
 def _window_spacing(pts: np.ndarray, quads: np.ndarray, margin_ratio: float) -> np.ndarray:
@@ -58,7 +62,7 @@ def _window_spacing(pts: np.ndarray, quads: np.ndarray, margin_ratio: float) -> 
     if len(quads):
         centres = quads.mean(axis=1)
         side = np.linalg.norm(np.diff(np.concatenate([quads, quads[:, :1]], axis=1), axis=1), axis=2).mean(axis=1)
-        near = np.argmin(np.linalg.norm(pts[:, None] - centres[None], axis=2), axis=1)
+        near = nearest_index(pts, centres)  # in row blocks: any number of markers
         spacing = np.maximum(side[near] * margin_ratio * 0.8, 2.0) / 0.45
     return spacing
 

@@ -39,6 +39,7 @@ import numpy as np
 from aicalib_tf.detect.charuco_refine import bilinear, symmetry_fit
 from aicalib_tf.detect.lattice import predict_ids
 from aicalib_tf.detect.refine import Smoothed, refine_windowed, window_radius
+from aicalib_tf.geometry.points import nearest_index
 
 __all__ = ["SUPPORT", "MAX_SHIFT_MARGIN", "MIN_NEIGHBOURS", "EDGE_NEIGHBOURS", "MAX_EDGE_MOVE", "MIN_CONTRAST_SHARE", "MAX_AFFINE_ASYMMETRY", "grow_along_lattice",
            "keep_with_contrast", "margin_px", "refine_in_squares", "asymmetry", "square_contrast", "at_frame_edge", "place_edge_corners"]
@@ -64,7 +65,7 @@ def margin_px(det, pts: np.ndarray) -> np.ndarray:
         return np.zeros(len(pts))
     quads = np.asarray(det.marker_corners, np.float64).reshape(-1, 4, 2)
     side = _sides(quads)
-    near = np.argmin(np.linalg.norm(pts[:, None] - quads.mean(axis=1)[None], axis=2), axis=1)
+    near = nearest_index(pts, quads.mean(axis=1))  # in row blocks: any number of markers
     return side[near] * (det.board.square - det.board.marker) / (2.0 * det.board.marker)
 
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["sq_distances", "close_pairs", "any_within", "nearest_k", "BLOCK"]
+__all__ = ["sq_distances", "close_pairs", "any_within", "nearest_k", "nearest_index", "BLOCK"]
 
 BLOCK = 1 << 20  # distances held at once by the blockwise and the dense paths (8 MB of float64)
 
@@ -110,3 +110,18 @@ def nearest_k(pts: np.ndarray, k: int) -> np.ndarray:
         d2[np.arange(len(rows)), rows] = np.inf
         out[rows] = np.argsort(d2, axis=1)[:, :k]
     return out
+
+
+def nearest_index(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(M,) int64: for each point of a (M, 2), the index of its nearest point of b (N, 2), N ≥ 1.
+
+    The same indices, ties included, as ``np.argmin(np.linalg.norm(a[:, None] - b[None], axis=2), axis=1)``,
+    worked out on blocks of rows of at most ``BLOCK`` distances.
+    """
+    a, b = np.asarray(a), np.asarray(b)
+    out = np.empty(len(a), np.int64)
+    step = max(1, BLOCK // max(len(b), 1))
+    for start in range(0, len(a), step):
+        out[start:start + step] = np.argmin(np.linalg.norm(a[start:start + step, None] - b[None], axis=2), axis=1)
+    return out
+

@@ -85,3 +85,20 @@ def test_refine_full_in_windows_gives_the_same_corners(board, monkeypatch):
     tiled = refine_full(gray, start)
     assert whole[1].all() and np.array_equal(whole[1], tiled[1])
     assert np.abs(whole[0] - tiled[0]).max() < 1e-3  # float32 rounding of each window's offset
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.float32])
+def test_the_network_in_windows_gives_the_single_runs_map(monkeypatch, board, dtype):
+    """Large images run the network in windows (the whole image's statistics, 32 px of context): the same map."""
+    from aicalib_tf.cnn import inference
+    from aicalib_tf.cnn.model import load_model
+
+    net = load_model("default")
+    img = np.ascontiguousarray(board[0][:743, :998])  # sides that are not multiples of 4: the edge padding
+    img = img if dtype == np.uint8 else img.astype(np.float32) / 255
+    whole = inference.corner_map(net, img)
+    monkeypatch.setattr(inference, "MAX_RUN_PIXELS", 10_000)
+    monkeypatch.setattr(inference, "TILE", 256)
+    assert len(inference._windows(744)) > 1
+    tiled = inference.corner_map(net, img)
+    assert tiled.shape == whole.shape and np.array_equal(tiled, whole)
