@@ -29,7 +29,7 @@ _LAZY = {
     "Calibration": "calib.fit", "CalibrationError": "calib.fit", "View": "calib.fit",
     "calibrate_camera": "calib.fit", "undistort": "calib.files", "save_calibration": "calib.files",
     "load_calibration": "calib.files", "check_calibration": "calib.check",
-    "Detection": "detect.pipeline", "detect_corners": "detect.pipeline", "find_chessboard_corners": "detect.pipeline",
+    "Detection": "detect.pipeline", "detect_corners": "detect.pipeline", "find_chessboard_corners": "detect.dropin",
     "Tracker": "detect.track",
 }
 

@@ -100,8 +100,10 @@ def _charuco_detector(name: str, board, model: str):
     net = load_model(model if name == "cnn" else "report")
 
     def detect(gray):
-        found = [d for d in detect_charuco(gray, [board], model=net) if not d.duplicate]
-        detect.why = "" if found else "no ChArUco board whose markers decide its corners (or two with the same ids)"
+        refused = {}
+        found = [d for d in detect_charuco(gray, [board], model=net, refused=refused) if not d.duplicate]
+        detect.why = "" if found else refused.get(board, "no ChArUco board whose markers decide its corners "
+                                                         "(or two with the same ids)")
         return (found[0].corners, found[0].ids) if found else None
 
     detect.info = {"model": str(net.aicalib_path), "sha256": file_sha256(net.aicalib_path), "board": board.describe()}
@@ -345,6 +347,10 @@ def _calibrate_files(files: list[str], detect, cfg: CalibrateConfig):
             skipped[f.label] = f"no {cfg.pattern[0]}x{cfg.pattern[1]} board found" + (f": {f.why}" if f.why else "")
     views = [f.view for f in found if f.view is not None]
     if not views:
+        whys = Counter(f.why for f in found if f.why)
+        if whys and "board" in detect.info:  # a ChArUco board: its markers say why (e.g. another size)
+            why, n = whys.most_common(1)[0]
+            raise CalibrationError(f"no ChArUco board read in any of the {len(files)} images; in {n}: {why}")
         hint = _suggest_pattern(files, detect.info["model"]) if "model" in detect.info else ""
         raise CalibrationError(f"no {cfg.pattern[0]}x{cfg.pattern[1]} board found in any of the {len(files)} images{hint}")
     meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),

@@ -285,12 +285,6 @@ def _training_data(cfg: TrainConfig, strategy, kind: str, global_batch: int, ini
     return batches_cls(pool, batch_size=global_batch, steps=cfg.steps, seed=cfg.seed, epoch=initial_epoch, **extra)
 
 
-def _op_message(exc) -> str:
-    """A TensorFlow error's own message in one line, without the graph's trace."""
-    text = " ".join(str(getattr(exc, "message", exc)).split())
-    return text.split(" [[")[0][:300]
-
-
 def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epochs_given: int | None = None) -> dict:
     """Train as ``cfg`` says and write RUN_DIR; returns the final metrics dict.
 
@@ -377,7 +371,8 @@ def train(cfg: TrainConfig, *, resume: bool = False, progress: bool = True, epoc
                       shuffle=False, steps_per_epoch=cfg.steps,
                       callbacks=[schedule, *_callbacks(cfg, run, val, initial_epoch, wall_before, t0, backup)])
         except tf.errors.DataLossError as exc:  # a record's checksum broken past the first (check_shard reads those)
-            raise ValueError(f"--data: a shard could not be read: {_op_message(exc)}") from None
+            message = " ".join(str(exc.message).split()).split(" [[")[0]  # TensorFlow's own words, not the graph's trace
+            raise ValueError(f"--data: a shard could not be read: {message[:300]}") from None
     final = run / "model.keras"
     save_model(model, final)
     stats = evaluate_points(model, *val, cfg.threshold)

@@ -8,11 +8,8 @@ benchmark. ``python -m aicalib_tf.detect`` is the command line.
 """
 
 from aicalib_tf.detect.draw import draw_detection
-from aicalib_tf.detect.pipeline import (
-    Detection,
-    detect_corners,
-    find_chessboard_corners,
-)
+from aicalib_tf.detect.dropin import find_chessboard_corners
+from aicalib_tf.detect.pipeline import Detection, detect_corners
 from aicalib_tf.detect.track import Tracker
 
 __all__ = ["Detection", "Tracker", "detect_corners", "draw_detection", "find_chessboard_corners"]

@@ -28,6 +28,7 @@ import numpy as np
 
 from aicalib_tf.detect.markers import Placed, aruco_markers, decode_cells, place_marker, verify_cells
 from aicalib_tf.detect.charuco_grow import SUPPORT
+from aicalib_tf.detect.charuco_layout import layout_mismatch
 from aicalib_tf.geometry.charuco import CharucoBoard
 
 __all__ = ["CharucoDetection", "SUPPORT", "name_lattice", "detect_charuco_boards", "square_lattice"]
@@ -140,7 +141,7 @@ def _near(ids: np.ndarray, markers: list[Placed], radius: float) -> np.ndarray:
 
 
 def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], model, threshold: float = 0.5,
-                          more_lattices=None) -> list[CharucoDetection]:
+                          more_lattices=None, refused: dict | None = None) -> list[CharucoDetection]:
     """Every ChArUco board of ``boards`` in the image, largest first.
 
     gray : (H, W) float32 in [0, 1]. model : the corner network. The grids of corners come from
@@ -154,6 +155,9 @@ def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], model, t
     more_lattices : ``f(pattern_size) -> [(ids, pts)]``, asked for a board none of these grids
     names (the chessboard pipeline's own search, whose pyramid and partial-board growth reach
     boards whose markers OpenCV cannot read, e.g. under heavy noise).
+    refused : a dict that receives {board: why} for each board whose markers contradict its layout
+    (:func:`aicalib_tf.detect.charuco_layout.layout_mismatch`: a description of another size); such a
+    board is not read in this image, rather than read with ids from the wrong layout.
     """
     from aicalib_tf.detect.charuco_complete import complete_from_markers, merge_same_board, polish
     from aicalib_tf.detect.charuco_grid import lattices
@@ -164,6 +168,14 @@ def detect_charuco_boards(gray: np.ndarray, boards: list[CharucoBoard], model, t
     u8 = quantize(gray)
     smoothed = Smoothed(gray)  # its smoothed copies, made once for every stage
     reads = {b: aruco_markers(u8, b) for b in dict.fromkeys(boards)}
+    for board, (ids, corners) in list(reads.items()):
+        why = layout_mismatch(board, ids, corners)
+        if why is not None:
+            del reads[board]
+            if refused is not None:
+                refused[board] = why
+    if not reads:
+        return []
     quads = np.concatenate([r[1] for r in reads.values()])
     ratio = min((b.square - b.marker) / (2.0 * b.marker) for b in reads)
     limit = max(max(b.pattern_size) for b in reads) + 1

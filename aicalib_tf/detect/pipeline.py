@@ -84,11 +84,10 @@ network's weak points (``WEAK``) confirm saddles the ring test fails at the dark
 Without ``pattern_size``, the largest grid with every corner found is returned, complete, its
 size taken as the pattern (columns counted along the grid direction nearer the image's x axis,
 so a 9×6 board held landscape is (9, 6) and turned on its side (6, 9)); ids are relative to that
-grid, in the full-board order. A grid with
-positions missing (a line cut by the frame that kept a few corners, say) counts by its largest
-filled rectangle (:func:`aicalib_tf.detect.grid.full_subgrid`), so a few extra corners never hide it,
-after corners off their neighbours' lattice are dropped as for partial boards.
-:func:`find_chessboard_corners` reports full boards only, like OpenCV.
+grid, in the full-board order. A grid with positions missing (a line cut by the frame that kept a few
+corners, say) counts by its largest filled rectangle (:func:`aicalib_tf.detect.grid.full_subgrid`), so a
+few extra corners never hide it, after corners off their neighbours' lattice are dropped as for partial
+boards. :func:`aicalib_tf.detect.dropin.find_chessboard_corners` reports full boards only, like OpenCV.
 """
 
 from __future__ import annotations
@@ -110,7 +109,7 @@ from aicalib_tf.detect.refine import Smoothed, refine_candidates
 from aicalib_tf.detect.zoom import from_zoom, zoom_box, zoom_in
 from aicalib_tf.io import read_image
 
-__all__ = ["Detection", "detect_corners", "detect_charuco", "find_chessboard_corners", "order_full_board", "refined_points"]
+__all__ = ["Detection", "detect_corners", "detect_charuco", "order_full_board", "refined_points"]
 
 
 @dataclass(frozen=True)
@@ -215,8 +214,9 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     frame = Frame(read_image(image))  # converted to float grey only where needed: a region, a reduced scale
     w, h = frame.size
     if _charuco_board(pattern_size) is not None:  # a ChArUco board: the largest one found
-        found = detect_charuco(frame.raw, [_charuco_board(pattern_size)], model=model, threshold=threshold)
-        return with_sigmas(_as_detection(found[0] if found else None, _charuco_board(pattern_size), (w, h)), frame.region)
+        board, refused = _charuco_board(pattern_size), {}
+        found = detect_charuco(frame.raw, [board], model=model, threshold=threshold, refused=refused)
+        return with_sigmas(_as_detection(found[0] if found else None, board, (w, h), refused.get(board)), frame.region)
     if pattern_size is not None:
         from aicalib_tf.geometry.pattern import check_pattern
 
@@ -366,21 +366,22 @@ def _charuco_board(board):
     return parse_board(board) if is_charuco(board) else None
 
 
-def _as_detection(det, board, size: tuple[int, int]) -> Detection:
-    """A ChArUco detection (or None) as a :class:`Detection` of the board's inner corners."""
+def _as_detection(det, board, size: tuple[int, int], why: str | None = None) -> Detection:
+    """A ChArUco detection (or None, ``why`` when known) as a :class:`Detection` of the board's inner corners."""
     if det is None:
         return Detection(np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
-                         board.pattern_size, False, size, "no ChArUco board whose markers decide its corners")
+                         board.pattern_size, False, size, why or "no ChArUco board whose markers decide its corners")
     return Detection(det.corners, det.ids, np.ones(len(det.corners), np.float32), board.pattern_size, det.complete, size)
 
 
-def detect_charuco(image, boards, *, model=None, threshold: float = 0.5) -> list:
+def detect_charuco(image, boards, *, model=None, threshold: float = 0.5, refused: dict | None = None) -> list:
     """Every ChArUco board of ``boards`` in the image (:mod:`aicalib_tf.detect.charuco`).
 
     image : path or array (the image gate). boards : CharucoBoards or their descriptions
     (``charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100``). The corners are the chessboard
     stages' (CNN, saddle refinement, grid assembly), their ids come from the markers. Returns a list of
-    :class:`~aicalib_tf.detect.charuco.CharucoDetection`, largest first (empty when none).
+    :class:`~aicalib_tf.detect.charuco.CharucoDetection`, largest first (empty when none). refused : a dict
+    that receives {board: why} for a board whose markers contradict it (:mod:`aicalib_tf.detect.charuco_layout`).
     """
     from aicalib_tf.detect.charuco import detect_charuco_boards
 
@@ -394,34 +395,6 @@ def detect_charuco(image, boards, *, model=None, threshold: float = 0.5) -> list
         def chessboard_search(pattern):  # the chessboard search's grid, ids relative to it allowed
             det = detect_corners(gray, pattern, model=model, threshold=threshold, relative=True)
             return [(det.ids.astype(np.int64), det.corners.astype(np.float64))] if det.found else []
-        return detect_charuco_boards(gray, boards, model, threshold, more_lattices=chessboard_search)
+        return detect_charuco_boards(gray, boards, model, threshold, more_lattices=chessboard_search, refused=refused)
     return boards_coarse_to_fine(frame, search)
 
-
-def find_chessboard_corners(image, pattern_size: tuple[int, int], corners=None, flags: int = 0, *,
-                            model=None) -> tuple[bool, np.ndarray | None]:
-    """Drop-in for ``cv2.findChessboardCorners(image, patternSize[, corners[, flags]])``.
-
-    Returns (found, corners): corners (cols·rows, 1, 2) float32 in OpenCV's order, or None when no full
-    board is found. ``corners`` is OpenCV's optional output array: an (cols·rows, 1, 2) float32 array
-    passed here is filled in place and returned. ``flags`` takes OpenCV's ``CALIB_CB_*`` values and
-    accepts every one of them without effect: they tune OpenCV's thresholding and quad search
-    (``ADAPTIVE_THRESH``, ``NORMALIZE_IMAGE``, ``FILTER_QUADS``, ``FAST_CHECK``, and the ``SB``
-    detector's ``EXHAUSTIVE``/``ACCURACY``/``LARGER``/``MARKER``), which this detector does not have;
-    its corners are always refined to sub-pixel accuracy.
-
-    >>> import numpy as np
-    >>> find_chessboard_corners(np.zeros((60, 80), np.uint8), (9, 6), None, 0)
-    (False, None)
-    """
-    if isinstance(flags, bool) or not isinstance(flags, (int, np.integer)) or flags < 0:
-        raise TypeError(f"flags must be a non-negative int of cv2.CALIB_CB_* values, got {flags!r}")
-    det = detect_corners(image, pattern_size, model=model)
-    if not det.complete:
-        return False, None
-    found = det.corners.reshape(-1, 1, 2).astype(np.float32)
-    if isinstance(corners, np.ndarray) and corners.shape == found.shape and corners.dtype == np.float32 \
-            and corners.flags.writeable:
-        corners[...] = found
-        return True, corners
-    return True, found

@@ -13,9 +13,9 @@ from aicalib_tf.detect.pipeline import (  # noqa: E402
     NO_GRID,
     UNDECIDED,
     detect_corners,
-    find_chessboard_corners,
     refined_points,
 )
+from aicalib_tf.detect.dropin import find_chessboard_corners  # noqa: E402
 from aicalib_tf.io import ImageError  # noqa: E402
 from aicalib_tf.cnn.model import MODELS_DIR, load_model  # noqa: E402
 from data_gen import make_sample  # noqa: E402
