@@ -47,6 +47,7 @@ import numpy as np
 from aicalib_tf.calib import schema as S
 from aicalib_tf.calib.fit import Calibration
 from aicalib_tf.calib.kalibr import to_camchain_yaml
+from aicalib_tf.calib.maps import map_entry, map_files, needs_maps
 from aicalib_tf.calib.quality import lens_of
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.image_circle import ImageCircle
@@ -102,7 +103,19 @@ def calibration_dict(cal: Calibration) -> dict:
         "rejected": dict(cal.rejected),
         "meta": dict(cal.meta),
         "image_circle": None if getattr(cal, "image_circle", None) is None else cal.image_circle.to_dict(),
+        **_lens_extras(cal),
     }
+
+
+def _lens_extras(cal: Calibration) -> dict:
+    """camera.json's ``lens_layout`` (a model whose layout its name carries: the spline's knot grid, base
+    projection and range) and ``undistort_maps`` (a model no OpenCV model holds: :mod:`~aicalib_tf.calib.maps`)."""
+    lens, out = lens_of(cal), {}
+    if hasattr(lens.spec, "layout"):
+        out["lens_layout"] = lens.spec.layout()
+    if needs_maps(lens):
+        out["undistort_maps"] = map_entry(lens, undistort_camera_matrix(cal, 0.0))
+    return out
 
 
 def to_json(cal: Calibration) -> str:
@@ -137,6 +150,9 @@ def to_camera_info_yaml(cal: Calibration, camera_name: str = "camera", *, R=None
 def save_calibration(cal: Calibration, folder) -> Path:
     """Write camera.yaml, camera.json, camera_info.yaml and Kalibr's camchain.yaml into ``folder``; returns the folder.
 
+    A lens no OpenCV model holds (the spline, ds, eucm) also gets ``undistort_map_x.npy`` and
+    ``undistort_map_y.npy``, float32 maps for ``cv2.remap`` (:mod:`~aicalib_tf.calib.maps`).
+
     Every text is produced before anything is written, and each file is replaced atomically.
     """
     folder = Path(folder)
@@ -145,6 +161,9 @@ def save_calibration(cal: Calibration, folder) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     for name, text in texts.items():
         atomic_write_text(folder / name, text)
+    lens = lens_of(cal)
+    if needs_maps(lens):  # no OpenCV model holds the lens: the remap maps themselves
+        map_files(lens, undistort_camera_matrix(cal, 0.0), folder, getattr(cal, "image_circle", None))
     return folder
 
 

@@ -263,6 +263,10 @@ def _fit_model(model: str, views: list[View], square_size: float, image_size, st
     spec = get_model(model)
     obj = [board_points(v.ids, square_size) for v in views]
     px = [v.corners for v in views]
+    if spec.START == "layout":  # a model whose layout the views choose (the spline's knots: calib.splined_fit)
+        from aicalib_tf.calib.splined_fit import fit_splined
+        return fit_splined(model, obj, px, image_size, start.lens if isinstance(start, Calibration) else start,
+                           rank_strict)
     free = np.ones(4 + N_COEFFS[model], bool)
     if fix_k3 and spec.FIX_K3 is not None:
         free[4 + spec.FIX_K3] = False
@@ -374,6 +378,7 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
             usable, 1.0, lambda vs, m, start: _fit_model(m, vs, 1.0, image_size, start, fix_k3), circle=image_circle)
     else:
         fit = _fit_model(model, usable, 1.0, image_size, None, fix_k3, rank_strict=False)  # a unit square: tvecs scaled last
+        model = fit.model  # a model that chose its layout (a spline) refits with that layout
         table = ({"model": model, "n_params": fit.intrinsics.size, "rms": fit.rms, "cv_rms": float("nan"),
                   "cv_se": float("nan"), "chosen": True, "note": "forced"},)
     max_drop = len(usable) // 3

@@ -103,6 +103,7 @@ def fold_scores(views, square_size: float, fit, model: str, full) -> np.ndarray:
     k = min(MAX_FOLDS, len(views))
     if k < 2:
         raise CalibrationError(f"{model}: cross-validation needs at least 2 views, got {len(views)}")
+    model = full.model  # a model whose fit chose its layout (a spline): every fold keeps that layout
     start = Lens.from_intrinsics(model, full.intrinsics, (1, 1))
     scores = []
     for f in range(k):
@@ -226,8 +227,8 @@ def select_model(views, square_size: float, fit, models=MODELS, *, circle=None):
     views : list of View (all usable). fit(views, model, start) -> BundleResult, start a Lens or
     None (from scratch). circle : the image circle (an
     :class:`~aicalib_tf.geometry.image_circle.ImageCircle`) or None; its rim counts as reached. table : tuple of dicts {"model", "n_params", "rms" (in-sample px), "cv_rms",
-    "cv_se" (px), "chosen", "note", "determined", "corners"} in ``models`` order. Raises CalibrationError when no
-    model can be fitted.
+    "cv_se" (px), "chosen", "note", "determined", "corners"} in ``models`` order. The chosen model is the name its fit carries (a spline's names the
+    layout its fit chose; its row has the bare name). Raises CalibrationError when no model can be fitted.
     """
     rows, fits, widest, what = {}, {}, None, ""
     for model in sorted(models, key=lambda m: not get_model(m).IS_FISHEYE):  # fisheyes first: the widest ray
@@ -240,7 +241,7 @@ def select_model(views, square_size: float, fit, models=MODELS, *, circle=None):
         start = Lens.from_intrinsics(warm, fits[warm].intrinsics, (1, 1)) if warm in fits else None
         try:
             fits[model] = _fit(fit, views, model, start)
-            row["rms"] = fits[model].rms
+            row["rms"], row["n_params"] = fits[model].rms, fits[model].intrinsics.size
             if widest is None and get_model(model).IS_FISHEYE:
                 widest, what = _reach(fits[model], views, circle)
             vague = undetermined_extras(fits[model])
@@ -261,4 +262,4 @@ def select_model(views, square_size: float, fit, models=MODELS, *, circle=None):
         raise CalibrationError("no lens model could be fitted: " + "; ".join(f"{r['note']}" for r in table))
     for r in table:
         r["chosen"] = r["model"] == chosen
-    return tuple(table), chosen, fits[chosen]
+    return tuple(table), fits[chosen].model, fits[chosen]

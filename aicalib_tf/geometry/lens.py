@@ -28,7 +28,7 @@ import numpy as np
 
 from .image_circle import circle_tuple, into_circle
 from .lens_model import LensModel, pixel_jacobians
-from .lens_registry import MODELS, REGISTRY, get_model, model_from_file_name
+from .lens_registry import MODELS, REGISTRY, get_model, model_from_file_name, per_model
 
 __all__ = [
     "MODELS", "N_COEFFS", "COEFF_NAMES", "ROS_NAMES", "Lens", "check_model", "model_from_ros", "get_model",
@@ -36,9 +36,9 @@ __all__ = [
     "field_of_view", "undistort_maps", "projection_jacobian",
 ]
 
-COEFF_NAMES = {m: spec.COEFF_NAMES for m, spec in REGISTRY.items()}
-N_COEFFS = {m: len(names) for m, names in COEFF_NAMES.items()}
-ROS_NAMES = {m: spec.NAMES["ros"] for m, spec in REGISTRY.items()}
+COEFF_NAMES = per_model(lambda spec: spec.COEFF_NAMES)  # also a family's configured names (lens_registry)
+N_COEFFS = per_model(lambda spec: spec.n_coeffs)
+ROS_NAMES = per_model(lambda spec: spec.NAMES["ros"])
 
 
 # ----------------------------------------------------------------------------- validation

@@ -27,6 +27,10 @@ EXTRA_COEFFS : {name: value} of the coefficients the model choice depends on, ea
     at which the model becomes a simpler one (k4 = 0, ξ = 0, β = 1): the choice prefers a model
     whose extras the views determine (|value − that| ≥ 2σ).
 FIX_K3 : index of k3 in the coefficients for ``fix_k3`` (None: the option does not apply).
+
+A model family whose layout is part of its name (a spline's knot grid: ``_splined``) answers
+:meth:`LensModel.variant` for those names; the registry asks it for names it does not list. A model
+whose fit is regularized gives its extra residuals by :meth:`LensModel.prior`.
 """
 
 from __future__ import annotations
@@ -89,6 +93,14 @@ class LensModel:
     def resolve(self, n: int) -> str | None:
         """The model a file means by this model's name with ``n`` coefficients (None: impossible)."""
         return self.NAME if n == self.n_coeffs else None
+
+    def variant(self, name: str) -> "LensModel | None":
+        """The model of this family called ``name`` (a configured layout), or None (every fixed model)."""
+        return None
+
+    def prior(self, d: np.ndarray):
+        """Regularization residuals the fit adds: (r (M,) px, J (M, n) dr/dd), or None (no regularization)."""
+        return None
 
     def max_angle(self, d: np.ndarray) -> float:
         """Radians: the widest off-axis angle these coefficients image."""

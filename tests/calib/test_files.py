@@ -19,7 +19,8 @@ SIZE = (640, 480)
 DIST = {"plumb_bob": [-0.2, 0.05, 0.001, -0.002, 0.01],
         "rational_polynomial": [-0.2, 0.05, 0.001, -0.002, 0.01, 0.02, -0.01, 0.003],
         "thin_prism": [-0.2, 0.05, 0.001, -0.002, 0.01, 0.02, -0.01, 0.003, 1e-4, -2e-4, 3e-4, 1e-5],
-        "equidistant": [0.05, -0.01, 0.002, -0.0003], "ds": [-0.2, 0.6], "eucm": [0.62, 1.1]}
+        "equidistant": [0.05, -0.01, 0.002, -0.0003], "ds": [-0.2, 0.6], "eucm": [0.62, 1.1],
+        "splined_equidistant": [0.05, -0.01, 0.002, -0.0003] + (0.01 * np.cos(0.3 * np.arange(200))).tolist()}
 HAS_MODEL = "model" in {f.name for f in dataclasses.fields(Calibration)}
 
 

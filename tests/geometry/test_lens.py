@@ -23,6 +23,7 @@ DISTS = {
     "equidistant": [0.02, -0.005, 0.001, -0.0002],
     "ds": [-0.18, 0.59],
     "eucm": [0.63, 1.08],
+    "splined_equidistant": [0.02, -0.005, 0.001, -0.0002] + (0.01 * np.sin(0.7 * np.arange(200))).tolist(),  # 10x10
 }
 PINHOLE = ("plumb_bob", "rational_polynomial", "thin_prism")
 
@@ -52,9 +53,10 @@ def _unit(v):
 
 # ----------------------------------------------------------------------------- tables and validation
 def test_tables_are_consistent():
-    assert lens.MODELS == ("plumb_bob", "rational_polynomial", "thin_prism", "equidistant", "ds", "eucm")
+    assert lens.MODELS == ("plumb_bob", "rational_polynomial", "thin_prism", "equidistant", "ds", "eucm",
+                           "splined_equidistant")
     assert lens.N_COEFFS == {"plumb_bob": 5, "rational_polynomial": 8, "thin_prism": 12, "equidistant": 4, "ds": 2,
-                             "eucm": 2}
+                             "eucm": 2, "splined_equidistant": 204}
     for m in lens.MODELS:
         assert len(lens.COEFF_NAMES[m]) == lens.N_COEFFS[m]
         assert lens.model_from_ros(lens.ROS_NAMES[m], lens.N_COEFFS[m]) == m

@@ -25,7 +25,7 @@ def test_every_model_has_the_interface():
     for name, spec in REGISTRY.items():
         assert isinstance(spec, LensModel) and spec.NAME == name and get_model(name) is spec
         assert len(spec.DEFAULT) == len(spec.FIT_START) == spec.n_coeffs
-        assert set(spec.NAMES) == {"opencv", "ros", "kalibr"} and spec.START in ("opencv", "rays")
+        assert set(spec.NAMES) == {"opencv", "ros", "kalibr"} and spec.START in ("opencv", "rays", "layout")
         assert spec.IS_FISHEYE == (spec.MAX_ANGLE > math.pi / 2)
         assert set(spec.EXTRA_COEFFS) <= set(spec.COEFF_NAMES)
         assert model_from_file_name(spec.NAMES["ros"], spec.n_coeffs) in REGISTRY

@@ -1,0 +1,170 @@
+"""The splined lens model's fit: its knot layout and smoothness chosen from the views, then one bundle fit.
+
+A fit of ``splined_base`` (the bare name; :mod:`aicalib_tf.geometry._splined`) goes:
+
+1. **Base lens.** The start lens (under ``auto``: the equidistant fit), or an equidistant fit from
+   scratch (:func:`~aicalib_tf.calib.starts.fisheye_start`).
+2. **Refusal.** Fewer than :data:`MIN_VIEWS` views, or fewer than :data:`CORNERS_PER_KNOT` corners per
+   knot (half the target density below) of the coarsest grid over the area the boards cover, do not determine a spline: a
+   :class:`~aicalib_tf.calib.bundle.CalibrationError` says so ("splined_base: needs at least 10
+   views covering ..., got 6") and the model choice moves on.
+3. **Layout.** The knot spacing h gives the area the corners cover (their convex hull in the (u, v)
+   plane of the base projection) :data:`CORNERS_PER_KNOT` corners per knot:
+   h = √(CORNERS_PER_KNOT · area / corners). The spline's rectangle, centred on the principal point,
+   reaches 2% and half a spacing beyond the farthest corner (rays up to :data:`MAX_HALF_FOV_DEG`) along
+   each axis, and nx, ny follow (at least 6 each). Pixels beyond it have no ray: the spline describes
+   the lens where the boards were, and the undistortion maps leave the rest black.
+4. **Smoothness.** ``smooth`` = s·f px per normalized unit, for s in :data:`SMOOTH_REL`: each is fitted on
+   the even views and scored on the odd ones and the other way round (held-out RMS, each held-out view
+   posed with the fitted intrinsics); the lowest mean wins, the smoother on a tie within 1%.
+5. **Start and fit.** K from the base lens; the knots by linear least squares so that the spline matches
+   the base lens's projection of the corners' rays and of a grid over the rectangle (with the
+   regularization); poses by PnP on rays; then the bundle fit with the regularization.
+
+A concrete layout (``splined_base_nx=.._ny=.._fov=.._smooth=..``) keeps its layout and smoothness;
+a start that is already a spline of that layout starts the bundle as it is.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from aicalib_tf.calib.bundle import BundleResult, CalibrationError, bundle_adjust, poses_from_rays, solve_pose
+from aicalib_tf.calib.starts import fisheye_start
+from aicalib_tf.geometry._equidistant import project as kb_project
+from aicalib_tf.geometry._equidistant import unproject as _unproject_kb
+from aicalib_tf.geometry._splined import FAMILY_NAME, MAX_KNOTS, MIN_KNOTS, N_BASE, splined_name
+from aicalib_tf.geometry.lens import Lens, get_model
+
+__all__ = ["fit_splined", "choose_layout", "spline_start", "MIN_VIEWS", "CORNERS_PER_KNOT", "SMOOTH_REL"]
+
+MIN_VIEWS = 10
+CORNERS_PER_KNOT = 20.0  # corners per knot over the covered area (each knot holds 2 values)
+SMOOTH_REL = (1e-2, 1e-1, 1.0)  # smooth / f candidates
+MAX_HALF_FOV_DEG = 100.0  # the widest border ray the rectangle is stretched to cover
+_MARGIN = 1.02
+
+
+def _base_k(lens: Lens) -> np.ndarray:
+    """The base projection's k1..k4 for a start lens: its own when it is equidistant, else 0."""
+    return np.array(lens.dist[:N_BASE] if lens.spec.FAMILY == "equidistant" else np.zeros(N_BASE), np.float64)
+
+
+def _uv(lens: Lens, px: np.ndarray) -> np.ndarray:
+    """(N, 2) px -> (M, 2) base-plane (u, v) of their rays under ``lens`` (rays with none dropped)."""
+    rays = lens.unproject(px)
+    rays = rays[np.isfinite(rays).all(axis=1)]
+    ang = np.arctan2(np.hypot(rays[:, 0], rays[:, 1]), rays[:, 2])
+    rays = rays[ang <= math.radians(MAX_HALF_FOV_DEG)]
+    u, v, ok = kb_project(rays, _base_k(lens))
+    return np.stack([u[ok], v[ok]], axis=1)
+
+
+def choose_layout(base: Lens, px, image_size, n_views: int) -> tuple[int, int, float]:
+    """(nx, ny, fov deg) of the spline for these corners (module docstring, steps 2–3).
+
+    base : the base lens. px : list of (N_v, 2) corners. Raises CalibrationError when the views do not
+    determine a spline."""
+    corners = np.concatenate([np.asarray(p, np.float64).reshape(-1, 2) for p in px])
+    uv = _uv(base, corners)
+    if n_views < MIN_VIEWS or len(uv) < 3:
+        raise CalibrationError(f"{FAMILY_NAME}: needs at least {MIN_VIEWS} views covering the image, got {n_views}")
+    area = float(cv2.contourArea(cv2.convexHull(uv.astype(np.float32))))
+    h = math.sqrt(CORNERS_PER_KNOT * area / len(uv))
+    U, V = (float(np.max(np.abs(uv[:, k]))) * _MARGIN + 0.5 * h for k in (0, 1))
+    nx = int(min(max(math.ceil(2 * U / h) + 3, MIN_KNOTS), MAX_KNOTS))
+    h = 2 * U / (nx - 3)
+    ny = int(min(max(math.ceil(2 * V / h) + 3, MIN_KNOTS), MAX_KNOTS))
+    knots_covered = area / (h * h)
+    if len(uv) < 0.5 * CORNERS_PER_KNOT * knots_covered:  # even the coarsest grid is finer than the corners allow
+        raise CalibrationError(f"{FAMILY_NAME}: needs at least {math.ceil(0.5 * CORNERS_PER_KNOT * knots_covered)} "
+                               f"corners covering the image for a {nx}x{ny} knot grid, got {len(uv)} in {n_views} views")
+    return nx, ny, math.degrees(2 * U)
+
+
+def spline_start(base: Lens, model: str, px) -> np.ndarray:
+    """(4 + n,) start [fx, fy, cx, cy, *knots] of the spline ``model`` that matches ``base`` over the corners'
+    rays and a grid over its rectangle (linear least squares with its regularization)."""
+    spec = get_model(model)
+    corners = np.concatenate([np.asarray(p, np.float64).reshape(-1, 2) for p in px])
+    rays = base.unproject(corners)
+    g = np.linspace(-1.0, 1.0, 25)
+    gu, gv = np.meshgrid(g * spec.U, g * spec.V)
+    k = _base_k(base)
+    grid = _unproject_kb(gu.ravel(), gv.ravel(), k)
+    rays = np.concatenate([rays, grid])
+    target = base.project(rays)
+    u, v, ok = kb_project(rays, k)
+    keep = ok & np.isfinite(target).all(axis=1) & (np.abs(u) <= spec.U) & (np.abs(v) <= spec.V)
+    u, v, target = u[keep], v[keep], target[keep]
+    _, _, _, _, idx, w = spec.correction(u, v, np.zeros(spec.n_coeffs))  # the weights alone
+    m = spec.nx * spec.ny
+    B = np.zeros((len(u), m))
+    B[np.repeat(np.arange(len(u)), 16), idx.reshape(-1)] = w.reshape(-1)
+    _, P = spec.prior(np.zeros(spec.n_coeffs))
+    half = P[: P.shape[0] // 2, N_BASE:N_BASE + m]
+    knots = []
+    for axis, (f, c, s) in enumerate(((base.fx, base.cx, u), (base.fy, base.cy, v))):  # px rows and the prior's
+        A = f * B
+        knots.append(np.linalg.solve(A.T @ A + half.T @ half, A.T @ (target[:, axis] - c - f * s)))
+    return np.concatenate([[base.fx, base.fy, base.cx, base.cy], k, *knots])
+
+
+def _held_out_rms(model: str, obj, px, intr, poses, train: np.ndarray) -> float:
+    """px: fit on the views ``train`` (bool (V,)), the held-out views' RMS with those intrinsics."""
+    pick = lambda seq: [s for s, t in zip(seq, train) if t]  # noqa: E731
+    fit = bundle_adjust(model, pick(obj), pick(px), intr, np.asarray(poses[0])[train], np.asarray(poses[1])[train],
+                        covariance=False, strict=False)
+    lens = Lens.from_intrinsics(model, fit.intrinsics, (1, 1))
+    sq, n = 0.0, 0
+    for o, p, t in zip(obj, px, train):
+        if not t:
+            pose = solve_pose(lens, o, p)
+            if pose is None or not np.isfinite(pose[2]):
+                return math.inf
+            sq, n = sq + pose[2] ** 2 * len(p), n + len(p)
+    return math.sqrt(sq / n)
+
+
+def _choose_smooth(base: Lens, layout, obj, px, poses) -> float:
+    """The smoothness weight, px per normalized unit, with the lowest even/odd held-out RMS (module docstring)."""
+    odd = np.arange(len(px)) % 2 == 1
+    best = None
+    for s in sorted(SMOOTH_REL, reverse=True):  # the smoothest first: it keeps a tie
+        model = splined_name(*layout, s * base.fx)
+        intr = spline_start(base, model, px)
+        score = np.mean([_held_out_rms(model, obj, px, intr, poses, train) for train in (odd, ~odd)])
+        if best is None or score < 0.99 * best[0]:
+            best = (score, s * base.fx)
+    return best[1]
+
+
+def fit_splined(model: str, obj, px, image_size, start: Lens | None, rank_strict: bool = True) -> BundleResult:
+    """One fit of a splined model (module docstring): a BundleResult whose ``model`` names the layout.
+
+    obj, px : lists of V (N_v, 3) board points and (N_v, 2) corners px. start : a Lens (any model) or None.
+    Raises CalibrationError when the views do not determine a spline or the fit fails."""
+    spec = get_model(model)
+    if start is not None and start.spec.FAMILY == spec.FAMILY and (model == FAMILY_NAME or start.model == model):
+        poses = poses_from_rays(start, obj, px)
+        if poses is None:
+            raise CalibrationError(f"{start.model}: the start lens sees no board in front of it in some view")
+        return bundle_adjust(start.model, obj, px, start.intrinsics(), *poses, rank_strict=rank_strict)
+    if start is None or start.spec.FAMILY == spec.FAMILY:
+        if model == FAMILY_NAME and len(px) < MIN_VIEWS:  # refuse before the equidistant fit
+            raise CalibrationError(f"{FAMILY_NAME}: needs at least {MIN_VIEWS} views covering the image, got {len(px)}")
+        every = np.ones(4 + get_model("equidistant").n_coeffs, bool)
+        intr, poses = fisheye_start(obj, px, image_size, every, "equidistant")
+        warm = bundle_adjust("equidistant", obj, px, intr, *poses, covariance=False, strict=False)
+        start = Lens.from_intrinsics("equidistant", warm.intrinsics, image_size)
+    base = Lens(start.model, start.K, start.dist, image_size)
+    poses = poses_from_rays(base, obj, px)
+    if poses is None:
+        raise CalibrationError(f"{model}: the start lens sees no board in front of it in some view")
+    if model == FAMILY_NAME:
+        layout = choose_layout(base, px, image_size, len(px))
+        model = splined_name(*layout, _choose_smooth(base, layout, obj, px, poses))
+    return bundle_adjust(model, obj, px, spline_start(base, model, px), *poses, rank_strict=rank_strict)
