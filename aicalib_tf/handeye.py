@@ -1,7 +1,7 @@
 """Hand-eye calibration: where a robot's camera sits, from the robot's poses and the camera's board views.
 
     python -m aicalib_tf.handeye "images/*.png" --poses poses.csv --pattern 9x6 --square 25mm
-        --setup eye-in-hand|eye-to-hand --out DIR [--intrinsics camera.json] [--model auto|plumb_bob|...]
+        --setup eye-in-hand|eye-to-hand --out DIR [--intrinsics camera.json] [--model plumb_bob|auto|...]
         [--robot-sigma 0.01deg,0.05mm] [--board charuco:...] [--detector cnn|opencv|...] [--save-partial]
 
 eye-in-hand: the camera rides on the flange and sees a board fixed in the cell; the result is
@@ -18,8 +18,8 @@ The same data may come as JSON or YAML (.json, .yaml: a list of {image, x, y, z,
 or {image, matrix: 4x4}). Rows are matched to images by file name; unmatched rows and images are
 listed. A quaternion whose norm is within 1e-3 of 1 is normalised with a warning.
 
-Without --intrinsics the camera is calibrated from the same images first (the lens model as in
-calibrate) and its intrinsics are refined in the hand-eye fit; with --intrinsics camera.json
+Without --intrinsics the camera is calibrated from the same images first (--model: plumb_bob by
+default, any of calibrate's models, or auto) and its intrinsics are refined in the hand-eye fit; with --intrinsics camera.json
 (calibrate's file) they are held. Then: each view's board pose; a closed-form start robust to
 robot rows that belong to other images (those are named and left out); one least-squares fit of
 the board corners over the hand-eye transform, the board's pose, the robot's poses (each with
@@ -84,7 +84,9 @@ def build_parser():
     ap.add_argument("--square", default=None, help="square size with unit, e.g. 25mm")
     ap.add_argument("--out", default="handeye", help="output folder (default: %(default)s)")
     ap.add_argument("--intrinsics", help="camera.json (or camera.yaml) of calibrate: hold these intrinsics")
-    ap.add_argument("--model", default="auto", help=f"lens model without --intrinsics: auto or one of {', '.join(MODELS)}")
+    ap.add_argument("--model", default="plumb_bob",
+                    help=f"lens model without --intrinsics: one of {', '.join(MODELS)}, or auto (each model fitted and "
+                         "cross-validated, as calibrate does: slower) (default: %(default)s)")
     ap.add_argument("--robot-sigma", default="0.01deg,0.05mm",
                     help="the robot's reported pose noise per axis, ROTATION,TRANSLATION (default: %(default)s)")
     ap.add_argument("--detector", default="cnn", choices=DETECTORS, help="corner detector (default: %(default)s)")

@@ -78,3 +78,20 @@ def test_robot_sigma_is_parsed_with_units():
     assert np.allclose(parse_robot_sigma("0.001rad,0.1m"), (0.0572957795, 100.0))
     with pytest.raises(ValueError, match="robot-sigma"):
         parse_robot_sigma("fast")
+
+
+def test_known_intrinsics_are_held(handeye_set, tmp_path, capsys):
+    from aicalib_tf.calib.fit import View, calibrate_camera
+    from aicalib_tf.calib.files import save_calibration
+    from aicalib_tf.geometry.pattern import pattern_ids
+    from data_gen.handeye import sample_handeye
+
+    s = sample_handeye(HandEyeSetConfig(views=9, size=(640, 480), swap=2, seed=11))  # the fixture's truth
+    obj, ids = s.board.object_points() * 1e-3, pattern_ids((9, 6))
+    views = [View(f"v{k}", s.camera.lens.project(obj @ C[:3, :3].T + C[:3, 3]), ids) for k, C in enumerate(s.C)]
+    save_calibration(calibrate_camera(views, (9, 6), 0.04, (640, 480), model="plumb_bob"), tmp_path / "cam")
+    rc, out, err = _run(capsys, handeye_set, tmp_path / "he", "--intrinsics", tmp_path / "cam" / "camera.json")
+    res = json.loads((tmp_path / "he" / "handeye.json").read_text())
+    assert rc == 0, err
+    assert res["camera"]["fitted"] is False and np.allclose(res["camera"]["K"], s.camera.K, atol=1e-3)
+    assert "held fixed" in out

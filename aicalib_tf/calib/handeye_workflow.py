@@ -41,7 +41,7 @@ class HandEyeConfig:
     board: str | None = None
     out: str = "handeye"
     intrinsics: str | None = None
-    model: str = "auto"
+    model: str = "plumb_bob"
     detector: str = "cnn"
     network: str = DETECTOR_NETWORK
     sigma_rot_deg: float = DEFAULT_SIGMA_ROT_DEG
