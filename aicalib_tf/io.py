@@ -94,10 +94,14 @@ def display_name(path) -> str:
 _CREDENTIALS = re.compile(r"(?i)\b([a-z][a-z0-9+.-]*://[^/\s:@]*):[^/\s]*@")  # the last @ ends the password
 
 
+_SECRET_QUERY = re.compile(r"(?i)([?&;](?:password|passwd|pass|pwd|token|access_token|key|api_?key|secret|auth)=)[^&;#\s]*")
+
+
 def redact_credentials(text: str) -> str:
-    """``text`` with the password of every URL in it replaced by ``***`` (``rtsp://user:***@host/``),
-    for anything printed or written: messages, reports, a calibration's ``source``."""
-    return _CREDENTIALS.sub(r"\1:***@", str(text))
+    """``text`` with the password of every URL in it replaced by ``***`` (``rtsp://user:***@host/``), and
+    the value of a query field that holds one (``?password=``, ``&token=``, ...), for anything printed or
+    written: messages, reports, a calibration's ``source``."""
+    return _SECRET_QUERY.sub(r"\1***", _CREDENTIALS.sub(r"\1:***@", str(text)))
 
 
 def max_pixels() -> int:
@@ -255,28 +259,39 @@ def _recursive_glob(pattern: str) -> list[str]:
 
 def _walk_once(root: str, pats: list, seen: set, out: list) -> None:
     """Append to ``out`` the paths under ``root`` ("" for the current folder) whose components below it
-    match ``pats``, walking no folder in ``seen`` and adding each walked one (:func:`_recursive_glob`)."""
-    queue = [(root or os.curdir, [])]  # (a folder to walk without following links, its components under root)
-    while queue:
-        start, above = queue.pop(0)
+    match ``pats``, entering only folders a match can lie under, none in ``seen``, and adding each one
+    entered (:func:`_recursive_glob`). Iterative (any depth); an unreadable folder is skipped, as glob
+    skips it."""
+    end = len(pats)
+    links = [(root or os.curdir, [], _closure({0}, pats))]  # (folder, its components under root, pattern states)
+    while links:
+        start, above, states = links.pop(0)
         key = _folder_key(start)
         if key is None or key in seen:
             continue
         seen.add(key)
-        for folder, dirs, files in os.walk(start):  # links to folders are listed in dirs, not entered
-            rel = os.path.relpath(folder, start)
-            base = above + ([] if rel == os.curdir else rel.split(os.sep))
-            dirs.sort()
-            out.extend(os.path.join(root, *base, n) for n in [*dirs, *files] if _match_parts([*base, n], pats))
-            keep = []
-            for d in dirs:
-                path = os.path.join(folder, d)
-                if os.path.islink(path):
-                    queue.append((path, [*base, d]))
-                elif (k := _folder_key(path)) is not None and k not in seen:
+        stack = [(start, above, states)]
+        while stack:
+            folder, base, states = stack.pop()
+            try:
+                with os.scandir(folder) as it:
+                    entries = sorted(it, key=lambda e: e.name)
+            except OSError:
+                continue
+            inner = []
+            for e in entries:
+                after = _step(states, e.name, pats)
+                if end in after:
+                    out.append(os.path.join(root, *base, e.name))
+                if not any(s < end for s in after):
+                    continue  # nothing below can match
+                if e.is_symlink():
+                    if e.is_dir():
+                        links.append((e.path, [*base, e.name], after))
+                elif e.is_dir(follow_symlinks=False) and (k := _folder_key(e.path)) is not None and k not in seen:
                     seen.add(k)
-                    keep.append(d)
-            dirs[:] = keep
+                    inner.append((e.path, [*base, e.name], after))
+            stack.extend(reversed(inner))
 
 
 def _folder_key(path) -> tuple[int, int] | None:
@@ -298,16 +313,27 @@ def _part_matcher(part: str, fnmatch):
     return lambda name: (part.startswith(".") or not name.startswith(".")) and rx.match(name) is not None
 
 
-def _match_parts(names: list[str], pats: list) -> bool:
-    """Whether a relative path's components match the pattern's (``**``: zero or more non-hidden folders)."""
-    if not pats:
-        return not names
-    if pats[0] == "**":
-        if _match_parts(names, pats[1:]):
-            return True
-        return bool(names) and not names[0].startswith(".") and (len(pats) == 1 or len(names) > 1) \
-            and _match_parts(names[1:], pats)
-    return bool(names) and pats[0](names[0]) and _match_parts(names[1:], pats[1:])
+def _closure(states: set, pats: list) -> frozenset:
+    """Pattern positions ``states`` and those a ``**`` matching no folder leads to."""
+    out = set(states)
+    for s in states:
+        while s < len(pats) and pats[s] == "**":
+            s += 1
+            out.add(s)
+    return frozenset(out)
+
+
+def _step(states: frozenset, name: str, pats: list) -> frozenset:
+    """The pattern positions after one more path component ``name`` (``**`` takes any non-hidden name and stays)."""
+    nxt = set()
+    for s in states:
+        if s < len(pats):
+            if pats[s] == "**":
+                if not name.startswith("."):
+                    nxt.add(s)
+            elif pats[s](name):
+                nxt.add(s + 1)
+    return _closure(nxt, pats)
 
 
 def atomic_write_bytes(path, data: bytes) -> Path:

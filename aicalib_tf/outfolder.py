@@ -39,6 +39,7 @@ from pathlib import Path
 __all__ = ["OutputFolder", "MARKER", "check_out_path"]
 
 MARKER = ".aicalib"  # written into every output folder; its presence makes the folder replaceable
+_MARKER_BYTES = 16 << 20  # a marker larger than this is not read (its folder's files count as the user's)
 _RENAME_EXCHANGE = 2  # linux/fs.h
 _AT_FDCWD = -100
 # Files an older calibration folder (written before the marker existed) may hold.
@@ -114,12 +115,12 @@ def _user_entries(path: Path) -> list[str]:
     if MARKER not in names:
         return []
     try:
-        from aicalib_tf.jsonio import loads
+        from aicalib_tf.jsonio import loads, read_text
 
-        written = loads((path / MARKER).read_text(encoding="utf-8"), str(path / MARKER)).get("files")
-    except (OSError, ValueError, AttributeError):  # an older marker: one line, the kind
+        written = loads(read_text(path / MARKER, max_bytes=_MARKER_BYTES), str(path / MARKER)).get("files")
+    except (OSError, ValueError, AttributeError):  # an older marker (one line, the kind), or not ours
         written = None
-    if not isinstance(written, list):
+    if not isinstance(written, list) or not all(isinstance(n, str) for n in written):
         return [n for n in names if n != MARKER and not _ours(n)]
     return [n for n in names if n != MARKER and n not in set(written)]
 

@@ -235,6 +235,8 @@ def test_a_recursive_glob_matches_what_glob_gives_on_a_tree_without_loops(tmp_pa
     ("error: rtsp://admin:p@ss:w0rd@10.0.0.1:554/s: cannot open", "error: rtsp://admin:***@10.0.0.1:554/s: cannot open"),
     ("rtsp://admin@host/s and HTTPS://:tok@h/x", "rtsp://admin@host/s and HTTPS://:***@h/x"),
     ("http://host:8080/a.mp4 photos/left:01.png", "http://host:8080/a.mp4 photos/left:01.png"),
+    ("rtsp://cam/live?user=admin&password=hunter2&channel=1", "rtsp://cam/live?user=admin&password=***&channel=1"),
+    ("http://h/s.mjpg?TOKEN=abc#x", "http://h/s.mjpg?TOKEN=***#x"),
 ])
 def test_a_urls_password_is_redacted(text, shown):
     from aicalib_tf.io import redact_credentials
@@ -262,3 +264,25 @@ def test_calibrate_and_detect_end_over_a_symlink_loop(tmp_path, command):
         assert proc.returncode == 2 and "error: 1 usable views" in proc.stderr, proc.stderr
     else:
         assert proc.returncode == 0 and "1 images: 1 full boards" in proc.stdout + proc.stderr, proc.stderr
+
+
+def test_a_recursive_glob_goes_any_depth_and_any_number_of_double_stars(tmp_path):
+    import time
+
+    from aicalib_tf.io import expand_images
+
+    deep = tmp_path
+    for _ in range(1200):  # glob.glob(recursive=True) raises RecursionError here
+        deep = deep / "d"
+        deep.mkdir()
+    (deep / "x.png").write_bytes(b"")
+    try:
+        t0 = time.monotonic()
+        assert expand_images([str(tmp_path / "**" / "*.png")]) == [str(deep / "x.png")]
+        assert expand_images([str(tmp_path / "/".join(["**"] * 12) / "d" / "*.png")]) == [str(deep / "x.png")]
+        assert time.monotonic() - t0 < 5.0
+    finally:  # removed from the bottom up: pytest's own clean-up (shutil.rmtree) recurses too deep here
+        (deep / "x.png").unlink()
+        while deep != tmp_path:
+            deep.rmdir()
+            deep = deep.parent

@@ -163,7 +163,7 @@ def test_kills_inside_the_write_phase_leave_the_old_set_or_the_new_set(tmp_path)
         before = _run_ids(out)
         proc = subprocess.Popen([sys.executable, "-c", WRITER, str(out), run], stdout=subprocess.PIPE, env=env)
         assert proc.stdout.readline().strip() == b"writing"
-        time.sleep((k % 10) * 0.007)  # from the first file to past the swap
+        time.sleep((k % 10) * 0.007 * (1 + k // 20))  # from the first file to past the swap (longer later: a busy machine)
         proc.send_signal(signal.SIGKILL)
         proc.wait()
         ids = _run_ids(out) if out.exists() else set()
@@ -189,3 +189,19 @@ def test_calibrate_twice_into_one_folder_keeps_the_users_notes(tmp_path, capsys)
     assert (out / "notes.txt").read_text() == "lens cap was dusty" and (out / "camera.json").stat().st_mtime > 0
     written = json.loads((out / MARKER).read_text())["files"]
     assert "camera.json" in written and written == sorted(p.name for p in out.iterdir() if p.name not in (MARKER, "notes.txt"))
+
+
+@pytest.mark.parametrize("marker", ['{"kind": "x", "files": [{}]}', '{"files": "camera.yaml"}', "[1, 2]", "\0\0",
+                                    '{"files": ["notes.txt", "camera.yaml"]}'])
+def test_a_strange_marker_never_costs_a_users_file(tmp_path, marker):
+    out = tmp_path / "c"
+    out.mkdir()
+    (out / MARKER).write_text(marker)
+    (out / "notes.txt").write_text("mine")
+    (out / "camera.yaml").write_text("old")
+    _write(out, "run00006")
+    assert _run_ids(out) == {"run00006"}
+    if "notes.txt" in marker:  # the marker says a run wrote notes.txt: it goes like the rest of that run
+        assert not (out / "notes.txt").exists()
+    else:
+        assert (out / "notes.txt").read_text() == "mine"
