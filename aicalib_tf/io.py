@@ -94,7 +94,8 @@ def display_name(path) -> str:
 _CREDENTIALS = re.compile(r"(?i)\b([a-z][a-z0-9+.-]*://[^/\s:@]*):[^/\s]*@")  # the last @ ends the password
 
 
-_SECRET_QUERY = re.compile(r"(?i)([?&;](?:password|passwd|pass|pwd|token|access_token|key|api_?key|secret|auth)=)[^&;#\s]*")
+_SECRET_QUERY = re.compile(r"(?i)([?&;](?:password|passwd|pass|pwd|token|access_token|key|api_?key|secret|auth)=)"
+                           r"[^&;#\s]*?(?=[&;#\s]|:\s|:$|$)")  # a value ends before a message's ": "
 
 
 def redact_credentials(text: str) -> str:

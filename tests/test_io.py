@@ -237,6 +237,7 @@ def test_a_recursive_glob_matches_what_glob_gives_on_a_tree_without_loops(tmp_pa
     ("http://host:8080/a.mp4 photos/left:01.png", "http://host:8080/a.mp4 photos/left:01.png"),
     ("rtsp://cam/live?user=admin&password=hunter2&channel=1", "rtsp://cam/live?user=admin&password=***&channel=1"),
     ("http://h/s.mjpg?TOKEN=abc#x", "http://h/s.mjpg?TOKEN=***#x"),
+    ("error: rtsp://h/s?pwd=a:b: cannot open", "error: rtsp://h/s?pwd=***: cannot open"),
 ])
 def test_a_urls_password_is_redacted(text, shown):
     from aicalib_tf.io import redact_credentials
