@@ -19,6 +19,7 @@ Save can write it (at least 3 views). Times are the caller's clock, seconds.
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 
 from aicalib_tf.guided.save import MIN_SAVED_VIEWS
@@ -86,6 +87,8 @@ class StallWatch:
             help_ = fallback
         if est is None:
             verdict = f"no fit yet ({views} views kept)"
+        elif not math.isfinite(est.sigma_px):
+            verdict = f"uncertainty not known yet (the boards cover too little of the image), {views} views"
         else:
             verdict = f"uncertainty {est.sigma_px:.3f} px against the {self.target_px:g} px target, {views} views"
         can_save = views >= MIN_SAVED_VIEWS

@@ -227,6 +227,11 @@ def test_stall_reasons_other_than_a_repeated_path():
     assert run("blurred (edges 4.0 px wide, typical 1.3 px)")["help"] == "move the board more slowly, or add light"
     assert run("no board")["can_save"] is False and run("no board")["verdict"] == "no fit yet (2 views kept)"
     assert run("no board", n=20) is None  # not yet 30 s
+    watch = StallWatch(0.1)
+    unknown = SimpleNamespace(kept=False, done=False, reason="adds little (predicted uncertainty -0.0%)", missing=(),
+                              estimate=SimpleNamespace(sigma_px=float("inf")), guidance=None)
+    out = [watch.note(unknown, 6, float(t)) for t in range(40)][-1]
+    assert out["verdict"].startswith("uncertainty not known yet") and out["help"] == "show the board in other places and tilts"
 
 
 def test_save_keeps_the_users_files_in_the_out_folder(tmp_path):
