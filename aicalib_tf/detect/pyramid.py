@@ -6,6 +6,12 @@ an f×f block), where the network, refinement and grid assembly cost about 1/f²
 corners found are then refined once more on the full image. Only when that finds no complete
 board is the next finer scale tried, down to full size (see :func:`aicalib_tf.detect.pipeline.detect_corners`).
 
+Memory. A scale is searched whole only up to ``MAX_SEARCH_PIXELS`` (16 MP): a larger photo's
+finest whole search is at f = 2, a quarter of its pixels, and full resolution is only reached in
+windows about the corners found (:func:`refine_full`). With the network run in windows
+(:mod:`aicalib_tf.cnn.inference`), a 48 MP photo peaks at 0.3–0.7 GB (docs/benchmark.md).
+ChArUco photos go coarse to fine as well (:func:`charuco_scales`, :func:`boards_coarse_to_fine`).
+
 Coordinates are (x, y) px, OpenCV's convention: the centre of pixel (0, 0) is at (0.0, 0.0). Block
 (i, j) of factor f covers full pixels f·i … f·i + f − 1, so its centre is at f·i + (f − 1)/2.
 Pure numpy/OpenCV.
