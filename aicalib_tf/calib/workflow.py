@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from aicalib_tf.cnn.spec import DETECTOR_NETWORK
+from aicalib_tf.detect.registry import DETECTORS
 from aicalib_tf.calib.fit import Calibration, CalibrationError, View, calibrate_camera, choose_model, fit_views
 from aicalib_tf.calib.quality import assess
 from aicalib_tf.geometry.image_circle import find_image_circle, thumbnail
@@ -26,7 +27,6 @@ from aicalib_tf.geometry.lens import MODELS as LENS_MODELS
 
 __all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "CalibrateConfig", "parse_square", "make_detector", "run", "undistort"]
 
-DETECTORS = ("cnn", "report", "opencv", "opencv-sb")
 PREVIEW_NAME = "undistorted.png"  # one image of the set, undistorted
 RESIZE_POLICIES = ("error", "skip", "crop", "scale")
 _UNITS = {"mm": "mm", "cm": "cm", "m": "m", "in": "in", "inch": "in", "": ""}
@@ -66,9 +66,9 @@ def make_detector(name: str, pattern_size: tuple[int, int], model: str = DETECTO
     attribute says whether the ids are relative to the visible grid (the CNN detectors return a
     board larger than the frame that way), and its ``sigmas`` attribute holds the corners' σ (N,) px
     (:mod:`aicalib_tf.detect.corner_sigma`) or None (the OpenCV detectors, nothing found).
-    The detectors are those of :mod:`aicalib_tf.bench.detectors`.
+    The detectors are those of :mod:`aicalib_tf.detect.registry`.
     """
-    from aicalib_tf.bench.detectors import make_detectors
+    from aicalib_tf.detect.registry import make_detectors
     from aicalib_tf.io import quantize
 
     if name not in DETECTORS:
