@@ -43,14 +43,30 @@ __all__ = ["fit_splined", "choose_layout", "spline_start", "MIN_VIEWS", "CORNERS
 
 MIN_VIEWS = 10
 CORNERS_PER_KNOT = 20.0  # corners per knot over the covered area (each knot holds 2 values)
-SMOOTH_REL = (1e-2, 1e-1, 1.0)  # smooth / f candidates
+SMOOTH_REL = (1e-4, 1e-3, 1e-2, 1e-1)  # smooth / f candidates
+MAX_NFEV = 500  # a spline fit's evaluations (its weakly regularized directions converge slowly)
+HELD_OUT_NFEV = 100  # each smoothness candidate's fit on half the views
 MAX_HALF_FOV_DEG = 100.0  # the widest border ray the rectangle is stretched to cover
 _MARGIN = 1.02
+RANGE_MARGIN_DEG = 15.0
 
 
 def _base_k(lens: Lens) -> np.ndarray:
     """The base projection's k1..k4 for a start lens: its own when it is equidistant, else 0."""
     return np.array(lens.dist[:N_BASE] if lens.spec.FAMILY == "equidistant" else np.zeros(N_BASE), np.float64)
+
+
+def _plain_base(base: Lens, px) -> Lens:
+    """``base``, or the plain equidistant θ_d = θ with its K when ``base``'s polynomial stops being monotonic
+    within :data:`RANGE_MARGIN_DEG` of the corners' widest ray (or leaves a corner without a ray): corners
+    past that range would be outside the spline's base, with no gradient to bring them back."""
+    corners = np.concatenate([np.asarray(p, np.float64).reshape(-1, 2) for p in px])
+    rays = base.unproject(corners)
+    if np.isfinite(rays).all():
+        widest = float(np.max(np.arctan2(np.hypot(rays[:, 0], rays[:, 1]), rays[:, 2])))
+        if base.max_angle() >= widest + math.radians(RANGE_MARGIN_DEG):
+            return base
+    return Lens("equidistant", base.K, np.zeros(N_BASE), base.image_size)
 
 
 def _uv(lens: Lens, px: np.ndarray) -> np.ndarray:
@@ -59,7 +75,7 @@ def _uv(lens: Lens, px: np.ndarray) -> np.ndarray:
     rays = rays[np.isfinite(rays).all(axis=1)]
     ang = np.arctan2(np.hypot(rays[:, 0], rays[:, 1]), rays[:, 2])
     rays = rays[ang <= math.radians(MAX_HALF_FOV_DEG)]
-    u, v, ok = kb_project(rays, _base_k(lens))
+    u, v, ok = kb_project(rays, _base_k(_plain_base(lens, [px])))
     return np.stack([u[ok], v[ok]], axis=1)
 
 
@@ -93,7 +109,7 @@ def spline_start(base: Lens, model: str, px) -> np.ndarray:
     rays = base.unproject(corners)
     g = np.linspace(-1.0, 1.0, 25)
     gu, gv = np.meshgrid(g * spec.U, g * spec.V)
-    k = _base_k(base)
+    k = _base_k(_plain_base(base, px))
     grid = _unproject_kb(gu.ravel(), gv.ravel(), k)
     rays = np.concatenate([rays, grid])
     target = base.project(rays)
@@ -117,7 +133,7 @@ def _held_out_rms(model: str, obj, px, intr, poses, train: np.ndarray) -> float:
     """px: fit on the views ``train`` (bool (V,)), the held-out views' RMS with those intrinsics."""
     pick = lambda seq: [s for s, t in zip(seq, train) if t]  # noqa: E731
     fit = bundle_adjust(model, pick(obj), pick(px), intr, np.asarray(poses[0])[train], np.asarray(poses[1])[train],
-                        covariance=False, strict=False)
+                        covariance=False, strict=False, max_nfev=HELD_OUT_NFEV)
     lens = Lens.from_intrinsics(model, fit.intrinsics, (1, 1))
     sq, n = 0.0, 0
     for o, p, t in zip(obj, px, train):
@@ -152,7 +168,7 @@ def fit_splined(model: str, obj, px, image_size, start: Lens | None, rank_strict
         poses = poses_from_rays(start, obj, px)
         if poses is None:
             raise CalibrationError(f"{start.model}: the start lens sees no board in front of it in some view")
-        return bundle_adjust(start.model, obj, px, start.intrinsics(), *poses, rank_strict=rank_strict)
+        return bundle_adjust(start.model, obj, px, start.intrinsics(), *poses, rank_strict=rank_strict, max_nfev=MAX_NFEV)
     if start is None or start.spec.FAMILY == spec.FAMILY:
         if model == FAMILY_NAME and len(px) < MIN_VIEWS:  # refuse before the equidistant fit
             raise CalibrationError(f"{FAMILY_NAME}: needs at least {MIN_VIEWS} views covering the image, got {len(px)}")
@@ -167,4 +183,5 @@ def fit_splined(model: str, obj, px, image_size, start: Lens | None, rank_strict
     if model == FAMILY_NAME:
         layout = choose_layout(base, px, image_size, len(px))
         model = splined_name(*layout, _choose_smooth(base, layout, obj, px, poses))
-    return bundle_adjust(model, obj, px, spline_start(base, model, px), *poses, rank_strict=rank_strict)
+    return bundle_adjust(model, obj, px, spline_start(base, model, px), *poses, rank_strict=rank_strict,
+                         max_nfev=MAX_NFEV)

@@ -1,0 +1,65 @@
+"""The splined model's fit: layout from the views, refusal with too few views, files and remap maps."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from aicalib_tf.calib import files as F
+from aicalib_tf.calib.bundle import CalibrationError
+from aicalib_tf.calib.fit import fit_views
+from aicalib_tf.calib.maps import MAP_FILES
+from aicalib_tf.calib.splined_fit import MIN_VIEWS
+from aicalib_tf.geometry._splined import splined_name
+from aicalib_tf.geometry import lens as L
+from aicalib_tf.geometry.pose import best_rotation
+from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views
+
+# a wide rational lens (no equidistant polynomial holds it exactly)
+WIDE = L.Lens("rational_polynomial", [[330.0, 0, 322.0], [0, 331.0, 243.0], [0, 0, 1]],
+              [0.35, 0.05, 1e-3, -8e-4, 0.0, 0.72, 0.14, 0.01], (640, 480))
+
+
+@pytest.fixture(scope="module")
+def spline_cal():
+    views = synthetic_views(WIDE, 10, 0.005, seed=3, distance=(0.25, 0.45))
+    # a layout of the family's own choice takes a held-out fit per smoothness: the benchmark runs that
+    return views, fit_views(views, PATTERN, SQUARE, WIDE.image_size, splined_name(8, 8, 140.0, 0.033))
+
+
+def test_the_fit_recovers_another_models_projections(spline_cal):
+    views, cal = spline_cal
+    assert cal.model == splined_name(8, 8, 140.0, 0.033) and cal.rms < 0.015
+    px = np.concatenate([v.corners for v in views])
+    rays = WIDE.unproject(px)
+    R = best_rotation(cal.lens, rays, px)
+    err = np.linalg.norm(cal.lens.project(rays @ R.T) - WIDE.project(rays), axis=1)
+    assert np.median(err) < 0.05 and np.percentile(err, 95) < 0.1
+
+
+def test_too_few_views_are_refused_with_the_reason():
+    views = synthetic_views(WIDE, MIN_VIEWS - 4, 0.005, seed=4)
+    with pytest.raises(CalibrationError, match=f"needs at least {MIN_VIEWS} views covering the image, got {MIN_VIEWS - 4}"):
+        fit_views(views, PATTERN, SQUARE, WIDE.image_size, "splined_equidistant")
+
+
+def test_files_round_trip_and_the_maps_remap_like_the_lens(spline_cal, tmp_path):
+    _, cal = spline_cal
+    F.save_calibration(cal, tmp_path)
+    back = F.load_calibration(tmp_path / "camera.json")
+    assert back.lens == cal.lens
+    data = F.read_json(tmp_path / "camera.json")
+    assert data["lens_layout"]["base"] == "equidistant" and data["undistort_maps"]["files"] == list(MAP_FILES)
+    mx, my = (np.load(tmp_path / n, allow_pickle=False) for n in MAP_FILES)
+    assert mx.dtype == np.float32 and mx.shape == (480, 640)
+    new_K = np.array(data["undistort_maps"]["camera_matrix"])
+    # the map sends an output pixel to where the lens images its pinhole ray
+    uv = np.array([[100.0, 80.0], [320.0, 240.0], [500.0, 400.0]])
+    ray = np.stack([(uv[:, 0] - new_K[0, 2]) / new_K[0, 0], (uv[:, 1] - new_K[1, 2]) / new_K[1, 1], np.ones(3)], 1)
+    want = cal.lens.project(ray)
+    got = np.stack([mx[uv[:, 1].astype(int), uv[:, 0].astype(int)], my[uv[:, 1].astype(int), uv[:, 0].astype(int)]], 1)
+    np.testing.assert_allclose(got, want, atol=1e-3)
+    img = (np.indices((480, 640)).sum(axis=0) % 256).astype(np.uint8)
+    out = cv2.remap(img, mx, my, cv2.INTER_LINEAR)
+    np.testing.assert_array_equal(out, F.undistort(img, cal))
