@@ -1,7 +1,7 @@
 """Calibrate a camera from a folder of chessboard photos.
 
     python -m aicalib_tf.calibrate "photos/*.jpg" --pattern 9x6 --square 25mm [--out calib/]
-        [--model auto|plumb_bob|rational_polynomial|thin_prism|equidistant|ds|eucm] [--rational] [--fix-k3]
+        [--model auto|plumb_bob|rational_polynomial|thin_prism|equidistant|ds|eucm|splined_equidistant] [--rational] [--fix-k3]
         [--detector cnn|report|opencv|opencv-sb] [--network default|report|PATH.keras]
         [--resize-policy error|skip|crop|scale]
 
