@@ -176,7 +176,7 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=60)
     ap.add_argument("--hd", type=int, default=QUICK_COUNTS["hd"], help="1920x1080 images (evaluate --quick's 2)")
     ap.add_argument("--no-before", action="store_true", help="leave out the search without the quick pass")
-    ap.add_argument("--model", default="default", help="default, default_int8, fast, fast_int8 or a .tflite path")
+    ap.add_argument("--model", default="default", help="default, default_int8, quick, quick_int8 or a .tflite path")
     ap.add_argument("--also", action="append", default=[], metavar="MODEL",
                     help="another network timed beside --model in the same run (repeatable)")
     a = ap.parse_args(argv)

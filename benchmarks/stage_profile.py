@@ -98,7 +98,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--limit", type=int, default=None)
     ap.add_argument("--conditions", default=None)
-    ap.add_argument("--model", default="default", help="default, default_int8, fast, fast_int8 or a .tflite path")
+    ap.add_argument("--model", default="default", help="default, default_int8, quick, quick_int8 or a .tflite path")
     a = ap.parse_args(argv)
     from aicalib_tf.cnn.model import load_model
     from aicalib_tf.detect import pipeline

@@ -79,8 +79,8 @@ def test_shipped_tflite_matches_its_recorded_sha256():
     from aicalib_tf.cnn.runtime import expected_sha256
     from aicalib_tf.cnn.spec import RUNTIME_FILES
 
-    assert set(RUNTIME_FILES) == {"default", "report", "default_int8", "fast", "fast_int8", "quick", "quick_int8"}
-    paths = [MODELS_DIR / f"{n}.tflite" for n in RUNTIME_FILES] + [MODELS_DIR / f"{n}.keras" for n in ("default", "report", "fast", "quick")]
+    assert set(RUNTIME_FILES) == {"default", "report", "default_int8", "quick", "quick_int8"}
+    paths = [MODELS_DIR / f"{n}.tflite" for n in RUNTIME_FILES] + [MODELS_DIR / f"{n}.keras" for n in ("default", "report", "quick")]
     for path in paths:
         assert file_sha256(path) == expected_sha256(path)
 

@@ -71,10 +71,10 @@ def __getattr__(name: str):
 
 
 def _resolve(weights, backend: str) -> Path:
-    if isinstance(weights, str) and weights in SHIPPED and weights not in ARCHITECTURES:  # fast: .keras and .tflite
+    if isinstance(weights, str) and weights in SHIPPED and weights not in ARCHITECTURES:  # a shipped model named apart from its architecture
         return MODELS_DIR / f"{weights}{'.tflite' if backend == 'runtime' else '.keras'}"
     if isinstance(weights, str) and weights in RUNTIME_FILES and weights not in ARCHITECTURES:
-        return MODELS_DIR / f"{weights}.tflite"  # a runtime-only model (default_int8, fast_int8)
+        return MODELS_DIR / f"{weights}.tflite"  # a runtime-only model (default_int8, quick_int8)
     if isinstance(weights, str) and weights in ARCHITECTURES:
         suffix = ".tflite" if backend == "runtime" and weights in SHIPPED else ".keras"
         return MODELS_DIR / f"{weights}{suffix}"
@@ -86,9 +86,7 @@ def load_model(weights: str | os.PathLike = "default", *, compile: bool = False,
 
     weights : ``"default"`` or ``"report"`` (the models shipped in ``models/``), ``"default_int8"``
         (default quantised to int8, runtime only: about 2× faster, the same detections on
-        evaluate's images; see the model card), ``"fast"`` (the depthwise-separable ``sep_s2w``
-        network, about a third of default's time; ``"fast_int8"`` its int8 export), or a path to a
-        ``.tflite`` or ``.keras`` file. ``"default_int8"`` and ``"default"`` on the runtime come with
+        evaluate's images; see the model card), or a path to a ``.tflite`` or ``.keras`` file. ``"default_int8"`` and ``"default"`` on the runtime come with
         ``quick``, the smaller ``quick`` network (int8 or float32) that the detector's quick passes
         run (:func:`aicalib_tf.detect.pipeline.detect_corners`); a path loads its network alone.
     backend : ``"auto"`` (a name loads the shipped ``.tflite`` on the LiteRT runtime, a path by

@@ -7,19 +7,18 @@ import hashlib
 import os
 from pathlib import Path
 
-__all__ = ["ARCHITECTURES", "SHIPPED", "SHIPPED_ARCH", "RUNTIME_FILES", "QUICK_NETWORKS", "DETECTOR_NETWORK",
+__all__ = ["ARCHITECTURES", "SHIPPED", "RUNTIME_FILES", "QUICK_NETWORKS", "DETECTOR_NETWORK",
            "NETWORK_HELP", "PATCH_SIZE", "MODELS_DIR", "model_kind", "file_sha256", "expected_sha256",
            "check_model_file", "write_sha256"]
 
 ARCHITECTURES = ("default", "report", "default_v1", "default_c12", "default_c16", "default_pre",
                  "sep", "sep_s2", "sep_w", "sep_s2w", "quick")
-SHIPPED = ("default", "report", "fast", "quick")  # the models shipped in models/ as .keras and .tflite
-SHIPPED_ARCH = {"fast": "sep_s2w"}  # a shipped model named apart from its architecture -> that architecture
-# every shipped runtime file (models/<name>.tflite) -> the .keras model it is exported from; default_int8,
-# fast_int8 and quick_int8 are default, fast and quick post-training quantised to int8 (weights and
-# activations), calibrated on data_gen renders
-RUNTIME_FILES = {"default": "default", "report": "report", "default_int8": "default", "fast": "fast",
-                 "fast_int8": "fast", "quick": "quick", "quick_int8": "quick"}
+SHIPPED = ("default", "report", "quick")  # the models shipped in models/ as .keras and .tflite
+# every shipped runtime file (models/<name>.tflite) -> the .keras model it is exported from; default_int8
+# and quick_int8 are default and quick post-training quantised to int8 (weights and activations),
+# calibrated on data_gen renders
+RUNTIME_FILES = {"default": "default", "report": "report", "default_int8": "default", "quick": "quick",
+                 "quick_int8": "quick"}
 # a shipped detector network -> the smaller network its quick passes run (the coarse scales where only a
 # complete board counts, see aicalib_tf.detect.pyramid.quick_scales); the finer scales run the network itself
 QUICK_NETWORKS = {"default": "quick", "default_int8": "quick_int8"}
@@ -27,8 +26,7 @@ QUICK_NETWORKS = {"default": "quick", "default_int8": "quick_int8"}
 # detections match the float network's (benchmarks/int8_detection.py) in about 2/3 of the time
 DETECTOR_NETWORK = "default_int8"
 NETWORK_HELP = ("the cnn detector's network: default_int8 (the default), default (the same network in float32, "
-                "the same detections, slower), fast or fast_int8 (a smaller network, a little faster, a board "
-                "fewer here and there), report, or a .tflite/.keras path")
+                "the same detections, slower), report, or a .tflite/.keras path")
 PATCH_SIZE = 32
 MODELS_DIR = Path(os.environ.get("AICALIB_MODELS", Path(__file__).resolve().parents[2] / "models"))
 

@@ -16,7 +16,7 @@ from aicalib_tf.cnn.train import VALIDATION_SEED  # noqa: E402
 # Floors well below the card's figures and far above an untrained or broken model (which finds
 # no corners: recall 0), on a fixed slice of the validation images.
 FLOORS = {"default": {"precision": 0.6, "recall": 0.45}, "report": {"precision": 0.3, "recall": 0.3},
-          "fast": {"precision": 0.6, "recall": 0.45}, "quick": {"precision": 0.6, "recall": 0.45}}
+          "quick": {"precision": 0.6, "recall": 0.45}}
 
 
 @pytest.fixture(scope="module")
@@ -25,7 +25,7 @@ def images():
     return pool.images, pool.corners
 
 
-@pytest.mark.parametrize("name, kind", [("default", "map"), ("report", "patch"), ("fast", "map"), ("quick", "map")])
+@pytest.mark.parametrize("name, kind", [("default", "map"), ("report", "patch"), ("quick", "map")])
 def test_shipped_model_loads_matches_its_card_and_scores_above_the_floor(images, name, kind):
     path = MODELS_DIR / f"{name}.keras"
     assert path.is_file(), f"{path} is missing"
@@ -46,16 +46,3 @@ def test_untrained_model_fails_the_floor(images):
     stats = point_detection_stats([(corner_points(build_model("default"), img)[0], gt) for img, gt in zip(*images)])
     assert not (stats["precision"] >= 0.6 and stats["recall"] >= 0.45)
     assert np.isfinite(stats["recall"])
-
-
-def test_fast_is_the_separable_network_and_loads_by_name_on_both_backends():
-    from aicalib_tf.cnn.runtime import RuntimeModel
-    from aicalib_tf.cnn.spec import SHIPPED_ARCH
-
-    keras_model = load_model("fast", backend="keras")
-    assert keras_model.name == SHIPPED_ARCH["fast"] == "sep_s2w" and keras_model.aicalib_path.endswith("fast.keras")
-    assert any(type(layer).__name__ == "SeparableConv2D" for layer in keras_model.layers)
-    for name in ("fast", "fast_int8"):
-        runtime = load_model(name)
-        assert isinstance(runtime, RuntimeModel) and runtime.kind == "map"
-        assert runtime.aicalib_path.endswith(f"{name}.tflite")
