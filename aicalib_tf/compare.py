@@ -11,9 +11,10 @@ absorbed by the board poses), and the difference at the pixel is how far B proje
 ray from it. --no-rotation leaves the rotation out.
 
 The rotation is fitted, and the median and 95th percentile taken, over the area both
-calibrations' boards covered: each stored board pose projected through its own calibration (a
-calibration is only known where its boards were). A file without board poses (a camera.yaml
-written without them) makes that the whole image, and the output says so. Cells outside a
+calibrations' boards covered: each stored board pose projected through its own calibration, its
+convex hull filled (a calibration is only known where its boards were). A file without board
+poses, or two calibrations whose boards share no area, make that the whole image, and the output
+says so. Cells outside a
 circular fisheye's image circle never count. It prints those figures, and over the whole image
 too, and writes a heat map of the difference (--out, default diff.png; the covered area outlined)
 atomically; --json writes the figures as JSON.
@@ -136,8 +137,9 @@ def format_compare(result: dict, name_a, name_b, cal_a, cal_b) -> str:
     """The printed report: both files, the rotation, median and p95 over the covered area and the whole image."""
     c, w = result["covered_stats"], result["all_stats"]
     n = int(np.size(result["diff"]))
-    area = ("the area both calibrations' boards covered" if result["coverage"] == "both"
-            else "the whole image (a file holds no board poses, so the covered area is unknown)")
+    area = {"both": "the area both calibrations' boards covered",
+            "no common area": "the whole image (the two calibrations' boards share no area)"}.get(
+        result["coverage"], "the whole image (a file holds no board poses, so the covered area is unknown)")
     rot = (f"rotation fitted out: {result['rotation_deg']:.3f}°" if result["rotation_fitted"]
            else "no rotation fitted")
     return "\n".join([

@@ -184,9 +184,10 @@ def compare_calibrations(cal_a, cal_b, *, grid=GRID, rotation: bool = True) -> d
     ``.pattern_size``, ``.square_size``, ``.rvecs``, ``.tvecs``, ``.image_circle``), over the cells both
     calibrations' boards cover (:func:`board_coverage`) inside both image circles.
 
-    Returns projection_diff's dict plus "coverage": "both" or "whole image" (when either holds
-    no views, the whole image stands in for the covered area), "scale_ratio" (the larger over the
-    smaller :func:`central_scale` at the image centre).
+    Returns projection_diff's dict plus "coverage": "both", or "whole image" (either holds no
+    views) or "no common area" (their boards share fewer than 3 cells), where the whole image
+    stands in for the covered area; "scale_ratio" (the larger over the smaller
+    :func:`central_scale` at the image centre).
     Raises ValueError when the image sizes differ or the central scales differ by more than
     :data:`SCALE_MISMATCH` (two different cameras; the message gives both figures).
     """
@@ -206,13 +207,14 @@ def compare_calibrations(cal_a, cal_b, *, grid=GRID, rotation: bool = True) -> d
         circle = getattr(c, "image_circle", None)
         if circle is not None:
             inside &= circle.contains(pts)
-    have_views = all(len(np.asarray(c.rvecs).reshape(-1, 3)) for c in (cal_a, cal_b))
-    covered = None
-    if have_views:
+    coverage, covered = "whole image", None
+    if all(len(np.asarray(c.rvecs).reshape(-1, 3)) for c in (cal_a, cal_b)):
         covered = board_coverage(la, cal_a.pattern_size, cal_a.square_size, cal_a.rvecs, cal_a.tvecs, grid)
         covered &= board_coverage(lb, cal_b.pattern_size, cal_b.square_size, cal_b.rvecs, cal_b.tvecs, grid)
+        coverage = "both" if np.count_nonzero(covered & inside) >= 3 else "no common area"
+        covered = covered if coverage == "both" else None
     out = projection_diff(la, lb, grid=grid, covered=covered, inside=inside, rotation=rotation)
-    out.update(coverage="both" if have_views else "whole image", scale_ratio=float(ratio))
+    out.update(coverage=coverage, scale_ratio=float(ratio))
     return out
 
 

@@ -103,3 +103,12 @@ def test_view_coverage_fills_each_views_hull():
     assert m[12, 15] and m[5, 5] and not m[2, 2] and not m[20, 28]
     assert 280 <= m.sum() <= 315  # centres inside: 20 x 14; the cells the edges touch: 21 x 15
     assert D.view_coverage([[[10.0, 10.0]]], SIZE).sum() == 1
+
+
+def test_boards_with_no_common_area_fall_back_to_the_whole_image(two_fits):
+    _, (a, b) = two_fits
+    at = lambda cal, x: dataclasses.replace(cal, rvecs=np.zeros((1, 3)), tvecs=np.array([[x, -0.1, 1.0]]))  # noqa: E731
+    left, right = at(a, -0.6), at(b, 0.3)  # 0.32 m boards 1 m away: x 20-180 px and 470-630 px
+    assert D.compare_calibrations(left, at(b, -0.6))["coverage"] == "both"
+    r = D.compare_calibrations(left, right)
+    assert r["coverage"] == "no common area" and r["covered_stats"]["cells"] == 32 * 24
