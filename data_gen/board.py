@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aicalib_tf.geometry.board_flex import flex_height, flexed_points
 from aicalib_tf.geometry.pattern import board_points, check_pattern, pattern_ids
 
 __all__ = ["Board", "sample_board"]
@@ -50,6 +51,8 @@ class Board:
     square_size : side of one square (board units, e.g. mm).
     margin : white paper border around the outer squares, in squares (0.25 = a quarter square).
     black, white : printed grey levels in [0, 1] (paper is never pure 0/1).
+    flex : (w_x, w_y) the board's parabolic sag in squares (:mod:`aicalib_tf.geometry.board_flex`):
+        a board point (X, Y) lies at z = s·flex_height(X / s, Y / s); (0, 0) is a flat board.
     """
 
     pattern_size: tuple[int, int]
@@ -57,9 +60,14 @@ class Board:
     margin: float = 0.5
     black: float = 0.1
     white: float = 0.85
+    flex: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self):
         object.__setattr__(self, "pattern_size", check_pattern(self.pattern_size))
+        flex = tuple(float(v) for v in np.asarray(self.flex, np.float64).ravel())
+        if len(flex) != 2 or not np.all(np.isfinite(flex)):
+            raise ValueError(f"flex must be two finite numbers (w_x, w_y) in squares, got {self.flex!r}")
+        object.__setattr__(self, "flex", flex)
         if not self.square_size > 0:
             raise ValueError(f"square_size must be > 0, got {self.square_size}")
         if self.margin < 0:
@@ -76,8 +84,14 @@ class Board:
         return self.pattern_size[1]
 
     def object_points(self) -> np.ndarray:
-        """(cols·rows, 3) float64 inner-corner positions, OpenCV order (index = r·cols + c)."""
-        return board_points(pattern_ids(self.pattern_size), self.square_size)
+        """(cols·rows, 3) float64 inner-corner positions, OpenCV order (index = r·cols + c), flexed by ``flex``."""
+        return flexed_points(board_points(pattern_ids(self.pattern_size), self.square_size), self.pattern_size,
+                             self.flex, self.square_size)
+
+    def height(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+        """(...) z of the flexed board at board-plane positions X, Y (..., board units)."""
+        s = self.square_size
+        return s * flex_height(np.asarray(X) / s, np.asarray(Y) / s, self.pattern_size, self.flex)
 
     def paper_bounds(self) -> tuple[float, float, float, float]:
         """(x0, y0, x1, y1) of the paper in board units."""
@@ -109,6 +123,7 @@ class Board:
             "margin": self.margin,
             "black": self.black,
             "white": self.white,
+            **({"flex": list(self.flex)} if any(self.flex) else {}),  # squares; absent: a flat board
         }
 
 

@@ -43,6 +43,8 @@ class Preset:
     this FOV are circular (the whole image circle inside the frame), narrower ones full frame.
     board : None (chessboards, sized by ``pattern`` or the ranges) or a ChArUco description,
     ``charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100`` (:mod:`aicalib_tf.geometry.charuco`).
+    flex : (w_x, w_y) every chessboard's parabolic sag in squares (:class:`data_gen.board.Board`'s ``flex``,
+    recorded in the label's ``board``); (0, 0): flat boards.
     """
 
     name: str
@@ -66,8 +68,11 @@ class Preset:
     fisheye_fov_deg: tuple[float, float] = (150.0, 200.0)
     board: str | None = None
     fisheye_circular_from_deg: float = 175.0
+    flex: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self):
+        if any(self.flex) and self.board is not None:
+            raise ValueError(f"preset {self.name!r}: flex applies to chessboards only, not {self.board!r}")
         lenses = (self.lens,) if isinstance(self.lens, str) else tuple(self.lens)
         if not lenses or any(ln not in LENSES for ln in lenses):
             raise ValueError(f"preset {self.name!r}: lens must be one of {LENSES} or a tuple of them, got {self.lens!r}")

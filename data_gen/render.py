@@ -2,7 +2,8 @@
 
 For every pixel *corner* (the grid of points (u ± 0.5, v ± 0.5)) we unproject exactly
 (:meth:`aicalib_tf.geometry.camera.Camera.pixel_to_ray`, i.e. :func:`aicalib_tf.geometry.lens.unproject`)
-and intersect the 3-D ray with the board plane through the board homography, so fisheye rays
+and intersect the 3-D ray with the board plane through the board homography (a flexed board's
+surface by :func:`surface_homogeneous`), so fisheye rays
 beyond 90° off-axis work; pixels outside a fisheye's image circle have no ray. A pixel whose four corners fall in one class (black square,
 white paper, off the paper) and one square/paper cell is filled directly. Pixels that straddle
 an edge are supersampled: the undistorted ray is interpolated bilinearly inside the pixel (the
@@ -23,7 +24,8 @@ from aicalib_tf.geometry.camera import Camera
 
 from .board import Board
 
-__all__ = ["render_board", "fibonacci_lattice", "board_coordinates", "plane_homogeneous", "lens_coverage"]
+__all__ = ["render_board", "fibonacci_lattice", "board_coordinates", "plane_homogeneous", "surface_homogeneous",
+           "lens_coverage"]
 
 _FIB = {13: 8, 21: 13, 34: 21, 55: 34, 89: 55, 144: 89, 233: 144}
 
@@ -94,7 +96,7 @@ def _active_box(camera: Camera, board: Board, rvec, tvec, step: int = 16):
     us = np.append(np.arange(0, w, step), w) - 0.5
     vs = np.append(np.arange(0, h, step), h) - 0.5
     uu, vv = np.meshgrid(us, vs)
-    X, Y = board_coordinates(camera.pixel_to_ray(np.stack([uu, vv], axis=-1)), rvec, tvec)
+    X, Y = board_coordinates(camera.pixel_to_ray(np.stack([uu, vv], axis=-1)), rvec, tvec, board)
     nan = np.stack(_pixel_corners(np.isnan(X) | np.isnan(Y)))  # X and Y are NaN together
     all_nan = nan.all(axis=0)
     # NaN-ignoring ranges over each cell's corners (NaN only where all four are NaN).
@@ -141,9 +143,38 @@ def _dehomogenize(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return X, Y
 
 
-def board_coordinates(rays: np.ndarray, rvec, tvec) -> tuple[np.ndarray, np.ndarray]:
-    """Intersect rays ((..., 3), or normalized (..., 2)) with the board plane; returns board X, Y (NaN behind)."""
-    return _dehomogenize(plane_homogeneous(rays, rvec, tvec))
+def board_coordinates(rays: np.ndarray, rvec, tvec, board=None) -> tuple[np.ndarray, np.ndarray]:
+    """Intersect rays ((..., 3), or normalized (..., 2)) with the board (its plane, or its flexed surface when
+    ``board`` has a ``flex``: :func:`surface_homogeneous`); returns board X, Y (NaN behind)."""
+    return _dehomogenize(surface_homogeneous(rays, rvec, tvec, board))
+
+
+def surface_homogeneous(rays: np.ndarray, rvec, tvec, board=None, iterations: int = 6) -> np.ndarray:
+    """:func:`plane_homogeneous` for a flexed board (``board.flex`` nonzero; else the plane's q itself).
+
+    The ray meets the surface z = board.height(X, Y) (:mod:`aicalib_tf.geometry.board_flex`) by fixed-point
+    iteration from the plane's hit: the ray's point at height z(X_k, Y_k) gives (X_k+1, Y_k+1). Each step
+    shrinks the error by the surface's slope times the ray's tangent to the board normal (a sag of 0.02
+    squares has slopes below 0.1), so ``iterations`` steps reach float precision for rays up to ~80°
+    from the normal. Returns (..., 3) q = (X, Y, 1)·q2 with the plane's q2 (its sign says in front).
+    """
+    q = plane_homogeneous(rays, rvec, tvec)
+    if board is None or not any(getattr(board, "flex", ())):
+        return q
+    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
+    t = np.asarray(tvec, dtype=np.float64).ravel()
+    rays = np.asarray(rays, dtype=np.float64)
+    if rays.shape[-1] == 2:
+        rays = np.concatenate([rays, np.ones(rays.shape[:-1] + (1,))], axis=-1)
+    o, d = -R.T @ t, rays @ R  # the camera centre and the rays in the board frame
+    X, Y = _dehomogenize(q)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for _ in range(iterations):
+            s = (board.height(X, Y) - o[2]) / d[..., 2]
+            X, Y = o[0] + s * d[..., 0], o[1] + s * d[..., 1]
+        hit = np.isfinite(X) & np.isfinite(Y)
+        out = np.stack([X * q[..., 2], Y * q[..., 2], q[..., 2]], axis=-1)
+    return np.where(hit[..., None], out, q)
 
 
 def render_board(
@@ -180,7 +211,7 @@ def render_board(
     bx0, by0, bx1, by1 = box
     crop = out[by0:by1, bx0:bx1]  # a view: writes land in ``out``
     bg = background[by0:by1, bx0:bx1]
-    q = plane_homogeneous(_corner_rays(camera, box), rvec, tvec)  # (h+1, w+1, 3)
+    q = surface_homogeneous(_corner_rays(camera, box), rvec, tvec, board)  # (h+1, w+1, 3)
     X, Y = _dehomogenize(q)
     cls = board.classify(X, Y)  # (h+1, w+1) at the box's pixel corners
     c00 = cls[:-1, :-1]
@@ -217,7 +248,7 @@ def _supersample_exact(crop, bg, camera: Camera, board: Board, rvec, tvec, origi
     lat = fibonacci_lattice(samples)
     u = (cols + origin[0] - 0.5)[:, None] + lat[None, :, 0]
     v = (rows + origin[1] - 0.5)[:, None] + lat[None, :, 1]
-    X, Y = board_coordinates(camera.pixel_to_ray(np.stack([u, v], axis=-1)), rvec, tvec)
+    X, Y = board_coordinates(camera.pixel_to_ray(np.stack([u, v], axis=-1)), rvec, tvec, board)
     scls = board.classify(X, Y)  # (E, n); NaN (not imaged) is off the paper
     frac_black = np.count_nonzero(scls == 0, axis=1) / float(samples)
     frac_white = np.count_nonzero(scls == 1, axis=1) / float(samples)

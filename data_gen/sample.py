@@ -98,6 +98,8 @@ def scene_for(preset: Preset, seed: int, camera_id: int, size=None, pattern=None
         cols_range=preset.cols_range,
         rows_range=preset.rows_range,
     )
+    if any(preset.flex):  # after the draws: the same camera and board as the flat preset
+        board = replace(board, flex=preset.flex)
     return cam, board
 
 

@@ -23,9 +23,14 @@ leaves the range; a fit that ends on its edge (within ``RANGE_EDGE_REL`` of
 and is an error naming the coefficient (``auto`` then moves on to the next model), as is a start
 outside the range.
 
-Starts: :mod:`aicalib_tf.calib.starts` gives the intrinsics; :func:`poses_from_rays` gives every view's pose from a lens guess (rays from
-:func:`~aicalib_tf.geometry.lens.unproject`, turned so that the board lies ahead, then
-``cv2.solvePnP`` on normalized coordinates with K = I), which works for boards past 90° off-axis.
+Weights (:mod:`~aicalib_tf.calib.weights`): residuals and Jacobian rows are multiplied by σ_ref/σ per
+corner, 0 for rejected corners (not in the RMS or the degrees of freedom); the covariance σ̂²·(JᵀWJ)⁻¹
+depends only on the σ's ratios. Board flex: with ``flex_basis`` two global parameters (w_x, w_y) of
+:mod:`~aicalib_tf.geometry.board_flex` follow the free intrinsics (z offset w·basis along the board's
+z axis; Jacobian: the projection's along the rotated z axis times the basis), in the Schur complement.
+
+Starts: :mod:`aicalib_tf.calib.starts` gives the intrinsics; :func:`~aicalib_tf.calib.poses.poses_from_rays`
+gives every view's pose from a lens guess, which works for boards past 90° off-axis.
 """
 
 from __future__ import annotations
@@ -35,9 +40,12 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from aicalib_tf.calib.lm import SchurProblem, levenberg_marquardt, reduce_blocks, schur_complement
+from aicalib_tf.calib.poses import poses_from_rays
+from aicalib_tf.calib.weights import corner_weights
 from aicalib_tf.geometry.lens import COEFF_NAMES, N_COEFFS, Lens, check_model, get_model, projection_jacobian
 
-__all__ = ["CalibrationError", "BundleResult", "bundle_adjust", "levenberg_marquardt", "schur_complement", "reduce_blocks",
+__all__ = ["CalibrationError", "BundleResult", "bundle_adjust", "corner_weights", "levenberg_marquardt", "schur_complement", "reduce_blocks",
            "SchurProblem", "poses_from_rays", "solve_pose", "param_names"]
 
 _PENALTY = 1e3  # px, the residual of a corner the parameters cannot project
@@ -65,7 +73,10 @@ class BundleResult:
     columns of fixed parameters are 0), or None when not asked for. jtj : (P, P) JᵀJ of the free
     parameters (free intrinsics first, then 6 per view), or None. sigma2 : residual variance, px².
     cost : ½ sum of squared residuals. nfev : function evaluations. note : why the covariance is a
-    pseudo-inverse (rank-deficient fit), else "".
+    pseudo-inverse (rank-deficient fit), else "". flex : (2,) the board flex (w_x, w_y) in the unit of the
+    board points, or None when not solved; flex_covariance : (2, 2) its covariance, or None. inliers :
+    (N,) bool over all corners in order (False: rejected, weight 0), or None when all count. flex_note :
+    why a flex was not solved or kept (:mod:`aicalib_tf.calib.robust`), else "".
     """
 
     model: str
@@ -82,6 +93,10 @@ class BundleResult:
     nfev: int
     note: str = ""
     converged: bool = True
+    flex: np.ndarray | None = None
+    flex_covariance: np.ndarray | None = None
+    inliers: np.ndarray | None = None
+    flex_note: str = ""
 
     @property
     def lens(self) -> Lens:
@@ -89,25 +104,10 @@ class BundleResult:
         return Lens.from_intrinsics(self.model, self.intrinsics, (1, 1))
 
 
-class SchurProblem:
-    """What :func:`levenberg_marquardt` needs of a problem whose parameters are ``nf`` global ones then 6 per
-    pose: a subclass sets ``splits`` (corner groups by pose) and ``_evaluate(x)`` -> (residuals (2N,),
-    global Jacobian (N, 2, nf), pose Jacobian (N, 2, 6), number of unprojectable corners)."""
-
-    def fun(self, x):
-        """Residuals (2N,), px."""
-        return self._evaluate(x)[0]
-
-    def normal_blocks(self, x):
-        """Blocks of JᵀJ and Jᵀr without forming J: U (nf, nf), W (V, nf, 6), Vb (V, 6, 6), gu (nf,), gv (V, 6)."""
-        r, Ji, Jp, _ = self._evaluate(x)
-        return reduce_blocks(r, Ji, Jp, self.splits)
-
-
 class _Problem(SchurProblem):
     """Residuals and the Jacobian's blocks of one bundle problem (cached per parameter vector)."""
 
-    def __init__(self, model, obj, px, intr0, free):
+    def __init__(self, model, obj, px, intr0, free, weights=None, flex_basis=None, flex0=None):
         self.model, self.ni = model, 4 + N_COEFFS[model]
         self.X = np.concatenate([np.asarray(o, np.float64).reshape(-1, 3) for o in obj])
         self.uv = np.concatenate([np.asarray(p, np.float64).reshape(-1, 2) for p in px])
@@ -117,7 +117,13 @@ class _Problem(SchurProblem):
         self.V, self.N = len(px), len(self.uv)
         self.base = np.asarray(intr0, np.float64).copy()
         self.free = np.asarray(free, bool)
-        self.nf = int(self.free.sum())
+        self.w = None if weights is None else np.asarray(weights, np.float64).reshape(self.N)
+        self.basis = None if flex_basis is None else np.concatenate(
+            [np.asarray(b, np.float64).reshape(-1, 2) for b in flex_basis])
+        self.nflex = 0 if self.basis is None else 2
+        self.flex0 = np.zeros(2) if flex0 is None else np.asarray(flex0, np.float64).reshape(2)
+        self.nf = int(self.free.sum()) + self.nflex
+        self.n_used = self.N if self.w is None else int(np.count_nonzero(self.w > 0))
         self._key, self._val = None, None
         self.shape = (2 * self.N, self.nf + 6 * self.V)  # (residuals, parameters)
         self.spec = get_model(model)
@@ -132,7 +138,7 @@ class _Problem(SchurProblem):
         if found is not None:
             J = np.zeros((found[1].shape[0], self.ni))
             J[:, 4:] = found[1]
-            val = (found[0], J[:, self.free])
+            val = (found[0], np.pad(J[:, self.free], ((0, 0), (0, self.nflex))))  # no prior on the flex
         self._prior_key, self._prior_val = x.copy(), val
         return val
 
@@ -149,9 +155,13 @@ class _Problem(SchurProblem):
 
     def unpack(self, x):
         intr = self.base.copy()
-        intr[self.free] = x[: self.nf]
+        intr[self.free] = x[: self.nf - self.nflex]
         poses = x[self.nf:].reshape(self.V, 6)
         return intr, poses[:, :3], poses[:, 3:]
+
+    def flex_of(self, x):
+        """(2,) the flex of parameter vector x, or None when not solved."""
+        return None if self.nflex == 0 else x[self.nf - 2: self.nf].copy()
 
     def _evaluate(self, x):
         if self._key is not None and np.array_equal(x, self._key):
@@ -161,7 +171,11 @@ class _Problem(SchurProblem):
         for v in range(self.V):
             Rv, jac = cv2.Rodrigues(rv[v])
             R[v], dR[v] = Rv, jac.reshape(3, 3, 3)  # dR[v][k] = dR / d rvec_k
-        Xc = np.einsum("nij,nj->ni", R[self.view_of], self.X) + tv[self.view_of]
+        X = self.X
+        if self.nflex:
+            X = X.copy()
+            X[:, 2] += self.basis @ self.flex_of(x)
+        Xc = np.einsum("nij,nj->ni", R[self.view_of], X) + tv[self.view_of]
         try:
             K = np.array([[intr[0], 0, intr[2]], [0, intr[1], intr[3]], [0, 0, 1.0]])
             uv, Jp, Ji = projection_jacobian(Xc, self.model, K, intr[4:])
@@ -169,54 +183,36 @@ class _Problem(SchurProblem):
             uv = np.full((self.N, 2), np.nan)
             Jp, Ji = np.zeros((self.N, 2, 3)), np.zeros((self.N, 2, self.ni))
         bad = ~np.isfinite(uv).all(axis=1)
-        res = np.where(bad[:, None], _PENALTY, uv - self.uv)
-        dP_dr = np.einsum("nkij,nj->nik", dR[self.view_of], self.X)  # (N, 3, 3): d Xc / d rvec
+        self.px_residuals = uv - self.uv  # unweighted, px (NaN where unprojectable)
+        res = np.where(bad[:, None], _PENALTY, self.px_residuals)
+        dP_dr = np.einsum("nkij,nj->nik", dR[self.view_of], X)  # (N, 3, 3): d Xc / d rvec
         J_pose = np.concatenate([Jp @ dP_dr, Jp], axis=2)  # (N, 2, 6)
-        J_intr = Ji[:, :, self.free]
-        J_pose[bad], J_intr[bad] = 0.0, 0.0
-        self._key, self._val = x.copy(), (res.ravel(), J_intr, J_pose, int(bad.sum()))
+        J_glob = Ji[:, :, self.free]
+        if self.nflex:  # d Xc / d w = R[:, 2] · basis
+            dz = np.einsum("nij,nj->ni", Jp, R[self.view_of][:, :, 2])
+            J_glob = np.concatenate([J_glob, dz[:, :, None] * self.basis[:, None, :]], axis=2)
+        J_pose[bad], J_glob[bad] = 0.0, 0.0
+        if self.w is not None:
+            res, J_pose, J_glob = res * self.w[:, None], J_pose * self.w[:, None, None], J_glob * self.w[:, None, None]
+            bad &= self.w > 0
+        self._key, self._val = x.copy(), (res.ravel(), J_glob, J_pose, int(bad.sum()))
         return self._val
 
 
-def reduce_blocks(r, Ji, Jp, splits):
-    """JᵀJ and Jᵀr in blocks from residuals r (2N,), global columns Ji (N, 2, nf) and pose columns
-    Jp (N, 2, 6), the corners grouped by pose (``splits``: np.split indices, every group non-empty):
-    (U (nf, nf), W (V, nf, 6), Vb (V, 6, 6), gu (nf,), gv (V, 6))."""
-    r = r.reshape(-1, 2)
-    starts = np.concatenate([[0], splits]).astype(np.int64)
-    # batched matmul rather than einsum: the same sums, 3–6× faster here (einsum does not use BLAS)
-    flat = Ji.reshape(Ji.shape[0] * Ji.shape[1], Ji.shape[2])
-    U = flat.T @ flat
-    JiT, JpT = Ji.transpose(0, 2, 1), Jp.transpose(0, 2, 1)
-    W = np.add.reduceat(JiT @ Jp, starts, axis=0)
-    Vb = np.add.reduceat(JpT @ Jp, starts, axis=0)
-    gu = flat.T @ r.ravel()
-    gv = np.add.reduceat(np.einsum("nri,nr->ni", Jp, r), starts, axis=0)
-    return U, W, Vb, gu, gv
-
-
-def schur_complement(U, W, Vb):
-    """(S = U − W·Vb⁻¹·Wᵀ (nf, nf), Vb⁻¹ (V, 6, 6)): the intrinsics block of JᵀJ with the poses eliminated."""
-    Vinv = np.linalg.inv(Vb)
-    WV = np.einsum("vij,vjk->vik", W, Vinv)
-    nf = W.shape[1]  # Σ_v WV_v·W_vᵀ as one matrix product (einsum does not use BLAS)
-    if nf == 0:
-        return U, Vinv
-    return U - WV.transpose(1, 0, 2).reshape(nf, -1) @ W.transpose(1, 0, 2).reshape(nf, -1).T, Vinv
-
-
 def _covariance(prob: _Problem, x, cost: float, model: str, strict: bool):
-    """(intrinsics covariance (ni, ni), JᵀJ (P, P), σ², note).
+    """(intrinsics covariance (ni, ni), flex covariance (2, 2) or None, JᵀJ (P, P), σ², note).
 
-    [(JᵀJ)⁻¹] restricted to the intrinsics is the inverse of the Schur complement S. A rank-deficient
-    fit (column-normalised S or a pose block with eigenvalue ratio <= _RANK_TOL) raises
-    CalibrationError when ``strict``, else the covariance uses the pseudo-inverse and ``note`` says so.
+    [(JᵀJ)⁻¹] restricted to the global parameters (free intrinsics, then the flex) is the inverse of
+    the Schur complement S. A rank-deficient fit (column-normalised S or a pose block with eigenvalue
+    ratio <= _RANK_TOL) raises CalibrationError when ``strict``, else the covariance uses the
+    pseudo-inverse and ``note`` says so.
     """
     U, W, Vb, _, _ = prob.normal_blocks(x)
-    dof = 2 * prob.N - prob.shape[1]
+    dof = 2 * prob.n_used - prob.shape[1]
     if dof <= 0:
-        raise CalibrationError(f"{model}: {prob.N} corners give {2 * prob.N} residuals for {prob.shape[1]} parameters")
-    names = [n for n, f in zip(param_names(model), prob.free) if f]
+        raise CalibrationError(f"{model}: {prob.n_used} corners give {2 * prob.n_used} residuals for "
+                               f"{prob.shape[1]} parameters")
+    names = [n for n, f in zip(param_names(model), prob.free) if f] + ["flex_x", "flex_y"][:prob.nflex]
     dv = np.sqrt(np.einsum("vii->vi", Vb))
     wv = np.linalg.eigvalsh(Vb / (dv[:, :, None] * dv[:, None, :]))
     if not np.all(np.isfinite(Vb)) or np.any(~(wv[:, 0] > _RANK_TOL * wv[:, -1])):
@@ -237,56 +233,23 @@ def _covariance(prob: _Problem, x, cost: float, model: str, strict: bool):
         inv = np.linalg.pinv(C, rcond=_RANK_TOL, hermitian=True)
     else:
         inv = np.linalg.inv(C)
+    full = sigma2 * inv / np.outer(d, d)
+    nfi = prob.nf - prob.nflex
     cov = np.zeros((prob.ni, prob.ni))
     idx = np.flatnonzero(prob.free)
-    cov[np.ix_(idx, idx)] = sigma2 * inv / np.outer(d, d)
+    cov[np.ix_(idx, idx)] = full[:nfi, :nfi]
+    flex_cov = full[nfi:, nfi:].copy() if prob.nflex else None
     nf, jtj = prob.nf, np.zeros((prob.shape[1], prob.shape[1]))
     jtj[:nf, :nf] = U
     for v in range(prob.V):
         sl = slice(nf + 6 * v, nf + 6 * v + 6)
         jtj[:nf, sl], jtj[sl, :nf], jtj[sl, sl] = W[v], W[v].T, Vb[v]
-    return cov, jtj, sigma2, note
-
-
-def levenberg_marquardt(prob, x0, max_nfev: int):
-    """Minimise ½|r(x)|² by Levenberg–Marquardt on the Schur-reduced normal equations; returns (x,
-    cost, evaluations, converged), converged False when ``max_nfev`` ran out first.
-
-    prob : any problem whose parameters are ``prob.nf`` global ones followed by 6 per pose, with
-    ``prob.fun(x)`` -> residuals and ``prob.normal_blocks(x)`` -> :func:`reduce_blocks`' tuple
-    (this module's bundle, and the rig fit of :mod:`aicalib_tf.calib.rig_bundle`)."""
-    x = x0.copy()
-    r = prob.fun(x)
-    cost, nfev, lam, nf, improved, done = 0.5 * float(r @ r), 1, 1e-3, prob.nf, False, False
-    while nfev < max_nfev:
-        U, W, Vb, gu, gv = prob.normal_blocks(x)
-        dU = np.maximum(np.diag(U), 1e-12 * max(float(np.max(np.diag(U), initial=0.0)), 1e-300))
-        dV = np.maximum(np.einsum("vii->vi", Vb), 1e-12)
-        improved = done = False
-        while nfev < max_nfev and lam < 1e16:
-            try:
-                S, Vinv = schur_complement(U + lam * np.diag(dU), W, Vb + lam * dV[:, :, None] * np.eye(6))
-                du = -np.linalg.solve(S, gu - np.einsum("vij,vjk,vk->i", W, Vinv, gv)) if nf else np.zeros(0)
-            except np.linalg.LinAlgError:
-                lam *= 10.0
-                continue
-            dv = -np.einsum("vij,vj->vi", Vinv, gv + np.einsum("vij,i->vj", W, du))
-            dx = np.concatenate([du, dv.ravel()])
-            r_new = prob.fun(x + dx)
-            nfev += 1
-            c_new = 0.5 * float(r_new @ r_new)
-            if np.isfinite(c_new) and c_new < cost:
-                done = cost - c_new <= 1e-10 * cost or np.all(np.abs(dx) <= 1e-9 * (np.abs(x) + 1e-9))
-                x, r, cost, lam, improved = x + dx, r_new, c_new, max(lam / 3.0, 1e-12), True
-                break
-            lam *= 10.0
-        if not improved or done:
-            break
-    return x, cost, nfev, done or (not improved and nfev < max_nfev)
+    return cov, flex_cov, jtj, sigma2, note
 
 
 def bundle_adjust(model: str, obj, px, intrinsics, rvecs, tvecs, *, free=None, max_nfev: int | None = None,
-                  covariance: bool = True, strict: bool = True, rank_strict: bool = True) -> BundleResult:
+                  covariance: bool = True, strict: bool = True, rank_strict: bool = True, sigmas=None,
+                  inliers=None, flex_basis=None, flex=None) -> BundleResult:  # size: one entry, its checks and results
     """Fit a lens model and every view's pose to detected corners.
 
     model : a :data:`~aicalib_tf.geometry.lens.MODELS` name. obj : list of V (N_v, 3) board points
@@ -296,6 +259,10 @@ def bundle_adjust(model: str, obj, px, intrinsics, rvecs, tvecs, *, free=None, m
     to convergence). covariance : also return the covariance and JᵀJ. strict : raise
     :class:`CalibrationError` when the fit ends with non-finite values or unprojectable corners.
     rank_strict : raise on a rank-deficient fit (else the covariance is a pseudo-inverse and ``note`` says so).
+    sigmas : list of V (N_v,) per-corner σ, px (> 0), or None (all equal). inliers : (N,) bool over all
+    corners in order, or None (all); rejected corners get weight 0 and their residuals are still
+    returned. flex_basis : list of V (N_v, 2) :func:`~aicalib_tf.geometry.board_flex.flex_basis` rows
+    to solve the board flex (module docstring), or None; flex : its (2,) start (default 0).
     """
     if model in N_COEFFS:  # a known model whose start lies outside its valid range: no fit to make
         try:
@@ -308,8 +275,9 @@ def bundle_adjust(model: str, obj, px, intrinsics, rvecs, tvecs, *, free=None, m
                          f"{len(rvecs)}, {len(tvecs)}")
     ni = 4 + N_COEFFS[model]
     free = np.ones(ni, bool) if free is None else np.asarray(free, bool)
-    prob = _Problem(model, obj, px, intrinsics, free)
-    x0 = np.concatenate([np.asarray(intrinsics, np.float64)[free],
+    weights = corner_weights(sigmas, inliers, sum(len(np.asarray(p).reshape(-1, 2)) for p in px))
+    prob = _Problem(model, obj, px, intrinsics, free, weights, flex_basis, flex)
+    x0 = np.concatenate([np.asarray(intrinsics, np.float64)[free], prob.flex0[:prob.nflex],
                          np.hstack([np.asarray(rvecs, np.float64).reshape(-1, 3),
                                     np.asarray(tvecs, np.float64).reshape(-1, 3)]).ravel()])
     if not np.all(np.isfinite(x0)):
@@ -325,68 +293,19 @@ def bundle_adjust(model: str, obj, px, intrinsics, rvecs, tvecs, *, free=None, m
         raise CalibrationError(f"{model}: the fit stopped at the edge of the model's valid range ({edge}): the views "
                                "ask for a value the model does not allow, so it does not describe this lens")
     res2 = res.reshape(-1, 2)
+    used = np.ones(prob.N, bool) if prob.w is None else prob.w > 0
+    if prob.w is not None:  # px residuals (the penalty where unprojectable), rejected corners included
+        res2 = np.where(np.isfinite(prob.px_residuals).all(axis=1)[:, None], prob.px_residuals, _PENALTY)
     sq = np.sum(res2 * res2, axis=1)
-    per_view = np.array([np.sqrt(np.mean(s)) for s in np.split(sq, prob.splits)])
-    cov = jtj = None
-    sigma2, note = float(np.sum(sq) / max(2 * prob.N - prob.shape[1], 1)), ""
+    per_view = np.array([np.sqrt(np.mean(s[u])) if u.any() else np.nan
+                         for s, u in zip(np.split(sq, prob.splits), np.split(used, prob.splits))])
+    cov = jtj = flex_cov = None
+    sigma2, note = float(np.sum(sq[used]) / max(2 * prob.n_used - prob.shape[1], 1)), ""
     if covariance:
-        cov, jtj, sigma2, note = _covariance(prob, x, cost, model, rank_strict)
-    return BundleResult(model, intr, rv.copy(), tv.copy(), np.split(res2, prob.splits), float(np.sqrt(np.mean(sq))),
-                        per_view, cov, jtj, sigma2, cost, nfev, note, converged)
-
-
-def poses_from_rays(lens: Lens, obj, px, min_z: float = 0.2):
-    """Every view's pose from a lens guess: (rvecs (V, 3), tvecs (V, 3)), or None if a view fails.
-
-    Each corner is unprojected with ``lens``; the view's rays are turned so that their mean points
-    along +z (a board seen 90° or more off-axis then lies in front of the turned camera), the rays
-    with z > ``min_z`` there (0.05 when fewer than 4 remain) go to ``cv2.solvePnP`` as normalized
-    coordinates with K = I, and the pose is turned back.
-    """
-    rvecs, tvecs = [], []
-    for o, p in zip(obj, px):
-        o, p = np.asarray(o, np.float64).reshape(-1, 3), np.asarray(p, np.float64).reshape(-1, 2)
-        rays = lens.unproject(p)
-        fin = np.isfinite(rays).all(axis=1)
-        if fin.sum() < 4:
-            return None
-        Q = _turn_to_z(np.mean(rays[fin] / np.linalg.norm(rays[fin], axis=1, keepdims=True), axis=0))
-        turned = rays @ Q.T
-        pose = None
-        for z in (min_z, 0.05):
-            ok = fin & (turned[:, 2] > z * np.linalg.norm(turned, axis=1))
-            if ok.sum() >= 4:
-                pose = _pnp(o[ok], turned[ok, :2] / turned[ok, 2:])
-                break
-        if pose is None:
-            return None
-        R, _ = cv2.Rodrigues(pose[0])
-        rvecs.append(cv2.Rodrigues(Q.T @ R)[0].ravel())
-        tvecs.append(Q.T @ pose[1])
-    return np.array(rvecs), np.array(tvecs)
-
-
-def _turn_to_z(m: np.ndarray) -> np.ndarray:
-    """A rotation (3, 3) that takes the direction ``m`` (3,) to +z (the identity when m is +z)."""
-    m = m / np.linalg.norm(m)
-    axis = np.cross(m, [0.0, 0.0, 1.0])
-    s, c = np.linalg.norm(axis), float(m[2])
-    if s < 1e-12:
-        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
-    return cv2.Rodrigues(axis / s * np.arctan2(s, c))[0]
-
-
-def _pnp(o, xn):
-    """Pose of planar board points o (M, 3) seen at normalized coordinates xn (M, 2), or None."""
-    eye = np.eye(3)
-    for flags in (cv2.SOLVEPNP_IPPE, cv2.SOLVEPNP_ITERATIVE):
-        try:
-            ok, r, t = cv2.solvePnP(o, xn.reshape(-1, 1, 2), eye, None, flags=flags)
-        except cv2.error:
-            continue
-        if ok and np.all(np.isfinite(r)) and np.all(np.isfinite(t)) and t[2, 0] > 0:
-            return r.ravel(), t.ravel()
-    return None
+        cov, flex_cov, jtj, sigma2, note = _covariance(prob, x, cost, model, rank_strict)
+    return BundleResult(model, intr, rv.copy(), tv.copy(), np.split(res2, prob.splits), float(np.sqrt(np.mean(sq[used]))),
+                        per_view, cov, jtj, sigma2, cost, nfev, note, converged, prob.flex_of(x), flex_cov,
+                        None if inliers is None else np.asarray(inliers, bool).copy())
 
 
 def solve_pose(lens: Lens, obj, px) -> tuple[np.ndarray, np.ndarray, float] | None:

@@ -13,7 +13,9 @@ Sphere and EUCM have no OpenCV or ROS name and are written ``ds`` with [ξ, α] 
 ``camera.json`` holds the same plus what is needed to rerun diagnostics: our model name
 (``model``: plumb_bob, rational_polynomial, thin_prism, equidistant, ds or eucm), the intrinsics covariance,
 the model-choice table, the quality summary, view names, per-view corner counts, standard
-deviations, rejected views with reasons, the square unit and the provenance in ``meta``; for a
+deviations, rejected views with reasons, the board's flex (``board_flex``: :func:`~aicalib_tf.calib.flex.flex_dict`),
+single corners rejected inside the solve (``rejected_corners``: {view: [[col, row], ...]}, and their
+count ``n_rejected_corners``), the square unit and the provenance in ``meta``; for a
 circular fisheye the image circle (``image_circle``: {"cx", "cy", "radius"} px; absent or null when
 the photos fill the frame, and in files written before it was kept).
 :func:`load_calibration` reads it back exactly (floats are written with full precision); it also
@@ -46,6 +48,7 @@ import numpy as np
 
 from aicalib_tf.calib import schema as S
 from aicalib_tf.calib.fit import Calibration
+from aicalib_tf.calib.flex import flex_dict, rejected_corners_dict, solve_fields_from_dict
 from aicalib_tf.calib.kalibr import to_camchain_yaml
 from aicalib_tf.calib.maps import map_entry, map_files, needs_maps
 from aicalib_tf.calib.quality import lens_of
@@ -103,6 +106,8 @@ def calibration_dict(cal: Calibration) -> dict:
         "rejected": dict(cal.rejected),
         "meta": dict(cal.meta),
         "image_circle": None if getattr(cal, "image_circle", None) is None else cal.image_circle.to_dict(),
+        "board_flex": flex_dict(cal),  # calib.flex: wx, wy, covariance (squares), sag, note; null: not considered
+        "rejected_corners": rejected_corners_dict(cal), "n_rejected_corners": int(getattr(cal, "n_rejected_corners", 0)),
         **_lens_extras(cal),
     }
 
@@ -250,7 +255,7 @@ def calibration_from_dict(d: dict) -> Calibration:
         std = {k: S.require_number(std, k, nullable=True) for k in std}
     extra = {"model": model, "covariance": S.require_matrix(d, "covariance", (n, n), default=None),
              "model_table": _model_table(d), "quality": nan_for_null(_optional_mapping(d, "quality")),
-             "image_circle": _image_circle(d)}
+             "image_circle": _image_circle(d), **solve_fields_from_dict(d)}
     return _build(dict(K=K, dist=S.require_dist(d, "distortion_coefficients", model), image_size=S.require_image_size(d),
                        pattern_size=pattern, square_size=square, square_unit=unit,
                        rms=S.require_number(d, "avg_reprojection_error", nonnegative=True), **_views(d), std=std,

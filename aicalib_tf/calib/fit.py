@@ -11,7 +11,10 @@ recalibrated. A misordered board sits tens of px off; corners pulled a few px by
 ``cornerSubPix`` does under strong distortion) bend the fit for every view, which is why only the
 worst view goes at a time. At most a third of the views are rejected, never below ``min_views``.
 
-The fit is one least-squares bundle over all views (:mod:`aicalib_tf.calib.bundle`). Starts: the
+The fit is one least-squares bundle over all views (:mod:`aicalib_tf.calib.bundle`). Inside each
+solve (:mod:`aicalib_tf.calib.robust`) single outlying corners are rejected, corners are weighted by
+their views' ``sigmas``, and the board's flex is solved and kept when the views determine it
+(:mod:`aicalib_tf.calib.flex`). Starts: the
 pinhole models from OpenCV's multi-start plumb_bob fit; the fisheye models (equidistant, ds, eucm) from a grid of focal lengths
 (:func:`~aicalib_tf.calib.starts.fisheye_start`), so fisheye lenses need no guess. ``model="auto"``
 picks the model by cross-validation over views (:mod:`aicalib_tf.calib.select`).
@@ -23,12 +26,16 @@ returns (pseudo-inverse covariance; ``meta["fit_note"]`` says so); under ``auto`
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
-from aicalib_tf.calib.bundle import BundleResult, CalibrationError, bundle_adjust, param_names, poses_from_rays
+from aicalib_tf.calib.bundle import BundleResult, CalibrationError, param_names, poses_from_rays
+from aicalib_tf.calib.flex_check import confirm_flex, solve_fields
+from aicalib_tf.calib.opencv_start import opencv_start
+from aicalib_tf.calib.robust import SolveOptions, solve
 from aicalib_tf.calib.select import select_model
 from aicalib_tf.calib.starts import convert_start, fisheye_start, widest_angle
 from aicalib_tf.calib.view_checks import MIN_VIEW_CORNERS, duplicates, view_problem
@@ -38,9 +45,6 @@ from aicalib_tf.geometry.pattern import board_points, check_pattern
 
 __all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "fit_views", "choose_model", "view_rms",
            "MIN_VIEW_CORNERS", "outlier_threshold"]
-
-_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
-
 
 @dataclass(frozen=True)
 class View:
@@ -95,6 +99,9 @@ class Calibration:
     meta : free-form provenance (detector, model sha256, flags) kept in the JSON file.
     image_circle : a circular fisheye's :class:`~aicalib_tf.geometry.image_circle.ImageCircle`
     (px; estimated from the photos), or None when the photos fill the frame or it is unknown.
+    flex : (2,) the board flex (w_x, w_y) in squares (:mod:`aicalib_tf.calib.flex`), or None when the board
+    was taken as flat; flex_covariance : (2, 2) squares²; flex_note : why there is no flex ("" otherwise).
+    rejected_corners : {view name: (K, 2) ids (col, row)} of single corners rejected inside the solve.
     """
 
     K: np.ndarray
@@ -117,6 +124,15 @@ class Calibration:
     model_table: tuple = ()
     quality: dict = field(default_factory=dict)
     image_circle: ImageCircle | None = None
+    flex: np.ndarray | None = None
+    flex_covariance: np.ndarray | None = None
+    flex_note: str = ""
+    rejected_corners: dict = field(default_factory=dict)
+
+    @property
+    def n_rejected_corners(self) -> int:
+        """How many single corners the solve rejected."""
+        return int(sum(len(v) for v in self.rejected_corners.values()))
 
     @property
     def lens(self) -> Lens:
@@ -162,47 +178,6 @@ def view_rms(view: View, K, dist, rvec, tvec, square_size: float, model: str | N
     return float(np.sqrt(np.mean(np.sum(res * res, axis=1)))), res
 
 
-def _starts(image_size) -> list:
-    """Initial K guesses: OpenCV's own (None) and three pinhole fields of view.
-
-    OpenCV initialises from homographies that ignore distortion; under strong barrel distortion
-    Levenberg–Marquardt can then settle in a wrong minimum (measured: fx +28% on a data_gen
-    sequence whose true fx it finds from a better start). The fit with the lowest RMS wins.
-    """
-    w, h = (float(s) for s in image_size)
-    starts = [None]
-    for hfov in (50.0, 80.0, 110.0):
-        f = 0.5 * w / np.tan(np.radians(hfov) / 2)
-        starts.append(np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]]))
-    return starts
-
-
-def _opencv_start(views: list[View], square_size: float, image_size, flags: int):
-    """plumb_bob by OpenCV from :func:`_starts` (flags 0 or CALIB_FIX_K3), the lowest RMS kept:
-    (K (3, 3), dist (5,), rvecs (V, 3), tvecs (V, 3)), the bundle fit's start."""
-    obj = [board_points(v.ids, square_size).astype(np.float32) for v in views]
-    img = [v.corners.astype(np.float32).reshape(-1, 1, 2) for v in views]
-    size = tuple(int(s) for s in image_size)
-    best, last_error = None, None
-    for K0 in _starts(image_size):
-        try:
-            if K0 is None:
-                fit = cv2.calibrateCamera(obj, img, size, None, None, flags=flags, criteria=_CRITERIA)
-            else:
-                fit = cv2.calibrateCamera(obj, img, size, K0, np.zeros(5), flags=flags | cv2.CALIB_USE_INTRINSIC_GUESS,
-                                          criteria=_CRITERIA)
-        except cv2.error as exc:
-            last_error = exc
-            continue
-        if np.isfinite(fit[0]) and (best is None or fit[0] < best[0]):
-            best = fit
-    if best is None:
-        raise CalibrationError(f"OpenCV could not calibrate from {len(views)} views: {getattr(last_error, 'err', last_error)}")
-    _, K, dist, rvecs, tvecs = best
-    return (K, dist.ravel()[:5], np.asarray(rvecs, np.float64).reshape(-1, 3),
-            np.asarray(tvecs, np.float64).reshape(-1, 3))
-
-
 def outlier_threshold(per_view_rms: np.ndarray) -> float:
     """The RMS (px) above which a view is an outlier: max(3 × median of the views' RMS, 0.5 px)."""
     return max(3.0 * float(np.median(np.asarray(per_view_rms, dtype=np.float64))), 0.5)
@@ -215,7 +190,8 @@ def _sort_views(views, pattern_size: tuple[int, int], image_size=None) -> tuple[
     usable: list[View] = []
     seen: set[str] = set()
     for k, v in enumerate(views):
-        view = v if isinstance(v, View) else View(getattr(v, "name", f"view{k}"), v.corners, v.ids)
+        view = v if isinstance(v, View) else View(getattr(v, "name", f"view{k}"), v.corners, v.ids,
+                                                  bool(getattr(v, "relative", False)), getattr(v, "sigmas", None))
         if view.name in seen:  # per-view results and rejections are keyed by name
             raise ValueError(f"two views are named {view.name!r}; view names must be unique")
         seen.add(view.name)
@@ -251,14 +227,15 @@ def _usable_views(views, pattern_size, min_views, image_size=None) -> tuple[list
 
 
 def _fit_model(model: str, views: list[View], square_size: float, image_size, start=None,
-               fix_k3: bool = False, rank_strict: bool = True) -> BundleResult:
+               fix_k3: bool = False, rank_strict: bool = True, options: SolveOptions | None = None) -> BundleResult:
     """One bundle fit of ``model`` to the views, from ``start`` (a Lens or Calibration) or from scratch.
 
     From scratch, the pinhole models (``START == "opencv"``) start from OpenCV's multi-start
     plumb_bob fit (extra coefficients 0) and the fisheye models from
     :func:`~aicalib_tf.calib.starts.fisheye_start`. ``fix_k3`` holds k3 at 0 (models with ``FIX_K3``).
     Raises CalibrationError naming the model when it cannot be fitted (a rank-deficient fit only
-    when ``rank_strict``).
+    when ``rank_strict``). options : the solve's board flex and corner rejection
+    (:class:`~aicalib_tf.calib.robust.SolveOptions`; default: corners rejected, flat board).
     """
     spec = get_model(model)
     obj = [board_points(v.ids, square_size) for v in views]
@@ -279,12 +256,13 @@ def _fit_model(model: str, views: list[View], square_size: float, image_size, st
     elif spec.START == "rays":
         intr, poses = fisheye_start(obj, px, image_size, free, model)
     else:
-        K, dist, rvecs, tvecs = _opencv_start(views, square_size, image_size, cv2.CALIB_FIX_K3 if fix_k3 else 0)
+        K, dist, rvecs, tvecs = opencv_start(views, square_size, image_size, cv2.CALIB_FIX_K3 if fix_k3 else 0)
         intr = np.zeros(4 + N_COEFFS[model])
         intr[:4], intr[4:9] = (K[0, 0], K[1, 1], K[0, 2], K[1, 2]), dist[:5]
         poses = (rvecs, tvecs)
     intr = np.where(free, intr, 0.0)
-    return bundle_adjust(model, obj, px, intr, *poses, free=free, rank_strict=rank_strict)
+    return solve(model, views, obj, px, intr, poses, free=free, rank_strict=rank_strict, options=options,
+                 unit=square_size)
 
 
 def _calibration(fit: BundleResult, views, pattern_size, square_size, image_size, rejected, square_unit,
@@ -299,24 +277,35 @@ def _calibration(fit: BundleResult, views, pattern_size, square_size, image_size
         rvecs=fit.rvecs, tvecs=fit.tvecs * float(square_size), per_view_rms=fit.per_view_rms,
         corner_counts=np.array([len(v.ids) for v in views]), std={k: float(v) for k, v in std.items()},
         rejected=dict(rejected), square_unit=square_unit, meta=dict(meta or {}, **({"fit_note": fit.note} if fit.note else {})), model=fit.model,
-        covariance=fit.covariance, model_table=tuple(table), image_circle=image_circle)
+        covariance=fit.covariance, model_table=tuple(table), image_circle=image_circle, **solve_fields(fit, views))
 
 
 def fit_views(views, pattern_size: tuple[int, int], square_size: float, image_size: tuple[int, int], model: str,
-              *, start=None, fix_k3: bool = False, square_unit: str = "", meta: dict | None = None) -> Calibration:
-    """One fit of one lens model to the views: no outlier rejection, no model choice.
+              *, start=None, fix_k3: bool = False, square_unit: str = "", meta: dict | None = None,
+              flex: str = "auto", reject_corners: bool = True) -> Calibration:
+    """One fit of one lens model to the views: no view rejection, no model choice.
 
     views : sequence of :class:`View` (at least 3 usable; unusable ones land in ``rejected``).
     model : a :data:`~aicalib_tf.geometry.lens.MODELS` name. start : optional Lens or Calibration to
     start from (any model; its K and, within the pinhole family, its coefficients). Raises
     :class:`CalibrationError` naming the model when it cannot be fitted, ValueError for bad arguments.
+    flex, reject_corners : the board flex and single-corner rejection inside the solve (:func:`calibrate_camera`).
     """
     pattern_size = _check_args(pattern_size, square_size, image_size, 3)
     if model not in MODELS:
         raise ValueError(f"unknown lens model {model!r}; choose from {', '.join(MODELS)}")
     usable, rejected = _usable_views(views, pattern_size, 3, image_size)
-    fit = _fit_model(model, usable, 1.0, image_size, start, fix_k3, rank_strict=False)  # a unit square: tvecs scaled last
+    opts = SolveOptions(pattern_size, flex, reject_corners)
+    fit = _fit_model(model, usable, 1.0, image_size, start, fix_k3, False, opts)  # a unit square: tvecs scaled last
+    fit = confirm_flex(fit, usable, _flex_refit(fit, image_size, fix_k3, opts), pattern_size)
     return _calibration(fit, usable, pattern_size, square_size, image_size, rejected, square_unit, meta)
+
+
+def _flex_refit(fit: BundleResult, image_size, fix_k3, opts: SolveOptions):
+    """(views, flex mode) -> a fit of ``fit``'s model from its intrinsics: the refits of :func:`confirm_flex`."""
+    start = Lens.from_intrinsics(fit.model, fit.intrinsics, image_size)
+    return lambda vs, mode: _fit_model(fit.model, vs, 1.0, image_size, start, fix_k3, False,
+                                       dataclasses.replace(opts, flex=mode))
 
 
 def _resolve_model(model: str, rational: bool) -> str:
@@ -329,32 +318,35 @@ def _resolve_model(model: str, rational: bool) -> str:
     return model
 
 
-def _refit(model, usable, square_size, image_size, warm: BundleResult, fix_k3) -> BundleResult:
+def _refit(model, usable, square_size, image_size, warm: BundleResult, fix_k3, opts=None) -> BundleResult:
     """Refit after a view was dropped: from the last fit, and from scratch for the pinhole models; the lower cost wins."""
     fits = [_fit_model(model, usable, square_size, image_size, Lens.from_intrinsics(model, warm.intrinsics, image_size),
-                       fix_k3, rank_strict=False)]
+                       fix_k3, False, opts)]
     if get_model(model).START == "opencv":
         try:
-            fits.append(_fit_model(model, usable, square_size, image_size, None, fix_k3, rank_strict=False))
+            fits.append(_fit_model(model, usable, square_size, image_size, None, fix_k3, False, opts))
         except CalibrationError:
             pass
     return min(fits, key=lambda f: f.cost)
 
 
 def choose_model(views, pattern_size: tuple[int, int], image_size: tuple[int, int], models=MODELS, *,
-                 fix_k3: bool = False, image_circle: ImageCircle | None = None) -> str:
+                 fix_k3: bool = False, image_circle: ImageCircle | None = None, flex: str = "auto",
+                 reject_corners: bool = True) -> str:
     """The model ``auto`` chooses among ``models`` for these views (:mod:`aicalib_tf.calib.select`;
     no outlier rejection): e.g. each half of the views' choice. Raises CalibrationError when no model fits."""
     pattern_size = _check_args(pattern_size, 1.0, image_size, 3)
     usable, _ = _usable_views(views, pattern_size, 3, image_size)
-    return select_model(usable, 1.0, lambda vs, m, start: _fit_model(m, vs, 1.0, image_size, start, fix_k3),
+    opts = SolveOptions(pattern_size, flex, reject_corners)
+    return select_model(usable, 1.0, lambda vs, m, start: _fit_model(m, vs, 1.0, image_size, start, fix_k3, True, opts),
                         tuple(models), circle=image_circle)[1]
 
 
 def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 1.0,
                      image_size: tuple[int, int] | None = None, *, model: str = "auto", rational: bool = False,
                      fix_k3: bool = False, reject_outliers: bool = True, min_views: int = 3, square_unit: str = "",
-                     meta: dict | None = None, image_circle: ImageCircle | None = None) -> Calibration:
+                     meta: dict | None = None, image_circle: ImageCircle | None = None, flex: str = "auto",
+                     reject_corners: bool = True) -> Calibration:
     """Calibrate a camera from detected boards: a bundle fit of the lens model over all views.
 
     views : sequence of :class:`View` (or objects with ``corners``, ``ids`` and ``name``).
@@ -366,18 +358,23 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
     reject_outliers : drop views by the rule in the module docstring and refit.
     image_circle : a circular fisheye's image circle (:func:`~aicalib_tf.geometry.image_circle.estimate_image_circle`),
     kept in the Calibration; under ``auto`` a pinhole model is not eligible when the circle's rim lies
-    at or near 90° off-axis.
+    at or near 90° off-axis. flex : "auto" solves the board's flex with the camera and keeps it when the
+    views determine it, "off" takes the board as flat (:mod:`aicalib_tf.calib.flex`). reject_corners :
+    reject single outlying corners inside every solve (:mod:`aicalib_tf.calib.robust`); a view's
+    ``sigmas`` weight its corners.
     Raises :class:`CalibrationError` with fewer than ``min_views`` usable views or when the model
     cannot be fitted, and ``ValueError`` for bad arguments (two views of one name among them).
     """
     pattern_size = _check_args(pattern_size, square_size, image_size, min_views)
     model = _resolve_model(model, rational)
     usable, rejected = _usable_views(views, pattern_size, min_views, image_size)
+    opts = SolveOptions(pattern_size, flex, reject_corners)
     if model == "auto":
         table, model, fit = select_model(
-            usable, 1.0, lambda vs, m, start: _fit_model(m, vs, 1.0, image_size, start, fix_k3), circle=image_circle)
+            usable, 1.0, lambda vs, m, start: _fit_model(m, vs, 1.0, image_size, start, fix_k3, True, opts),
+            circle=image_circle)
     else:
-        fit = _fit_model(model, usable, 1.0, image_size, None, fix_k3, rank_strict=False)  # a unit square: tvecs scaled last
+        fit = _fit_model(model, usable, 1.0, image_size, None, fix_k3, False, opts)  # a unit square: tvecs scaled last
         model = fit.model  # a model that chose its layout (a spline) refits with that layout
         table = ({"model": model, "n_params": fit.intrinsics.size, "rms": fit.rms, "cv_rms": float("nan"),
                   "cv_se": float("nan"), "chosen": True, "note": "forced"},)
@@ -390,6 +387,7 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
         rejected[usable[worst].name] = f"outlier: RMS {fit.per_view_rms[worst]:.2f} px > {thr:.2f} px"
         usable.pop(worst)
         max_drop -= 1
-        fit = _refit(model, usable, 1.0, image_size, fit, fix_k3)
+        fit = _refit(model, usable, 1.0, image_size, fit, fix_k3, opts)
+    fit = confirm_flex(fit, usable, _flex_refit(fit, image_size, fix_k3, opts), pattern_size)
     return _calibration(fit, usable, pattern_size, square_size, image_size, rejected, square_unit, meta, table,
                         image_circle)

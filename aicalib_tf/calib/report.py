@@ -23,6 +23,7 @@ import numpy as np
 
 from aicalib_tf.calib import quality as Q
 from aicalib_tf.calib.fit import Calibration, View
+from aicalib_tf.calib.flex import flex_line
 from aicalib_tf.calib.quality import coverage_counts
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.image_circle import circle_fov_deg, circle_problem
@@ -96,6 +97,19 @@ def calibration_warnings(cal: Calibration, views: list[View]) -> list[str]:
     return warnings
 
 
+def solve_lines(cal: Calibration) -> list[str]:
+    """The report's lines on the solve's single-corner rejections and the board flex (:mod:`aicalib_tf.calib.flex`)."""
+    out = []
+    n = int(getattr(cal, "n_rejected_corners", 0))
+    if n:
+        per = sorted(cal.rejected_corners.items(), key=lambda kv: -len(kv[1]))
+        out.append(f"{n} single corner{'s' if n != 1 else ''} rejected inside the solve (of "
+                   f"{int(np.sum(cal.corner_counts))}): " + ", ".join(f"{k} {len(v)}" for k, v in per[:5])
+                   + (", ..." if len(per) > 5 else ""))
+    line = flex_line(cal)
+    return out + ([line] if line else [])
+
+
 def format_report(cal: Calibration, views: list[View], *, skipped: dict | None = None, total: int | None = None) -> str:
     """The compact text report the CLI prints.
 
@@ -117,6 +131,7 @@ def format_report(cal: Calibration, views: list[View], *, skipped: dict | None =
     lines.append(f"RMS reprojection error {cal.rms:.3f} px (worst view {worst}: {worst_rms:.3f} px)"
                  + (f"; {partial} partial board{'s' if partial != 1 else ''}" if partial else "")
                  + (f" ({relative} larger than the frame, ids relative to what is seen)" if relative else ""))
+    lines.extend(solve_lines(cal))
     s = cal.std
     names_in = "ROS " if L.get_model(model).NAMES["opencv"] else "files: no OpenCV or ROS name, "
     lines.append(f"image {cal.image_size[0]}x{cal.image_size[1]} px, lens model {model} ({names_in}{L.ROS_NAMES[model]})")

@@ -143,3 +143,25 @@ def test_a_start_outside_the_models_range_is_refused_with_the_reason():
     intr0[4] = 1.5
     with pytest.raises(CalibrationError, match=r"^ds: the start is outside the model's valid range .*xi must be in \(-1, 1\]"):
         bundle_adjust("ds", obj, px, intr0, *poses)
+
+
+def test_flex_jacobian_matches_finite_differences_and_unit_weights_change_nothing():
+    from aicalib_tf.calib.bundle import _Problem
+    from aicalib_tf.geometry.board_flex import flex_basis
+
+    views = synthetic_views(PINHOLE, 4, 0.1, seed=2)
+    obj, px = _problem(views)
+    basis = [flex_basis(v.ids[:, 0], v.ids[:, 1], (9, 6)) for v in views]
+    poses = poses_from_rays(PINHOLE, obj, px)
+    prob = _Problem("plumb_bob", obj, px, PINHOLE.intrinsics(), np.ones(9, bool), None, basis, [0.003, -0.002])
+    x = np.concatenate([PINHOLE.intrinsics(), [0.003, -0.002], np.hstack(poses).ravel()])
+    r, Jg, _, _ = prob._evaluate(x)
+    for k in (9, 10):  # the two flex columns
+        dx = np.zeros_like(x)
+        dx[k] = 1e-7
+        num = (prob.fun(x + dx) - prob.fun(x - dx)) / 2e-7
+        np.testing.assert_allclose(Jg[:, :, k].ravel(), num, rtol=1e-5, atol=1e-6)
+    plain = bundle_adjust("plumb_bob", obj, px, PINHOLE.intrinsics(), *poses)
+    ones = bundle_adjust("plumb_bob", obj, px, PINHOLE.intrinsics(), *poses, sigmas=[np.full(len(p), 0.3) for p in px])
+    np.testing.assert_array_equal(ones.intrinsics, plain.intrinsics)
+    np.testing.assert_array_equal(ones.covariance, plain.covariance)

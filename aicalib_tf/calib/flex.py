@@ -1,0 +1,118 @@
+"""The board's flex in a calibration: when it is solved, when it is kept, and how it is reported.
+
+The flex is the two-parameter parabolic sag of :mod:`aicalib_tf.geometry.board_flex` (mrcal's
+``calobject_warp``): a board point (c, r) moves along the board's z axis by
+w_x·(1 − u²) + w_y·(1 − v²), u and v its place across the inner-corner grid scaled to [−1, 1].
+One flex is shared by every view (one physical board); the bundle solves (w_x, w_y) with the camera
+(:mod:`aicalib_tf.calib.bundle`). Here w is in squares; ``sag`` is the centre's offset against the
+corners of the grid, w_x + w_y, reported in squares and in the board's unit.
+
+Rule (``flex="auto"``): the flex is solved, and kept when the views determine it: both standard
+deviations at most :data:`FLEX_SIGMA_MAX` squares (a quarter of :data:`FLEX_TYPICAL`, the sag of a
+printed board on a rigid backing that a flex must resolve: mrcal measures about 0.014 squares on a
+GoPro set) and |w| within :data:`FLEX_PLAUSIBLE`. Otherwise the board is taken as flat and refitted,
+and the note says why. Views whose ids are relative (a board larger than the frame) do not know where
+their corners lie on the board, so a set holding one is fitted flat.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from aicalib_tf.geometry.board_flex import flex_basis
+
+__all__ = ["FLEX_SIGMA_MAX", "FLEX_TYPICAL", "FLEX_PLAUSIBLE", "FLEX_MODES", "basis_of_views", "flex_problem",
+           "flex_line", "flex_dict"]
+
+FLEX_TYPICAL = 0.02  # squares: the sag a flex must resolve (the benchmark's largest)
+FLEX_SIGMA_MAX = FLEX_TYPICAL / 4  # squares: the largest σ of a kept flex
+FLEX_PLAUSIBLE = 0.25  # squares: beyond this a "flex" is the lens model's misfit, not the board's
+FLEX_MODES = ("auto", "off")
+
+
+def basis_of_views(views, pattern_size) -> tuple[list | None, str]:
+    """(list of V (N_v, 2) :func:`~aicalib_tf.geometry.board_flex.flex_basis` rows, "") for views with
+    absolute ids, or (None, why) when the flex cannot be solved for these views."""
+    relative = sum(1 for v in views if getattr(v, "relative", False))
+    if relative:
+        return None, f"not solved: {relative} view{'s' if relative != 1 else ''} with ids relative to what is seen"
+    if pattern_size is None:
+        return None, "not solved: no pattern size"
+    return [flex_basis(v.ids[:, 0], v.ids[:, 1], pattern_size) for v in views], ""
+
+
+def flex_problem(flex, covariance, unit: float = 1.0) -> str:
+    """Why a solved flex is not kept ("" when it is): (2,) flex and (2, 2) covariance in board units of
+    ``unit`` per square (the unit the bundle's board points were in)."""
+    if flex is None or covariance is None:
+        return "not determined by these views"
+    w = np.asarray(flex, np.float64) / unit
+    sd = np.sqrt(np.maximum(np.diag(np.asarray(covariance, np.float64)), 0.0)) / unit
+    if not np.all(np.isfinite(w)) or not np.all(np.isfinite(sd)):
+        return "not determined by these views"
+    if sd.max() > FLEX_SIGMA_MAX:
+        return f"not determined by these views (σ {sd.max():.3f} squares > {FLEX_SIGMA_MAX:.3f})"
+    if np.abs(w).max() > FLEX_PLAUSIBLE:
+        return (f"not used: the fit asks {np.abs(w).max():.3f} squares, beyond a board's plausible "
+                f"{FLEX_PLAUSIBLE} (the lens model's misfit, not the board's)")
+    return ""
+
+
+def _sag(flex, std) -> tuple[float, float]:
+    """(sag, σ) squares of the centre against the grid's corners: w_x + w_y (σ from the diagonal and
+    the covariance's off-diagonal term when ``std`` is a (2, 2) covariance)."""
+    w = np.asarray(flex, np.float64)
+    c = np.asarray(std, np.float64)
+    var = float(c[0, 0] + c[1, 1] + 2 * c[0, 1]) if c.ndim == 2 else float(np.sum(c * c))
+    return float(w.sum()), float(np.sqrt(max(var, 0.0)))
+
+
+def flex_line(cal) -> str | None:
+    """The report's line on the board flex, or None when the calibration did not consider one."""
+    flex = getattr(cal, "flex", None)
+    note = getattr(cal, "flex_note", "")
+    if flex is None:
+        return f"board flex: {note}" if note else None
+    sag, sd = _sag(flex, cal.flex_covariance)
+    s, unit = float(cal.square_size), cal.square_unit
+    wx, wy = (float(v) for v in flex)
+    in_unit = f"{sag * s:.3g} ± {sd * s:.2g} {unit} (" if unit else ""
+    return (f"board flex: sag {in_unit}{sag:.4f} ± {sd:.4f} squares{')' if unit else ''}, "
+            f"along x {wx:+.4f}, along y {wy:+.4f} squares")
+
+
+def flex_dict(cal) -> dict | None:
+    """camera.json's ``board_flex``: {"wx", "wy" (squares), "covariance" (2×2 squares²), "sag", "sag_std"
+    (squares), "sag_unit" (the board's unit: square size × squares), "note"}, or None when not considered."""
+    flex = getattr(cal, "flex", None)
+    note = getattr(cal, "flex_note", "")
+    if flex is None:
+        return {"wx": None, "wy": None, "note": note} if note else None
+    sag, sd = _sag(flex, cal.flex_covariance)
+    return {"wx": float(flex[0]), "wy": float(flex[1]),
+            "covariance": np.asarray(cal.flex_covariance, np.float64).tolist(), "sag": sag, "sag_std": sd,
+            "sag_unit": sag * float(cal.square_size), "sag_std_unit": sd * float(cal.square_size),
+            "unit": cal.square_unit, "note": note}
+
+
+def solve_fields_from_dict(d: dict) -> dict:
+    """The Calibration fields :func:`flex_dict` and ``rejected_corners`` wrote into camera.json (absent in
+    older files: a flat board, no corner rejected); every field checked (:mod:`aicalib_tf.calib.schema`)."""
+    from aicalib_tf.calib import schema as S
+
+    out: dict = {}
+    flex = S.require_mapping(d, "board_flex", {}) if d.get("board_flex") is not None else {}
+    with S.within("board_flex"):
+        out["flex_note"] = S.require_str(flex, "note", "")
+        if flex.get("wx") is not None or flex.get("wy") is not None:
+            out["flex"] = np.array([S.require_number(flex, "wx"), S.require_number(flex, "wy")])
+            out["flex_covariance"] = S.require_matrix(flex, "covariance", (2, 2))
+    corners = S.require_mapping(d, "rejected_corners", {}) if d.get("rejected_corners") is not None else {}
+    with S.within("rejected_corners"):
+        out["rejected_corners"] = {str(k): S.require_matrix(corners, k, (-1, 2)).astype(np.int64) for k in corners}
+    return out
+
+
+def rejected_corners_dict(cal) -> dict:
+    """camera.json's ``rejected_corners``: {view name: [[col, row], ...]} of single corners the solve rejected."""
+    return {k: np.asarray(v, np.int64).reshape(-1, 2).tolist() for k, v in getattr(cal, "rejected_corners", {}).items()}

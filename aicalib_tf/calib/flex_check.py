@@ -1,0 +1,99 @@
+"""Does a solved board flex earn its two parameters on held-out views?
+
+A flex whose σ is small (:func:`~aicalib_tf.calib.flex.flex_problem`) can still be the lens model's
+misfit: on OpenCV's 13 left-camera photos the two first/second halves each found a flex within
+σ = 0.001 squares of its own, 8σ apart from the other's, and their projections drifted 1.1 px apart
+where the flat fits agree to 0.27 px. So the flex is kept only when it predicts views it was not
+fitted to: k = min(5, V) folds as in :mod:`aicalib_tf.calib.select` (view i in fold i mod k); each
+fold's other views are fitted with the flex and with a flat board, each held-out view's pose is solved
+with those intrinsics (and that flex applied to its board points), and the fold's score is the RMS
+over its held-out corners. The flex stays when the mean gain (flat − flexed) exceeds its standard
+error over the folds (the one-SE rule of the model choice); with fewer than
+:data:`~aicalib_tf.calib.select.MIN_CV_VIEWS` views the σ rule alone decides.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from aicalib_tf.calib.bundle import CalibrationError, solve_pose
+from aicalib_tf.calib.select import MAX_FOLDS, MIN_CV_VIEWS
+from aicalib_tf.geometry.board_flex import flexed_points
+from aicalib_tf.geometry.lens import Lens
+from aicalib_tf.geometry.pattern import board_points
+
+__all__ = ["held_out_gain", "flex_earned", "confirm_flex", "solve_fields"]
+
+
+def _score(fit, held, pattern_size, square_size: float) -> float:
+    """px: RMS over the held-out views' corners, each view posed with ``fit``'s intrinsics and flex."""
+    lens = Lens.from_intrinsics(fit.model, fit.intrinsics, (1, 1))
+    flex = getattr(fit, "flex", None)
+    sq, n = 0.0, 0
+    for v in held:
+        obj = board_points(v.ids, square_size)
+        if flex is not None:
+            obj = flexed_points(obj, pattern_size, np.asarray(flex) / square_size, square_size)
+        pose = solve_pose(lens, obj, v.corners)
+        if pose is None or not np.isfinite(pose[2]):
+            raise CalibrationError(f"held-out view {v.name} cannot be posed")
+        sq, n = sq + pose[2] ** 2 * len(v.ids), n + len(v.ids)
+    return float(np.sqrt(sq / n))
+
+
+def held_out_gain(views, fit, pattern_size, square_size: float = 1.0) -> np.ndarray:
+    """(k,) px: each fold's held-out RMS with a flat board minus with the flex (positive: the flex helps).
+
+    views : list of View; fit(views, flex) -> BundleResult with flex "auto" or "off" (its board points
+    in ``square_size`` per square). Raises CalibrationError when a fold cannot be fitted or posed.
+    """
+    k = min(MAX_FOLDS, len(views))
+    gains = []
+    for f in range(k):
+        train = [v for i, v in enumerate(views) if i % k != f]
+        held = [v for i, v in enumerate(views) if i % k == f]
+        flexed, flat = fit(train, "auto"), fit(train, "off")
+        gains.append(_score(flat, held, pattern_size, square_size) - _score(flexed, held, pattern_size, square_size))
+    return np.array(gains)
+
+
+def flex_earned(views, fit, pattern_size, square_size: float = 1.0) -> tuple[bool, str]:
+    """(keep the flex, why not when not): the held-out rule of the module docstring."""
+    if len(views) < MIN_CV_VIEWS:
+        return True, ""
+    try:
+        g = held_out_gain(views, fit, pattern_size, square_size)
+    except CalibrationError as exc:
+        return False, f"not used: the held-out check failed ({exc})"
+    se = float(g.std(ddof=1) / np.sqrt(len(g)))
+    if g.mean() > se:
+        return True, ""
+    return False, (f"not used: no gain on held-out views ({1000 * g.mean():+.1f} ± {1000 * se:.1f} mpx over "
+                   f"{len(g)} folds; the board is taken as flat)")
+
+
+def confirm_flex(fit, views, refit, pattern_size):
+    """``fit`` when it has no flex or held-out views confirm its flex (:func:`flex_earned`), else the views
+    refitted flat, its ``flex_note`` saying why. refit(views, "auto" | "off") -> BundleResult (unit square)."""
+    if getattr(fit, "flex", None) is None:
+        return fit
+    keep, why = flex_earned(views, refit, pattern_size)
+    if keep:
+        return fit
+    return dataclasses.replace(refit(views, "off"), flex_note=why)
+
+
+def solve_fields(fit, views) -> dict:
+    """The Calibration fields of a solve's flex (fit with a unit square) and rejected corners:
+    {"flex_note", "rejected_corners" ({view name: (K, 2) ids}), and "flex", "flex_covariance" when solved}."""
+    flex, inliers = getattr(fit, "flex", None), getattr(fit, "inliers", None)
+    out = {"flex_note": getattr(fit, "flex_note", ""), "rejected_corners": {}}
+    if flex is not None:
+        out.update(flex=np.asarray(flex, np.float64).copy(), flex_covariance=np.asarray(fit.flex_covariance, np.float64))
+    if inliers is not None:
+        for v, keep in zip(views, np.split(np.asarray(inliers, bool), np.cumsum([len(v.ids) for v in views])[:-1])):
+            if not keep.all():
+                out["rejected_corners"][v.name] = v.ids[~keep].copy()
+    return out

@@ -1,0 +1,138 @@
+"""One calibration solve with per-corner weights, single-corner outlier rejection and the board flex.
+
+Weights: a view's ``sigmas`` (one σ per corner, px) weight its corners by 1/σ
+(:func:`~aicalib_tf.calib.bundle.corner_weights`); views without them take the median σ of those
+that have them (all equal when none has).
+
+Corner outliers: after each fit every corner's normalised residual e = |r|·σ_ref/σ (px) is compared
+with T = max(:data:`CORNER_K` · ŝ, :data:`CORNER_FLOOR_PX`), ŝ = median(e) / √(2 ln 2) over the
+corners in use: the per-axis σ of a 2-D Gaussian residual, from its median norm (a Rayleigh median), so
+a few gross errors do not inflate it. With Gaussian noise a corner passes T with probability
+exp(−K²/2) = 4·10⁻⁵ (K = 4.5). Corners beyond T get weight 0 and the fit is redone from the last one,
+until the set of rejected corners repeats (at most :data:`MAX_ROUNDS` fits); a corner rejected once is
+tested again against each refit. Limits: a view keeps at least two thirds of its corners and
+:data:`~aicalib_tf.calib.view_checks.MIN_VIEW_CORNERS` (a view worse than that is the view-rejection
+rule's of :mod:`aicalib_tf.calib.fit`: none of its corners is rejected), and at most
+:data:`MAX_CORNER_FRACTION` of all corners go, the worst first. The floor keeps the rule from cutting
+into a fit whose residuals are far below a detector's precision.
+
+Flex: see :mod:`aicalib_tf.calib.flex`. With ``flex="auto"`` the flex is solved in every fit and,
+when the views do not determine it, the last fit is redone with a flat board.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from aicalib_tf.calib.bundle import BundleResult, CalibrationError, bundle_adjust
+from aicalib_tf.calib.flex import FLEX_MODES, basis_of_views, flex_problem
+from aicalib_tf.calib.view_checks import MIN_VIEW_CORNERS
+
+__all__ = ["SolveOptions", "solve", "view_sigmas", "flag_corners", "CORNER_K", "CORNER_FLOOR_PX", "MAX_ROUNDS",
+           "MAX_CORNER_FRACTION"]
+
+CORNER_K = 4.5
+CORNER_FLOOR_PX = 0.25
+MAX_ROUNDS = 5
+MAX_CORNER_FRACTION = 0.05
+_RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))  # median of |r| / σ for a 2-D Gaussian r
+
+
+@dataclass(frozen=True)
+class SolveOptions:
+    """How a calibration solve treats corners and the board.
+
+    pattern_size : (cols, rows) inner corners, needed to solve the flex (None: flat board).
+    flex : "auto" (solve it, keep it when determined) or "off". reject_corners : reject single corners.
+    """
+
+    pattern_size: tuple[int, int] | None = None
+    flex: str = "auto"
+    reject_corners: bool = True
+
+    def __post_init__(self):
+        if self.flex not in FLEX_MODES:
+            raise ValueError(f"flex must be one of {', '.join(FLEX_MODES)}, got {self.flex!r}")
+
+
+def view_sigmas(views) -> list | None:
+    """Per-view (N_v,) σ px for :func:`~aicalib_tf.calib.bundle.bundle_adjust`, or None when no view has
+    any (views without their own take the median of the others')."""
+    given = [getattr(v, "sigmas", None) for v in views]
+    if all(g is None for g in given):
+        return None
+    fill = float(np.median(np.concatenate([np.asarray(g, np.float64).ravel() for g in given if g is not None])))
+    return [np.full(len(v.ids), fill) if g is None else np.asarray(g, np.float64) for v, g in zip(views, given)]
+
+
+def flag_corners(fit: BundleResult, sigmas) -> np.ndarray:
+    """(N,) bool over all corners: True where a corner is kept by the rule of the module docstring.
+
+    fit : the last fit (its ``inliers`` are the corners in use). sigmas : per-view σ or None."""
+    res = np.concatenate(fit.residuals)
+    n = len(res)
+    w = np.ones(n)
+    if sigmas is not None:
+        sig = np.concatenate([np.asarray(s, np.float64) for s in sigmas])
+        w = np.median(sig) / sig
+    e = np.linalg.norm(res, axis=1) * w
+    e = np.where(np.isfinite(e), e, np.inf)
+    used = np.ones(n, bool) if fit.inliers is None else fit.inliers
+    thr = max(CORNER_K * float(np.median(e[used])) / _RAYLEIGH_MEDIAN, CORNER_FLOOR_PX)
+    out = e > thr
+    starts = np.cumsum([0] + [len(r) for r in fit.residuals])
+    for a, b in zip(starts[:-1], starts[1:]):
+        if out[a:b].sum() > (b - a) // 3 or (b - a) - out[a:b].sum() < MIN_VIEW_CORNERS:
+            out[a:b] = False  # the view as a whole is off: the view-rejection rule's case
+    cap = int(MAX_CORNER_FRACTION * n)
+    if out.sum() > cap:
+        worst = np.argsort(np.where(out, -e, 0.0), kind="stable")[:cap]
+        out[:] = False
+        out[worst] = True
+    return ~out
+
+
+def _refit(fit: BundleResult, obj, px, free, sigmas, inliers, basis, rank_strict) -> BundleResult:
+    flex = fit.flex if (basis is not None and fit.flex is not None) else None
+    return bundle_adjust(fit.model, obj, px, fit.intrinsics, fit.rvecs, fit.tvecs, free=free, sigmas=sigmas,
+                         inliers=inliers, flex_basis=basis, flex=flex, rank_strict=rank_strict)
+
+
+def solve(model: str, views, obj, px, intrinsics, poses, *, free, rank_strict: bool,
+          options: SolveOptions | None = None, unit: float = 1.0) -> BundleResult:
+    """Fit ``model`` to the views with the options' flex and corner rejection; returns the final fit, its
+    ``flex_note`` saying why the flex is not used ("" when it is, or when ``flex="off"``).
+
+    views : the View list (ids, sigmas, relative); obj, px : their board points (in ``unit`` per square)
+    and corners; intrinsics, poses : the start ((4 + n,), (rvecs, tvecs)). Raises CalibrationError as
+    :func:`~aicalib_tf.calib.bundle.bundle_adjust` does.
+    """
+    options = options or SolveOptions()
+    sigmas = view_sigmas(views)
+    basis, why = (None, "") if options.flex == "off" else basis_of_views(views, options.pattern_size)
+    fit = None
+    if basis is not None:
+        try:
+            fit = bundle_adjust(model, obj, px, intrinsics, *poses, free=free, sigmas=sigmas, flex_basis=basis,
+                                rank_strict=True)
+        except CalibrationError:
+            basis, why = None, "not determined by these views"
+    if fit is None:
+        fit = bundle_adjust(model, obj, px, intrinsics, *poses, free=free, sigmas=sigmas, rank_strict=rank_strict)
+    seen = set()
+    for _ in range(MAX_ROUNDS - 1 if options.reject_corners else 0):
+        keep = flag_corners(fit, sigmas)
+        key = keep.tobytes()
+        if key in seen or (fit.inliers is None and keep.all()) or (fit.inliers is not None
+                                                                    and np.array_equal(keep, fit.inliers)):
+            break
+        seen.add(key)
+        fit = _refit(fit, obj, px, free, sigmas, None if keep.all() else keep, basis, rank_strict)
+    if basis is not None:
+        why = flex_problem(fit.flex, fit.flex_covariance, unit)
+        if why:
+            fit = _refit(fit, obj, px, free, sigmas, fit.inliers, None, rank_strict)
+    return dataclasses.replace(fit, flex_note=why)

@@ -1,0 +1,150 @@
+"""calib.flex, calib.robust: the board's flex, per-corner weights and single-corner rejection inside the solve."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from aicalib_tf.calib.files import calibration_dict, calibration_from_dict, to_json
+from aicalib_tf.calib.fit import View, calibrate_camera
+from aicalib_tf.calib.flex import FLEX_SIGMA_MAX, flex_problem
+from aicalib_tf.calib.report import solve_lines
+from aicalib_tf.geometry import lens as L
+from aicalib_tf.geometry.board_flex import flex_basis, flex_height, flexed_points
+from aicalib_tf.geometry.pattern import board_points
+
+PATTERN = (9, 6)
+SQUARE = 0.04
+SIZE = (640, 480)
+PINHOLE = L.Lens("plumb_bob", [[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]], [-0.25, 0.08, 0.001, -0.0005, 0.0], SIZE)
+
+
+def flexed_views(n=20, noise=0.2, flex=(0.0, 0.0), seed=2, noise_of=None):
+    """``n`` views of a 9x6 board (square 0.04 m) flexed by ``flex`` squares; noise px (1σ per axis), or
+    per view from noise_of(k)."""
+    rng = np.random.default_rng(seed)
+    cols, rows = PATTERN
+    ids = np.stack(np.meshgrid(np.arange(cols), np.arange(rows)), -1).reshape(-1, 2)
+    X = flexed_points(board_points(ids, SQUARE), PATTERN, flex, SQUARE) - [(cols - 1) * SQUARE / 2,
+                                                                           (rows - 1) * SQUARE / 2, 0]
+    w, h = SIZE
+    views = []
+    while len(views) < n:
+        ray = PINHOLE.unproject(rng.uniform([0.1 * w, 0.1 * h], [0.9 * w, 0.9 * h]))
+        t = ray / ray[2] * rng.uniform(0.35, 0.6)
+        R = Rotation.from_euler("xyz", rng.uniform(-40, 40, 3) * [1, 1, 0.5], degrees=True).as_matrix()
+        uv = PINHOLE.project(X @ R.T + t)
+        ok = np.all(np.isfinite(uv), 1) & (uv[:, 0] > 0) & (uv[:, 0] < w - 1) & (uv[:, 1] > 0) & (uv[:, 1] < h - 1)
+        if ok.sum() < 20:
+            continue
+        s = noise if noise_of is None else noise_of(len(views))
+        views.append(View(f"v{len(views):02d}", uv[ok] + s * rng.standard_normal((int(ok.sum()), 2)), ids[ok]))
+    return views
+
+
+def test_flex_basis_is_zero_on_the_grid_edges_and_one_at_the_centre():
+    b = flex_basis(np.array([0.0, 8.0, 4.0, 4.0]), np.array([0.0, 5.0, 2.5, 0.0]), PATTERN)
+    np.testing.assert_allclose(b, [[0, 0], [0, 0], [1, 1], [1, 0]])
+    assert flex_height(4.0, 2.5, PATTERN, (0.01, 0.02)) == pytest.approx(0.03)
+    p = flexed_points(board_points(np.array([[4, 0], [0, 0]]), 25.0), PATTERN, (0.02, 0.0), 25.0)
+    np.testing.assert_allclose(p[:, 2], [0.5, 0.0])  # 0.02 squares of 25 mm at the centre column
+
+
+def test_flex_is_recovered_and_the_focal_length_unbiased():
+    views = flexed_views(flex=(0.012, 0.006))
+    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", square_unit="m")
+    sd = np.sqrt(np.diag(cal.flex_covariance))
+    assert cal.flex_note == "" and sd.max() < FLEX_SIGMA_MAX
+    np.testing.assert_allclose(cal.flex, [0.012, 0.006], atol=max(0.002, 3 * sd.max()))
+    assert abs(cal.fx - 500.0) < 2.5 * cal.std["fx"]
+    flat = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="off")
+    assert flat.flex is None and abs(flat.fx - 500.0) > 3 * flat.std["fx"]  # ignoring the flex biases fx
+    lines = solve_lines(cal)
+    assert lines and lines[-1].startswith("board flex: sag") and "squares" in lines[-1] and " m (" in lines[-1]
+
+
+def test_a_flex_the_views_cannot_determine_stays_off_and_says_why():
+    assert "not determined" in flex_problem([0.01, 0.0], np.diag([0.02, 0.001]) ** 2)
+    assert flex_problem([0.01, 0.0], np.diag([0.001, 0.001]) ** 2) == ""
+    assert "plausible" in flex_problem([0.6, 0.0], np.diag([0.001, 0.001]) ** 2)
+    views = [View(v.name, v.corners, v.ids, relative=True) for v in flexed_views(8, flex=(0.01, 0.0))]
+    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob")
+    assert cal.flex is None and "relative" in cal.flex_note
+    assert solve_lines(cal)[-1].startswith("board flex: not solved")
+
+
+def test_displaced_corners_are_the_ones_rejected_and_the_fit_is_the_clean_one():
+    views = flexed_views(seed=3)
+    rng = np.random.default_rng(7)
+    dirty, moved = [], {}
+    for k, v in enumerate(views):
+        c = v.corners.copy()
+        if k % 4 == 0:
+            i = int(rng.integers(len(c)))
+            c[i] += rng.uniform(3, 10) * np.array([np.cos(a := rng.uniform(0, 2 * np.pi)), np.sin(a)])
+            moved[v.name] = [v.ids[i].tolist()]
+        dirty.append(View(v.name, c, v.ids))
+    clean = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="off")
+    cal = calibrate_camera(dirty, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="off")
+    assert {k: v.tolist() for k, v in cal.rejected_corners.items()} == moved
+    assert cal.n_rejected_corners == len(moved) and not cal.rejected and clean.n_rejected_corners == 0
+    assert abs(cal.fx - clean.fx) < 0.1 * clean.std["fx"] and abs(cal.cx - clean.cx) < 0.1 * clean.std["cx"]
+    old = calibrate_camera(dirty, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="off", reject_corners=False)
+    assert old.rejected or abs(old.fx - clean.fx) > 0.5 * clean.std["fx"]  # whole views went, or fx moved
+    assert solve_lines(cal)[0].startswith(f"{len(moved)} single corners rejected inside the solve")
+    back = calibration_from_dict(json.loads(to_json(cal)))
+    assert {k: v.tolist() for k, v in back.rejected_corners.items()} == moved
+    assert calibration_dict(cal)["n_rejected_corners"] == len(moved)
+
+
+def test_per_corner_sigmas_weight_the_fit():
+    noisy = set(range(0, 20, 3))
+    views = flexed_views(noise=0.1, seed=4, noise_of=lambda k: 1.0 if k in noisy else 0.1)
+    weighted = [View(v.name, v.corners, v.ids, sigmas=np.full(len(v.ids), 1.0 if k in noisy else 0.1))
+                for k, v in enumerate(views)]
+    kw = dict(model="plumb_bob", flex="off", reject_outliers=False)
+    plain = calibrate_camera(views, PATTERN, SQUARE, SIZE, **kw)
+    cal = calibrate_camera(weighted, PATTERN, SQUARE, SIZE, **kw)
+    assert cal.std["fx"] < 0.6 * plain.std["fx"] and abs(cal.fx - 500.0) < 3 * cal.std["fx"]
+    # one σ for all corners, at any scale, is the unweighted fit
+    same = [View(v.name, v.corners, v.ids, sigmas=np.full(len(v.ids), 7.0)) for v in views]
+    eq = calibrate_camera(same, PATTERN, SQUARE, SIZE, **kw)
+    assert eq.fx == pytest.approx(plain.fx, abs=1e-5) and eq.std["fx"] == pytest.approx(plain.std["fx"], rel=1e-5)
+    with pytest.raises(ValueError, match="sigmas"):
+        View("x", views[0].corners, views[0].ids, sigmas=np.zeros(len(views[0].ids)))
+
+
+def test_flex_round_trips_through_camera_json():
+    cal = calibrate_camera(flexed_views(12, flex=(0.01, 0.0), seed=5), PATTERN, SQUARE, SIZE, model="plumb_bob",
+                           square_unit="m")
+    d = json.loads(to_json(cal))
+    assert d["board_flex"]["wx"] == pytest.approx(cal.flex[0]) and d["board_flex"]["note"] == ""
+    assert d["board_flex"]["sag_unit"] == pytest.approx(d["board_flex"]["sag"] * SQUARE)
+    back = calibration_from_dict(d)
+    np.testing.assert_array_equal(back.flex, cal.flex)
+    np.testing.assert_array_equal(back.flex_covariance, cal.flex_covariance)
+
+
+def test_data_gen_renders_a_flexed_board_and_labels_its_projection():
+    import cv2
+    from dataclasses import replace
+
+    from data_gen.presets import get_preset
+    from data_gen.render import board_coordinates
+    from data_gen.sample import draw_scene, make_sample
+
+    preset = replace(get_preset("calib"), name="calib_flexed", flex=(0.08, 0.04))
+    sample, flat = make_sample(preset, 0, 3), make_sample("calib", 0, 3)
+    assert sample.label["board"]["flex"] == [0.08, 0.04] and "flex" not in flat.label["board"]
+    scene = draw_scene(preset, 0, 3)
+    X, Y = board_coordinates(scene.camera.pixel_to_ray(scene.corners), scene.rvec, scene.tvec, scene.board)
+    np.testing.assert_allclose(np.stack([X, Y], 1), scene.board.object_points()[:, :2], atol=1e-9)
+    ok, found = cv2.findChessboardCorners(sample.image, PATTERN)
+    assert ok
+    found = cv2.cornerSubPix(sample.image, found, (5, 5), (-1, -1), (3, 50, 1e-4)).reshape(-1, 2)
+    to_flexed = np.median(np.linalg.norm(found - sample.corners, axis=1))
+    to_flat = np.median(np.linalg.norm(found - flat.corners, axis=1))
+    assert to_flexed < 0.1 and to_flat > 2 * to_flexed, (to_flexed, to_flat)
