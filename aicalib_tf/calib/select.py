@@ -55,6 +55,11 @@ rational_polynomial beat equidistant's held-out RMS by 1.5 standard errors (0.16
 0.171 ± 0.002 px) with k1 = 0.34 ± 0.23, and the two halves of the views chose different families:
 beyond the boards its pixels were a pinhole's extrapolation of a lens it cannot image.
 
+A model whose fit chooses its layout from the views (the spline, ``START == "layout"``) comes last, and
+is fitted only when the best model so far leaves a pattern in its residuals over the image
+(:func:`~aicalib_tf.calib.splined_fit.misfit_note`); its row says so otherwise. A spline refused by its
+fit (too few views) gets the reason in its row, and the choice moves on.
+
 Determined extras. Among the models within one standard error, one whose ``EXTRA_COEFFS`` (the
 coefficients that make it more than a simpler model: rational's k4..k6, DS's ξ, EUCM's β) the
 views do not determine (|value − the simpler model's value| < 2σ) gives way to one that is
@@ -71,6 +76,7 @@ from __future__ import annotations
 import numpy as np
 
 from aicalib_tf.calib.bundle import CalibrationError, solve_pose
+from aicalib_tf.calib.splined_fit import misfit_note
 from aicalib_tf.calib.starts import widest_angle
 from aicalib_tf.geometry.image_circle import circle_fov_deg
 from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens, get_model
@@ -231,8 +237,15 @@ def select_model(views, square_size: float, fit, models=MODELS, *, circle=None):
     layout its fit chose; its row has the bare name). Raises CalibrationError when no model can be fitted.
     """
     rows, fits, widest, what = {}, {}, None, ""
-    for model in sorted(models, key=lambda m: not get_model(m).IS_FISHEYE):  # fisheyes first: the widest ray
+    order = sorted(models, key=lambda m: (get_model(m).START == "layout", not get_model(m).IS_FISHEYE))
+    for model in order:  # fisheyes first (the widest ray), a model whose views choose its layout (a spline) last
         row = rows[model] = _row(model, sum(len(v.ids) for v in views))
+        if get_model(model).START == "layout" and fits:  # a spline only where the best model leaves a pattern
+            ranked = sorted((m for m in fits if np.isfinite(rows[m]["cv_rms"])), key=lambda m: rows[m]["cv_rms"])
+            note = misfit_note(fits[ranked[0]], views) if ranked else None
+            if note is not None:
+                row["note"] = note
+                continue
         if widest is not None and not widest + RAY_MARGIN_DEG < np.degrees(get_model(model).MAX_ANGLE):
             row["note"] = (f"{what} {widest:.1f}° off-axis; {model} images less than "
                            f"{np.degrees(get_model(model).MAX_ANGLE):.0f}° (not eligible)")

@@ -17,6 +17,9 @@ A fit of ``splined_base`` (the bare name; :mod:`aicalib_tf.geometry._splined`) g
 4. **Smoothness.** ``smooth`` = s·f px per normalized unit, for s in :data:`SMOOTH_REL`: each is fitted on
    the even views and scored on the odd ones and the other way round (held-out RMS, each held-out view
    posed with the fitted intrinsics); the lowest mean wins, the smoother on a tie within 1%.
+Under ``auto`` (:mod:`aicalib_tf.calib.select`) a spline is fitted only when the best parametric model
+leaves a pattern in its residuals over the image (:func:`misfit_note`): it has nothing to earn otherwise.
+
 5. **Start and fit.** K from the base lens; the knots by linear least squares so that the spline matches
    the base lens's projection of the corners' rays and of a grid over the rectangle (with the
    regularization); poses by PnP on rays; then the bundle fit with the regularization.
@@ -39,7 +42,7 @@ from aicalib_tf.geometry._equidistant import unproject as _unproject_kb
 from aicalib_tf.geometry._splined import FAMILY_NAME, MAX_KNOTS, MIN_KNOTS, N_BASE, splined_name
 from aicalib_tf.geometry.lens import Lens, get_model
 
-__all__ = ["fit_splined", "choose_layout", "spline_start", "MIN_VIEWS", "CORNERS_PER_KNOT", "SMOOTH_REL"]
+__all__ = ["fit_splined", "choose_layout", "spline_start", "misfit_note", "MIN_VIEWS", "CORNERS_PER_KNOT", "SMOOTH_REL"]
 
 MIN_VIEWS = 10
 CORNERS_PER_KNOT = 20.0  # corners per knot over the covered area (each knot holds 2 values)
@@ -49,6 +52,8 @@ HELD_OUT_NFEV = 100  # each smoothness candidate's fit on half the views
 MAX_HALF_FOV_DEG = 100.0  # the widest border ray the rectangle is stretched to cover
 _MARGIN = 1.02
 RANGE_MARGIN_DEG = 15.0
+MISFIT_GRID = 6  # cells per axis of the residual-pattern test
+MISFIT_Z = 3.0
 
 
 def _base_k(lens: Lens) -> np.ndarray:
@@ -127,6 +132,39 @@ def spline_start(base: Lens, model: str, px) -> np.ndarray:
         A = f * B
         knots.append(np.linalg.solve(A.T @ A + half.T @ half, A.T @ (target[:, axis] - c - f * s)))
     return np.concatenate([[base.fx, base.fy, base.cx, base.cy], k, *knots])
+
+
+def misfit_note(fit, views) -> str | None:
+    """Why the model choice need not fit a spline after ``fit`` (the best parametric BundleResult), or None.
+
+    The views' corners are binned on a :data:`MISFIT_GRID` grid over their bounding box; a cell with at
+    least 8 corners contributes n·|mean residual|²/σ² (σ²: the residuals' variance per axis), which is
+    χ² with 2 degrees of freedom per cell when the residuals are noise alone. The Wilson–Hilferty z of
+    the sum below :data:`MISFIT_Z` says the parametric model leaves no pattern a spline could take up."""
+    r = [np.asarray(x, np.float64).reshape(-1, 2) for x in getattr(fit, "residuals", None) or []]
+    q = [np.asarray(v.corners, np.float64).reshape(-1, 2) for v in views]
+    if len(r) != len(q) or any(len(a) != len(b) for a, b in zip(r, q)):
+        return None
+    r, q = np.concatenate(r), np.concatenate(q)
+    ok = np.isfinite(r).all(axis=1)
+    r, q = r[ok], q[ok]
+    lo, hi = q.min(axis=0), q.max(axis=0) + 1e-9
+    cell = np.floor((q - lo) / (hi - lo) * MISFIT_GRID).astype(np.int64)
+    key = cell[:, 1] * MISFIT_GRID + cell[:, 0]
+    var = float(np.mean(r * r))
+    stat, k = 0.0, 0
+    for c in np.unique(key):
+        sel = key == c
+        if sel.sum() >= 8:
+            m = r[sel].mean(axis=0)
+            stat, k = stat + sel.sum() * float(m @ m) / max(var, 1e-300), k + 2
+    if k == 0:
+        return None
+    z = ((stat / k) ** (1 / 3) - (1 - 2 / (9 * k))) / math.sqrt(2 / (9 * k))
+    if z >= MISFIT_Z:
+        return None
+    return (f"{FAMILY_NAME}: not fitted: the best model's residuals show no pattern over the image "
+            f"(z = {z:.1f} < {MISFIT_Z:g} over {k // 2} cells)")
 
 
 def _held_out_rms(model: str, obj, px, intr, poses, train: np.ndarray) -> float:

@@ -63,3 +63,17 @@ def test_files_round_trip_and_the_maps_remap_like_the_lens(spline_cal, tmp_path)
     img = (np.indices((480, 640)).sum(axis=0) % 256).astype(np.uint8)
     out = cv2.remap(img, mx, my, cv2.INTER_LINEAR)
     np.testing.assert_array_equal(out, F.undistort(img, cal))
+
+
+def test_the_model_choice_fits_a_spline_only_where_the_residuals_show_a_pattern():
+    from types import SimpleNamespace
+
+    from aicalib_tf.calib.splined_fit import misfit_note
+
+    rng = np.random.default_rng(0)
+    views = synthetic_views(WIDE, 12, 0.0, seed=5)
+    noise = [0.1 * rng.standard_normal(v.corners.shape) for v in views]
+    assert "no pattern" in misfit_note(SimpleNamespace(residuals=noise), views)
+    # a 0.1 px displacement over the image's right third, below the noise of single corners
+    bump = [n + 0.1 * (v.corners[:, :1] > 430) * [1.0, -0.5] for n, v in zip(noise, views)]
+    assert misfit_note(SimpleNamespace(residuals=bump), views) is None
