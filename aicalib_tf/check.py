@@ -17,6 +17,9 @@ footage's own noise:
 - the lens test: how much refitting every intrinsic lowers the residuals (a changed distortion
   leaves a radial pattern; blur and noise do not), beyond what the calibration's uncertainty allows.
 
+Both allow at least 0.04 px per axis of corner error that repeats between views (a detector's
+systematic error), so very clean footage does not make a negligible change significant.
+
 It prints the verdict, the views used and skipped with reasons, the corner noise of both footages,
 each drift with ±1σ, and the smallest fx change and principal-point shift these views detect 95% of
 the time (with a note when the new footage is much noisier than the calibration's); --out writes
