@@ -68,7 +68,7 @@ __all__ = ["CheckResult", "check_calibration", "check_fields", "format_check", "
 
 ALPHA = 0.01  # each test's false-alarm rate for an unchanged camera
 POWER = 0.95  # the detection probability of the reported smallest detectable changes
-NOISIER = 1.5  # check footage noisier than the calibration's by this factor gets a note
+NOISIER = 1.5  # check footage noisier than the calibration's by this factor (with the floor) gets a note
 MIN_CHECK_VIEWS = 3
 SYSTEMATIC_PX = 0.04  # corner error per axis that repeats between views (detector, rendering); both covariances assume it
 
@@ -347,7 +347,7 @@ def check_calibration(cal, views, *, alpha: float = ALPHA, hold_distortion: bool
     notes = [note] if note else []
     if free is None:
         notes.append("every intrinsic could not be refitted to these views: the lens test was not run")
-    if noise > NOISIER * cal_noise:
+    if sigma2 > NOISIER ** 2 * (cal_noise ** 2 + SYSTEMATIC_PX ** 2):  # noisier beyond the floor both have
         notes.append(f"the check footage is {noise / cal_noise:.1f}x noisier than the calibration's (corner noise "
                      f"{noise:.3f} against {cal_noise:.3f} px per axis); it still detects fx changed by "
                      f"{100 * small_fx / calibrated[0]:.2f}% or the principal point moved {small_pp:.1f} px "
