@@ -41,7 +41,7 @@ from aicalib_tf.calib.starts import convert_start, fisheye_start, widest_angle
 from aicalib_tf.calib.view_checks import MIN_VIEW_CORNERS, duplicates, view_problem
 from aicalib_tf.geometry.image_circle import ImageCircle
 from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens, get_model, model_from_ros, project
-from aicalib_tf.geometry.pattern import board_points, check_pattern
+from aicalib_tf.geometry.pattern import board_points, check_lattice
 
 __all__ = ["View", "Calibration", "CalibrationError", "calibrate_camera", "fit_views", "choose_model", "view_rms",
            "MIN_VIEW_CORNERS", "outlier_threshold"]
@@ -207,7 +207,7 @@ def _sort_views(views, pattern_size: tuple[int, int], image_size=None) -> tuple[
 
 
 def _check_args(pattern_size, square_size, image_size, min_views) -> tuple[int, int]:
-    pattern_size = check_pattern(pattern_size)
+    pattern_size = check_lattice(pattern_size)
     if not np.isfinite(square_size) or square_size <= 0:
         raise ValueError(f"square_size must be a positive number, got {square_size!r}")
     if image_size is None or len(image_size) != 2 or min(int(s) for s in image_size) < 2:

@@ -27,6 +27,7 @@ from aicalib_tf.calib.flex import flex_line
 from aicalib_tf.calib.quality import coverage_counts
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.image_circle import circle_fov_deg, circle_problem
+from aicalib_tf.geometry.aprilgrid import corner_count
 from aicalib_tf.geometry.pattern import board_points
 
 __all__ = ["field_of_view", "fov_line", "view_tilts_deg", "coverage_counts", "calibration_warnings", "format_report", "report_figure",
@@ -125,7 +126,8 @@ def format_report(cal: Calibration, views: list[View], *, skipped: dict | None =
     for name, why in cal.rejected.items():
         lines.append(f"  rejected {name}: {why}")
     worst, worst_rms = cal.worst_view()
-    partial = int(np.sum(cal.corner_counts < cal.pattern_size[0] * cal.pattern_size[1]))
+    full = corner_count((cal.meta or {}).get("board")) or cal.pattern_size[0] * cal.pattern_size[1]  # an AprilGrid's lattice is sparse
+    partial = int(np.sum(cal.corner_counts < full))
     used = set(cal.views)
     relative = sum(1 for v in views if getattr(v, "relative", False) and v.name in used)
     lines.append(f"RMS reprojection error {cal.rms:.3f} px (worst view {worst}: {worst_rms:.3f} px)"

@@ -33,7 +33,7 @@ from aicalib_tf.calib.bundle import CalibrationError
 from aicalib_tf.calib.fit import Calibration, calibrate_camera, outlier_threshold
 from aicalib_tf.calib.rig_bundle import Observation, RigFit, rig_adjust
 from aicalib_tf.calib.rig_result import RigCalibration, relative_flags, rig_result
-from aicalib_tf.geometry.pattern import board_points, check_pattern
+from aicalib_tf.geometry.pattern import board_points, check_lattice
 from aicalib_tf.geometry.rectify import compose, invert, relative_pose
 
 __all__ = ["RigCalibration", "calibrate_rig", "place_cameras", "MIN_SHARED_VIEWS", "frame_groups", "fit_rig",
@@ -193,7 +193,7 @@ def calibrate_rig(views, pattern_size, square_size: float, image_sizes, *, names
     camera's calibration keeps its own and uses it as a single camera's does. Raises :class:`CalibrationError` naming the camera that cannot be calibrated or
     placed, or saying that the cameras never see the board at once; ValueError for bad arguments.
     """
-    pattern_size = check_pattern(pattern_size)
+    pattern_size = check_lattice(pattern_size)
     C = len(views)
     if C < 2:
         raise ValueError(f"a rig needs at least 2 cameras, got {C}")

@@ -73,6 +73,10 @@ def make_detector(name: str, pattern_size: tuple[int, int], model: str = DETECTO
 
     if name not in DETECTORS:
         raise ValueError(f"unknown detector {name!r}; choose from {', '.join(DETECTORS)}")
+    if hasattr(pattern_size, "tag_ids"):  # an AprilGrid (aicalib_tf.geometry.aprilgrid): OpenCV decodes its tags
+        from aicalib_tf.detect.aprilgrid import make_detector as aprilgrid_detector
+
+        return aprilgrid_detector(pattern_size)
     if hasattr(pattern_size, "marker_ids"):  # a ChArUco board (aicalib_tf.geometry.charuco)
         return _charuco_detector(name, pattern_size, model)
     detectors, info = make_detectors([name], tuple(pattern_size), model, relative=True)
@@ -191,9 +195,10 @@ def _detect_all(files: list[str], labels: dict[str, str], cfg: "CalibrateConfig"
 def _target(cfg):
     """What the detector looks for: the ChArUco board of ``cfg.board``, else the pattern."""
     if cfg.board:
+        from aicalib_tf.geometry.aprilgrid import is_aprilgrid, load_board
         from aicalib_tf.geometry.charuco import parse_board
 
-        return parse_board(cfg.board)
+        return load_board(cfg.board) if is_aprilgrid(cfg.board) else parse_board(cfg.board)
     return cfg.pattern
 
 
@@ -350,7 +355,8 @@ def _calibrate_files(files: list[str], detect, cfg: CalibrateConfig):
         whys = Counter(f.why for f in found if f.why)
         if whys and "board" in detect.info:  # a ChArUco board: its markers say why (e.g. another size)
             why, n = whys.most_common(1)[0]
-            raise CalibrationError(f"no ChArUco board read in any of the {len(files)} images; in {n}: {why}")
+            raise CalibrationError(f"no {detect.info.get('kind', 'ChArUco')} board read in any of the {len(files)} images; "
+                                   f"in {n}: {why}")
         hint = _suggest_pattern(files, detect.info["model"]) if "model" in detect.info else ""
         raise CalibrationError(f"no {cfg.pattern[0]}x{cfg.pattern[1]} board found in any of the {len(files)} images{hint}")
     meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),

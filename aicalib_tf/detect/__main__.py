@@ -7,7 +7,9 @@ and unreadable files. ``--workers N`` (default: one per core, one per 8 images a
 in worker processes that each load the model once (:mod:`aicalib_tf.detect.batch`); the files
 and counts are the same as with ``--workers 1``, which runs in this process. An unreadable file
 is counted and named at the end; the batch goes on. ``--board charuco:...`` finds a ChArUco board
-instead (its corners named by its markers, :mod:`aicalib_tf.detect.charuco`). Exit codes: 0 done; 2 bad arguments or model.
+instead (its corners named by its markers, :mod:`aicalib_tf.detect.charuco`); ``--board aprilgrid:6x6,tag=88mm,spacing=0.3``
+or a Kalibr target.yaml finds Kalibr's AprilGrid (tags decoded by OpenCV's aruco, corners by the
+saddle fit, ids on the grid's lattice, :mod:`aicalib_tf.detect.aprilgrid`). Exit codes: 0 done; 2 bad arguments or model.
 """
 
 from __future__ import annotations
@@ -25,7 +27,8 @@ def build_parser():
     ap = parser("python -m aicalib_tf.detect", __doc__)
     ap.add_argument("images", nargs="+", help="image files or glob patterns (** recurses; each file once)")
     ap.add_argument("--pattern", help="inner corners, COLSxROWS, e.g. 9x6 (or --board)")
-    ap.add_argument("--board", help="a ChArUco board instead of --pattern: charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100")
+    ap.add_argument("--board", help="a ChArUco board instead of --pattern: charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100; "
+                                    "an AprilGrid: aprilgrid:6x6,tag=88mm,spacing=0.3; or a Kalibr target.yaml")
     ap.add_argument("--out", required=True, help="folder for <image>.png overlays and <image>.json corners")
     ap.add_argument("--model", default=DETECTOR_NETWORK, help=NETWORK_HELP)
     ap.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core, but one per 8 images at most)")
@@ -55,10 +58,12 @@ def _main(args) -> int:
     from aicalib_tf.io import expand_images
     from aicalib_tf.outfolder import OutputFolder
 
-    if args.board:  # detect_corners dispatches on a ChArUco board
+    if args.board:  # detect_corners dispatches on a ChArUco board, the file detector on an AprilGrid
+        from aicalib_tf.geometry.aprilgrid import Checkerboard, is_aprilgrid, load_board
         from aicalib_tf.geometry.charuco import parse_board
 
-        pattern = parse_board(args.board)
+        pattern = load_board(args.board) if is_aprilgrid(args.board) else parse_board(args.board)
+        pattern = pattern.pattern_size if isinstance(pattern, Checkerboard) else pattern  # a Kalibr checkerboard
     elif args.pattern:
         pattern = check_pattern(parse_pattern(args.pattern))
     else:

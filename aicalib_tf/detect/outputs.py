@@ -61,7 +61,12 @@ def file_detector(pattern, model_name: str, out, sha):
             gray = load_image(f)
         except ImageError as exc:
             return "failed", str(exc)
-        det = detect_corners(gray, pattern, model=model)
+        if hasattr(pattern, "tag_ids"):  # an AprilGrid: OpenCV decodes its tags, no network
+            from aicalib_tf.detect.aprilgrid import detect_corners_aprilgrid
+
+            det = detect_corners_aprilgrid(gray, pattern)
+        else:
+            det = detect_corners(gray, pattern, model=model)
         write_detection(out, f, stem, gray, det, pattern, model=model_name, sha=sha)
         return ("complete" if det.complete else "partial" if det.found else "none"), det.reason
     return work

@@ -8,12 +8,29 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["MIN_PATTERN", "MAX_PATTERN", "parse_pattern", "check_pattern", "board_points", "board_symmetries", "pattern_ids"]
+__all__ = ["MIN_PATTERN", "MAX_PATTERN", "MAX_LATTICE_SIDE", "parse_pattern", "check_pattern", "check_lattice",
+           "board_points", "board_symmetries", "pattern_ids"]
 
 MIN_PATTERN = (3, 3)
 
 
 MAX_PATTERN = (20, 15)
+
+
+MAX_LATTICE_SIDE = 10_000  # ids along one side of a board's lattice (a camera file's limit)
+
+
+def check_lattice(pattern_size) -> tuple[int, int]:
+    """Validate ``(cols, rows)`` of a board's id lattice for calibration: each side in
+    [3, ``MAX_LATTICE_SIDE``]. A chessboard's lattice is its pattern; a board whose corners sit on a
+    sparse lattice (an AprilGrid, :mod:`aicalib_tf.geometry.aprilgrid`) may exceed ``MAX_PATTERN``."""
+    try:
+        cols, rows = (int(v) for v in pattern_size)
+    except (TypeError, ValueError):
+        raise ValueError(f"pattern_size must be (cols, rows), got {pattern_size!r}") from None
+    if min(cols, rows) < min(MIN_PATTERN) or max(cols, rows) > MAX_LATTICE_SIDE:
+        raise ValueError(f"pattern_size must have sides in [{min(MIN_PATTERN)}, {MAX_LATTICE_SIDE}], got {cols}x{rows}")
+    return cols, rows
 
 
 def parse_pattern(text: str) -> tuple[int, int]:
