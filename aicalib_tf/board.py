@@ -1,7 +1,12 @@
-"""Write a printable ChArUco board, its description printed beneath it.
+"""Write a printable ChArUco board or Kalibr AprilGrid, its description printed beneath it.
 
     python -m aicalib_tf.board "charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100" --out board.pdf
         [--paper A4|A3|A2|letter] [--dpi 300]
+    python -m aicalib_tf.board "aprilgrid:6x6,tag=20mm,spacing=0.3" --out grid.pdf
+
+An AprilGrid (or a Kalibr ``target_type: aprilgrid`` YAML) is drawn from its layout
+(:mod:`aicalib_tf.geometry.aprilgrid`): tags with a two-bit black border and a black square of the
+gap's side at every tag corner, as Kalibr prints it.
 
 The board is drawn by OpenCV (``cv2.aruco.CharucoBoard.generateImage``) at its true size on the
 paper (the longer side of the board along the longer side of the paper), centred, with the
@@ -30,13 +35,14 @@ _UNIT_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 def _layout(board, paper: str) -> tuple[tuple[float, float], tuple[float, float], float]:
     """((paper w, h) mm, (board x0, y0) mm on the page, square mm): landscape when the board is wider."""
     if board.unit not in _UNIT_MM:
-        raise ValueError(f"board {board.describe()}: give square= and marker= a unit (mm, cm, m, in) to print it")
+        what = "tag=" if hasattr(board, "tag_ids") else "square= and marker="
+        raise ValueError(f"board {board.describe()}: give {what} a unit (mm, cm, m, in) to print it")
     try:
         pw, ph = PAPERS[paper.lower()]
     except KeyError:
         raise ValueError(f"--paper must be one of {', '.join(PAPERS)}, got {paper!r}") from None
-    sq = board.square * _UNIT_MM[board.unit]
-    bw, bh = board.squares[0] * sq, board.squares[1] * sq
+    cells, sq = _cells(board)
+    bw, bh = cells[0] * sq, cells[1] * sq
     if bw > bh:
         pw, ph = ph, pw
     if bw > pw - 2 * MARGIN_MM or bh > ph - 2 * MARGIN_MM - 8.0:
@@ -45,9 +51,22 @@ def _layout(board, paper: str) -> tuple[tuple[float, float], tuple[float, float]
     return (pw, ph), ((pw - bw) / 2.0, (ph - bh) / 2.0 - 4.0), sq
 
 
+def _cells(board) -> tuple[tuple[int, int], float]:
+    """((across, down), mm): the board's printed extent in cells of that side, a ChArUco board's
+    squares or an AprilGrid's lattice units (its corner squares beyond the outer tags included)."""
+    if hasattr(board, "tag_ids"):  # an AprilGrid (aicalib_tf.geometry.aprilgrid)
+        a = board.fraction[0]
+        return (board.pattern_size[0] - 1 + 2 * a, board.pattern_size[1] - 1 + 2 * a), board.square_size * _UNIT_MM[board.unit]
+    return tuple(board.squares), board.square * _UNIT_MM[board.unit]
+
+
 def _board_pixels(board, square_px: int) -> np.ndarray:
     """(Y·p, X·p) uint8 board drawn by OpenCV, p = ``square_px`` or the nearest size OpenCV draws
     (``generateImage`` refuses a few sizes; a PDF places the bitmap at the exact size anyway)."""
+    if hasattr(board, "tag_ids"):  # an AprilGrid, drawn from its layout: p px per lattice unit
+        from aicalib_tf.geometry.aprilgrid import layout_image
+
+        return layout_image(board, square_px, board.fraction[0] * square_px)
     X, Y = board.squares
     cv = board.to_opencv()
     for p in sorted(range(max(square_px - 3, 1), square_px + 4), key=lambda q: abs(q - square_px)):
@@ -79,7 +98,8 @@ def page_pdf(board, paper: str = "A4", dpi: int = 300) -> bytes:
     (pw, ph), (x0, y0), sq = _layout(board, paper)
     img = _board_pixels(board, max(int(round(sq * dpi / 25.4)), 1))
     fig = new_figure((pw / 25.4, ph / 25.4))
-    bw, bh = board.squares[0] * sq, board.squares[1] * sq
+    cells, _ = _cells(board)
+    bw, bh = cells[0] * sq, cells[1] * sq
     ax = fig.add_axes((x0 / pw, 1.0 - (y0 + bh) / ph, bw / pw, bh / ph))
     ax.imshow(img, cmap="gray", vmin=0, vmax=255, interpolation="nearest", aspect="auto")
     ax.set_axis_off()
@@ -94,7 +114,8 @@ def build_parser():
     from aicalib_tf.cli import parser
 
     ap = parser("python -m aicalib_tf.board", __doc__)
-    ap.add_argument("board", help="charuco:XxY,square=30mm,marker=22mm,dict=DICT_5X5_100[,legacy][,first=0]")
+    ap.add_argument("board", help="charuco:XxY,square=30mm,marker=22mm,dict=DICT_5X5_100[,legacy][,first=0], "
+                                  "aprilgrid:6x6,tag=88mm,spacing=0.3[,family=tag36h11][,first=0] or a Kalibr aprilgrid target.yaml")
     ap.add_argument("--out", required=True, help="board.pdf or board.png")
     ap.add_argument("--paper", default="A4", help=f"one of {', '.join(PAPERS)} (default: %(default)s)")
     ap.add_argument("--dpi", type=int, default=300, help="pixels per inch of the board bitmap (default: %(default)s)")
@@ -106,10 +127,13 @@ def _parse_args(argv):
 
 
 def _main(args) -> int:
+    from aicalib_tf.geometry.aprilgrid import AprilGrid, is_aprilgrid, load_board
     from aicalib_tf.geometry.charuco import parse_board
     from aicalib_tf.io import atomic_write_bytes
 
-    board = parse_board(args.board)
+    board = load_board(args.board) if is_aprilgrid(args.board) else parse_board(args.board)
+    if not isinstance(board, AprilGrid) and not hasattr(board, "squares"):
+        raise ValueError(f"{args.board}: a Kalibr checkerboard is a chessboard; this prints ChArUco boards and AprilGrids")
     if not 50 <= args.dpi <= 1200:
         raise ValueError(f"--dpi must be between 50 and 1200, got {args.dpi}")
     out = str(args.out)

@@ -86,3 +86,18 @@ def test_calibration_from_eight_rendered_views_recovers_fx(layout):
     cal = calibrate_camera(views, BOARD.pattern_size, BOARD.square_size, SIZE, model="plumb_bob", square_unit="mm")
     assert abs(cal.K[0, 0] / 900.0 - 1) < 0.01 and abs(cal.K[1, 1] / 900.0 - 1) < 0.01
     assert cal.rms < 0.05
+
+
+def test_the_printed_page_reads_back_with_every_corner():
+    from aicalib_tf.board import page_image
+
+    board = parse_board("aprilgrid:6x6,tag=20mm,spacing=0.3")
+    page = cv2.GaussianBlur(page_image(board, "A4", 150), (0, 0), 0.8)
+    det = detect_aprilgrid(page, board)
+    assert len(det.ids) == 144 and det.rotation == PRINT_ROTATION
+    # the corners are evenly spaced lattice points: an affine map from ids fits them to a pixel's fraction
+    A = np.c_[det.ids, np.ones(len(det.ids))]
+    fit, *_ = np.linalg.lstsq(A, det.corners, rcond=None)
+    assert np.abs(A @ fit - det.corners).max() < 0.3
+    px_per_mm = 150 / 25.4
+    assert fit[0, 0] == pytest.approx(round(board.square_size * px_per_mm), rel=1e-3)  # the bitmap: whole px a unit
