@@ -63,8 +63,8 @@ rows or columns at the right or bottom, like 1281x721 among 1280x720), or scale 
 
 A ChArUco board replaces --pattern and --square: ``--board charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100``
 (every view is partial by nature; each corner's id comes from the markers beside it). With --rig,
-each camera may see a different part of the board in a pair: the ids tie them. Videos and cameras
-read chessboards.
+each camera may see a different part of the board in a pair: the ids tie them. Videos, cameras and
+rig videos read it too (``video.mp4 --board charuco:...``): a board cut by the frame is a view.
 
 Exit codes: 0 success; 2 bad input (no images, bad --pattern or --square, a bad model, no board
 found, fewer than 3 usable views, mixed sizes); nothing is written on failure.
@@ -156,7 +156,7 @@ def _main(args) -> int:
         from aicalib_tf.guided.workflow import GuidedRunConfig, parse_target, run_guided
 
         return _run(lambda: GuidedRunConfig(source=source, target_px=parse_target(args.target), max_views=args.max_views,
-                                            save_partial=args.save_partial, **_common(args, video=True)), run_guided,
+                                            save_partial=args.save_partial, **_common(args)), run_guided,
                     "camera.yaml, camera.json (with the kept frames), camera_info.yaml, report.png")
     if bool(args.rig) == bool(args.images):
         print("error: give either images or --rig NAME=GLOB ... (not both)" if args.rig else "error: no images given",
@@ -188,18 +188,15 @@ def _rig_video_config(args, cameras):
 
     return RigVideoConfig(cameras=cameras, target_px=parse_target(args.target), max_views=args.max_views,
                           sync_tolerance_s=parse_tolerance(args.sync_tolerance), pair_by=args.pair_by,
-                          save_partial=args.save_partial, **_common(args, video=True))
+                          save_partial=args.save_partial, **_common(args))
 
 
-def _common(args, video: bool = False) -> dict:
-    """The options one camera and a rig share, parsed (ValueError for a bad --pattern or --square, or a
-    ChArUco --board with a video, a camera or rig videos: those read chessboards)."""
+def _common(args) -> dict:
+    """The options one camera and a rig share, of photos or of the guided loop, parsed
+    (ValueError for a bad --pattern, --square or --board)."""
     from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
 
     if args.board:
-        if video:
-            raise ValueError("--board (a ChArUco board) takes photos, of one camera or a rig; videos and cameras "
-                             "read chessboards (--pattern)")
         from aicalib_tf.geometry.charuco import parse_board
 
         board = parse_board(args.board)

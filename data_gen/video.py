@@ -3,7 +3,7 @@
     python -m data_gen.video --out DIR [--seconds 60] [--fps 30] [--size 1280x720]
         [--lens mild|strong|fisheye150] [--pattern 9x6] [--square 25] [--seed 0]
         [--shutter 0.0167] [--rolling-shutter 0] [--noise 2] [--format avi|mp4] [--y4m] [--workers N] [--pace 1]
-        [--rig-baseline MM]
+        [--rig-baseline MM] [--board charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100]
 
 A board moves along a smooth hand-held path (:mod:`data_gen.path`: rests at poses spread over the
 image with varied tilts, minimum-jerk moves between them, some poses cut by the frame, some out
@@ -31,10 +31,15 @@ camera ``B`` board units to its right, converging by a few degrees (placed as
 same board path at the same instants. It writes video_cam0/video_cam1 and labels_cam0/labels_cam1
 (the same fields, each in its camera's frame), and meta.json's ``rig`` holds R (2, 3, 3) and T
 (2, 3) with X_k = R_k·X_0 + T_k (board units) and the baseline |T_1|.
+
+``--board charuco:...`` films a ChArUco board (:mod:`data_gen.charuco`) instead of the chessboard:
+its inner corners replace --pattern and --square (corner ids are OpenCV's ChArUco ids), and each
+label also holds ``board`` (the description).
 """
 
 from __future__ import annotations
 
+# size: one video's frame model (scene, truth, motion blur, rolling shutter), its writers and its command line
 import json
 import math
 import sys
@@ -44,11 +49,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from aicalib_tf.geometry.charuco import parse_board
 from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
 from aicalib_tf.geometry.pose import in_frame
 
 from .background import make_background
 from .board import Board
+from .charuco import CharucoTarget
 from .camera import sample_camera, sample_fisheye
 from .dataset import check_pixels
 from .degrade import gaussian_blur, gaussian_noise
@@ -87,8 +94,13 @@ class VideoConfig:
     workers: int = 1
     pace: float = 1.0  # the hand's speed: rests and moves last 1/pace as long (short test videos: 3)
     rig_baseline: float = 0.0  # board units between two cameras (0: one camera)
+    board: str | None = None  # a ChArUco description (charuco:...): its corners replace pattern and square
 
     def __post_init__(self):
+        if self.board:  # a bad description is a ValueError naming the field
+            b = parse_board(self.board)
+            object.__setattr__(self, "pattern", b.pattern_size)
+            object.__setattr__(self, "square", float(b.square))
         if self.lens not in LENSES:
             raise ValueError(f"--lens must be one of {', '.join(LENSES)}, got {self.lens!r}")
         if self.format not in ("avi", "mp4"):
@@ -140,7 +152,7 @@ def make_scene(cfg: VideoConfig, camera: int = 0) -> VideoScene:
     second camera of the stereo pair (``cfg.rig_baseline``), its own lens and background, the same path."""
     rng = np.random.default_rng([cfg.seed, 11])
     cam = _camera(cfg.lens, cfg.size, rng)
-    board = Board(check_pattern(cfg.pattern), float(cfg.square))
+    board = CharucoTarget(parse_board(cfg.board)) if cfg.board else Board(check_pattern(cfg.pattern), float(cfg.square))
     bg = _background(rng, cam)
     path = hand_path(rng, cam, board, cfg.seconds + 1.0 / cfg.fps, dwell_s=(0.25 / cfg.pace, 0.6 / cfg.pace),
                      move_s=(0.8 / cfg.pace, 1.8 / cfg.pace))
@@ -229,7 +241,8 @@ def frame_truth(scene: VideoScene, index: int) -> dict:
             "rvec": cv2.Rodrigues(Rm)[0].ravel().tolist(), "tvec": tvm.tolist(),
             "corners": [[float(x), float(y)] if np.isfinite(x) and np.isfinite(y) else None for x, y in corners],
             "visible": visible.tolist(), "has_board": bool(visible.any()), "motion_px": motion,
-            "subframes": int(np.clip(math.ceil(motion / 0.7), 1, _MAX_SUBFRAMES))}
+            "subframes": int(np.clip(math.ceil(motion / 0.7), 1, _MAX_SUBFRAMES)),
+            **({"board": cfg.board} if cfg.board else {})}
 
 
 def render_frame(scene: VideoScene, index: int) -> tuple[np.ndarray, dict]:
@@ -370,6 +383,7 @@ def build_parser():
     ap.add_argument("--pace", type=float, default=1.0, help="hand speed factor (default: %(default)s)")
     ap.add_argument("--rig-baseline", type=float, default=0.0,
                     help="render a stereo pair this many board units apart (default: one camera)")
+    ap.add_argument("--board", help="film a ChArUco board instead: charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100")
     ap.add_argument("--quiet", action="store_true")
     return ap
 
@@ -385,7 +399,7 @@ def main(argv: list[str] | None = None) -> int:
                           pattern=check_pattern(parse_pattern(args.pattern)), square=args.square, seed=args.seed,
                           shutter=args.shutter, rolling_shutter=args.rolling_shutter, noise=args.noise,
                           format=args.format, y4m=args.y4m, workers=args.workers, pace=args.pace,
-                          rig_baseline=args.rig_baseline)
+                          rig_baseline=args.rig_baseline, board=args.board)
         out = write_video(cfg, progress=not args.quiet)
     except (ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -35,6 +35,7 @@ from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.calib.fit import CalibrationError, View
 from aicalib_tf.guided.save import PARTIAL_HEAD
 from aicalib_tf.guided.session import GuidedCalibration, GuidedConfig, check_max_views
+from aicalib_tf.guided.workflow import board_name, board_target
 
 __all__ = ["RigVideoConfig", "run_rig_video", "is_rig_video", "parse_tolerance", "pair_overlap", "SYNC_CHECK_EVERY"]
 
@@ -63,6 +64,7 @@ class RigVideoConfig:
     save_partial: bool = False  # a reading stopped early (Ctrl-C, a stream that fails) still calibrates
     quiet: bool = False
     workers: int | None = None  # unused: frames come one at a time
+    board: str | None = None  # a ChArUco description (pattern and square then follow from it)
 
     def __post_init__(self):
         check_max_views(self.max_views)
@@ -308,7 +310,7 @@ def run_rig_video(cfg: RigVideoConfig) -> tuple[object, str]:
     from aicalib_tf.outfolder import OutputFolder
 
     models = rig_models(cfg.model, [n for n, _ in cfg.cameras])
-    detect = make_detector(cfg.detector, cfg.pattern, cfg.network)
+    detect = make_detector(cfg.detector, board_target(cfg), cfg.network)
     with OutputFolder(cfg.out, "rig") as out:
         cams = _open(cfg, detect, models)
         partial = False
@@ -326,7 +328,7 @@ def run_rig_video(cfg: RigVideoConfig) -> tuple[object, str]:
         pairings = _check_sync(cams, cfg)
         for c in cams:
             if not c.session.views:
-                raise CalibrationError(f"{c.name} ({c.source.name}): no {cfg.pattern[0]}x{cfg.pattern[1]} board kept "
+                raise CalibrationError(f"{c.name} ({c.source.name}): no {board_name(cfg)} kept "
                                        f"in the {c.session.examined} frames examined (of {len(c.times)})")
         groups, solo = _groups(cams, pairings)
         views, skipped, images, detected = _views(cams, groups, detect, cfg)
@@ -337,7 +339,7 @@ def run_rig_video(cfg: RigVideoConfig) -> tuple[object, str]:
                 "frames": {c.name: len(c.times) for c in cams}, "examined": {c.name: c.session.examined for c in cams},
                 "kept_frames": {c.name: c.session.kept_frames for c in cams}, "frames_used": [n for n, _ in groups],
                 "offset_s": {c.name: p.offset_s if np.isfinite(p.offset_s) else None for c, p in zip(cams[1:], pairings)},
-                "stopped": stopped, "partial": partial}
+                "stopped": stopped, "partial": partial, **({"board": cfg.board} if cfg.board else {})}
         sizes = {c.name: c.session.image_size for c in cams}
         found = {c.name: c.session.image_circle_and_note() for c in cams}  # each camera's examined frames
         circles = {name: circle for name, (circle, _) in found.items()}

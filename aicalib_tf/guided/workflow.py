@@ -5,6 +5,11 @@ it writes the files of the photo path (camera.yaml, camera.json, camera_info.yam
 report.txt), with the kept frames' indices and the loop's counts in camera.json's ``meta``. A
 run stopped before its end (Ctrl-C, or a live stream that stops) writes nothing unless
 ``save_partial``: then the calibration so far, marked ``"partial": true`` in ``meta``.
+
+The board is a chessboard (``pattern``, ``square``) or a ChArUco board (``board``, a
+``charuco:...`` description; :mod:`aicalib_tf.geometry.charuco`): a marker board's partial views
+name their corners by the markers beside them, so a board cut by the frame is a view as a whole
+one is.
 """
 
 from __future__ import annotations
@@ -17,13 +22,14 @@ from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.calib.fit import Calibration, CalibrationError
 from aicalib_tf.guided.session import GuidedCalibration, GuidedConfig, check_max_views
 
-__all__ = ["GuidedRunConfig", "run_guided", "progress_line", "summary_lines", "guided_source", "parse_target"]
+__all__ = ["GuidedRunConfig", "run_guided", "progress_line", "summary_lines", "guided_source", "parse_target",
+           "board_target", "board_name"]
 
 
 @dataclass(frozen=True)
 class GuidedRunConfig:
     """A guided run: ``source`` (a video path, image globs as one string, a camera index or a URL),
-    the board, the loop's settings (:class:`~aicalib_tf.guided.session.GuidedConfig`) and the outputs."""
+    the board (a chessboard's pattern, or ``board``: a ChArUco description), the loop's settings (:class:`~aicalib_tf.guided.session.GuidedConfig`) and the outputs."""
 
     source: str
     pattern: tuple[int, int]
@@ -39,9 +45,25 @@ class GuidedRunConfig:
     quiet: bool = False
     examine_all: bool = False
     workers: int | None = None  # unused: frames come one at a time
+    board: str | None = None  # a ChArUco description (pattern and square then follow from it)
 
     def __post_init__(self):
         check_max_views(self.max_views)
+
+
+def board_target(cfg):
+    """What the detector looks for: the :class:`~aicalib_tf.geometry.charuco.CharucoBoard` of ``cfg.board``
+    (a marker board: partial views name their corners by the markers), else ``cfg.pattern``."""
+    if getattr(cfg, "board", None):
+        from aicalib_tf.geometry.charuco import parse_board
+
+        return parse_board(cfg.board)
+    return cfg.pattern
+
+
+def board_name(cfg) -> str:
+    """How messages name the board: "9x6 board" or "ChArUco board (charuco:...)"."""
+    return f"ChArUco board ({cfg.board})" if getattr(cfg, "board", None) else f"{cfg.pattern[0]}x{cfg.pattern[1]} board"
 
 
 def guided_source(images, camera) -> str | None:
@@ -118,7 +140,7 @@ def run_guided(cfg: GuidedRunConfig) -> tuple[Calibration, str]:
     from aicalib_tf.sources import open_source
 
     check_out_path(cfg.out)
-    detect = make_detector(cfg.detector, cfg.pattern, cfg.network)
+    detect = make_detector(cfg.detector, board_target(cfg), cfg.network)
     session = GuidedCalibration(GuidedConfig(cfg.pattern, cfg.square, cfg.square_unit, cfg.model, cfg.target_px,
                                              cfg.max_views, gate=not cfg.examine_all), detect)
     partial = False
@@ -135,9 +157,11 @@ def run_guided(cfg: GuidedRunConfig) -> tuple[Calibration, str]:
         dropped = source.dropped
     name = source.name
     if not session.views and not partial:
-        raise CalibrationError(f"{name}: no {cfg.pattern[0]}x{cfg.pattern[1]} board found in the {session.examined} "
-                               f"frames examined (of {session.frames_seen})")
-    meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
+        why = f"; {detect.why}" if cfg.board and detect.why else ""  # a marker board's detector says why
+        raise CalibrationError(f"{name}: no {board_name(cfg)} found in the {session.examined} "
+                               f"frames examined (of {session.frames_seen}){why}")
+    meta = {**({"board": cfg.board} if cfg.board else {}),
+            "detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
             "lens_model": cfg.model, "source": name, "frames": session.frames_seen, "examined": session.examined,
             "dropped": dropped, "kept_frames": session.kept_frames, "target_px": cfg.target_px,
             "stopped": stopped, "partial": partial}

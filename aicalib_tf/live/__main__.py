@@ -1,6 +1,7 @@
 """Calibrate a camera from a web page: the feed, the detected corners, where to hold the board next.
 
     python -m aicalib_tf.live --pattern 9x6 --square 25mm [--out calib/] [--port 8765]
+        (or --board charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100 for a ChArUco board)
         [--source video.mp4 | --camera 0 | --source rtsp://...] [--target 0.1px] [--max-views 40]
 
 Open the printed address in a browser: it holds a random token made for this run (as Jupyter's
@@ -14,8 +15,10 @@ next view to show ("a board in the top-left, turned left about its vertical axis
 missing, and the verdict (the predicted projection uncertainty against ``--target``). "Save
 calibration" writes the files of the photo path into ``--out`` (camera.yaml, camera.json,
 camera_info.yaml, report.png, report.txt). ``--host 0.0.0.0`` serves other machines too.
+A ChArUco board (``--board``) names each corner by the markers beside it: a board cut by the
+frame is a view, and the page writes each corner's id beside it.
 
-Exit codes: 0 after Ctrl-C; 2 bad input (a bad pattern or square, a port in use, a source that
+Exit codes: 0 after Ctrl-C; 2 bad input (a bad pattern, square or board, a port in use, a source that
 cannot be opened).
 """
 
@@ -33,7 +36,9 @@ def build_parser():
     from aicalib_tf.cnn.spec import DETECTOR_NETWORK, NETWORK_HELP
 
     ap = parser("python -m aicalib_tf.live", __doc__)
-    ap.add_argument("--pattern", required=True, help="inner corners, COLSxROWS, e.g. 9x6")
+    ap.add_argument("--pattern", help="inner corners, COLSxROWS, e.g. 9x6 (or --board)")
+    ap.add_argument("--board", help="a ChArUco board instead of --pattern and --square: "
+                                    "charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100[,legacy][,first=0]")
     ap.add_argument("--square", default="1", help="square size with unit, e.g. 25mm (default: 1, unitless)")
     ap.add_argument("--out", default="calib", help="where Save writes the calibration (default: %(default)s)")
     ap.add_argument("--source", default=None, help="a video file, image glob or stream URL read by the server")
@@ -77,9 +82,20 @@ def _config(args):
         raise ValueError(f"--port must be in 0..65535, got {args.port}")
     check_max_views(args.max_views)
     check_out_path(args.out)
-    square, unit = parse_square(args.square)
-    return LiveConfig(pattern=check_pattern(parse_pattern(args.pattern)), square=square, square_unit=unit,
-                      out=args.out, source=args.source if args.source is not None else args.camera,
+    if args.board:
+        from aicalib_tf.geometry.charuco import parse_board
+
+        if args.pattern:
+            raise ValueError("give --pattern (a chessboard) or --board (a ChArUco board), not both")
+        b = parse_board(args.board)
+        pattern, square, unit = b.pattern_size, float(b.square), b.unit
+    elif not args.pattern:
+        raise ValueError("give --pattern COLSxROWS (a chessboard) or --board charuco:... (a ChArUco board)")
+    else:
+        pattern = check_pattern(parse_pattern(args.pattern))
+        square, unit = parse_square(args.square)
+    return LiveConfig(pattern=pattern, square=square, square_unit=unit, board=args.board, out=args.out,
+                      source=args.source if args.source is not None else args.camera,
                       detector=args.detector, network=args.network, model=args.model,
                       target_px=parse_target(args.target), max_views=args.max_views)
 
@@ -88,6 +104,7 @@ def _main(args) -> int:
     import asyncio
 
     from aicalib_tf.calib.workflow import make_detector
+    from aicalib_tf.guided.workflow import board_target
     from aicalib_tf.live.server import LiveState, make_app
 
     cfg = _config(args)
@@ -97,8 +114,8 @@ def _main(args) -> int:
         open_source(cfg.source).close()  # a source that cannot be opened fails here, with its name
     from aicalib_tf.live.server import tracking_detector
 
-    detector = make_detector(cfg.detector, cfg.pattern, cfg.network)
-    if cfg.detector == "cnn":  # a stream: follow the board from frame to frame
+    detector = make_detector(cfg.detector, board_target(cfg), cfg.network)
+    if cfg.detector == "cnn" and not cfg.board:  # a chessboard stream: follow the board from frame to frame
         detector = tracking_detector(cfg.pattern, cfg.network, detector)
     state = LiveState(cfg, detector)
     try:

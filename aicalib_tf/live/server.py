@@ -69,6 +69,7 @@ class LiveConfig:
     model: str = "auto"
     target_px: float = 0.1
     max_views: int = 40
+    board: str | None = None  # a ChArUco description (pattern and square follow from it); None: a chessboard
 
 
 def _finite(x):
@@ -77,8 +78,8 @@ def _finite(x):
     return x if np.isfinite(x) else None
 
 
-def update_json(update, session) -> dict:
-    """One update as the page reads it (strict JSON types; no NaN)."""
+def update_json(update, session, *, ids: bool = False) -> dict:
+    """One update as the page reads it (strict JSON; no NaN); ``ids``: with a marker board's corner ids (row·cols + col)."""
     est = update.estimate
     size = session.image_size or (1, 1)
     cover = coverage_counts(session.views, size, COVERAGE_CELLS) if session.views else np.zeros(COVERAGE_CELLS[::-1])
@@ -95,6 +96,7 @@ def update_json(update, session) -> dict:
         "coverage": cover.astype(int).tolist(),
         "frames": int(session.frames_seen), "examined_frames": int(session.examined), "views": len(session.views),
         "target_px": _finite(session.cfg.target_px),
+        **({"ids": [int(c + r * session.cfg.pattern[0]) for c, r in update.ids]} if ids and update.ids is not None else {}),
     }
 
 
@@ -140,7 +142,7 @@ class LiveState:
             t = time.monotonic()
             update = self.session.add((self.index, t, gray))
             self.index += 1
-            self.last = update_json(update, self.session)
+            self.last = update_json(update, self.session, ids=bool(self.cfg.board))
             self.last["stall"] = self.watch.note(update, len(self.session.views), self.clock())
             self.last["bad_frames"] = self.bad_frames
             now = time.monotonic()
@@ -167,13 +169,13 @@ class LiveState:
     def save(self) -> tuple[str, str]:
         """Calibrate the kept views and write the files into ``cfg.out``; returns (out, report)."""
         from aicalib_tf.guided.save import save_session
-
         from aicalib_tf.sources import source_name
 
         meta = {"source": source_name(self.cfg.source or "browser camera"), "detector": self.cfg.detector,
                 "model": self.detector.info.get("model"), "model_sha256": self.detector.info.get("sha256"),
                 "lens_model": self.cfg.model, "frames": self.session.frames_seen, "examined": self.session.examined,
-                "kept_frames": self.session.kept_frames, "target_px": self.cfg.target_px, "live": True}
+                "kept_frames": self.session.kept_frames, "target_px": self.cfg.target_px, "live": True,
+                **({"board": self.cfg.board} if self.cfg.board else {})}
         with self.lock:
             report = save_session(self.session, self.cfg.out, meta, head=[f"live page: {meta['source']}"])
         return self.cfg.out, report
@@ -247,7 +249,6 @@ def _source_thread(state: LiveState, loop: asyncio.AbstractEventLoop, queue: asy
         loop.call_soon_threadsafe(_offer, queue, (b"", dict(state.last, ended=True)))
     except Exception as exc:  # noqa: BLE001 - reported on the page and the console, one line
         from aicalib_tf.cli import describe_error
-
         from aicalib_tf.sources import source_name
 
         why = describe_error(exc)
@@ -284,7 +285,7 @@ class _Routes:
 
         cfg = self.state.cfg
         return web.json_response({"mode": "server" if cfg.source else "browser", "pattern": list(cfg.pattern),
-                                  "target_px": cfg.target_px, "max_views": cfg.max_views, "out": cfg.out})
+                                  "board": cfg.board, "target_px": cfg.target_px, "max_views": cfg.max_views, "out": cfg.out})
 
     async def last(self, _request):
         from aiohttp import web

@@ -266,3 +266,59 @@ def test_the_host_rule(bind, host, local, ok):
 
     why = refusal("/", {"Host": host}, {}, token=TOKEN, bind_host=bind, local=local)
     assert (why is None) == ok, why
+
+
+CHARUCO = "charuco:6x5,square=30mm,marker=20mm,dict=DICT_4X4_50"
+
+
+def _charuco_frame(cut: int) -> tuple[np.ndarray, dict]:
+    """A 640x480 frame of the board of :data:`CHARUCO` (54 px squares, at (60, 60)) with its ``cut`` left
+    px hidden, and {OpenCV corner id: (x, y) px} of the inner corners left in view."""
+    from aicalib_tf.geometry.charuco import layout_image, parse_board
+
+    board, p, at = parse_board(CHARUCO), 54, 60
+    frame = np.full((480, 640), 140, np.uint8)
+    img = layout_image(board, p, margin_px=p // 2)
+    frame[at - p // 2: at - p // 2 + img.shape[0], at - p // 2: at - p // 2 + img.shape[1]] = img
+    frame[:, :cut] = 140
+    frame = cv2.GaussianBlur(frame, (0, 0), 0.8)
+    cols, rows = board.pattern_size
+    truth = {r * cols + c: (at + (c + 1) * p - 0.5, at + (r + 1) * p - 0.5) for r in range(rows) for c in range(cols)}
+    return frame, {k: xy for k, xy in truth.items() if xy[0] > cut}
+
+
+def test_a_charuco_board_runs_the_loop_and_the_page_gets_corner_ids(tmp_path):
+    from aicalib_tf.calib.workflow import make_detector
+    from aicalib_tf.geometry.charuco import parse_board
+
+    board = parse_board(CHARUCO)
+    state = LiveState(LiveConfig(board.pattern_size, 30.0, "mm", out=str(tmp_path / "calib"), model="plumb_bob",
+                                 board=CHARUCO), make_detector("cnn", board))
+    for cut in (0, 140):  # the whole board, then a board cut by the frame's left edge: its ids name the corners
+        frame, truth = _charuco_frame(cut)
+        update = state.add_gray(frame)
+        assert update["examined"] and len(update["ids"]) == len(update["corners"]) == len(truth), (cut, update)
+        got = dict(zip(update["ids"], update["corners"]))
+        assert set(got) == set(truth)
+        assert max(np.hypot(*(np.subtract(got[k], truth[k]))) for k in truth) < 0.5
+    assert state.session.views and json.loads(json.dumps(state.last))["ids"]
+
+    async def body(c, _port):
+        async with c.get(f"/config?token={TOKEN}") as r:
+            return await r.json()
+
+    assert _serve(state, body)["board"] == CHARUCO
+    chess = _state(tmp_path)  # a chessboard's ids are relative to the visible grid: not sent
+    assert "ids" not in chess.add_gray(np.zeros((480, 640), np.uint8))
+
+
+def test_the_live_command_takes_a_board_or_a_pattern(tmp_path, capsys):
+    from aicalib_tf.live.__main__ import _config, _parse_args, main
+
+    cfg = _config(_parse_args(["--board", CHARUCO, "--out", str(tmp_path / "o")]))
+    assert cfg.board == CHARUCO and cfg.pattern == (5, 4) and cfg.square == 30.0 and cfg.square_unit == "mm"
+    for args, why in ((["--board", CHARUCO, "--pattern", "9x6"], "not both"), ([], "give --pattern"),
+                      (["--board", "charuco:6x5,square=30mm,marker=20mm,dict=DICT_NOPE"], "DICT_NOPE")):
+        assert main(args + ["--out", str(tmp_path / "o"), "--port", "0"]) == 2
+        err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+        assert len(err) == 1 and why in err[0], err
