@@ -98,3 +98,17 @@ def test_layout_has_corner_squares_and_tags():
     # a tag's two-bit border is black
     bit = t // (b.bits + 4)
     assert (img[m: m + 2 * bit, m: m + t] == 0).all()
+
+
+@pytest.mark.parametrize("board, field", [("aprilgrid:6x6,tag=88mm,spacing=1", "spacing"),
+                                          ("aprilgrid:6x6,tag=88mm,spacing=0.3,family=tag99", "family")])
+def test_calibrate_refuses_a_bad_grid_in_one_line(tmp_path, capsys, board, field):
+    from aicalib_tf.calibrate import main
+
+    assert main([str(tmp_path / "x.png"), "--board", board, "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and field in err[0]
+    f = tmp_path / "target.yaml"
+    f.write_text("target_type: circlegrid\n")
+    assert main([str(tmp_path / "x.png"), "--board", str(f)]) == 2
+    assert "target_type" in capsys.readouterr().err
