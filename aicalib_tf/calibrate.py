@@ -66,6 +66,12 @@ A ChArUco board replaces --pattern and --square: ``--board charuco:11x8,square=3
 each camera may see a different part of the board in a pair: the ids tie them. Videos, cameras and
 rig videos read it too (``video.mp4 --board charuco:...``): a board cut by the frame is a view.
 
+Kalibr's AprilGrid is a board too: ``--board aprilgrid:6x6,tag=88mm,spacing=0.3[,family=tag36h11][,first=0]``
+(tags across x up, tag size, gap between tags over the tag size; ids row-major from the bottom-left),
+or Kalibr's target file ``--board target.yaml`` (``target_type: aprilgrid``, or ``checkerboard``
+read as --pattern and --square). OpenCV's aruco decodes the tags; each tag corner is placed by the
+saddle fit. Photos only, of one camera or a rig.
+
 Exit codes: 0 success; 2 bad input (no images, bad --pattern or --square, a bad model, no board
 found, fewer than 3 usable views, mixed sizes); nothing is written on failure.
 """
@@ -97,7 +103,9 @@ def build_parser():
                     help='calibrate a rig: one NAME=GLOB per camera, e.g. cam0="left/*.png" cam1="right/*.png"')
     ap.add_argument("--pattern", help="inner corners, COLSxROWS, e.g. 9x6 (or --board)")
     ap.add_argument("--board", help="a ChArUco board instead of --pattern and --square: "
-                                    "charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100[,legacy][,first=0]")
+                                    "charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100[,legacy][,first=0]; "
+                                    "an AprilGrid: aprilgrid:6x6,tag=88mm,spacing=0.3[,family=tag36h11][,first=0]; "
+                                    "or a Kalibr target.yaml")
     ap.add_argument("--square", default="1", help="square size with unit, e.g. 25mm (default: 1, unitless)")
     ap.add_argument("--out", default="calib", help="output folder (default: %(default)s)")
     ap.add_argument("--detector", default="cnn", choices=DETECTORS, help="corner detector (default: %(default)s)")
@@ -194,8 +202,11 @@ def _rig_video_config(args, cameras):
 def _common(args) -> dict:
     """The options one camera and a rig share, of photos or of the guided loop, parsed
     (ValueError for a bad --pattern, --square or --board)."""
+    from aicalib_tf.geometry.aprilgrid import is_aprilgrid
     from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
 
+    if args.board and is_aprilgrid(args.board):  # an AprilGrid, or a Kalibr target file
+        return _aprilgrid_common(args)
     if args.board:
         from aicalib_tf.geometry.charuco import parse_board
 
@@ -209,6 +220,19 @@ def _common(args) -> dict:
     return dict(pattern=check_pattern(parse_pattern(args.pattern)), square=square, square_unit=unit, out=args.out,
                 detector=args.detector, network=args.network,
                 model="rational_polynomial" if args.rational else args.model, quiet=args.quiet, workers=args.workers)
+
+
+def _aprilgrid_common(args) -> dict:
+    """:func:`_common` for ``--board aprilgrid:...`` or a Kalibr target YAML (an AprilGrid, or a
+    checkerboard read as ``--pattern``/``--square``)."""
+    from aicalib_tf.geometry.aprilgrid import Checkerboard, load_board
+
+    board = load_board(args.board)
+    shared = dict(out=args.out, detector=args.detector, network=args.network,
+                  model="rational_polynomial" if args.rational else args.model, quiet=args.quiet, workers=args.workers)
+    if isinstance(board, Checkerboard):
+        return dict(pattern=board.pattern_size, square=board.square, square_unit=board.unit, **shared)
+    return dict(pattern=board.pattern_size, square=board.square_size, square_unit=board.unit, board=args.board, **shared)
 
 
 def _run(build, run_fn, wrote: str) -> int:

@@ -55,9 +55,10 @@ def board_target(cfg):
     """What the detector looks for: the :class:`~aicalib_tf.geometry.charuco.CharucoBoard` of ``cfg.board``
     (a marker board: partial views name their corners by the markers), else ``cfg.pattern``."""
     if getattr(cfg, "board", None):
+        from aicalib_tf.geometry.aprilgrid import is_aprilgrid, load_board
         from aicalib_tf.geometry.charuco import parse_board
 
-        return parse_board(cfg.board)
+        return load_board(cfg.board) if is_aprilgrid(cfg.board) else parse_board(cfg.board)
     return cfg.pattern
 
 
