@@ -2,7 +2,7 @@
 
     python benchmarks/corner_sigma.py [--images 6] [--conditions named,sweeps] [--cache DIR]
     python benchmarks/corner_sigma.py --fit [--fit-on sweeps,named] [--images 6]   # refit COEFFS, LOW, HIGH
-    python benchmarks/corner_sigma.py --calibrate [--views 20] [--as-rendered]   # calibration with and without σ
+    python benchmarks/corner_sigma.py --calibrate [--views 20] [--repeats 3] [--as-rendered]   # calibration with and without σ
 
 Renders the benchmark's conditions (:mod:`aicalib_tf.bench.conditions`, with their own seeds), detects
 each board with the shipped model and matches every detected corner to the nearest visible true
@@ -19,8 +19,8 @@ of the fit altogether, to see how the model carries to conditions it was not fit
 
 ``--calibrate`` degrades the calibration sequences' views (:func:`aicalib_tf.bench.conditions.calibration_sequences`,
 cameras 0–3) one by one with a blur and a noise drawn from ``MIXED`` (seeded per view), detects them
-and calibrates each camera twice, its corners weighted by their σ and all equal, with the lens model
-the truth has (plumb_bob); it prints the rotation-free errors against the true camera: fx %, the
+and calibrates each camera with its corners weighted in each way of ``WEIGHTINGS`` (all equal, by
+their σ, by σ with a floor added in quadrature), with the lens model the truth has (plumb_bob); it prints the rotation-free errors against the true camera: fx %, the
 principal point and the mean projection error over the area the boards covered.
 """
 
@@ -58,7 +58,7 @@ def board_errors(image: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.n
     if not det.found or len(truth) == 0:
         return np.zeros((0, len(cs.COLUMNS))), np.zeros((0, 2)), 0
     frame = Frame(read_image(image))
-    x = cs.design(cs.board_measures(frame.region, det.corners, det.ids, det.scores, frame.size))
+    x = cs.board_design(frame, det.corners, det.ids, det.scores, frame.size)
     d = det.corners[:, None, :].astype(np.float64) - truth[None, :, :]
     near = np.argmin(np.einsum("nmk,nmk->nm", d, d), axis=1)
     err = d[np.arange(len(d)), near]
@@ -173,30 +173,36 @@ def _degraded(image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.clip(np.round(out), 0, 255).astype(np.uint8)
 
 
-def calibrate_weighted(views: int, degrade: bool = True) -> None:
-    """Print each camera's calibration errors with the σ weights and without them (``--calibrate``;
-    ``degrade`` False: the views as rendered, noise σ 2)."""
+WEIGHTINGS = {"equal": None, "σ": 0.0, "σ ⊕ 0.02": 0.02, "σ ⊕ 0.05": 0.05}  # floor px added in quadrature
+
+
+def calibrate_weighted(views: int, degrade: bool = True, repeats: int = 1) -> None:
+    """Print each camera's calibration errors under each of ``WEIGHTINGS`` (``--calibrate``; ``degrade``
+    False: the views as rendered, noise σ 2), ``repeats`` draws of the degradations, and their means."""
     from aicalib_tf.bench.conditions import calibration_sequences
     from aicalib_tf.bench.metrics import calibration_errors
     from aicalib_tf.calib.fit import View, calibrate_camera
 
-    print(f"{'camera':>6s} {'weights':>8s} {'fx %':>8s} {'fy %':>8s} {'pp px':>7s} {'proj seen px':>12s} {'rms px':>7s}")
+    print(f"{'camera':>6s} {'draw':>4s} {'weights':>9s} {'fx %':>8s} {'fy %':>8s} {'pp px':>7s} {'proj seen px':>12s} {'rms px':>7s}")
+    totals = {w: [] for w in WEIGHTINGS}
     for cam, samples in calibration_sequences(views):
-        rng = np.random.default_rng(1000 + cam)
-        found = []
-        for k, s in enumerate(samples):
-            det = detect_corners(_degraded(s.image, rng) if degrade else s.image, PATTERN)
-            if det.found:
-                found.append((f"view{k:02d}", det))
         lab = samples[0].label
         seen = np.concatenate([s.corners[s.visible] for s in samples])
-        for weighted in (True, False):
-            vs = [View(n, d.corners, d.ids, sigmas=d.sigmas if weighted else None) for n, d in found]
-            cal = calibrate_camera(vs, PATTERN, float(lab["square_size"]), tuple(lab["image_size"]), model="plumb_bob")
-            err = calibration_errors(cal.K, cal.dist, np.asarray(lab["K"]), np.asarray(lab["dist"]), tuple(lab["image_size"]),
-                                     model=cal.model, model_true=lab["distortion_model"], seen=seen)
-            print(f"{cam:6d} {'σ' if weighted else 'equal':>8s} {err['fx_pct']:8.3f} {err['fy_pct']:8.3f} {err['pp_px']:7.3f} "
-                  f"{err['proj_err_seen_mean_px']:12.4f} {cal.rms:7.3f}")
+        for draw in range(repeats if degrade else 1):
+            rng = np.random.default_rng(1000 * (draw + 1) + cam)
+            found = [(f"view{k:02d}", d) for k, s in enumerate(samples)
+                     if (d := detect_corners(_degraded(s.image, rng) if degrade else s.image, PATTERN)).found]
+            for label, floor in WEIGHTINGS.items():
+                vs = [View(n, d.corners, d.ids, sigmas=None if floor is None else np.hypot(d.sigmas, floor)) for n, d in found]
+                cal = calibrate_camera(vs, PATTERN, float(lab["square_size"]), tuple(lab["image_size"]), model="plumb_bob")
+                err = calibration_errors(cal.K, cal.dist, np.asarray(lab["K"]), np.asarray(lab["dist"]), tuple(lab["image_size"]),
+                                         model=cal.model, model_true=lab["distortion_model"], seen=seen)
+                totals[label].append((abs(err["fx_pct"]), err["pp_px"], err["proj_err_seen_mean_px"]))
+                print(f"{cam:6d} {draw:4d} {label:>9s} {err['fx_pct']:8.3f} {err['fy_pct']:8.3f} {err['pp_px']:7.3f} "
+                      f"{err['proj_err_seen_mean_px']:12.4f} {cal.rms:7.3f}")
+    for label, rows in totals.items():
+        m = np.mean(rows, axis=0)
+        print(f"mean over {len(rows)} calibrations, {label:>9s}: |fx| {m[0]:.3f} %, pp {m[1]:.3f} px, proj seen {m[2]:.4f} px")
 
 
 def main(argv=None) -> int:
@@ -209,10 +215,11 @@ def main(argv=None) -> int:
     ap.add_argument("--calibrate", action="store_true", help="calibrate mixed-degradation sequences with and without σ")
     ap.add_argument("--views", type=int, default=20, help="views per calibration sequence (--calibrate)")
     ap.add_argument("--as-rendered", action="store_true", help="--calibrate on the views as rendered, not degraded")
+    ap.add_argument("--repeats", type=int, default=1, help="draws of the degradations per camera (--calibrate)")
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     if a.calibrate:
-        calibrate_weighted(a.views, degrade=not a.as_rendered)
+        calibrate_weighted(a.views, degrade=not a.as_rendered, repeats=a.repeats)
         print(f"{time.perf_counter() - t0:.0f} s")
         return 0
     if a.cache:

@@ -6,7 +6,7 @@ symmetry (a shadow edge, an object in front, JPEG blocks), with blur, and with l
 across the window (a strong lens), and shrinks with the junction's contrast. It is measured in
 each corner's window of the unsmoothed image (bilinear samples on the (2r + 1)² grid about the
 corner, r the refinement's radius for the distance to the nearest other corner,
-:func:`aicalib_tf.detect.refine.window_radius`; :func:`aicalib_tf.detect.corner_sigma_kernels.window_measures`):
+:func:`aicalib_tf.detect.refine.window_radius`, at most 3 px; :func:`aicalib_tf.detect.corner_sigma_kernels.window_measures`):
 
 * ``odd``: √(Σ w o²), o(d) = (I(c + d) − I(c − d)) / 2 the part of the window that is not
   point-symmetric about the corner (noise and asymmetry), w the saddle fit's Gaussian weights
@@ -38,28 +38,27 @@ from dataclasses import replace
 
 import numpy as np
 
-from aicalib_tf.detect.corner_sigma_kernels import lattice_bend, window_measures
+from aicalib_tf.detect.corner_sigma_kernels import board_columns
 from aicalib_tf.detect.refine import window_radius
 from aicalib_tf.detect.saddle import saddle_fit_matrix
 
-__all__ = ["MEASURES", "COLUMNS", "COEFFS", "LOW", "HIGH", "corner_measures", "design", "sigma_from_design",
-           "board_measures", "board_sigmas", "with_sigmas"]
+__all__ = ["COLUMNS", "COEFFS", "LOW", "HIGH", "design", "sigma_from_design", "board_design", "board_sigmas",
+           "with_sigmas"]
 
-MEASURES = ("odd", "odd_median", "even", "residual", "curvature", "bend", "spacing", "score")
 COLUMNS = ("noise/contrast", "own excess asymmetry", "residual/contrast", "impulsive noise", "bend/spacing", "score",
            "(noise/contrast)²")
 # log σ = COEFFS[0] + Σ COEFFS[1 + k] · clip(design[:, k], LOW[k], HIGH[k]); refit: python benchmarks/corner_sigma.py --fit
-COEFFS = np.array([-0.450, 0.571, 2.395, 0.191, 0.249, 0.145, -0.538, -0.081])
-LOW = np.array([-5.523, -0.810, -2.127, 0.321, -6.022, -0.693, 1.808])
-HIGH = np.array([-1.344, 0.678, -0.248, 1.732, -1.660, 0.000, 30.503])
+COEFFS = np.array([-0.679, 0.497, 2.325, 0.464, -0.230, 0.100, -0.707, -0.092])
+LOW = np.array([-4.855, -0.901, -2.336, 0.266, -6.022, -0.693, 1.274])
+HIGH = np.array([-1.129, 0.720, -0.252, 1.187, -1.660, 0.000, 23.575])
 MIN_SCORE = 0.05  # a corner the network missed (score 0) counts as this weak
 _TINY = 1e-6  # grey levels (px for the bend): keeps the logarithms finite in a flat window
-_MAX_RADIUS = 5  # window_radius's largest
+_MAX_RADIUS = 3  # px: the refinement's window radius, at most this (a 7×7 window: the measures' cost)
 
 
 @functools.lru_cache(maxsize=1)
 def _operators() -> tuple[np.ndarray, np.ndarray]:
-    """Each radius' quadratic fit (R + 1, 6, (2R+1)²) and normalized Gaussian weights (R + 1, (2R+1)²), R = 5."""
+    """Each radius' quadratic fit (R + 1, 6, (2R+1)²) and normalized Gaussian weights (R + 1, (2R+1)²), R = ``_MAX_RADIUS``."""
     big = (2 * _MAX_RADIUS + 1) ** 2
     fits, weights = np.zeros((_MAX_RADIUS + 1, 6, big)), np.zeros((_MAX_RADIUS + 1, big))
     for r in range(1, _MAX_RADIUS + 1):
@@ -70,48 +69,31 @@ def _operators() -> tuple[np.ndarray, np.ndarray]:
     return fits, weights
 
 
-def corner_measures(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray) -> np.ndarray:
-    """The σ model's measurements of each corner of one board (module docstring), in the order of ``MEASURES``.
+def design(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray) -> np.ndarray:
+    """The model's columns (N, 7) (``COLUMNS``) of one board's corners, unclipped (module docstring).
 
-    gray : (H, W) float32 grey in [0, 1], unsmoothed. corners : (N, 2) (x, y) px. ids : (N, 2) int
+    gray : (H, W) float32 grey in [0, 1] or uint8, unsmoothed (every column is a ratio of grey levels
+    or of px, so either scale gives the same). corners : (N, 2) (x, y) px. ids : (N, 2) int
     (col, row), distinct. scores : (N,) network responses in [0, 1].
-    Returns (N, 8) float64, all positive (the bend, where no row or column passes through the corner
-    with both neighbours, is the board's median bend).
+    Columns: log(board noise / contrast), log(own odd_median / board's), log(residual / contrast),
+    log(board odd / board odd_median) (salt-and-pepper pixels raise the first, not the second),
+    log(bend / spacing), log(score), and the first column squared (the error grows faster than the
+    noise once it is well above the floor of a clean render). The board's values are medians of the
+    logarithms over its corners; a corner with no row or column through it takes the board's median bend
+    (:func:`aicalib_tf.detect.corner_sigma_kernels.design_columns`).
     """
     from aicalib_tf.detect.junctions import nearest_spacing
 
     pts = np.ascontiguousarray(np.asarray(corners, np.float64).reshape(-1, 2))
     if len(pts) == 0:
-        return np.zeros((0, len(MEASURES)))
-    spacing = nearest_spacing(pts)
-    radius = np.ascontiguousarray(window_radius(spacing), np.int64)
-    fits, weights = _operators()
-    out = np.empty((len(pts), len(MEASURES)))
-    out[:, :5] = window_measures(np.ascontiguousarray(gray, np.float32), pts, radius, fits, weights)
-    ij = np.asarray(ids, np.int64).reshape(-1, 2)
-    bend = lattice_bend(pts, np.ascontiguousarray(ij - ij.min(axis=0)))
-    seen = bend >= 0
-    out[:, 5] = np.where(seen, bend, np.median(bend[seen]) if seen.any() else _TINY)
-    out[:, 6] = spacing
-    out[:, 7] = np.maximum(np.asarray(scores, np.float64).reshape(-1), MIN_SCORE)
-    return np.maximum(out, _TINY)
-
-
-def design(measures: np.ndarray) -> np.ndarray:
-    """The model's columns (N, 7) (``COLUMNS``) of one board's measures (N, 8) (:func:`corner_measures`), unclipped.
-
-    log(board noise / contrast), log(own odd_median / board's), log(residual / contrast), log(board
-    odd / board odd_median) (salt-and-pepper pixels raise the first, not the second), log(bend /
-    spacing), log(score), and the first column squared (the error grows faster than the noise once
-    it is well above the floor of a clean render). The board's values are medians over its corners.
-    """
-    m = np.log(np.asarray(measures, np.float64).reshape(-1, len(MEASURES)))
-    if len(m) == 0:
         return np.zeros((0, len(COLUMNS)))
-    odd, med, even, resid, _, bend, spacing, score = m.T
-    noise = np.median(med)
-    return np.stack([noise - even, med - noise, resid - even, np.full(len(m), np.median(odd) - noise),
-                     bend - spacing, score, (noise - even) ** 2], axis=1)
+    spacing = nearest_spacing(pts)
+    radius = np.minimum(window_radius(spacing), _MAX_RADIUS)
+    fits, weights = _operators()
+    img = gray if gray.dtype == np.uint8 and gray.ndim == 2 else np.asarray(gray, np.float32)
+    return board_columns(np.ascontiguousarray(img), pts, np.asarray(ids, np.int64).reshape(-1, 2), spacing, radius,
+                         np.asarray(scores, np.float64).reshape(-1), fits, weights, MIN_SCORE,
+                         _TINY * (255.0 if img.dtype == np.uint8 else 1.0))
 
 
 def sigma_from_design(x: np.ndarray, coeffs: np.ndarray = COEFFS, low: np.ndarray = LOW, high: np.ndarray = HIGH) -> np.ndarray:
@@ -120,36 +102,41 @@ def sigma_from_design(x: np.ndarray, coeffs: np.ndarray = COEFFS, low: np.ndarra
     return np.exp(coeffs[0] + x @ np.asarray(coeffs[1:], np.float64)).astype(np.float32)
 
 
-def board_measures(region, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """:func:`corner_measures` (N, 8) reading only the part of the image about the corners.
+def board_design(image, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """:func:`design` (N, 7) of a board in ``image``, converting no more of it than needed.
 
-    region : ``region(x0, y0, x1, y1) -> (y1 − y0, x1 − x0) float32`` grey of the image (e.g.
-    :meth:`aicalib_tf.detect.pyramid.Frame.region`). corners : (N, 2) px. ids : (N, 2). scores : (N,).
+    image : a :class:`~aicalib_tf.detect.pyramid.Frame` (a grey uint8 frame is read as it is, any other
+    through its float grey), or ``region(x0, y0, x1, y1) -> (y1 − y0, x1 − x0) float32`` grey of the
+    image, asked for the part about the corners. corners : (N, 2) px. ids : (N, 2). scores : (N,).
     size : (width, height) px.
     """
     pts = np.asarray(corners, np.float64).reshape(-1, 2)
     if len(pts) == 0:
-        return np.zeros((0, len(MEASURES)))
+        return np.zeros((0, len(COLUMNS)))
+    raw = getattr(image, "raw", None)
+    if raw is not None and raw.dtype == np.uint8 and raw.ndim == 2:
+        return design(raw, pts, ids, scores)
+    region = image.region if raw is not None else image
     pad = _MAX_RADIUS + 2  # the largest window and the bilinear sample's next pixel
     x0, y0 = (max(int(np.floor(v)) - pad, 0) for v in pts.min(axis=0))
     x1 = min(int(np.ceil(pts[:, 0].max())) + pad + 1, size[0])
     y1 = min(int(np.ceil(pts[:, 1].max())) + pad + 1, size[1])
-    return corner_measures(region(x0, y0, x1, y1), pts - np.array([x0, y0], np.float64), ids, scores)
+    return design(region(x0, y0, x1, y1), pts - np.array([x0, y0], np.float64), ids, scores)
 
 
-def board_sigmas(region, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """Each corner's σ (N,) float32 px, one standard deviation per axis (:func:`board_measures`' arguments)."""
+def board_sigmas(image, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Each corner's σ (N,) float32 px, one standard deviation per axis (:func:`board_design`'s arguments)."""
     if len(corners) == 0:
         return np.zeros(0, np.float32)
-    return sigma_from_design(design(board_measures(region, corners, ids, scores, size)))
+    return sigma_from_design(board_design(image, corners, ids, scores, size))
 
 
-def with_sigmas(det, region):
+def with_sigmas(det, image):
     """``det`` (a :class:`~aicalib_tf.detect.pipeline.Detection`) with its corners' ``sigmas`` (:func:`board_sigmas`).
 
-    region : as :func:`board_measures`, over the image the corners are in. A detection without
+    image : as :func:`board_design` (a Frame, or a region function), over the image the corners are in. A detection without
     corners is returned as it is.
     """
     if not det.found:
         return det
-    return replace(det, sigmas=board_sigmas(region, det.corners, det.ids, det.scores, det.image_size))
+    return replace(det, sigmas=board_sigmas(image, det.corners, det.ids, det.scores, det.image_size))

@@ -216,7 +216,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     if _charuco_board(pattern_size) is not None:  # a ChArUco board: the largest one found
         board, refused = _charuco_board(pattern_size), {}
         found = detect_charuco(frame.raw, [board], model=model, threshold=threshold, refused=refused)
-        return with_sigmas(_as_detection(found[0] if found else None, board, (w, h), refused.get(board)), frame.region)
+        return with_sigmas(_as_detection(found[0] if found else None, board, (w, h), refused.get(board)), frame)
     if pattern_size is not None:
         from aicalib_tf.geometry.pattern import check_pattern
 
@@ -235,7 +235,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
                 continue
             det = replace(det, corners=corners, image_size=(w, h))
         if det.complete and pattern_size is not None:
-            return with_sigmas(det, frame.region)
+            return with_sigmas(det, frame)
         if f in quick:  # a quick pass counts only with a complete board
             continue
         if not det.found:
@@ -245,7 +245,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
         if best is None or (best.relative and not det.relative and det.found) or (
                 det.relative <= best.relative and len(det.corners) > len(best.corners)):
             best = det  # a board with fixed ids beats one with relative ids
-    return with_sigmas(replace(best, image_size=(w, h), reason="" if best.found else reason), frame.region)
+    return with_sigmas(replace(best, image_size=(w, h), reason="" if best.found else reason), frame)
 
 
 def _zoomed(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: float, seen: Grid,

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from aicalib_tf.detect import corner_sigma as cs
-from aicalib_tf.detect.corner_sigma_kernels import lattice_bend, window_measures
+from aicalib_tf.detect.corner_sigma_kernels import design_columns, lattice_bend, window_measures
 from aicalib_tf.detect.pipeline import Detection, detect_corners
 from aicalib_tf.detect.warm import synthetic_board
 
@@ -57,11 +57,11 @@ def _junction(size: int = 41, centre=(20.0, 20.0), angle: float = 0.3) -> np.nda
 def test_window_measures_of_a_point_symmetric_junction_have_no_odd_part():
     fits, weights = cs._operators()
     img = _junction()
-    got = window_measures(img, np.array([[20.0, 20.0]]), np.array([4]), fits, weights)[0]
-    odd, odd_median, even, residual, curvature = got
+    got = window_measures(img, np.array([[20.0, 20.0]]), np.array([3]), fits, weights)[0]
+    odd, odd_median, even, residual = got
     assert odd < 1e-6 and odd_median < 1e-6
-    assert 0.2 < even < 0.35 and residual > 0 and curvature > 0
-    moved = window_measures(img, np.array([[21.0, 20.0]]), np.array([4]), fits, weights)[0]
+    assert 0.2 < even < 0.35 and residual > 0
+    moved = window_measures(img, np.array([[21.0, 20.0]]), np.array([3]), fits, weights)[0]
     assert moved[0] > 0.05  # a px off the centre, the window is far from point-symmetric
 
 
@@ -74,6 +74,18 @@ def test_lattice_bend_is_zero_on_a_straight_lattice_and_the_second_difference_ot
     pts[5] += [0.0, 0.3]  # (1, 1) moved 0.3 px along y: both second differences through it are 2 · 0.3
     bend = lattice_bend(pts, ids)
     assert bend[5] == pytest.approx(0.6) and bend[6] == pytest.approx(0.15)  # (2, 1): its row 0.3, its column 0
+
+
+def test_design_columns_take_the_boards_medians_and_the_usual_bend_where_a_corner_has_none():
+    measures = np.array([[0.02, 0.01, 0.2, 0.05], [0.02, 0.04, 0.2, 0.05], [0.08, 0.01, 0.1, 0.05]])
+    x = design_columns(measures, np.array([0.1, -1.0, 0.3]), np.full(3, 10.0), np.array([1.0, 0.0, 0.5]), 0.05, 1e-6)
+    noise = np.log(0.01)  # the median odd_median
+    np.testing.assert_allclose(x[:, 0], noise - np.log([0.2, 0.2, 0.1]))
+    np.testing.assert_allclose(x[:, 1], np.log([0.01, 0.04, 0.01]) - noise)
+    np.testing.assert_allclose(x[:, 3], np.log(0.02) - noise)
+    np.testing.assert_allclose(x[:, 4], np.log([0.1, 0.2, 0.3]) - np.log(10.0))  # (0.1 + 0.3) / 2 for the second
+    np.testing.assert_allclose(x[:, 5], np.log([1.0, 0.05, 0.5]))
+    np.testing.assert_allclose(x[:, 6], x[:, 0] ** 2)
 
 
 def test_the_model_clips_its_columns_to_the_fitted_range():
@@ -92,3 +104,10 @@ def test_the_opencv_detectors_give_no_sigmas_and_the_cnn_detector_does(board):
     corners, _ = cnn(board)
     assert cnn.sigmas is not None and len(cnn.sigmas) == len(corners)
     assert cv(board) is not None and cv.sigmas is None
+
+
+def test_a_uint8_frame_and_its_float_grey_give_the_same_columns(board):
+    det = detect_corners(board, PATTERN)
+    grey = board.astype(np.float32) / 255.0
+    np.testing.assert_allclose(cs.design(board, det.corners, det.ids, det.scores),
+                               cs.design(grey, det.corners, det.ids, det.scores), atol=1e-4)
