@@ -70,7 +70,7 @@ Kalibr's AprilGrid is a board too: ``--board aprilgrid:6x6,tag=88mm,spacing=0.3[
 (tags across x up, tag size, gap between tags over the tag size; ids row-major from the bottom-left),
 or Kalibr's target file ``--board target.yaml`` (``target_type: aprilgrid``, or ``checkerboard``
 read as --pattern and --square). OpenCV's aruco decodes the tags; each tag corner is placed by the
-saddle fit. Photos only, of one camera or a rig.
+saddle fit. Photos, videos and cameras read it as they read a ChArUco board.
 
 Exit codes: 0 success; 2 bad input (no images, bad --pattern or --square, a bad model, no board
 found, fewer than 3 usable views, mixed sizes); nothing is written on failure.

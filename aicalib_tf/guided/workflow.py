@@ -63,8 +63,13 @@ def board_target(cfg):
 
 
 def board_name(cfg) -> str:
-    """How messages name the board: "9x6 board" or "ChArUco board (charuco:...)"."""
-    return f"ChArUco board ({cfg.board})" if getattr(cfg, "board", None) else f"{cfg.pattern[0]}x{cfg.pattern[1]} board"
+    """How messages name the board: "9x6 board", "ChArUco board (charuco:...)" or "AprilGrid (aprilgrid:...)"."""
+    board = getattr(cfg, "board", None)
+    if board:
+        from aicalib_tf.geometry.aprilgrid import is_aprilgrid
+
+        return f"{'AprilGrid' if is_aprilgrid(board) else 'ChArUco board'} ({board})"
+    return f"{cfg.pattern[0]}x{cfg.pattern[1]} board"
 
 
 def guided_source(images, camera) -> str | None:
