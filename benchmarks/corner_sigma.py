@@ -20,7 +20,7 @@ of the fit altogether, to see how the model carries to conditions it was not fit
 ``--calibrate`` degrades the calibration sequences' views (:func:`aicalib_tf.bench.conditions.calibration_sequences`,
 cameras 0–3) one by one with a blur and a noise drawn from ``MIXED`` (seeded per view), detects them
 and calibrates each camera with its corners weighted in each way of ``WEIGHTINGS`` (all equal, by
-their σ, by σ with a floor added in quadrature), with the lens model the truth has (plumb_bob); it prints the rotation-free errors against the true camera: fx %, the
+their σ, by σ with a floor added in quadrature, by the view's median σ), with the lens model the truth has (plumb_bob); it prints the rotation-free errors against the true camera: fx %, the
 principal point and the mean projection error over the area the boards covered.
 """
 
@@ -173,7 +173,17 @@ def _degraded(image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.clip(np.round(out), 0, 255).astype(np.uint8)
 
 
-WEIGHTINGS = {"equal": None, "σ": 0.0, "σ ⊕ 0.02": 0.02, "σ ⊕ 0.05": 0.05}  # floor px added in quadrature
+WEIGHTINGS = {"equal": None, "σ": 0.0, "σ ⊕ 0.02": 0.02, "σ ⊕ 0.05": 0.05,  # floor px added in quadrature
+              "view σ": "view"}  # each view's median σ for all its corners
+
+
+def _weights(sigmas: np.ndarray, how) -> np.ndarray | None:
+    """The σ a view's corners enter the fit with under one of ``WEIGHTINGS``."""
+    if how is None:
+        return None
+    if how == "view":
+        return np.full(len(sigmas), float(np.median(sigmas)))
+    return np.hypot(sigmas, how)
 
 
 def calibrate_weighted(views: int, degrade: bool = True, repeats: int = 1) -> None:
@@ -193,7 +203,7 @@ def calibrate_weighted(views: int, degrade: bool = True, repeats: int = 1) -> No
             found = [(f"view{k:02d}", d) for k, s in enumerate(samples)
                      if (d := detect_corners(_degraded(s.image, rng) if degrade else s.image, PATTERN)).found]
             for label, floor in WEIGHTINGS.items():
-                vs = [View(n, d.corners, d.ids, sigmas=None if floor is None else np.hypot(d.sigmas, floor)) for n, d in found]
+                vs = [View(n, d.corners, d.ids, sigmas=_weights(d.sigmas, floor)) for n, d in found]
                 cal = calibrate_camera(vs, PATTERN, float(lab["square_size"]), tuple(lab["image_size"]), model="plumb_bob")
                 err = calibration_errors(cal.K, cal.dist, np.asarray(lab["K"]), np.asarray(lab["dist"]), tuple(lab["image_size"]),
                                          model=cal.model, model_true=lab["distortion_model"], seen=seen)
