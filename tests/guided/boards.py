@@ -37,3 +37,6 @@ class FakeDetector:
 
     def __call__(self, gray):
         return self.next
+
+
+CHARUCO = "charuco:6x5,square=40mm,marker=30mm,dict=DICT_4X4_50"  # the board of the ``charuco_pair`` fixture

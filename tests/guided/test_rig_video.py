@@ -130,3 +130,17 @@ def test_a_circular_fisheye_rig_video_keeps_each_cameras_image_circle(tmp_path, 
     assert main(["--rig", f"cam0={tmp_path / 'cam0.avi'}", f"cam1={tmp_path / 'cam1.avi'}", "--pattern", "9x6",
                  "--square", f"{truth.board.square_size}mm", "--out", str(out), "--quiet"]) == 0
     check_circular_rig_output(out, truth, capsys.readouterr().out)
+
+
+def test_a_charuco_stereo_video_pair_calibrates_end_to_end(charuco_pair, tmp_path, capsys):
+    from .boards import CHARUCO
+
+    out = tmp_path / "rig"
+    assert main(["--rig", f"cam0={charuco_pair}/video_cam0.avi", f"cam1={charuco_pair}/video_cam1.avi", "--board",
+                 CHARUCO, "--out", str(out), "--quiet"]) == 0
+    rig = json.loads((out / "rig.json").read_text())
+    truth = json.loads((charuco_pair / "meta.json").read_text())["rig"]
+    assert rig["quality"]["status"] == "ok" and rig["meta"]["board"] == CHARUCO
+    assert abs(float(np.linalg.norm(np.asarray(rig["T"])[1])) / truth["baseline"] - 1) < 0.01
+    assert rig["meta"]["kept_frames"]["cam0"] and rig["meta"]["kept_frames"]["cam1"]
+    assert "cam0-cam1: 75 frame pairs" in capsys.readouterr().out

@@ -57,3 +57,42 @@ def test_the_sessions_guidance_stays_inside_the_image_circle():
     est = Lens(u.estimate.model, u.estimate.K, u.estimate.dist, size)
     for distance in (250.0, 300.0, 400.0):  # the suggested board exists inside the circle near the boards' distance
         assert candidate_points(est, u.guidance.region, u.guidance.tilt, distance, PATTERN, 25.0, circle) is not None
+
+
+def test_a_marker_boards_partial_views_are_kept_and_calibrate():
+    """A ChArUco-like detector names the corners it sees by their board ids (absolute, not relative to
+    the visible grid): a board cut by the frame's edge is a view, and the loop keeps and fits such views."""
+    import cv2
+
+    from aicalib_tf.geometry.pattern import board_points, pattern_ids
+
+    pattern, square, size = (10, 7), 30.0, (640, 480)
+    K = np.array([[520.0, 0, 319.5], [0, 520.0, 239.5], [0, 0, 1]])
+    dist = np.array([-0.2, 0.05, 0, 0, 0])
+    ids = pattern_ids(pattern)
+    obj = board_points(ids, square)
+    rng = np.random.default_rng(7)
+    frames = []
+    while len(frames) < 14:
+        rvec = np.radians(rng.uniform([-35, -35, -20], [35, 35, 20]))
+        tvec = np.array([rng.uniform(-150, 150), rng.uniform(-120, 120), rng.uniform(450, 700)]) - [135, 90, 0]
+        px = cv2.projectPoints(obj, rvec, tvec, K, dist)[0].reshape(-1, 2)
+        inside = (px[:, 0] > 4) & (px[:, 0] < size[0] - 4) & (px[:, 1] > 4) & (px[:, 1] < size[1] - 4)
+        if 20 <= inside.sum() < len(ids):  # only boards cut by the frame
+            frames.append((px[inside] + rng.normal(0, 0.05, (inside.sum(), 2)), ids[inside]))
+
+    class Marker:
+        relative, sigmas, k = False, None, 0
+
+        def __call__(self, gray):
+            self.k += 1
+            return frames[self.k - 1]
+
+    session = GuidedCalibration(GuidedConfig(pattern=pattern, square=square, model="plumb_bob", gate=False,
+                                             max_views=20), Marker())
+    gray = np.full(size[::-1], 128, np.uint8)
+    updates = [session.add((k, k / 30.0, gray)) for k in range(len(frames))]
+    assert sum(u.kept for u in updates) >= 6, [u.reason for u in updates]
+    assert all(len(v.ids) < len(ids) for v in session.views)  # every kept view is a partial board
+    cal = session.result()
+    assert abs(cal.K[0, 0] / 520.0 - 1) < 0.01 and abs(cal.K[0, 2] - 319.5) < 3
