@@ -6,8 +6,10 @@ Corner sequences: a 640x480 plumb_bob lens (fx 500 px, k1 -0.25) sees a 9x6 boar
 flexed by w = (0.6·sag, 0.4·sag) squares (:mod:`aicalib_tf.geometry.board_flex`; sag = w_x + w_y, the
 centre against the grid's corners), in 20 poses 0.35-0.6 m away tilted up to 40°; corners get Gaussian
 noise (--noise px per axis). Each sequence is calibrated with the flex solved (``flex="auto"``) and with
-the board taken as flat (``flex="off"``), plumb_bob forced. Per sag: the worst |sag error| and whether
-every sequence met the target (within 10% or 0.002 squares), the flex's σ, and the focal-length bias
+the board taken as flat (``flex="off"``), plumb_bob forced. Per sag: how many fits kept the flex (its σ
+and the held-out check of :mod:`aicalib_tf.calib.flex_check`; a dropped flex counts as sag 0), the worst
+|sag error| and whether every sequence met the target (within 10% or 0.002 squares), the kept flexes'
+median σ, and the focal-length bias
 (mean fx − 500 over the seeds, with its standard error) against the median σ_fx of one fit.
 
 Rendered sequences (--rendered N per sag): data_gen's ``calib`` preset with the preset's ``flex``, the
@@ -62,24 +64,26 @@ def _sag(cal) -> tuple[float, float]:
 
 
 def corner_rows(sags, seeds: int, noise: float) -> list[str]:
-    lines = ["| sag (squares) | worst sag error | all within target | flex σ (squares) | fx bias, flex solved "
-             "(px, ± s.e.) | fx bias, flat board | median σ_fx |", "|---|---|---|---|---|---|---|"]
+    lines = ["| sag (squares) | flex kept | worst sag error | all within target | flex σ (squares) | fx bias, flex "
+             "solved (px, ± s.e.) | fx bias, flat board | median σ_fx |", "|---|---|---|---|---|---|---|---|"]
     for sag in sags:
         flex = (SPLIT[0] * sag, SPLIT[1] * sag)
-        err, sd, fx_on, fx_off, sfx, ok = [], [], [], [], [], True
+        err, sd, fx_on, fx_off, sfx, ok, kept = [], [], [], [], [], True, 0
         for seed in range(seeds):
             views = corner_sequence(flex, noise, np.random.default_rng([seed, 47]))
             on = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", square_unit="m")
             off = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="off")
             s, s_sd = _sag(on)
+            kept += on.flex is not None
             err.append(s - sag)
-            sd.append(s_sd)
+            sd += [s_sd] if on.flex is not None else []
             ok &= abs(s - sag) <= max(0.1 * sag, 0.002)
             fx_on.append(on.fx - 500.0)
             fx_off.append(off.fx - 500.0)
             sfx.append(on.std["fx"])
         se = lambda a: np.std(a, ddof=1) / np.sqrt(len(a))  # noqa: E731
-        lines.append(f"| {sag:g} | {np.max(np.abs(err)):.4f} | {'yes' if ok else 'NO'} | {np.median(sd):.4f} | "
+        lines.append(f"| {sag:g} | {kept}/{seeds} | {np.max(np.abs(err)):.4f} | {'yes' if ok else 'NO'} | "
+                     f"{np.median(sd) if sd else float('nan'):.4f} | "
                      f"{np.mean(fx_on):+.3f} ± {se(fx_on):.3f} | {np.mean(fx_off):+.3f} ± {se(fx_off):.3f} | "
                      f"{np.median(sfx):.3f} |")
         print(lines[-1], flush=True)

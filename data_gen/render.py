@@ -156,7 +156,8 @@ def surface_homogeneous(rays: np.ndarray, rvec, tvec, board=None, iterations: in
     iteration from the plane's hit: the ray's point at height z(X_k, Y_k) gives (X_k+1, Y_k+1). Each step
     shrinks the error by the surface's slope times the ray's tangent to the board normal (a sag of 0.02
     squares has slopes below 0.1), so ``iterations`` steps reach float precision for rays up to ~80°
-    from the normal. Returns (..., 3) q = (X, Y, 1)·q2 with the plane's q2 (its sign says in front).
+    from the normal; a ray still moving by more than 1e-9 squares (grazing the board) keeps the plane's
+    hit. Returns (..., 3) q = (X, Y, 1)·q2 with the plane's q2 (its sign says in front).
     """
     q = plane_homogeneous(rays, rvec, tvec)
     if board is None or not any(getattr(board, "flex", ())):
@@ -168,11 +169,13 @@ def surface_homogeneous(rays: np.ndarray, rvec, tvec, board=None, iterations: in
         rays = np.concatenate([rays, np.ones(rays.shape[:-1] + (1,))], axis=-1)
     o, d = -R.T @ t, rays @ R  # the camera centre and the rays in the board frame
     X, Y = _dehomogenize(q)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         for _ in range(iterations):
             s = (board.height(X, Y) - o[2]) / d[..., 2]
-            X, Y = o[0] + s * d[..., 0], o[1] + s * d[..., 1]
-        hit = np.isfinite(X) & np.isfinite(Y)
+            X1, Y1 = o[0] + s * d[..., 0], o[1] + s * d[..., 1]
+            step, X, Y = np.abs(X1 - X) + np.abs(Y1 - Y), X1, Y1
+        # a ray that did not settle grazes the board far from the paper: it keeps the plane's hit
+        hit = np.isfinite(X) & np.isfinite(Y) & (step <= 1e-9 * board.square_size)
         out = np.stack([X * q[..., 2], Y * q[..., 2], q[..., 2]], axis=-1)
     return np.where(hit[..., None], out, q)
 

@@ -1,8 +1,11 @@
 """One calibration solve with per-corner weights, single-corner outlier rejection and the board flex.
 
-Weights: a view's ``sigmas`` (one σ per corner, px) weight its corners by 1/σ
+Weights: a view's ``sigmas`` (one σ per corner, px) weight its corners by 1/σ'
 (:func:`~aicalib_tf.calib.bundle.corner_weights`); views without them take the median σ of those
-that have them (all equal when none has).
+that have them (all equal when none has). σ' = √(σ² + τ²) adds the error the σ's leave unexplained
+(:func:`with_floor`, from a first fit with the σ alone): on OpenCV's 13 left-camera photos the detector's
+σ have median 0.024 px (5-95%: 0.006-0.066) while the fit's residuals are 0.16 px RMS; weighted by 1/σ
+the fit moved fx by 0.86 px (2.3σ) and rejected 26 corners, with σ' it stays within 0.1σ of the equal-weight fit.
 
 Corner outliers: after each fit every corner's normalised residual e = |r|·σ_ref/σ (px) is compared
 with T = max(:data:`CORNER_K` · ŝ, :data:`CORNER_FLOOR_PX`), ŝ = median(e) / √(2 ln 2) over the
@@ -31,7 +34,7 @@ from aicalib_tf.calib.bundle import BundleResult, CalibrationError, bundle_adjus
 from aicalib_tf.calib.flex import FLEX_MODES, basis_of_views, flex_problem
 from aicalib_tf.calib.view_checks import MIN_VIEW_CORNERS
 
-__all__ = ["SolveOptions", "solve", "view_sigmas", "flag_corners", "CORNER_K", "CORNER_FLOOR_PX", "MAX_ROUNDS",
+__all__ = ["SolveOptions", "solve", "view_sigmas", "with_floor", "flag_corners", "CORNER_K", "CORNER_FLOOR_PX", "MAX_ROUNDS",
            "MAX_CORNER_FRACTION"]
 
 CORNER_K = 4.5
@@ -66,6 +69,18 @@ def view_sigmas(views) -> list | None:
         return None
     fill = float(np.median(np.concatenate([np.asarray(g, np.float64).ravel() for g in given if g is not None])))
     return [np.full(len(v.ids), fill) if g is None else np.asarray(g, np.float64) for v, g in zip(views, given)]
+
+
+def with_floor(sigmas, fit: BundleResult) -> list:
+    """Per-view σ' = √(σ² + τ²), px: τ² = max(0, s² − mean σ²) with s² the fit's residual variance per axis
+    (Σ|r|² / 2N): the error the detector's σ do not explain (lens-model misfit, print, focus), shared by all
+    corners. Without it a corner whose σ is ten times below the residuals' scale gets a hundred times the
+    weight of its neighbours for an error it does not have (module docstring)."""
+    res = np.concatenate(fit.residuals)
+    sig = np.concatenate([np.asarray(v, np.float64) for v in sigmas])
+    fin = np.isfinite(res).all(axis=1)
+    tau2 = max(float(np.sum(res[fin] ** 2) / (2 * max(fin.sum(), 1))) - float(np.mean(sig * sig)), 0.0)
+    return [np.sqrt(np.asarray(v, np.float64) ** 2 + tau2) for v in sigmas]
 
 
 def flag_corners(fit: BundleResult, sigmas) -> np.ndarray:
@@ -122,6 +137,9 @@ def solve(model: str, views, obj, px, intrinsics, poses, *, free, rank_strict: b
             basis, why = None, "not determined by these views"
     if fit is None:
         fit = bundle_adjust(model, obj, px, intrinsics, *poses, free=free, sigmas=sigmas, rank_strict=rank_strict)
+    if sigmas is not None:  # the error the σ's do not explain, shared by every corner, then the weighted refit
+        sigmas = with_floor(sigmas, fit)
+        fit = _refit(fit, obj, px, free, sigmas, None, basis, rank_strict)
     seen = set()
     for _ in range(MAX_ROUNDS - 1 if options.reject_corners else 0):
         keep = flag_corners(fit, sigmas)

@@ -268,7 +268,8 @@ class GuidedCalibration:
             try:
                 fits.append(fit_views(s.views, cfg.pattern, cfg.square, self.image_size, m,
                                       start=s.cal if s.cal is not None and s.cal.model == m else None,
-                                      fix_k3=m != "equidistant", square_unit=cfg.square_unit))
+                                      fix_k3=m != "equidistant", square_unit=cfg.square_unit,
+                                      flex="off"))  # the running fit: the board's flex is the final fit's
             except (CalibrationError, np.linalg.LinAlgError):
                 continue
         if not fits:
