@@ -80,7 +80,8 @@ def build_parser():
     ap.add_argument("--setup", required=True, choices=SETUPS, help="camera on the flange, or fixed in the cell")
     ap.add_argument("--pattern", help="inner corners, COLSxROWS, e.g. 9x6 (or --board)")
     ap.add_argument("--board", help="a ChArUco board instead of --pattern and --square: "
-                                    "charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100[,legacy][,first=0]")
+                                    "charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100[,legacy][,first=0]; "
+                                    "an AprilGrid: aprilgrid:6x6,tag=88mm,spacing=0.3; or a Kalibr target.yaml")
     ap.add_argument("--square", default=None, help="square size with unit, e.g. 25mm")
     ap.add_argument("--out", default="handeye", help="output folder (default: %(default)s)")
     ap.add_argument("--intrinsics", help="camera.json (or camera.yaml) of calibrate: hold these intrinsics")
@@ -112,10 +113,14 @@ def _config(args):
                   sigma_rot_deg=rot, sigma_t_mm=tr, save_partial=args.save_partial, quiet=args.quiet,
                   workers=args.workers, seed=args.seed)
     if args.board:
+        from aicalib_tf.geometry.aprilgrid import AprilGrid, Checkerboard, is_aprilgrid, load_board
         from aicalib_tf.geometry.charuco import parse_board
 
-        board = parse_board(args.board)
-        return HandEyeConfig(pattern=board.pattern_size, square=board.square, square_unit=board.unit, board=args.board,
+        board = load_board(args.board) if is_aprilgrid(args.board) else parse_board(args.board)
+        if isinstance(board, Checkerboard):  # a Kalibr checkerboard target: a chessboard
+            return HandEyeConfig(pattern=board.pattern_size, square=board.square, square_unit=board.unit, **common)
+        square = board.square_size if isinstance(board, AprilGrid) else board.square
+        return HandEyeConfig(pattern=board.pattern_size, square=square, square_unit=board.unit, board=args.board,
                              **common)
     if not args.pattern or not args.square:
         raise ValueError("give --pattern COLSxROWS and --square SIZE (e.g. 25mm), or --board charuco:...")

@@ -38,7 +38,8 @@ def build_parser():
     ap = parser("python -m aicalib_tf.live", __doc__)
     ap.add_argument("--pattern", help="inner corners, COLSxROWS, e.g. 9x6 (or --board)")
     ap.add_argument("--board", help="a ChArUco board instead of --pattern and --square: "
-                                    "charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100[,legacy][,first=0]")
+                                    "charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100[,legacy][,first=0]; "
+                                    "an AprilGrid: aprilgrid:6x6,tag=88mm,spacing=0.3; or a Kalibr target.yaml")
     ap.add_argument("--square", default="1", help="square size with unit, e.g. 25mm (default: 1, unitless)")
     ap.add_argument("--out", default="calib", help="where Save writes the calibration (default: %(default)s)")
     ap.add_argument("--source", default=None, help="a video file, image glob or stream URL read by the server")
@@ -87,14 +88,17 @@ def _config(args):
 
         if args.pattern:
             raise ValueError("give --pattern (a chessboard) or --board (a ChArUco board), not both")
-        b = parse_board(args.board)
-        pattern, square, unit = b.pattern_size, float(b.square), b.unit
+        from aicalib_tf.geometry.aprilgrid import AprilGrid, Checkerboard, is_aprilgrid, load_board
+
+        b = load_board(args.board) if is_aprilgrid(args.board) else parse_board(args.board)
+        pattern, square, unit = b.pattern_size, float(b.square_size if isinstance(b, AprilGrid) else b.square), b.unit
+        board = None if isinstance(b, Checkerboard) else args.board  # a Kalibr checkerboard: a chessboard
     elif not args.pattern:
         raise ValueError("give --pattern COLSxROWS (a chessboard) or --board charuco:... (a ChArUco board)")
     else:
-        pattern = check_pattern(parse_pattern(args.pattern))
+        pattern, board = check_pattern(parse_pattern(args.pattern)), None
         square, unit = parse_square(args.square)
-    return LiveConfig(pattern=pattern, square=square, square_unit=unit, board=args.board, out=args.out,
+    return LiveConfig(pattern=pattern, square=square, square_unit=unit, board=board, out=args.out,
                       source=args.source if args.source is not None else args.camera,
                       detector=args.detector, network=args.network, model=args.model,
                       target_px=parse_target(args.target), max_views=args.max_views)
