@@ -88,6 +88,10 @@ __all__ = ["select_model", "cross_validate", "fold_scores", "choose", "undetermi
 COMPLEXITY = tuple(sorted(MODELS, key=lambda m: get_model(m).RANK))  # simplest first (each model's RANK), see above
 MAX_FOLDS = 5
 MIN_CV_VIEWS = 4  # every fold then leaves at least 3 views to fit
+# the fewest views with which the choice tries a spline: its smoothness is chosen on halves of the views,
+# and halves of 10 views chose wrongly where 20 chose well (benchmarks/splined_model.py); a spline's fit and
+# folds also take minutes, which a small calibration should not wait for
+AUTO_SPLINE_VIEWS = 20
 RAY_MARGIN_DEG = 5.0  # a model must image rays this far beyond the widest reached (pinholes: below 85°)
 
 
@@ -243,6 +247,9 @@ def select_model(views, square_size: float, fit, models=MODELS, *, circle=None):
         if get_model(model).START == "layout" and fits:  # a spline only where the best model leaves a pattern
             ranked = sorted((m for m in fits if np.isfinite(rows[m]["cv_rms"])), key=lambda m: rows[m]["cv_rms"])
             note = misfit_note(fits[ranked[0]], views) if ranked else None
+            if note is None and len(views) < AUTO_SPLINE_VIEWS and len(models) > 1:
+                note = (f"{model}: not tried with {len(views)} views (the choice tries it from {AUTO_SPLINE_VIEWS}; "
+                        f"--model {model} fits it)")
             if note is not None:
                 row["note"] = note
                 continue
