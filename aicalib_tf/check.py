@@ -184,6 +184,18 @@ def check_out_file(out: str, inputs) -> Path:
     return path
 
 
+def board_of(cal):
+    """What the detector looks for: the calibration's marker board (a ChArUco board or an AprilGrid,
+    ``meta["board"]`` of its camera.json), else its chessboard pattern."""
+    text = (cal.meta or {}).get("board")
+    if not isinstance(text, str) or not text:
+        return tuple(cal.pattern_size)
+    from aicalib_tf.geometry.aprilgrid import is_aprilgrid, load_board
+    from aicalib_tf.geometry.charuco import parse_board
+
+    return load_board(text) if is_aprilgrid(text) else parse_board(text)
+
+
 def _detect(files: list[str], cal, cfg: CheckConfig):
     """Views of the calibration's board in every photo and sampled video frame; (views, {label: why skipped})."""
     from aicalib_tf.calib.fit import View
@@ -196,7 +208,7 @@ def _detect(files: list[str], cal, cfg: CheckConfig):
     photos = [f for f in files if f not in videos]
     views, skipped = [], {}
     cols, rows = cal.pattern_size
-    found = list(zip(photos, map_images(photos, _file_detector, (cfg.detector, tuple(cal.pattern_size), cfg.network),
+    found = list(zip(photos, map_images(photos, _file_detector, (cfg.detector, board_of(cal), cfg.network),
                                         workers=cfg.workers))) if photos else []
     for video in videos:
         found += list(_detect_frames(video, cal, cfg))
@@ -221,7 +233,7 @@ def _detect_frames(video: str, cal, cfg: CheckConfig):
     from aicalib_tf.calib.workflow import make_detector
     from aicalib_tf.io import load_image
 
-    detect = make_detector(cfg.detector, tuple(cal.pattern_size), cfg.network)
+    detect = make_detector(cfg.detector, board_of(cal), cfg.network)
     for index, frame in video_frames(video, cfg.every, cfg.max_frames):
         gray = load_image(frame)
         hit = detect(gray)
