@@ -71,7 +71,7 @@ def corner_rows(sags, seeds: int, noise: float) -> list[str]:
         err, sd, fx_on, fx_off, sfx, ok, kept = [], [], [], [], [], True, 0
         for seed in range(seeds):
             views = corner_sequence(flex, noise, np.random.default_rng([seed, 47]))
-            on = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", square_unit="m")
+            on = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", square_unit="m", flex="auto")
             off = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="off")
             s, s_sd = _sag(on)
             kept += on.flex is not None
@@ -109,7 +109,7 @@ def rendered_rows(sags, n: int) -> list[str]:
                 if found is not None:
                     views.append(View(f"img{k:02d}", found[0], found[1], relative=detect.relative))
             sq, size, fx = label["square_size"], tuple(label["image_size"]), label["K"][0][0]
-            on = calibrate_camera(views, PATTERN, sq, size, square_unit="mm")
+            on = calibrate_camera(views, PATTERN, sq, size, square_unit="mm", flex="auto")
             off = calibrate_camera(views, PATTERN, sq, size, model=on.model, flex="off")
             s, s_sd = _sag(on)
             lines.append(f"| {sag:g} | {cam} | {s:.4f} ± {s_sd:.4f} | {on.fx - fx:+.3f} | {off.fx - fx:+.3f} | "

@@ -13,8 +13,8 @@ worst view goes at a time. At most a third of the views are rejected, never belo
 
 The fit is one least-squares bundle over all views (:mod:`aicalib_tf.calib.bundle`). Inside each
 solve (:mod:`aicalib_tf.calib.robust`) single outlying corners are rejected, corners are weighted by
-their views' ``sigmas``, and the board's flex is solved and kept when the views determine it
-(:mod:`aicalib_tf.calib.flex`). Starts: the
+their views' ``sigmas``, and with ``flex="auto"`` the board's flex is solved and kept when the views
+determine it (:mod:`aicalib_tf.calib.flex`). Starts: the
 pinhole models from OpenCV's multi-start plumb_bob fit; the fisheye models (equidistant, ds, eucm) from a grid of focal lengths
 (:func:`~aicalib_tf.calib.starts.fisheye_start`), so fisheye lenses need no guess. ``model="auto"``
 picks the model by cross-validation over views (:mod:`aicalib_tf.calib.select`).
@@ -282,7 +282,7 @@ def _calibration(fit: BundleResult, views, pattern_size, square_size, image_size
 
 def fit_views(views, pattern_size: tuple[int, int], square_size: float, image_size: tuple[int, int], model: str,
               *, start=None, fix_k3: bool = False, square_unit: str = "", meta: dict | None = None,
-              flex: str = "auto", reject_corners: bool = True) -> Calibration:
+              flex: str = "off", reject_corners: bool = True) -> Calibration:
     """One fit of one lens model to the views: no view rejection, no model choice.
 
     views : sequence of :class:`View` (at least 3 usable; unusable ones land in ``rejected``).
@@ -331,7 +331,7 @@ def _refit(model, usable, square_size, image_size, warm: BundleResult, fix_k3, o
 
 
 def choose_model(views, pattern_size: tuple[int, int], image_size: tuple[int, int], models=MODELS, *,
-                 fix_k3: bool = False, image_circle: ImageCircle | None = None, flex: str = "auto",
+                 fix_k3: bool = False, image_circle: ImageCircle | None = None, flex: str = "off",
                  reject_corners: bool = True) -> str:
     """The model ``auto`` chooses among ``models`` for these views (:mod:`aicalib_tf.calib.select`;
     no outlier rejection): e.g. each half of the views' choice. Raises CalibrationError when no model fits."""
@@ -345,7 +345,7 @@ def choose_model(views, pattern_size: tuple[int, int], image_size: tuple[int, in
 def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 1.0,
                      image_size: tuple[int, int] | None = None, *, model: str = "auto", rational: bool = False,
                      fix_k3: bool = False, reject_outliers: bool = True, min_views: int = 3, square_unit: str = "",
-                     meta: dict | None = None, image_circle: ImageCircle | None = None, flex: str = "auto",
+                     meta: dict | None = None, image_circle: ImageCircle | None = None, flex: str = "off",
                      reject_corners: bool = True) -> Calibration:
     """Calibrate a camera from detected boards: a bundle fit of the lens model over all views.
 
@@ -359,7 +359,8 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
     image_circle : a circular fisheye's image circle (:func:`~aicalib_tf.geometry.image_circle.estimate_image_circle`),
     kept in the Calibration; under ``auto`` a pinhole model is not eligible when the circle's rim lies
     at or near 90° off-axis. flex : "auto" solves the board's flex with the camera and keeps it when the
-    views determine it, "off" takes the board as flat (:mod:`aicalib_tf.calib.flex`). reject_corners :
+    views determine it, "off" (default) takes the board as flat (:mod:`aicalib_tf.calib.flex`; on real
+    photos the halves of a set fit different flexes: docs/benchmark.md). reject_corners :
     reject single outlying corners inside every solve (:mod:`aicalib_tf.calib.robust`); a view's
     ``sigmas`` weight its corners.
     Raises :class:`CalibrationError` with fewer than ``min_views`` usable views or when the model

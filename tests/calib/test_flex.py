@@ -55,12 +55,12 @@ def test_flex_basis_is_zero_on_the_grid_edges_and_one_at_the_centre():
 
 def test_flex_is_recovered_and_the_focal_length_unbiased():
     views = flexed_views(flex=(0.012, 0.006))
-    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", square_unit="m")
+    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", square_unit="m", flex="auto")
     sd = np.sqrt(np.diag(cal.flex_covariance))
     assert cal.flex_note == "" and sd.max() < FLEX_SIGMA_MAX
     np.testing.assert_allclose(cal.flex, [0.012, 0.006], atol=max(0.002, 3 * sd.max()))
     assert abs(cal.fx - 500.0) < 2.5 * cal.std["fx"]
-    flat = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="off")
+    flat = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob")  # the default: a flat board
     assert flat.flex is None and abs(flat.fx - 500.0) > 3 * flat.std["fx"]  # ignoring the flex biases fx
     lines = solve_lines(cal)
     assert lines and lines[-1].startswith("board flex: sag") and "squares" in lines[-1] and " m (" in lines[-1]
@@ -71,7 +71,7 @@ def test_a_flex_the_views_cannot_determine_stays_off_and_says_why():
     assert flex_problem([0.01, 0.0], np.diag([0.001, 0.001]) ** 2) == ""
     assert "plausible" in flex_problem([0.6, 0.0], np.diag([0.001, 0.001]) ** 2)
     views = [View(v.name, v.corners, v.ids, relative=True) for v in flexed_views(8, flex=(0.01, 0.0))]
-    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob")
+    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="auto")
     assert cal.flex is None and "relative" in cal.flex_note
     assert solve_lines(cal)[-1].startswith("board flex: not solved")
 
@@ -119,7 +119,7 @@ def test_per_corner_sigmas_weight_the_fit():
 
 def test_flex_round_trips_through_camera_json():
     cal = calibrate_camera(flexed_views(12, flex=(0.01, 0.0), seed=5), PATTERN, SQUARE, SIZE, model="plumb_bob",
-                           square_unit="m")
+                           square_unit="m", flex="auto")
     d = json.loads(to_json(cal))
     assert d["board_flex"]["wx"] == pytest.approx(cal.flex[0]) and d["board_flex"]["note"] == ""
     assert d["board_flex"]["sag_unit"] == pytest.approx(d["board_flex"]["sag"] * SQUARE)
