@@ -13,10 +13,12 @@ place than its own), corners over 2 px off, and the corner error of:
   (:func:`aicalib_tf.detect.aprilgrid.detect_aprilgrid`);
 * OpenCV's aruco with CORNER_REFINE_SUBPIX, and with CORNER_REFINE_APRILTAG.
 
-``--dist K1 K2 P1 P2 K3`` renders through that OpenCV lens instead (each supersampled pixel's ray
-found by a fixed-point inversion of the distortion, 3x3 samples a pixel), truth projected through it.
+``--lens MODEL --dist ...`` (and ``--fx``) renders through that lens of :mod:`aicalib_tf.geometry.lens`
+instead (each supersampled pixel's ray from ``unproject``, 3x3 samples a pixel; e.g. ``--lens
+equidistant --dist 0.05 -0.01 0 0 --fx 400``, a fisheye), truth projected through it, and the
+calibration fits that model.
 
-Then it calibrates (:func:`aicalib_tf.calib.fit.calibrate_camera`, plumb_bob) from the first
+Then it calibrates (:func:`aicalib_tf.calib.fit.calibrate_camera`, the rendered lens's model) from the first
 ``--calib-views`` views and reports the focal length's and the principal point's errors.
 """
 
@@ -32,6 +34,7 @@ import numpy as np
 
 from aicalib_tf.detect.aprilgrid import detect_aprilgrid
 from aicalib_tf.geometry.aprilgrid import layout_image, parse_board, render_view
+from aicalib_tf.geometry.lens import project, unproject
 
 BOARD = "aprilgrid:6x6,tag=88mm,spacing=0.3"
 SIZE = (1280, 960)
@@ -46,45 +49,44 @@ def random_view(board, rng, partial: bool):
     tilt = rng.uniform(-0.7, 0.7, 2)
     rvec = np.array([tilt[0], tilt[1], rng.uniform(-0.5, 0.5)])
     R, _ = cv2.Rodrigues(rvec)
-    z = rng.uniform(90, 150)
+    z = rng.uniform(90, 150) * K[0, 0] / 900.0  # the same size in the image at any focal length
     if partial:
         p = np.array([rng.choice([0.05, 0.95]) * SIZE[0], rng.uniform(0.2, 0.8) * SIZE[1]])
     else:
         p = np.array([rng.uniform(0.4, 0.6) * SIZE[0], rng.uniform(0.4, 0.6) * SIZE[1]])
-    ray = np.linalg.solve(K, np.array([p[0], p[1], 1.0]))
+    ray = unproject(p, LENS["model"], K, LENS["dist"])
+    ray = ray / ray[2]
     tvec = z * ray - R @ np.array([L[0] / 2, L[1] / 2, 0.0])
     return rvec, tvec
 
 
-DIST = np.zeros(5)  # OpenCV's (k1, k2, p1, p2, k3) of the rendered lens (--dist)
+LENS = {"model": "plumb_bob", "dist": np.zeros(5)}  # the rendered lens (--lens, --dist); zero plumb_bob: a pinhole
 SUPER = 3  # samples a pixel along each axis through a distorting lens
 
 
+def distorted() -> bool:
+    return LENS["model"] != "plumb_bob" or bool(np.any(LENS["dist"]))
+
+
 @functools.lru_cache(maxsize=1)
-def _rays(dist: tuple) -> np.ndarray:
-    """(h·S, w·S, 2) float64 normalised rays of the supersampled pixels through the lens ``dist``."""
+def _rays(model: str, dist: tuple) -> np.ndarray:
+    """(h·S, w·S, 3) float64 unit rays of the supersampled pixels (``geometry.lens.unproject``)."""
     s = SUPER
     ys, xs = np.mgrid[0: SIZE[1] * s, 0: SIZE[0] * s].astype(np.float64)
-    xd = ((xs - (s - 1) / 2) / s - K[0, 2]) / K[0, 0]
-    yd = ((ys - (s - 1) / 2) / s - K[1, 2]) / K[1, 1]
-    k1, k2, p1, p2, k3 = dist
-    x, y = xd.copy(), yd.copy()
-    for _ in range(30):  # fixed point of x = (xd − tangential(x)) / radial(x)
-        r2 = x * x + y * y
-        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        x = (xd - (2 * p1 * x * y + p2 * (r2 + 2 * x * x))) / radial
-        y = (yd - (p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)) / radial
-    return np.stack([x, y], axis=-1)
+    px = np.stack([(xs - (s - 1) / 2) / s, (ys - (s - 1) / 2) / s], axis=-1)
+    return unproject(px, model, K, np.asarray(dist))
 
 
 def _render_distorted(layout, margin, R, tvec) -> np.ndarray:
-    """(H, W) float32 in [0, 1]: the layout seen through the lens DIST, area-averaged over SUPER² samples."""
-    rays = _rays(tuple(DIST))
-    Hinv = np.linalg.inv(np.column_stack([R[:, 0], R[:, 1], tvec]))
-    b = rays @ Hinv[:, :2].T + Hinv[:, 2]
-    X, Y = b[..., 0] / b[..., 2], b[..., 1] / b[..., 2]
-    mx = (margin - 0.5 + X * PX_PER_UNIT).astype(np.float32)
-    my = (margin - 0.5 + Y * PX_PER_UNIT).astype(np.float32)
+    """(H, W) float32 in [0, 1]: the layout seen through LENS, area-averaged over SUPER² samples."""
+    rays = _rays(LENS["model"], tuple(LENS["dist"]))
+    b = rays @ np.linalg.inv(np.column_stack([R[:, 0], R[:, 1], tvec])).T  # λ·(X, Y, 1) for the ray λ·d
+    with np.errstate(invalid="ignore", divide="ignore"):
+        front = b[..., 2] > 0
+        X = np.where(front, b[..., 0] / b[..., 2], -1e6)
+        Y = np.where(front, b[..., 1] / b[..., 2], -1e6)
+    mx = np.nan_to_num(margin - 0.5 + X * PX_PER_UNIT, nan=-1e6).astype(np.float32)
+    my = np.nan_to_num(margin - 0.5 + Y * PX_PER_UNIT, nan=-1e6).astype(np.float32)
     big = cv2.remap(layout.astype(np.float32) / 255.0, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                     borderValue=1.0)
     return cv2.resize(big, SIZE, interpolation=cv2.INTER_AREA)
@@ -93,7 +95,7 @@ def _render_distorted(layout, margin, R, tvec) -> np.ndarray:
 def render(board, layout, margin, rvec, tvec, rng) -> np.ndarray:
     """(H, W) uint8 view of the board at pose (rvec, tvec), blurred and noisy."""
     R, _ = cv2.Rodrigues(np.asarray(rvec, np.float64))
-    if DIST.any():
+    if distorted():
         img = _render_distorted(layout, margin, R, np.asarray(tvec, np.float64))
     else:
         img = render_view(layout, PX_PER_UNIT, margin, K @ np.column_stack([R[:, 0], R[:, 1], tvec]), SIZE, 4)
@@ -104,7 +106,8 @@ def render(board, layout, margin, rvec, tvec, rng) -> np.ndarray:
 def truth(board, ids, rvec, tvec) -> np.ndarray:
     """(N, 2) px: where lattice ids (N, 2) project."""
     obj = board.object_points(ids) / board.square_size
-    return cv2.projectPoints(obj, np.asarray(rvec, np.float64), np.asarray(tvec, np.float64), K, DIST)[0].reshape(-1, 2)
+    R, _ = cv2.Rodrigues(np.asarray(rvec, np.float64))
+    return project(obj @ R.T + np.asarray(tvec, np.float64), LENS["model"], K, LENS["dist"])
 
 
 def whole_tag_corners(board, rvec, tvec) -> set:
@@ -136,10 +139,12 @@ def main(argv=None) -> int:
     ap.add_argument("--views", type=int, default=24)
     ap.add_argument("--calib-views", type=int, default=8)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--dist", type=float, nargs=5, default=[0.0] * 5, metavar=("K1", "K2", "P1", "P2", "K3"),
-                    help="render through this OpenCV lens (plumb_bob) instead of a pinhole")
+    ap.add_argument("--lens", default="plumb_bob", help="the rendered lens model (geometry.lens), e.g. equidistant")
+    ap.add_argument("--dist", type=float, nargs="+", default=[0.0] * 5, help="its coefficients, OpenCV's order")
+    ap.add_argument("--fx", type=float, default=900.0, help="focal length px (fx = fy)")
     args = ap.parse_args(argv)
-    DIST[:] = args.dist
+    LENS.update(model=args.lens, dist=np.asarray(args.dist, np.float64))
+    K[0, 0] = K[1, 1] = args.fx
     from aicalib_tf.calib.fit import View, calibrate_camera
 
     board = parse_board(BOARD)
@@ -172,12 +177,13 @@ def main(argv=None) -> int:
               f"(within 2 px {(stats[m]['found'] - stats[m]['off']) / expected_total:.3f})  wrong ids {stats[m]['wrong']}  over 2 px off {stats[m]['off']}  "
               f"median {np.median(e):.4f} px  p95 {np.percentile(e, 95):.4f} px  max {e.max():.3f} px  "
               f"{1000 * stats[m]['s'] / args.views:.0f} ms/view")
-    cal = calibrate_camera(views, board.pattern_size, board.square_size, SIZE, model="plumb_bob", square_unit=board.unit)
+    cal = calibrate_camera(views, board.pattern_size, board.square_size, SIZE, model=LENS["model"], square_unit=board.unit)
     fx, fy = cal.K[0, 0], cal.K[1, 1]
     cx, cy = cal.K[0, 2], cal.K[1, 2]
     print(f"calibration from {len(views)} views: rms {cal.rms:.4f} px, fx {fx:.2f} ({100 * (fx / K[0, 0] - 1):+.3f}%), "
           f"fy {fy:.2f} ({100 * (fy / K[1, 1] - 1):+.3f}%), cx {cx - K[0, 2]:+.2f} px, cy {cy - K[1, 2]:+.2f} px, "
-          f"k1 {cal.dist.ravel()[0]:+.4f} (truth {DIST[0]:+.4f}), k2 {cal.dist.ravel()[1]:+.4f} (truth {DIST[1]:+.4f})")
+          f"k1 {cal.dist.ravel()[0]:+.4f} (truth {LENS['dist'][0]:+.4f}), k2 {cal.dist.ravel()[1]:+.4f} "
+          f"(truth {LENS['dist'][1]:+.4f})")
     return 0
 
 
