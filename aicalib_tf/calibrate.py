@@ -72,6 +72,12 @@ or Kalibr's target file ``--board target.yaml`` (``target_type: aprilgrid``, or 
 read as --pattern and --square). OpenCV's aruco decodes the tags; each tag corner is placed by the
 saddle fit. Photos, videos and cameras read it as they read a ChArUco board.
 
+OpenCV's circle grids, for photos: ``--board circles:4x11,spacing=20mm,asymmetric[,diameter=14mm]`` or
+``circles:7x6,spacing=20mm,symmetric`` (OpenCV's patternSize (cols, rows) and its object points;
+diameter defaults to half the nearest centre distance). cv2.findCirclesGrid finds the grid; each
+centre is the circle's dark-area centroid, corrected for the projected-centre bias with the lens and
+poses of a first calibration, then calibrated again (two corrections).
+
 Exit codes: 0 success; 2 bad input (no images, bad --pattern or --square, a bad model, no board
 found, fewer than 3 usable views, mixed sizes); nothing is written on failure.
 """
@@ -105,7 +111,8 @@ def build_parser():
     ap.add_argument("--board", help="a ChArUco board instead of --pattern and --square: "
                                     "charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100[,legacy][,first=0]; "
                                     "an AprilGrid: aprilgrid:6x6,tag=88mm,spacing=0.3[,family=tag36h11][,first=0]; "
-                                    "or a Kalibr target.yaml")
+                                    "a Kalibr target.yaml; "
+                                    "or a circle grid: circles:4x11,spacing=20mm,asymmetric|symmetric[,diameter=10mm]")
     ap.add_argument("--square", default="1", help="square size with unit, e.g. 25mm (default: 1, unitless)")
     ap.add_argument("--out", default="calib", help="output folder (default: %(default)s)")
     ap.add_argument("--detector", default="cnn", choices=DETECTORS, help="corner detector (default: %(default)s)")
@@ -203,10 +210,17 @@ def _common(args) -> dict:
     """The options one camera and a rig share, of photos or of the guided loop, parsed
     (ValueError for a bad --pattern, --square or --board)."""
     from aicalib_tf.geometry.aprilgrid import is_aprilgrid
+    from aicalib_tf.geometry.circles import is_circles
+    from aicalib_tf.geometry.circles import parse_board as parse_circles
     from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
 
     if args.board and is_aprilgrid(args.board):  # an AprilGrid, or a Kalibr target file
         return _aprilgrid_common(args)
+    if args.board and is_circles(args.board):  # an OpenCV circle grid
+        board = parse_circles(args.board)
+        return dict(pattern=board.pattern_size, square=board.square_size, square_unit=board.unit, board=args.board,
+                    out=args.out, detector=args.detector, network=args.network,
+                    model="rational_polynomial" if args.rational else args.model, quiet=args.quiet, workers=args.workers)
     if args.board:
         from aicalib_tf.geometry.charuco import parse_board
 

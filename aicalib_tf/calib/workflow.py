@@ -13,6 +13,7 @@ import re
 import sys
 from collections import Counter
 import dataclasses
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -77,6 +78,10 @@ def make_detector(name: str, pattern_size: tuple[int, int], model: str = DETECTO
         from aicalib_tf.detect.aprilgrid import make_detector as aprilgrid_detector
 
         return aprilgrid_detector(pattern_size)
+    if hasattr(pattern_size, "circle_ids"):  # an OpenCV circle grid (aicalib_tf.geometry.circles)
+        from aicalib_tf.detect.circles import make_detector as circles_detector
+
+        return circles_detector(pattern_size)
     if hasattr(pattern_size, "marker_ids"):  # a ChArUco board (aicalib_tf.geometry.charuco)
         return _charuco_detector(name, pattern_size, model)
     detectors, info = make_detectors([name], tuple(pattern_size), model, relative=True)
@@ -197,7 +202,11 @@ def _target(cfg):
     if cfg.board:
         from aicalib_tf.geometry.aprilgrid import is_aprilgrid, load_board
         from aicalib_tf.geometry.charuco import parse_board
+        from aicalib_tf.geometry.circles import is_circles
+        from aicalib_tf.geometry.circles import parse_board as parse_circles
 
+        if is_circles(cfg.board):
+            return parse_circles(cfg.board)
         return load_board(cfg.board) if is_aprilgrid(cfg.board) else parse_board(cfg.board)
     return cfg.pattern
 
@@ -365,8 +374,16 @@ def _calibrate_files(files: list[str], detect, cfg: CalibrateConfig):
     circle, note = _image_circle(found, size)
     if note:
         meta["image_circle_note"] = note
-    cal = calibrate_camera(views, cfg.pattern, cfg.square, size, model=cfg.model, rational=cfg.rational,
-                           fix_k3=cfg.fix_k3, square_unit=cfg.square_unit, meta=meta, image_circle=circle)
+    fit = functools.partial(calibrate_camera, pattern_size=cfg.pattern, square_size=cfg.square, image_size=size,
+                            model=cfg.model, rational=cfg.rational, fix_k3=cfg.fix_k3, square_unit=cfg.square_unit,
+                            meta=meta, image_circle=circle)
+    board = _target(cfg)
+    if hasattr(board, "circle_ids"):  # centres corrected for the projected-centre bias, then refitted
+        from aicalib_tf.calib.circle_bias import calibrate_circles
+
+        cal, views = calibrate_circles(views, board, fit)
+    else:
+        cal = fit(views)
     by_name = {v.name: v for v in views}
     used = [by_name[n] for n in cal.views]
 
