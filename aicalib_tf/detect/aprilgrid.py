@@ -2,15 +2,18 @@
 OpenCV's aruco, each tag corner placed by the project's saddle fit.
 
 OpenCV's ``cv2.aruco.ArucoDetector`` (the grid's AprilTag dictionary, two-bit borders) decodes the
-tags; its quad corners start the fit. Tags of ids outside the grid, or seen twice, are dropped.
-Which of a tag's corners OpenCV reports first depends on how the codes were drawn: with two tags
-or more, the quarter turn whose corners a homography from the board fits best decides (one tag
-alone keeps :data:`~aicalib_tf.geometry.aprilgrid.PRINT_ROTATION`). Each corner is an X-junction:
-the tag's black border and the small square at its corner meet there, in a clean window of side
-min(gap, two bits) on the board. :func:`aicalib_tf.detect.refine.refine_windowed` fits the saddle
-in a window that fits inside it; a corner whose fit fails, or whose window leaves the image, is
-dropped. Corner ids are lattice positions (the geometry module's docstring), so a partial view
-keeps its ids. ``refine="opencv"`` returns OpenCV's own sub-pixel corners instead, for comparison.
+tags. Tags of ids outside the grid, or seen twice, are dropped. Which of a tag's corners OpenCV
+reports first depends on how the codes were drawn: with two tags or more, the quarter turn whose
+corners a homography from the board fits best decides (one tag alone keeps
+:data:`~aicalib_tf.geometry.aprilgrid.PRINT_ROTATION`). Each corner is an X-junction: the tag's
+black border and the small square at its corner meet there, in a clean square of side
+min(gap, two bits) on the board. OpenCV's quad corners lie up to that far off, pushed out along the
+tag's diagonals where its contour runs into the corner squares, so a coarse saddle fit in a wide
+window starts where a homography over the tag and its neighbours puts the corner (else at the
+quad's corner), and :func:`aicalib_tf.detect.refine.refine_windowed` finishes in a window inside the
+clean square. A corner whose fit fails, or whose window leaves the image, is dropped. Corner ids are
+lattice positions (the geometry module's docstring), so a partial view keeps its ids.
+``refine="opencv"`` returns OpenCV's own sub-pixel corners instead, for comparison.
 
 Coordinates are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0).
 """
@@ -126,8 +129,8 @@ def _pull_in(smoothed: Smoothed, quads: np.ndarray, predicted: np.ndarray, spaci
     tag's contour runs into its corner squares: the fit starts at the corner the tag and its
     neighbours predict (:func:`predicted_corners`), then where that fails at the quad's corner,
     each with the windows ``PULL_IN_WINDOWS`` (fractions of the clean square) in turn; it must end
-    within ``PULL_IN_REACH`` clean squares of the prediction or of the quad's corner. quads, predicted (K, 4, 2),
-    spacing (K, 4) px. Returns (4K, 2) float64 and ok (4K,) bool.
+    within ``PULL_IN_REACH`` clean squares of the prediction or of the quad's corner.
+    quads, predicted (K, 4, 2), spacing (K, 4) px. Returns (4K, 2) float64 and ok (4K,) bool.
     """
     pred = predicted.reshape(-1, 2)
     sp = spacing.reshape(-1)

@@ -45,7 +45,7 @@ FAMILIES = {"tag36h11": "DICT_APRILTAG_36h11", "tag36h10": "DICT_APRILTAG_36h10"
             "tag25h9": "DICT_APRILTAG_25h9", "tag16h5": "DICT_APRILTAG_16h5"}
 BORDER_BITS = 2  # Kalibr's tags: a black border two bits wide
 MAX_LATTICE = 2000  # lattice points along one side (spacing 0.3: 13 a tag)
-PRINT_ROTATION = 2  # quarter turns of OpenCV's marker image as printed (Kalibr draws its codes turned by half a turn)
+PRINT_ROTATION = 2  # counter-clockwise quarter turns of OpenCV's marker image as printed (Kalibr draws its codes turned by half a turn)
 _UNIT_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4, "": None}
 
 
@@ -141,13 +141,13 @@ class AprilGrid:
 
     def tag_corner_ids(self, tag_id, rotation: int = PRINT_ROTATION) -> np.ndarray:
         """(..., 4, 2) int64 lattice ids of the corners of tags ``tag_id``, in the order OpenCV's
-        aruco reports them for a tag printed ``rotation`` quarter turns from its marker image
+        aruco reports them for a tag printed ``rotation`` quarter turns counter-clockwise from its marker image
         (0: top-left, top-right, bottom-right, bottom-left on the page)."""
         cell = self.tag_cell(tag_id)
         x0, y0 = self.lattice_of(2 * cell[..., 0]), self.lattice_of(2 * cell[..., 1])
         b = self.fraction[1]
         offs = np.array([[0, 0], [b, 0], [b, b], [0, b]], np.int64)
-        offs = np.roll(offs, -int(rotation) % 4, axis=0)
+        offs = np.roll(offs, int(rotation) % 4, axis=0)  # np.rot90 turns the code counter-clockwise on the page
         return np.stack([x0, y0], axis=-1)[..., None, :] + offs
 
     def corner_ids(self) -> np.ndarray:

@@ -101,3 +101,15 @@ def test_the_printed_page_reads_back_with_every_corner():
     assert np.abs(A @ fit - det.corners).max() < 0.3
     px_per_mm = 150 / 25.4
     assert fit[0, 0] == pytest.approx(round(board.square_size * px_per_mm), rel=1e-3)  # the bitmap: whole px a unit
+
+
+def test_tags_printed_another_way_round_keep_their_ids(monkeypatch):
+    import aicalib_tf.geometry.aprilgrid as geometry
+
+    monkeypatch.setattr(geometry, "PRINT_ROTATION", 1)  # every tag's code turned a quarter
+    turned = layout_image(BOARD, Q, MARGIN)
+    monkeypatch.undo()
+    rvec, tvec = pose([0.2, -0.3, 0.4], (640, 480), 120)
+    det = detect_aprilgrid(render(turned, rvec, tvec), BOARD)
+    assert det.rotation == 1 and len(det.ids) == 144
+    assert np.linalg.norm(det.corners - truth(det.ids, rvec, tvec), axis=1).max() < 0.15
