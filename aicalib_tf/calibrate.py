@@ -122,6 +122,9 @@ def build_parser():
     ap.add_argument("--network", default=DETECTOR_NETWORK, help=NETWORK_HELP)
     ap.add_argument("--fix-k3", action="store_true", help="hold k3 at 0 (pinhole models; narrow lenses, few views)")
     ap.add_argument("--rational", action="store_true", help="the same as --model rational_polynomial")
+    ap.add_argument("--flex", choices=("off", "auto"), default="off",
+                    help="photos: auto solves the board's flex (a parabolic sag) with the camera and keeps it when the "
+                         "views determine it (default: %(default)s; see docs/calibration.md)")
     ap.add_argument("--workers", type=int, default=None,
                     help="detection processes (default: one per core, but one per 8 images at most)")
     ap.add_argument("--resize-policy", default="error", choices=RESIZE_POLICIES,
@@ -167,6 +170,8 @@ def _main(args) -> int:
     from aicalib_tf.guided.workflow import guided_source
 
     source = guided_source(args.images, args.camera)
+    if args.flex != "off" and (source is not None or args.rig):
+        raise ValueError("--flex is solved for photos of one camera; videos, cameras and rigs take the board flat")
     if source is not None and not args.rig:
         from aicalib_tf.guided.workflow import GuidedRunConfig, parse_target, run_guided
 
@@ -192,7 +197,7 @@ def _main(args) -> int:
             return _run(lambda: _rig_video_config(args, cameras), run_rig_video, wrote)
         return _run(lambda: RigConfig(cameras=cameras, **_common(args)), run_rig, wrote)
     return _run(lambda: CalibrateConfig(images=tuple(args.images), fix_k3=args.fix_k3, rational=args.rational,
-                                        resize_policy=args.resize_policy, **_common(args)), run,
+                                        resize_policy=args.resize_policy, flex=args.flex, **_common(args)), run,
                 "camera.yaml, camera.json, camera_info.yaml, camchain.yaml, report.png")
 
 

@@ -138,6 +138,7 @@ class CalibrateConfig:
     quiet: bool = False
     workers: int | None = None  # detection processes (None: aicalib_tf.detect.batch.worker_count's default)
     board: str | None = None  # a ChArUco description (pattern and square then follow from it)
+    flex: str = "off"  # the board's flex: "auto" solves it with the camera and keeps it when determined
 
 
 @dataclass
@@ -370,13 +371,13 @@ def _calibrate_files(files: list[str], detect, cfg: CalibrateConfig):
         raise CalibrationError(f"no {cfg.pattern[0]}x{cfg.pattern[1]} board found in any of the {len(files)} images{hint}")
     meta = {"detector": cfg.detector, "model": detect.info.get("model"), "model_sha256": detect.info.get("sha256"),
             "rational": cfg.rational, "lens_model": cfg.model, "fix_k3": cfg.fix_k3, "resize_policy": cfg.resize_policy,
-            "images": len(files), **({"board": cfg.board} if cfg.board else {})}
+            "flex": cfg.flex, "images": len(files), **({"board": cfg.board} if cfg.board else {})}
     circle, note = _image_circle(found, size)
     if note:
         meta["image_circle_note"] = note
     fit = functools.partial(calibrate_camera, pattern_size=cfg.pattern, square_size=cfg.square, image_size=size,
                             model=cfg.model, rational=cfg.rational, fix_k3=cfg.fix_k3, square_unit=cfg.square_unit,
-                            meta=meta, image_circle=circle)
+                            meta=meta, image_circle=circle, flex=cfg.flex)
     board = _target(cfg)
     if hasattr(board, "circle_ids"):  # centres corrected for the projected-centre bias, then refitted
         from aicalib_tf.calib.circle_bias import calibrate_circles

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -194,6 +195,16 @@ def test_cli_on_opencv_left_matches_the_reference(tmp_path, capsys):
     assert not list(tmp_path.glob(".aicalib-*.tmp-*"))  # nor a staging folder
     assert cv2.imread(str(tmp_path / "c" / "report.png")).shape[1] > 1000
 
+
+def test_cli_flex_auto_solves_the_board_flex_and_says_so(tmp_path, capsys):
+    rc, out, err = _run_cli(capsys, str(LEFT / "*.jpg"), "--pattern", "9x6", "--square", "25mm", "--model", "plumb_bob",
+                            "--flex", "auto", "--out", tmp_path / "c")
+    assert rc == 0, err
+    cal = json.loads((tmp_path / "c" / "camera.json").read_text())
+    assert "board_flex" in cal and cal["meta"]["flex"] == "auto" and "board flex" in out
+    rc, out, err = _run_cli(capsys, str(LEFT / "*.jpg"), "--pattern", "9x6", "--rig", "a=x", "--flex", "auto",
+                            "--out", tmp_path / "r")
+    assert rc == 2 and "--flex" in err
 
 @pytest.mark.slow
 def test_cli_on_udacity_handles_every_image(tmp_path, capsys):
