@@ -45,7 +45,9 @@ FAMILIES = {"tag36h11": "DICT_APRILTAG_36h11", "tag36h10": "DICT_APRILTAG_36h10"
             "tag25h9": "DICT_APRILTAG_25h9", "tag16h5": "DICT_APRILTAG_16h5"}
 BORDER_BITS = 2  # Kalibr's tags: a black border two bits wide
 MAX_LATTICE = 2000  # lattice points along one side (spacing 0.3: 13 a tag)
-PRINT_ROTATION = 2  # counter-clockwise quarter turns of OpenCV's marker image as printed (Kalibr draws its codes turned by half a turn)
+# Counter-clockwise quarter turns of OpenCV's marker image as printed. Kalibr prints each code upright
+# (most significant bit top-left, a set bit white), which is OpenCV's image turned half a turn.
+PRINT_ROTATION = 2
 _UNIT_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4, "": None}
 
 

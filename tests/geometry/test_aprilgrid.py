@@ -112,3 +112,15 @@ def test_calibrate_refuses_a_bad_grid_in_one_line(tmp_path, capsys, board, field
     f.write_text("target_type: circlegrid\n")
     assert main([str(tmp_path / "x.png"), "--board", str(f)]) == 2
     assert "target_type" in capsys.readouterr().err
+
+
+def test_printed_tags_are_kalibrs_codes_upright():
+    from aicalib_tf.geometry.aprilgrid import tag_image
+
+    b = parse_board("aprilgrid:6x6,tag=88mm,spacing=0.3")
+    # tag36h11's first codes (the AprilTag family), read from the printed tag: rows from the top,
+    # most significant bit first, a set bit white, inside the two-bit border
+    for tag_id, code in [(0, 0xD5D628584), (1, 0xD97F18B49), (2, 0xDD280910E)]:
+        img = tag_image(b, tag_id, 10 * 10)
+        cells = img[25::10, 25::10][:6, :6] > 127
+        assert int("".join("1" if v else "0" for v in cells.ravel()), 2) == code
