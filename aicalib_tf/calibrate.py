@@ -172,6 +172,9 @@ def _main(args) -> int:
     source = guided_source(args.images, args.camera)
     if args.flex != "off" and (source is not None or args.rig):
         raise ValueError("--flex is solved for photos of one camera; videos, cameras and rigs take the board flat")
+    if args.board and args.board.strip().lower().startswith("circles:") and (source is not None or args.rig):
+        raise ValueError("--board circles:... is read from photos of one camera; videos, cameras and rigs take "
+                         "a chessboard, a ChArUco board or an AprilGrid")
     if source is not None and not args.rig:
         from aicalib_tf.guided.workflow import GuidedRunConfig, parse_target, run_guided
 

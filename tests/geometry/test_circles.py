@@ -50,3 +50,10 @@ def test_bad_spec_exits_2_with_one_line(capsys):
 def test_too_small_grid():
     with pytest.raises(ValueError, match="grid"):
         CircleGrid((2, 2), 10.0, "symmetric")
+
+
+def test_rigs_refuse_circle_grids(capsys):
+    from aicalib_tf.calibrate import main
+
+    assert main(["--rig", "a=x/*.png", "b=y/*.png", "--board", "circles:4x11,spacing=20mm,asymmetric"]) == 2
+    assert "photos of one camera" in capsys.readouterr().err
