@@ -2,9 +2,10 @@
 projected-centre bias correction, against cv2.findCirclesGrid + cv2.calibrateCamera.
 
     .venv/bin/python benchmarks/circle_grid.py [--board circles:4x11,spacing=20mm,asymmetric] [--views 12] [--seed 0]
+        [--blur SIGMA] [--gradient G]
 
 Each view renders the grid (:func:`aicalib_tf.geometry.circles.render_view`, 4x4 supersampling,
-then noise σ 1/255) at a random pose (distance 300-500 mm, tilts up to 45°) through two cameras
+optionally a blur and a light gradient, then noise σ 1/255) at a random pose (distance 300-500 mm, tilts up to 45°) through two cameras
 of 800x600 px, fx = fy = 700, (cx, cy) = (405, 296): a pinhole, and a barrel lens (OpenCV's
 plumb_bob, k1 = -0.3, k2 = 0.1). Truth is the projection of each circle's centre. It reports, per
 camera, the centre error of OpenCV's centres and of ours (dark-area centroid) before and after the
@@ -52,18 +53,21 @@ def random_pose(board: CircleGrid, rng: np.random.Generator, K=K_TRUE, size=SIZE
             return rvec, tvec
 
 
-def render(board, K, dist, rvec, tvec, rng, size=SIZE, noise=1 / 255):
-    """uint8 image of the board at that pose through (K, dist), with Gaussian noise."""
-    img = render_view(board, size, *pose_maps(K, dist, rvec, tvec), supersample=4)
-    img = img + rng.normal(0, noise, img.shape)
+def render(board, K, dist, rvec, tvec, rng, size=SIZE, noise=1 / 255, blur=0.0, gradient=0.0):
+    """uint8 image of the board at that pose through (K, dist): a Gaussian blur (σ px), light
+    falling linearly by ``gradient`` from the left edge to the right, Gaussian noise."""
+    img = render_view(board, size, *pose_maps(K, dist, rvec, tvec), supersample=4).astype(np.float64)
+    if blur:
+        img = cv2.GaussianBlur(img, (0, 0), blur)
+    img = img * (1 - gradient * np.linspace(0, 1, size[0])[None, :]) + rng.normal(0, noise, img.shape)
     return np.round(np.clip(img, 0, 1) * 255).astype(np.uint8)
 
 
-def measure(board, dist, poses, rng):
+def measure(board, dist, poses, rng, blur=0.0, gradient=0.0):
     """Per view: (truth, OpenCV's centres, ours) (N, 2) each, None where OpenCV found no grid."""
     out = []
     for rvec, tvec in poses:
-        img = render(board, K_TRUE, dist, rvec, tvec, rng)
+        img = render(board, K_TRUE, dist, rvec, tvec, rng, blur=blur, gradient=gradient)
         truth = cv2.projectPoints(board.object_points(), rvec, tvec, K_TRUE, dist)[0].reshape(-1, 2)
         cv_centres = find_grid(img, board)
         out.append(None if cv_centres is None else (truth, cv_centres, refine_centres(img, cv_centres)))
@@ -110,13 +114,16 @@ def main(argv=None) -> int:
     ap.add_argument("--board", default="circles:4x11,spacing=20mm,asymmetric")
     ap.add_argument("--views", type=int, default=12)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--blur", type=float, default=0.0, help="Gaussian blur σ, px (default 0)")
+    ap.add_argument("--gradient", type=float, default=0.0,
+                    help="light falling by this fraction from the left edge to the right (default 0)")
     args = ap.parse_args(argv)
     board = parse_board(args.board)
     rng = np.random.default_rng(args.seed)
     poses = [random_pose(board, rng) for _ in range(args.views)]
     for lens, dist in LENSES.items():
         t0 = time.perf_counter()
-        found = measure(board, dist, poses, rng)
+        found = measure(board, dist, poses, rng, args.blur, args.gradient)
         print(f"{lens}: {sum(f is not None for f in found)}/{len(found)} views found "
               f"({time.perf_counter() - t0:.1f} s to render and detect)")
         for k, v in centre_table(board, dist, poses, found).items():

@@ -3,14 +3,16 @@ circle's centre to a fraction of a pixel.
 
 ``cv2.findCirclesGrid`` (its blob detector, dark circles on a light board) finds the grid and
 orders it (OpenCV's order, index i·cols + j). Each centre is then placed anew as the centroid of
-the circle's dark area: in a window of half-side 0.55 × the distance to the nearest found centre,
-the dark and light levels are the 5th and 95th percentiles; the pixels darker than their mean that
-connect to the blob, grown by two pixels, form the circle's mask, and each masked pixel weighs
-``clip((light − I) / (light − dark), 0, 1)``, its dark fraction, so edge pixels count by the area
-they cover. Under a pinhole camera this centroid is the image ellipse's centre, which is not the
-projection of the circle's centre: :mod:`aicalib_tf.calib.circle_bias` corrects that after a first
-calibration. A circle whose mask runs into the window's edge (a neighbour, the image's border) or
-whose contrast is under 0.05 keeps OpenCV's centre; ``refine="opencv"`` keeps them all.
+the circle's dark area, in a window of half-side 0.55 × the distance to the nearest found centre:
+the pixels darker than the mean of the window's 5th and 95th percentiles that connect to the blob,
+grown by ``GROW`` px (a blurred edge), form the circle's mask; a plane fitted to the pixels away
+from every dark blob gives the board's light level L(x, y) (an illumination gradient), the
+reflectance is I / L, and each masked pixel weighs ``clip((1 − I/L) / (1 − inner), 0, 1)``
+(``inner`` the disc's 5th percentile), its dark fraction, so edge pixels count by the area they
+cover. Under a pinhole camera this centroid is the image ellipse's centre, which is not the
+projection of the circle's centre: :mod:`aicalib_tf.calib.circle_bias` corrects that after a
+first calibration. A circle whose grown mask reaches the window's edge (a neighbour, the image's
+border), or whose contrast is under 0.05, keeps OpenCV's centre; ``refine="opencv"`` keeps them all.
 
 Coordinates are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0).
 """
@@ -27,6 +29,7 @@ __all__ = ["find_grid", "refine_centres", "detect_circles", "make_detector", "RE
 REFINES = ("centroid", "opencv")
 WINDOW = 0.55  # window half-side over the nearest centre distance
 MIN_CONTRAST = 0.05  # light − dark, in the image's [0, 1] levels
+GROW = 4  # px the thresholded disc is grown by: its blurred edge counts
 
 
 def _blob_detector(image_area: int):
@@ -60,6 +63,17 @@ def _nearest(centres: np.ndarray) -> np.ndarray:
     return d.min(axis=1)
 
 
+def _light_plane(win: np.ndarray, background: np.ndarray) -> np.ndarray | None:
+    """The board's light level over the window: a plane a + b·x + c·y fitted to the background pixels."""
+    ys, xs = np.nonzero(background)
+    if len(xs) < 12:
+        return None
+    A = np.stack([np.ones(len(xs)), xs, ys], axis=1).astype(np.float64)
+    coef, *_ = np.linalg.lstsq(A, win[ys, xs], rcond=None)
+    yy, xx = np.mgrid[0:win.shape[0], 0:win.shape[1]]
+    return coef[0] + coef[1] * xx + coef[2] * yy
+
+
 def _centroid(img: np.ndarray, c: np.ndarray, half: float) -> np.ndarray | None:
     """The dark-area centroid of the circle at about ``c`` in the float image, or None."""
     h, w = img.shape
@@ -71,18 +85,29 @@ def _centroid(img: np.ndarray, c: np.ndarray, half: float) -> np.ndarray | None:
     dark, light = np.percentile(win, 5), np.percentile(win, 95)
     if light - dark < MIN_CONTRAST:
         return None
-    _, labels = cv2.connectedComponents((win < (dark + light) / 2).astype(np.uint8), connectivity=8)
-    cx, cy = int(round(c[0])) - x0, int(round(c[1])) - y0
-    lab = labels[cy, cx]
+    dark_px = (win < (dark + light) / 2).astype(np.uint8)
+    _, labels = cv2.connectedComponents(dark_px, connectivity=8)
+    lab = labels[int(round(c[1])) - y0, int(round(c[0])) - x0]
     if lab == 0:
         return None
-    mask = cv2.dilate((labels == lab).astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-    if mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any():
+    grown = cv2.dilate((labels == lab).astype(np.uint8), _disc(GROW)).astype(bool)
+    if grown[0].any() or grown[-1].any() or grown[:, 0].any() or grown[:, -1].any():
         return None
-    wgt = np.clip((light - win) / (light - dark), 0.0, 1.0) * mask
+    level = _light_plane(win, ~cv2.dilate(dark_px, _disc(GROW)).astype(bool))
+    if level is None or np.min(level) <= 0:
+        return None
+    norm = win / level  # the board's reflectance: 1 on the light board, under a smooth illumination
+    inner = np.percentile(norm[labels == lab], 5)
+    if 1 - inner < MIN_CONTRAST:
+        return None
+    wgt = np.clip((1 - norm) / (1 - inner), 0.0, 1.0) * grown
     total = wgt.sum()
     ys, xs = np.mgrid[y0:y1, x0:x1]
     return np.array([(wgt * xs).sum() / total, (wgt * ys).sum() / total])
+
+
+def _disc(r: int) -> np.ndarray:
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
 
 
 def refine_centres(gray: np.ndarray, centres: np.ndarray) -> np.ndarray:

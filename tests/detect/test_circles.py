@@ -125,3 +125,20 @@ def test_calibrate_cli_end_to_end(tmp_path):
     assert "circle_bias_iterations" in text
     fx = cam["K"][0][0] if "K" in cam else cam["camera_matrix"][0][0]
     assert fx == pytest.approx(560.0, rel=1e-3)
+
+
+def test_centroid_holds_under_blur_and_a_light_gradient():
+    ours, theirs = [], []
+    for k, (rvec, tvec) in enumerate(_poses(BOARD, 5, seed=11)):
+        img = render_view(BOARD, SIZE, *pose_maps(K, np.zeros(5), rvec, tvec), supersample=3).astype(np.float64)
+        img = cv2.GaussianBlur(img, (0, 0), 1.5) * (1 - 0.4 * np.linspace(0, 1, SIZE[0])[None, :])
+        img = np.round(np.clip(img + np.random.default_rng(k).normal(0, 1 / 255, img.shape), 0, 1) * 255)
+        img = img.astype(np.uint8)
+        truth = cv2.projectPoints(BOARD.object_points(), rvec, tvec, K, None)[0].reshape(-1, 2)
+        truth = truth + centre_offsets(BOARD.object_points(), BOARD.radius, rvec, tvec, "plumb_bob", K, np.zeros(5))
+        cv_hit = detect_circles(img, BOARD, refine="opencv")
+        if cv_hit is not None:
+            theirs.append(np.linalg.norm(cv_hit[0] - truth, axis=1))
+            ours.append(np.linalg.norm(detect_circles(img, BOARD)[0] - truth, axis=1))
+    assert len(ours) >= 3
+    assert np.mean(np.concatenate(ours)) < 0.6 * np.mean(np.concatenate(theirs)) and np.mean(np.concatenate(ours)) < 0.02
