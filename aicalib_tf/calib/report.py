@@ -28,6 +28,7 @@ from aicalib_tf.calib.quality import coverage_counts
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.image_circle import circle_fov_deg, circle_problem
 from aicalib_tf.geometry.aprilgrid import corner_count
+from aicalib_tf.geometry.circles import circle_count
 from aicalib_tf.geometry.pattern import board_points
 
 __all__ = ["field_of_view", "fov_line", "view_tilts_deg", "coverage_counts", "calibration_warnings", "format_report", "report_figure",
@@ -126,7 +127,8 @@ def format_report(cal: Calibration, views: list[View], *, skipped: dict | None =
     for name, why in cal.rejected.items():
         lines.append(f"  rejected {name}: {why}")
     worst, worst_rms = cal.worst_view()
-    full = corner_count((cal.meta or {}).get("board")) or cal.pattern_size[0] * cal.pattern_size[1]  # an AprilGrid's lattice is sparse
+    board = (cal.meta or {}).get("board")
+    full = corner_count(board) or circle_count(board) or cal.pattern_size[0] * cal.pattern_size[1]  # sparse lattices
     partial = int(np.sum(cal.corner_counts < full))
     used = set(cal.views)
     relative = sum(1 for v in views if getattr(v, "relative", False) and v.name in used)

@@ -33,7 +33,7 @@ import numpy as np
 
 from aicalib_tf.geometry.pattern import board_points
 
-__all__ = ["CircleGrid", "PREFIX", "LAYOUTS", "is_circles", "parse_board", "homography_maps", "pose_maps", "render_view"]
+__all__ = ["CircleGrid", "PREFIX", "LAYOUTS", "is_circles", "circle_count", "parse_board", "homography_maps", "pose_maps", "render_view"]
 
 PREFIX = "circles:"
 LAYOUTS = ("symmetric", "asymmetric")
@@ -123,6 +123,18 @@ class CircleGrid:
 def is_circles(text) -> bool:
     """Whether ``text`` names a circle grid (``circles:...``)."""
     return isinstance(text, str) and text.strip().lower().startswith(PREFIX)
+
+
+def circle_count(description) -> int | None:
+    """Circles of the grid that ``description`` names (its text), else None (another board, or text
+    that no longer parses): a view with fewer is partial."""
+    if not is_circles(description):
+        return None
+    try:
+        board = parse_board(description)
+    except ValueError:
+        return None
+    return board.grid[0] * board.grid[1]
 
 
 def _length(text: str, field: str) -> tuple[float, str]:

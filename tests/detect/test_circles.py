@@ -123,6 +123,7 @@ def test_calibrate_cli_end_to_end(tmp_path):
     cam = json.loads((out / "camera.json").read_text())
     text = json.dumps(cam)
     assert "circle_bias_iterations" in text
+    assert "partial" not in (out / "report.txt").read_text()
     fx = cam["K"][0][0] if "K" in cam else cam["camera_matrix"][0][0]
     assert fx == pytest.approx(560.0, rel=1e-3)
 
