@@ -22,37 +22,24 @@ from __future__ import annotations
 import argparse
 import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from aicalib_tf.calib.fit import View, calibrate_camera
-from aicalib_tf.geometry import lens as L
-from aicalib_tf.geometry.board_flex import flexed_points
-from aicalib_tf.geometry.pattern import board_points
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-PATTERN, SQUARE, SIZE = (9, 6), 0.04, (640, 480)
+from aicalib_tf.calib.fit import View, calibrate_camera  # noqa: E402
+from aicalib_tf.geometry import lens as L  # noqa: E402
+from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views  # noqa: E402
+
+SIZE = (640, 480)
 LENS = L.Lens("plumb_bob", [[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]], [-0.25, 0.08, 0.001, -0.0005, 0.0], SIZE)
 SPLIT = (0.6, 0.4)  # the sag's share along x and y
 
 
 def corner_sequence(flex, noise: float, rng: np.random.Generator, n: int = 20) -> list[View]:
     """``n`` views of the flexed board through :data:`LENS`, corners with ``noise`` px."""
-    cols, rows = PATTERN
-    ids = np.stack(np.meshgrid(np.arange(cols), np.arange(rows)), -1).reshape(-1, 2)
-    X = flexed_points(board_points(ids, SQUARE), PATTERN, flex, SQUARE) - [(cols - 1) * SQUARE / 2,
-                                                                           (rows - 1) * SQUARE / 2, 0]
-    w, h = SIZE
-    views = []
-    while len(views) < n:
-        ray = LENS.unproject(rng.uniform([0.1 * w, 0.1 * h], [0.9 * w, 0.9 * h]))
-        t = ray / ray[2] * rng.uniform(0.35, 0.6)
-        R = Rotation.from_euler("xyz", rng.uniform(-40, 40, 3) * [1, 1, 0.5], degrees=True).as_matrix()
-        uv = LENS.project(X @ R.T + t)
-        ok = np.all(np.isfinite(uv), 1) & (uv[:, 0] > 0) & (uv[:, 0] < w - 1) & (uv[:, 1] > 0) & (uv[:, 1] < h - 1)
-        if ok.sum() >= 20:
-            views.append(View(f"v{len(views):02d}", uv[ok] + noise * rng.standard_normal((int(ok.sum()), 2)), ids[ok]))
-    return views
+    return synthetic_views(LENS, n, noise, seed=rng, flex=flex)
 
 
 def _sag(cal) -> tuple[float, float]:

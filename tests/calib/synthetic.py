@@ -6,22 +6,27 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from aicalib_tf.calib.fit import View
+from aicalib_tf.geometry.board_flex import flexed_points
 from aicalib_tf.geometry.pattern import board_points
 
 PATTERN = (9, 6)
 SQUARE = 0.04
 
 
-def synthetic_views(lens, n=20, noise=0.0, *, seed=0, avoid=None, distance=(0.35, 0.6), min_corners=20):
+def synthetic_views(lens, n=20, noise=0.0, *, seed=0, avoid=None, distance=(0.35, 0.6), min_corners=20, flex=None,
+                    noise_of=None):
     """``n`` views of a 9x6 board (square 0.04) seen by ``lens``, corner noise ``noise`` px (1σ per axis).
 
-    avoid : (x0, y0, x1, y1) px: no board centre and no corner in that rectangle.
+    avoid : (x0, y0, x1, y1) px: no board centre and no corner in that rectangle. flex : (w_x, w_y) the
+    board's sag in squares (:mod:`aicalib_tf.geometry.board_flex`), None flat. noise_of : k -> view k's
+    noise px, in place of ``noise``. seed : anything ``np.random.default_rng`` takes (a Generator too).
     Corners outside the image (or with no projection) are dropped, so boards can be partial.
     """
     rng = np.random.default_rng(seed)
     cols, rows = PATTERN
     ids = np.stack(np.meshgrid(np.arange(cols), np.arange(rows)), -1).reshape(-1, 2)
-    X = board_points(ids, SQUARE) - [(cols - 1) * SQUARE / 2, (rows - 1) * SQUARE / 2, 0]
+    X = board_points(ids, SQUARE) if flex is None else flexed_points(board_points(ids, SQUARE), PATTERN, flex, SQUARE)
+    X = X - [(cols - 1) * SQUARE / 2, (rows - 1) * SQUARE / 2, 0]
     w, h = lens.image_size
     views = []
     while len(views) < n:
@@ -39,5 +44,6 @@ def synthetic_views(lens, n=20, noise=0.0, *, seed=0, avoid=None, distance=(0.35
             ok &= ~inside(np.nan_to_num(uv, nan=-1e9))
         if ok.sum() < min_corners:
             continue
-        views.append(View(f"v{len(views):02d}", uv[ok] + noise * rng.standard_normal((int(ok.sum()), 2)), ids[ok]))
+        s = noise if noise_of is None else noise_of(len(views))
+        views.append(View(f"v{len(views):02d}", uv[ok] + s * rng.standard_normal((int(ok.sum()), 2)), ids[ok]))
     return views

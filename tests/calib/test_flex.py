@@ -6,7 +6,6 @@ import json
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from aicalib_tf.calib.files import calibration_dict, calibration_from_dict, to_json
 from aicalib_tf.calib.fit import View, calibrate_camera
@@ -15,6 +14,7 @@ from aicalib_tf.calib.report import solve_lines
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.board_flex import flex_basis, flex_height, flexed_points
 from aicalib_tf.geometry.pattern import board_points
+from tests.calib.synthetic import synthetic_views
 
 PATTERN = (9, 6)
 SQUARE = 0.04
@@ -25,24 +25,7 @@ PINHOLE = L.Lens("plumb_bob", [[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]], [-0
 def flexed_views(n=20, noise=0.2, flex=(0.0, 0.0), seed=2, noise_of=None):
     """``n`` views of a 9x6 board (square 0.04 m) flexed by ``flex`` squares; noise px (1σ per axis), or
     per view from noise_of(k)."""
-    rng = np.random.default_rng(seed)
-    cols, rows = PATTERN
-    ids = np.stack(np.meshgrid(np.arange(cols), np.arange(rows)), -1).reshape(-1, 2)
-    X = flexed_points(board_points(ids, SQUARE), PATTERN, flex, SQUARE) - [(cols - 1) * SQUARE / 2,
-                                                                           (rows - 1) * SQUARE / 2, 0]
-    w, h = SIZE
-    views = []
-    while len(views) < n:
-        ray = PINHOLE.unproject(rng.uniform([0.1 * w, 0.1 * h], [0.9 * w, 0.9 * h]))
-        t = ray / ray[2] * rng.uniform(0.35, 0.6)
-        R = Rotation.from_euler("xyz", rng.uniform(-40, 40, 3) * [1, 1, 0.5], degrees=True).as_matrix()
-        uv = PINHOLE.project(X @ R.T + t)
-        ok = np.all(np.isfinite(uv), 1) & (uv[:, 0] > 0) & (uv[:, 0] < w - 1) & (uv[:, 1] > 0) & (uv[:, 1] < h - 1)
-        if ok.sum() < 20:
-            continue
-        s = noise if noise_of is None else noise_of(len(views))
-        views.append(View(f"v{len(views):02d}", uv[ok] + s * rng.standard_normal((int(ok.sum()), 2)), ids[ok]))
-    return views
+    return synthetic_views(PINHOLE, n, noise, seed=seed, flex=flex, noise_of=noise_of)
 
 
 def test_flex_basis_is_zero_on_the_grid_edges_and_one_at_the_centre():
