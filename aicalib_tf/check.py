@@ -192,7 +192,11 @@ def board_of(cal):
         return tuple(cal.pattern_size)
     from aicalib_tf.geometry.aprilgrid import is_aprilgrid, load_board
     from aicalib_tf.geometry.charuco import parse_board
+    from aicalib_tf.geometry.circles import is_circles
 
+    if is_circles(text):  # its centres need the projected-centre bias removed (calib.circle_bias), per view
+        raise ValueError(f"the calibration was made with a circle grid ({text}); the field check reads "
+                         "chessboards, ChArUco boards and AprilGrids")
     return load_board(text) if is_aprilgrid(text) else parse_board(text)
 
 

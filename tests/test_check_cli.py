@@ -159,3 +159,9 @@ def test_out_replaces_an_earlier_result(tmp_path):
         check_out_file(str(link), [tmp_path / "camera.json"])
     with pytest.raises(ValueError, match="does not exist"):
         check_out_file(str(tmp_path / "no" / "check.json"), [])
+
+
+def test_a_circle_grid_calibration_is_refused_with_one_line(calibration, tmp_path, capsys):
+    path = _edited(calibration, tmp_path, lambda d: d["meta"].__setitem__("board", "circles:4x11,spacing=20mm,asymmetric"))
+    rc, out, err = _run(capsys, path, LEFT / "left01.jpg", LEFT / "left02.jpg", LEFT / "left03.jpg")
+    assert rc == 2 and err.count("\n") == 1 and "circle grid" in err and "Traceback" not in err, err
