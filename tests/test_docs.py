@@ -25,6 +25,9 @@ from aicalib_tf import docs as docs_module
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", ROOT / "CHANGELOG.md", *sorted((ROOT / "docs").glob("*.md"))]
 README_MAX_BYTES = 12 * 1024
+DOCS_PAGE_MAX_BYTES = 40 * 1024  # every docs/*.md page but the generated cli.md
+# headings that narrate the work instead of naming what the page describes
+JOURNAL_HEADING = re.compile(r"^(before|after|now|what changed|what is left|tried)\b|\b\d{4}-\d{2}-\d{2}\b", re.IGNORECASE)
 FIRST_SCREEN_LINES = 40
 
 # where a path in inline code must start to be taken as a path into this repository
@@ -193,6 +196,16 @@ def test_no_history_wording(page):
             for m in pattern.finditer(line):
                 found.append(f"line {number}: {why}: ...{line[max(0, m.start() - 30): m.end() + 30]}...")
     assert not found, f"{_rel(page)} speaks of the history of the work, not the software:\n" + "\n".join(found)
+
+
+@pytest.mark.parametrize("page", [p for p in PAGES if p.parent.name == "docs" and p.name != "cli.md"], ids=_rel)
+def test_docs_page_is_a_short_reference(page):
+    size = page.stat().st_size
+    assert size <= DOCS_PAGE_MAX_BYTES, f"{_rel(page)} is {size} bytes (at most {DOCS_PAGE_MAX_BYTES}): condense it"
+    prose, _ = _split(page.read_text(encoding="utf-8"))
+    journal = [f"line {n}: {line}" for n, line in prose
+               if (m := re.match(r"^#{1,6}\s+(.*)$", line)) and JOURNAL_HEADING.search(m.group(1))]
+    assert not journal, f"{_rel(page)}: headings that narrate the work:\n" + "\n".join(journal)
 
 
 def test_cli_reference_is_up_to_date():
