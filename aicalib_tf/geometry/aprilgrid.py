@@ -35,6 +35,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from aicalib_tf.geometry.charuco import parse_length
 from aicalib_tf.geometry.pattern import board_points, check_pattern
 
 __all__ = ["AprilGrid", "Checkerboard", "FAMILIES", "PREFIX", "MAX_LATTICE", "PRINT_ROTATION", "is_aprilgrid",
@@ -48,7 +49,6 @@ MAX_LATTICE = 2000  # lattice points along one side (spacing 0.3: 13 a tag)
 # Counter-clockwise quarter turns of OpenCV's marker image as printed. Kalibr prints each code upright
 # (most significant bit top-left, a set bit white), which is OpenCV's image turned half a turn.
 PRINT_ROTATION = 2
-_UNIT_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4, "": None}
 
 
 @functools.lru_cache(maxsize=None)
@@ -190,13 +190,6 @@ def is_aprilgrid(text) -> bool:
     return t.startswith(PREFIX) or t.endswith((".yaml", ".yml"))
 
 
-def _length(text: str, field: str) -> tuple[float, str]:
-    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*([a-zA-Z]*)\s*", text)
-    if not m or m.group(2).lower() not in _UNIT_MM:
-        raise ValueError(f"{field}= must be a length such as 88mm, 8.8cm or 0.088m, got {text!r}")
-    return float(m.group(1)), m.group(2).lower()
-
-
 def parse_board(text: str) -> AprilGrid:
     """Parse ``aprilgrid:6x6,tag=88mm,spacing=0.3[,family=tag36h11][,first=0]``.
 
@@ -218,7 +211,7 @@ def parse_board(text: str) -> AprilGrid:
     missing = [k + "=" for k in ("tag", "spacing") if k not in fields]
     if missing:
         raise ValueError(f"board {text!r}: missing {', '.join(missing)}")
-    tag, unit = _length(fields["tag"], "tag")
+    tag, unit = parse_length(fields["tag"], "tag=", "88mm, 8.8cm or 0.088m")
     try:
         spacing = float(fields["spacing"])
     except ValueError:

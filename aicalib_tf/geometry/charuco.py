@@ -30,11 +30,12 @@ import numpy as np
 
 from aicalib_tf.geometry.pattern import board_points, check_pattern, pattern_ids
 
-__all__ = ["CharucoBoard", "parse_board", "is_charuco", "DICTIONARIES", "dictionary", "marker_bits", "layout_image"]
+__all__ = ["CharucoBoard", "parse_board", "is_charuco", "DICTIONARIES", "dictionary", "marker_bits", "layout_image",
+           "parse_length", "UNIT_MM"]
 
 MAX_BOARD_EXTENT = 1e6  # board units (1 km in mm); OpenCV's board geometry is float32
 
-_UNIT_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4, "": None}
+UNIT_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4, "": None}  # a board length unit -> mm ("" unitless)
 PREFIX = "charuco:"
 
 
@@ -192,19 +193,21 @@ def is_charuco(text) -> bool:
     return isinstance(text, str) and text.strip().lower().startswith(PREFIX)
 
 
-def _length(text: str, what: str) -> tuple[float, str]:
+def parse_length(text: str, what: str, example: str = "30mm, 3cm or 0.03m") -> tuple[float, str]:
+    """A board description's length field: ``"30mm"`` -> (30.0, "mm"); a unit of :data:`UNIT_MM` or none.
+    ValueError naming ``what`` (e.g. ``square``) otherwise."""
     m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*([a-zA-Z]*)\s*", text)
-    if not m or m.group(2).lower() not in _UNIT_MM:
-        raise ValueError(f"{what} must be a length such as 30mm, 3cm or 0.03m, got {text!r}")
+    if not m or m.group(2).lower() not in UNIT_MM:
+        raise ValueError(f"{what} must be a length such as {example}, got {text!r}")
     return float(m.group(1)), m.group(2).lower()
 
 
 def _lengths(square: str, marker: str) -> tuple[float, float, str]:
     """Square and marker lengths in the square's unit (a unitless marker shares it)."""
-    s, su = _length(square, "square")
-    m, mu = _length(marker, "marker")
+    s, su = parse_length(square, "square")
+    m, mu = parse_length(marker, "marker")
     if mu and su and mu != su:
-        m = m * _UNIT_MM[mu] / _UNIT_MM[su]
+        m = m * UNIT_MM[mu] / UNIT_MM[su]
     elif mu and not su:
         raise ValueError(f"marker has a unit ({mu}) but square has none")
     return s, m, su
