@@ -15,8 +15,8 @@ Use::
     mx, my = np.load("undistort_map_x.npy"), np.load("undistort_map_y.npy")
     ideal = cv2.remap(cv2.imread("photo.png"), mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
 
-The maps are computed in bands of rows (:data:`BAND_ROWS`), so a 12 MP image needs no more memory
-than the two maps.
+The maps are computed in bands of rows (:func:`aicalib_tf.geometry.lens.undistort_maps`), so a 12 MP
+image needs little more memory than the two maps.
 """
 
 from __future__ import annotations
@@ -27,10 +27,9 @@ import numpy as np
 
 from aicalib_tf.io import atomic_write_bytes
 
-__all__ = ["needs_maps", "undistort_map_arrays", "map_files", "map_entry", "MAP_FILES", "BAND_ROWS"]
+__all__ = ["needs_maps", "undistort_map_arrays", "map_files", "map_entry", "MAP_FILES"]
 
 MAP_FILES = ("undistort_map_x.npy", "undistort_map_y.npy")
-BAND_ROWS = 256
 
 
 def needs_maps(lens) -> bool:
@@ -40,16 +39,8 @@ def needs_maps(lens) -> bool:
 
 def undistort_map_arrays(lens, new_K, circle=None) -> tuple[np.ndarray, np.ndarray]:
     """(map_x, map_y) float32 (H, W) px of ``lens.image_size``: :meth:`~aicalib_tf.geometry.lens.Lens.undistort_maps`
-    towards the pinhole camera ``new_K`` (3, 3), computed band by band; −1 where no source pixel."""
-    w, h = lens.image_size
-    new_K = np.asarray(new_K, np.float64)
-    mx, my = np.empty((h, w), np.float32), np.empty((h, w), np.float32)
-    for r0 in range(0, h, BAND_ROWS):
-        rows = min(BAND_ROWS, h - r0)
-        band_K = new_K.copy()
-        band_K[1, 2] -= r0  # the band's row 0 is the image's row r0
-        mx[r0:r0 + rows], my[r0:r0 + rows] = lens.undistort_maps(new_K=band_K, new_size=(w, rows), circle=circle)
-    return mx, my
+    towards the pinhole camera ``new_K`` (3, 3); −1 where no source pixel."""
+    return lens.undistort_maps(new_K=np.asarray(new_K, np.float64), new_size=lens.image_size, circle=circle)
 
 
 def _npy_bytes(arr: np.ndarray) -> bytes:
