@@ -71,8 +71,6 @@ def __getattr__(name: str):
 
 
 def _resolve(weights, backend: str) -> Path:
-    if isinstance(weights, str) and weights in SHIPPED and weights not in ARCHITECTURES:  # a shipped model named apart from its architecture
-        return MODELS_DIR / f"{weights}{'.tflite' if backend == 'runtime' else '.keras'}"
     if isinstance(weights, str) and weights in RUNTIME_FILES and weights not in ARCHITECTURES:
         return MODELS_DIR / f"{weights}.tflite"  # a runtime-only model (default_int8, quick_int8)
     if isinstance(weights, str) and weights in ARCHITECTURES:
@@ -86,7 +84,8 @@ def load_model(weights: str | os.PathLike = "default", *, compile: bool = False,
 
     weights : ``"default"`` or ``"report"`` (the models shipped in ``models/``), ``"default_int8"``
         (default quantised to int8, runtime only: about 2× faster, the same detections on
-        evaluate's images; see the model card), or a path to a ``.tflite`` or ``.keras`` file. ``"default_int8"`` and ``"default"`` on the runtime come with
+        evaluate's images; see the model card), or a path to a ``.tflite`` or ``.keras`` file.
+        ``"default_int8"`` and ``"default"`` on the runtime come with
         ``quick``, the smaller ``quick`` network (int8 or float32) that the detector's quick passes
         run (:func:`aicalib_tf.detect.pipeline.detect_corners`); a path loads its network alone.
     backend : ``"auto"`` (a name loads the shipped ``.tflite`` on the LiteRT runtime, a path by
