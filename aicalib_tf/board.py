@@ -25,16 +25,17 @@ import sys
 import cv2
 import numpy as np
 
+from aicalib_tf.geometry.charuco import UNIT_MM
+
 __all__ = ["main", "PAPERS", "page_image", "page_pdf"]
 
 PAPERS = {"a4": (210.0, 297.0), "a3": (297.0, 420.0), "a2": (420.0, 594.0), "letter": (215.9, 279.4)}
 MARGIN_MM = 10.0
-_UNIT_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 
 
 def _layout(board, paper: str) -> tuple[tuple[float, float], tuple[float, float], float]:
     """((paper w, h) mm, (board x0, y0) mm on the page, square mm): landscape when the board is wider."""
-    if board.unit not in _UNIT_MM:
+    if not UNIT_MM.get(board.unit):  # unitless: no size on paper
         what = "tag=" if hasattr(board, "tag_ids") else "square= and marker="
         raise ValueError(f"board {board.describe()}: give {what} a unit (mm, cm, m, in) to print it")
     try:
@@ -56,8 +57,8 @@ def _cells(board) -> tuple[tuple[int, int], float]:
     squares or an AprilGrid's lattice units (its corner squares beyond the outer tags included)."""
     if hasattr(board, "tag_ids"):  # an AprilGrid (aicalib_tf.geometry.aprilgrid)
         a = board.fraction[0]
-        return (board.pattern_size[0] - 1 + 2 * a, board.pattern_size[1] - 1 + 2 * a), board.square_size * _UNIT_MM[board.unit]
-    return tuple(board.squares), board.square * _UNIT_MM[board.unit]
+        return (board.pattern_size[0] - 1 + 2 * a, board.pattern_size[1] - 1 + 2 * a), board.square_size * UNIT_MM[board.unit]
+    return tuple(board.squares), board.square * UNIT_MM[board.unit]
 
 
 def _board_pixels(board, square_px: int) -> np.ndarray:
@@ -129,8 +130,13 @@ def _parse_args(argv):
 def _main(args) -> int:
     from aicalib_tf.geometry.aprilgrid import AprilGrid, is_aprilgrid, load_board
     from aicalib_tf.geometry.charuco import parse_board
+    from aicalib_tf.geometry.circles import is_circles
+    from aicalib_tf.geometry.circles import parse_board as parse_circles
     from aicalib_tf.io import atomic_write_bytes
 
+    if is_circles(args.board):  # a bad description names its field; a good one is not printed here
+        raise ValueError(f"board {parse_circles(args.board).describe()}: circle grids are not printed by this command "
+                         "(it prints ChArUco boards and AprilGrids)")
     board = load_board(args.board) if is_aprilgrid(args.board) else parse_board(args.board)
     if not isinstance(board, AprilGrid) and not hasattr(board, "squares"):
         raise ValueError(f"{args.board}: a Kalibr checkerboard is a chessboard; this prints ChArUco boards and AprilGrids")

@@ -251,6 +251,15 @@ def _field(d: dict, path: str, key: str, kind=float):
         raise ValueError(f"{path}: {key} must be a {'whole ' if kind is int else ''}number, got {d[key]!r}") from None
 
 
+_KALIBR_FIELDS = {"tags": "tagCols, tagRows", "tag": "tagSize", "spacing": "tagSpacing"}
+
+
+def _kalibr_names(message: str) -> str:
+    """An :class:`AprilGrid` message with its field named as Kalibr's target file names it."""
+    field, colon, rest = message.partition(":")
+    return f"{_KALIBR_FIELDS[field]}:{rest}" if colon and field in _KALIBR_FIELDS else message
+
+
 def read_kalibr_target(path: str) -> AprilGrid | Checkerboard:
     """A Kalibr target YAML: ``target_type: aprilgrid`` (tagCols, tagRows, tagSize m, tagSpacing)
     or ``checkerboard`` (targetCols, targetRows inner corners, rowSpacingMeters = colSpacingMeters)."""
@@ -261,7 +270,7 @@ def read_kalibr_target(path: str) -> AprilGrid | Checkerboard:
             return AprilGrid((_field(d, path, "tagCols", int), _field(d, path, "tagRows", int)),
                              _field(d, path, "tagSize"), _field(d, path, "tagSpacing"), unit="m")
         except ValueError as e:
-            raise ValueError(str(e) if str(e).startswith(path) else f"{path}: {e}") from None
+            raise ValueError(str(e) if str(e).startswith(path) else f"{path}: {_kalibr_names(str(e))}") from None
     if kind == "checkerboard":
         pattern = (_field(d, path, "targetCols", int), _field(d, path, "targetRows", int))
         rs, cs = _field(d, path, "rowSpacingMeters"), _field(d, path, "colSpacingMeters")

@@ -31,13 +31,13 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from aicalib_tf.geometry.charuco import UNIT_MM, parse_length
 from aicalib_tf.geometry.pattern import board_points
 
 __all__ = ["CircleGrid", "PREFIX", "LAYOUTS", "is_circles", "circle_count", "parse_board", "homography_maps", "pose_maps", "render_view"]
 
 PREFIX = "circles:"
 LAYOUTS = ("symmetric", "asymmetric")
-_UNIT_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 
 
 @dataclass(frozen=True)
@@ -138,10 +138,8 @@ def circle_count(description) -> int | None:
 
 
 def _length(text: str, field: str) -> tuple[float, str]:
-    m = re.fullmatch(r"([0-9]*\.?[0-9]+(?:e-?[0-9]+)?)\s*(mm|cm|m|in)?", text.strip().lower())
-    if not m:
-        raise ValueError(f"{field}= must be a length such as 20mm, 2cm or 0.02m, got {text!r}")
-    return float(m.group(1)), m.group(2) or ""
+    """(value, unit) of a length field, read by the boards' one length parser (:func:`parse_length`)."""
+    return parse_length(text, f"{field}=", "20mm, 2cm or 0.02m")
 
 
 def parse_board(text: str) -> CircleGrid:
@@ -153,7 +151,7 @@ def parse_board(text: str) -> CircleGrid:
     if not body.lower().startswith(PREFIX):
         raise ValueError(f"a circle grid must look like circles:4x11,spacing=20mm,asymmetric, got {text!r}")
     parts = [p.strip() for p in body[len(PREFIX):].split(",") if p.strip()]
-    m = re.fullmatch(r"(\d+)\s*[x×]\s*(\d+)", parts[0]) if parts else None
+    m = re.fullmatch(r"(\d+)\s*[xX×]\s*(\d+)", parts[0]) if parts else None
     if not m:
         raise ValueError(f"board {text!r}: first give the circles as COLSxROWS, e.g. 4x11")
     fields, layout = {}, None
@@ -177,7 +175,7 @@ def parse_board(text: str) -> CircleGrid:
         if dunit != unit:
             if not (dunit and unit):
                 raise ValueError(f"board {text!r}: diameter= and spacing= need the same unit")
-            diameter *= _UNIT_MM[dunit] / _UNIT_MM[unit]
+            diameter *= UNIT_MM[dunit] / UNIT_MM[unit]
         if diameter <= 0:
             raise ValueError(f"board {text!r}: diameter= must be > 0")
     try:

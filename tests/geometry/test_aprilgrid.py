@@ -72,7 +72,8 @@ def test_kalibr_yaml_aprilgrid_and_checkerboard(tmp_path):
 @pytest.mark.parametrize("text, field", [
     ("target_type: 'circlegrid'\ntargetCols: 6\n", "target_type"),
     ("target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSize: 0.088\n", "tagSpacing"),
-    ("target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 1.2\n", "spacing"),
+    ("target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 1.2\n", "tagSpacing: "),
+    ("target_type: aprilgrid\ntagCols: 1\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 0.3\n", "tagCols, tagRows: "),
     ("target_type: checkerboard\ntargetCols: 9\ntargetRows: 6\nrowSpacingMeters: 0.02\ncolSpacingMeters: 0.03\n",
      "rowSpacingMeters"),
     ("target_type: aprilgrid\ntagCols: six\n", "tagCols"),
