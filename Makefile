@@ -11,8 +11,8 @@ STAMP  := $(VENV)/.installed
 # the compiled kernels (aicalib_tf/kernels.py) are rebuilt when their sources change; a failed build
 # (no C compiler) leaves numba's JIT to compile them on first use, and is not retried until they change
 KERNELS := $(VENV)/.kernels
-KERNEL_SOURCES := aicalib_tf/kernels.py aicalib_tf/cnn/corner_map_kernels.py aicalib_tf/detect/sampling.py \
-                  $(wildcard aicalib_tf/detect/*_kernels.py)
+KERNEL_SOURCES := aicalib_tf/kernels.py aicalib_tf/cnn/corner_map_kernels.py aicalib_tf/detect/corners/sampling.py \
+                  $(wildcard aicalib_tf/detect/*_kernels.py aicalib_tf/detect/*/*_kernels.py)
 
 $(STAMP): pyproject.toml
 	test -d $(VENV) || $(PYTHON) -m venv $(VENV)

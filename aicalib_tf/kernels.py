@@ -1,7 +1,7 @@
 """Compiled loops: numba kernels, built ahead of time into one extension module, numba as fallback.
 
 Each kernel is written once, as numba-compilable Python, beside the maths it implements
-(``detect/saddle_kernels.py`` and the others in :data:`KERNEL_SOURCES`), and declared with
+(``detect/corners/saddle_kernels.py`` and the others in :data:`KERNEL_SOURCES`), and declared with
 ``@kernel("argument types", ...)``, one string per signature in numba's notation (``f4[:, ::1]`` a
 C-ordered 2-D float32 array, ``u1`` uint8, ``i8`` an int64, ``b1`` a bool). A function that only kernels call is
 ``@helper``. Kernels run one of two ways:
@@ -44,14 +44,14 @@ MODE_ENV = "AICALIB_KERNELS"  # "jit" forces numba's just-in-time compilation (t
 # while these files are those it was built from.
 KERNEL_SOURCES = (
     "cnn/corner_map_kernels.py",
-    "detect/sampling.py",
-    "detect/saddle_kernels.py",
-    "detect/shadow_kernels.py",
-    "detect/junction_kernels.py",
-    "detect/lattice_kernels.py",
-    "detect/grid_kernels.py",
+    "detect/corners/sampling.py",
+    "detect/corners/saddle_kernels.py",
+    "detect/corners/shadow_kernels.py",
+    "detect/corners/junction_kernels.py",
+    "detect/chessboard/lattice_kernels.py",
+    "detect/chessboard/grid_kernels.py",
     "detect/pyramid_kernels.py",
-    "detect/corner_sigma_kernels.py",
+    "detect/corners/sigma_kernels.py",
 )
 _DTYPES = {"f4": np.float32, "f8": np.float64, "i8": np.int64, "b1": np.bool_, "u1": np.uint8}
 _SCALARS = {"f4": np.float32, "f8": float, "i8": int, "b1": bool, "u1": int}

@@ -10,7 +10,7 @@ least 3 px inside the image) it reports recall, wrong ids (a corner nearer anoth
 place than its own), corners over 2 px off, and the corner error of:
 
 * ours: OpenCV's aruco decodes the tags, the project's saddle fit places the corners
-  (:func:`aicalib_tf.detect.aprilgrid.detect_aprilgrid`);
+  (:func:`aicalib_tf.detect.boards.aprilgrid.detect_aprilgrid`);
 * OpenCV's aruco with CORNER_REFINE_SUBPIX, and with CORNER_REFINE_APRILTAG.
 
 ``--lens MODEL --dist ...`` (and ``--fx``) renders through that lens of :mod:`aicalib_tf.geometry.lens`
@@ -32,7 +32,7 @@ import time
 import cv2
 import numpy as np
 
-from aicalib_tf.detect.aprilgrid import detect_aprilgrid
+from aicalib_tf.detect.boards.aprilgrid import detect_aprilgrid
 from aicalib_tf.geometry.aprilgrid import layout_image, parse_board, render_view
 from aicalib_tf.geometry.lens import project, unproject
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from aicalib_tf.calib.circle_bias import calibrate_circles, centre_offsets
 from aicalib_tf.calib.fit import View, calibrate_camera
-from aicalib_tf.detect.circles import find_grid, refine_centres
+from aicalib_tf.detect.boards.circles import find_grid, refine_centres
 from aicalib_tf.geometry.circles import CircleGrid, parse_board, pose_maps, render_view
 
 SIZE = (800, 600)

@@ -8,7 +8,7 @@ Renders the benchmark's conditions (:mod:`aicalib_tf.bench.conditions`, with the
 each board with the shipped model and matches every detected corner to the nearest visible true
 corner (within ``WRONG_PX``; further ones are counted as gross and left out). Per condition it
 prints the corners matched, the measured RMS error per axis, the RMS of the predicted σ
-(:mod:`aicalib_tf.detect.corner_sigma`), their ratio (target 0.8–1.25) and the rank correlation of
+(:mod:`aicalib_tf.detect.corners.sigma`), their ratio (target 0.8–1.25) and the rank correlation of
 |error| with σ among the condition's corners.
 
 ``--fit`` renders the conditions of ``--fit-on`` again with other seeds (``FIT_SEEDS``: other
@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT))
 
 from aicalib_tf.bench.conditions import PATTERN, condition_samples, select_conditions  # noqa: E402
 from aicalib_tf.bench.metrics import WRONG_PX  # noqa: E402
-from aicalib_tf.detect import corner_sigma as cs  # noqa: E402
+from aicalib_tf.detect.corners import sigma as cs  # noqa: E402
 from aicalib_tf.detect.pipeline import detect_corners  # noqa: E402
 from aicalib_tf.detect.pyramid import Frame  # noqa: E402
 from aicalib_tf.io import read_image  # noqa: E402

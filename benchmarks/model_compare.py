@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 
 from aicalib_tf.detect.pipeline import refined_points  # noqa: E402
 from aicalib_tf.cnn.inference import corner_points  # noqa: E402
-from aicalib_tf.detect.junctions import nearest_spacing  # noqa: E402
+from aicalib_tf.detect.corners.junctions import nearest_spacing  # noqa: E402
 from aicalib_tf.cnn.point_metrics import match_points, point_detection_stats  # noqa: E402
 from aicalib_tf.cnn.model import load_model  # noqa: E402
 from data_gen import make_sample  # noqa: E402

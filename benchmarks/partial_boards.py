@@ -59,7 +59,7 @@ def partial_stats(corners, ids, truth, visible, pattern, max_px=MAX_PX) -> dict:
 
 def _count_placements():
     """Wrap placement.place_cells to count grids whose ids the image left open (for the report only)."""
-    from aicalib_tf.detect import placement
+    from aicalib_tf.detect.chessboard import placement
 
     tally = {"tried": 0, "open": 0}
     place = placement.place_cells

@@ -6,7 +6,7 @@ Each refiner starts from the true corners moved by a random offset of up to --st
 CNN peak gives) and the error after refinement is measured, per condition: clean (σ = 0.6 px
 lens blur) and Gaussian noise σ = 10, 20 and 40 grey levels on top of it; with --shading also
 evaluate's ``shading`` condition (illumination gradient and a hard shadow). "windowed" is the
-detector's own refinement (:func:`aicalib_tf.detect.refine.refine_windowed`: the window sized to the
+detector's own refinement (:func:`aicalib_tf.detect.corners.refine.refine_windowed`: the window sized to the
 squares, and the shadow-robust fit where the window is not point-symmetric).
 """
 
@@ -18,9 +18,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from aicalib_tf.detect.junctions import nearest_spacing
+from aicalib_tf.detect.corners.junctions import nearest_spacing
 from aicalib_tf.bench.metrics import corner_error_stats
-from aicalib_tf.detect.refine import Smoothed, refine_saddle, refine_subpix, refine_windowed
+from aicalib_tf.detect.corners.refine import Smoothed, refine_saddle, refine_subpix, refine_windowed
 from data_gen import make_sample
 from data_gen.presets import Rule, get_preset
 

@@ -59,7 +59,8 @@ class StageClock:
 def instrument(clock: StageClock) -> None:
     """Wrap the pipeline's stage functions (module attributes, looked up at call time) by ``clock``."""
     from aicalib_tf.cnn import inference, runtime
-    from aicalib_tf.detect import pipeline, pyramid, refine
+    from aicalib_tf.detect import pipeline, pyramid
+    from aicalib_tf.detect.corners import refine
 
     targets = [
         (pipeline, "read_image", "gate"), (pyramid, "as_gray_float", "gate"), (inference, "network_input", "input"), (inference, "decode_map", "decode"),

@@ -22,7 +22,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("aicalib_tf", "data_gen")
-MAX_MODULE_LINES = 400
+MAX_MODULE_LINES = 450
 MAX_FUNCTION_LINES = 60
 SIZE_NOTE = "# size:"  # a comment that says why a module or function is longer than the limits
 

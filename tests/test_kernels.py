@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from aicalib_tf import kernels
-from aicalib_tf.detect.lattice_kernels import nearest_steps
-from aicalib_tf.detect.saddle_kernels import saddle_refine
-from aicalib_tf.detect.saddle import saddle_fit_matrix
+from aicalib_tf.detect.chessboard.lattice_kernels import nearest_steps
+from aicalib_tf.detect.corners.saddle_kernels import saddle_refine
+from aicalib_tf.detect.corners.saddle import saddle_fit_matrix
 
 ROOT = Path(__file__).resolve().parents[1]
 LEFT = ROOT / "tests" / "data" / "opencv_left"

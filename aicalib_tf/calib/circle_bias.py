@@ -1,7 +1,7 @@
 """The projected-centre bias of circle grids, corrected by iterating with the current lens.
 
 A circle's image is an ellipse (a pinhole camera) or a slightly bent one (a lens); the detector
-(:mod:`aicalib_tf.detect.circles`) measures the centroid of that dark area, which is not the
+(:mod:`aicalib_tf.detect.boards.circles`) measures the centroid of that dark area, which is not the
 projection of the circle's centre: a circle tilted away from the camera has its near half larger
 in the image than its far half, and distortion adds to it. The offset grows with the circle's
 radius (about r²/Z² at first order) and biases the focal length and the principal point.

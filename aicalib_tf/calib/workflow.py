@@ -66,7 +66,7 @@ def make_detector(name: str, pattern_size: tuple[int, int], model: str = DETECTO
     where the detector tells (the CNN detectors), else "". After each call its ``relative``
     attribute says whether the ids are relative to the visible grid (the CNN detectors return a
     board larger than the frame that way), and its ``sigmas`` attribute holds the corners' σ (N,) px
-    (:mod:`aicalib_tf.detect.corner_sigma`) or None (the OpenCV detectors, nothing found).
+    (:mod:`aicalib_tf.detect.corners.sigma`) or None (the OpenCV detectors, nothing found).
     The detectors are those of :mod:`aicalib_tf.detect.registry`.
     """
     from aicalib_tf.detect.registry import make_detectors
@@ -75,11 +75,11 @@ def make_detector(name: str, pattern_size: tuple[int, int], model: str = DETECTO
     if name not in DETECTORS:
         raise ValueError(f"unknown detector {name!r}; choose from {', '.join(DETECTORS)}")
     if hasattr(pattern_size, "tag_ids"):  # an AprilGrid (aicalib_tf.geometry.aprilgrid): OpenCV decodes its tags
-        from aicalib_tf.detect.aprilgrid import make_detector as aprilgrid_detector
+        from aicalib_tf.detect.boards.aprilgrid import make_detector as aprilgrid_detector
 
         return aprilgrid_detector(pattern_size)
     if hasattr(pattern_size, "circle_ids"):  # an OpenCV circle grid (aicalib_tf.geometry.circles)
-        from aicalib_tf.detect.circles import make_detector as circles_detector
+        from aicalib_tf.detect.boards.circles import make_detector as circles_detector
 
         return circles_detector(pattern_size)
     if hasattr(pattern_size, "marker_ids"):  # a ChArUco board (aicalib_tf.geometry.charuco)

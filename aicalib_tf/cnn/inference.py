@@ -5,7 +5,7 @@ Both model kinds give the same thing, points (N, 2) float32 (x, y) px and weight
 * a corner-map model (``default``) runs once on the whole image and its map is decoded
   (:func:`aicalib_tf.cnn.corner_map.decode_map`);
 * a patch classifier (``report``) scores 32×32 patches around saddle-point candidates
-  (:func:`aicalib_tf.detect.candidates.saddle_points`); its points are those pixel positions.
+  (:func:`aicalib_tf.detect.corners.candidates.saddle_points`); its points are those pixel positions.
 
 Precision. On a CPU with native bfloat16 arithmetic (x86 ``avx512_bf16`` or ``amx_bf16``) and
 TensorFlow's oneDNN kernels on (the default), the corner map is computed in bfloat16: the model's
@@ -36,7 +36,7 @@ import numpy as np
 
 from aicalib_tf.cnn.corner_map import STRIDE, decode_map, network_input, padded_shape, standardize
 from aicalib_tf.cnn.spec import PATCH_SIZE, model_kind
-from aicalib_tf.detect.candidates import saddle_points
+from aicalib_tf.detect.corners.candidates import saddle_points
 from aicalib_tf.geometry.points import any_within
 
 __all__ = ["corner_map", "corner_points", "weak_corner_points", "patch_weights", "extract_patches", "native_bfloat16", "resolve_precision"]

@@ -84,7 +84,7 @@ def _map_fn(model, shape: tuple[int, int], precision: str):
     552×432); either pays 2–3 ms more on its first call at a size, while oneDNN sets up its
     kernels. A trace costs about 40 ms, so a size gets its own function on its second use: a
     folder of photos of one size is traced once, and the one-off sizes of enlarged regions
-    (:mod:`aicalib_tf.detect.zoom`) share the function for any size. Beyond ``MAX_MAP_SHAPES`` sizes per
+    (:mod:`aicalib_tf.detect.chessboard.zoom`) share the function for any size. Beyond ``MAX_MAP_SHAPES`` sizes per
     precision, that function serves the rest too (its outputs are the same).
     """
     holder = _holder(model)

@@ -11,7 +11,7 @@ One interpreter per input shape, the ``MAX_SHAPES`` most recently used kept (at 
 interpreter for a new size (``resize_tensor_input`` and ``allocate_tensors``, which re-applies the
 XNNPACK delegate) costs 10–30 ms at 640×480 on this project's 2-core CPU, more than the 8 ms call
 itself, while a new interpreter costs about 0.5 ms. A stream of one image size alternating with
-zoomed regions (:mod:`aicalib_tf.detect.zoom`) or a pyramid's scales then never re-plans the
+zoomed regions (:mod:`aicalib_tf.detect.chessboard.zoom`) or a pyramid's scales then never re-plans the
 image size's interpreter.
 Threads: ``AICALIB_THREADS`` if set, else 2 where the machine has two or more cores (measured on
 this project's 2-core CPU: 640×480 11.4 ms on 2 threads against 17.8 ms on 1; 1920×1080 62 against

@@ -27,7 +27,7 @@ from tqdm import tqdm
 
 from aicalib_tf.cnn.corner_map import STRIDE, encode_corners, standardize
 from aicalib_tf.cnn.model import PATCH_SIZE
-from aicalib_tf.detect.candidates import saddle_points
+from aicalib_tf.detect.corners.candidates import saddle_points
 from data_gen.dataset import iter_samples
 from data_gen.presets import get_preset
 

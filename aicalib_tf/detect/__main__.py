@@ -7,9 +7,9 @@ and unreadable files. ``--workers N`` (default: one per core, one per 8 images a
 in worker processes that each load the model once (:mod:`aicalib_tf.detect.batch`); the files
 and counts are the same as with ``--workers 1``, which runs in this process. An unreadable file
 is counted and named at the end; the batch goes on. ``--board charuco:...`` finds a ChArUco board
-instead (its corners named by its markers, :mod:`aicalib_tf.detect.charuco`); ``--board aprilgrid:6x6,tag=88mm,spacing=0.3``
+instead (its corners named by its markers, :mod:`aicalib_tf.detect.charuco.detector`); ``--board aprilgrid:6x6,tag=88mm,spacing=0.3``
 or a Kalibr target.yaml finds Kalibr's AprilGrid (tags decoded by OpenCV's aruco, corners by the
-saddle fit, ids on the grid's lattice, :mod:`aicalib_tf.detect.aprilgrid`). Exit codes: 0 done; 2 bad arguments or model.
+saddle fit, ids on the grid's lattice, :mod:`aicalib_tf.detect.boards.aprilgrid`). Exit codes: 0 done; 2 bad arguments or model.
 """
 
 from __future__ import annotations

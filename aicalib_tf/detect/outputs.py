@@ -62,7 +62,7 @@ def file_detector(pattern, model_name: str, out, sha):
         except ImageError as exc:
             return "failed", str(exc)
         if hasattr(pattern, "tag_ids"):  # an AprilGrid: OpenCV decodes its tags, no network
-            from aicalib_tf.detect.aprilgrid import detect_corners_aprilgrid
+            from aicalib_tf.detect.boards.aprilgrid import detect_corners_aprilgrid
 
             det = detect_corners_aprilgrid(gray, pattern)
         else:

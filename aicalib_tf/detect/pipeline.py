@@ -1,10 +1,10 @@
 """Chessboard detection with the CNN: image -> ordered board (the CLI is ``python -m aicalib_tf.detect``).
 
 Pipeline: CNN corner weights -> peaks (:mod:`aicalib_tf.cnn.inference`) -> saddle-point refinement
-on the original image (:mod:`aicalib_tf.detect.refine`, :mod:`aicalib_tf.detect.junctions`) -> grid assembly
-(:mod:`aicalib_tf.detect.grid`) -> ordered board (:mod:`aicalib_tf.detect.board_order`), or a partial board
-(:mod:`aicalib_tf.detect.partial`, placed by :mod:`aicalib_tf.detect.placement` on the lattice model of
-:mod:`aicalib_tf.detect.lattice`).
+on the original image (:mod:`aicalib_tf.detect.corners.refine`, :mod:`aicalib_tf.detect.corners.junctions`) -> grid assembly
+(:mod:`aicalib_tf.detect.chessboard.grid`) -> ordered board (:mod:`aicalib_tf.detect.chessboard.board_order`), or a partial board
+(:mod:`aicalib_tf.detect.chessboard.partial`, placed by :mod:`aicalib_tf.detect.chessboard.placement` on the lattice model of
+:mod:`aicalib_tf.detect.chessboard.lattice`).
 
 Order of a full board (OpenCV's, row-major: index = r·cols + c). A board read from the front
 keeps its handedness, so only its rotations are ambiguous: 180°, and 90° too for a square
@@ -49,7 +49,7 @@ leaves the image by more than 0.3 of its radius (pulled towards the frame), and 
 X-junctions one step outside the pattern is dropped. If every corner is found, the board is complete and ordered by the full-board rules.
 A view of one corner of a non-square board alone (two sides cut by the frame) cannot be placed:
 the visible sides could be the long or the short ones. When no 3×3 seed starts a grid at all,
-the candidates are assembled again from 3×2 seeds (:func:`aicalib_tf.detect.grid.assemble_grids` with
+the candidates are assembled again from 3×2 seeds (:func:`aicalib_tf.detect.chessboard.grid.assemble_grids` with
 ``strips``, growing by candidates only; the partial board then grows as above): strips of a board
 2 corners wide, between objects or around one, hold no 3×3 block.
 
@@ -74,18 +74,18 @@ found at full size.
 Thin boards (``pattern_size`` given): at the edge of a wide-angle lens a board's squares can be
 2–4 px thick, and the CNN finds few of their corners. When the full-size search finds no full
 board but assembles a grid with corners under 6 px apart, the region the board could cover is
-enlarged 3× (at most 240,000 px enlarged) and searched again (:mod:`aicalib_tf.detect.zoom`). A complete
+enlarged 3× (at most 240,000 px enlarged) and searched again (:mod:`aicalib_tf.detect.chessboard.zoom`). A complete
 board found there is returned, so is a partial one with more than half the pattern's corners;
 otherwise partial boards are looked for at full size too, and the one with more corners is
 returned. Boards close to a fisheye: with no full board assembled, the candidates are assembled again
-with ``bend`` (:func:`aicalib_tf.detect.grid.assemble_grids`); only a full board from it counts. There the
+with ``bend`` (:func:`aicalib_tf.detect.chessboard.grid.assemble_grids`); only a full board from it counts. There the
 network's weak points (``WEAK``) confirm saddles the ring test fails at the dark rim (``proposer``'s ``bent``).
 
 Without ``pattern_size``, the largest grid with every corner found is returned, complete, its
 size taken as the pattern (columns counted along the grid direction nearer the image's x axis,
 so a 9×6 board held landscape is (9, 6) and turned on its side (6, 9)); ids are relative to that
 grid, in the full-board order. A grid with positions missing (a line cut by the frame that kept a few
-corners, say) counts by its largest filled rectangle (:func:`aicalib_tf.detect.grid.full_subgrid`), so a
+corners, say) counts by its largest filled rectangle (:func:`aicalib_tf.detect.chessboard.grid.full_subgrid`), so a
 few extra corners never hide it, after corners off their neighbours' lattice are dropped as for partial
 boards. :func:`aicalib_tf.detect.dropin.find_chessboard_corners` reports full boards only, like OpenCV.
 """
@@ -98,15 +98,15 @@ from functools import partial as bind
 import numpy as np
 
 from aicalib_tf.cnn.spec import DETECTOR_NETWORK
-from aicalib_tf.detect.board_order import full_board, order_full_board
-from aicalib_tf.detect.corner_sigma import with_sigmas
-from aicalib_tf.detect.grid import MIN_CORNERS, Grid, assemble_grids, full_subgrid
-from aicalib_tf.detect.junctions import dedupe, nearest_spacing, proposer, typical_amplitude
-from aicalib_tf.detect.lattice import drop_outliers
-from aicalib_tf.detect.partial import partial_board, relative_board
+from aicalib_tf.detect.chessboard.board_order import full_board, order_full_board
+from aicalib_tf.detect.corners.sigma import with_sigmas
+from aicalib_tf.detect.chessboard.grid import MIN_CORNERS, Grid, assemble_grids, full_subgrid
+from aicalib_tf.detect.corners.junctions import dedupe, nearest_spacing, proposer, typical_amplitude
+from aicalib_tf.detect.chessboard.lattice import drop_outliers
+from aicalib_tf.detect.chessboard.partial import partial_board, relative_board
 from aicalib_tf.detect.pyramid import Frame, boards_coarse_to_fine, quick_scales, quick_shift, refine_full, scales, to_full
-from aicalib_tf.detect.refine import Smoothed, refine_candidates
-from aicalib_tf.detect.zoom import from_zoom, zoom_box, zoom_in
+from aicalib_tf.detect.corners.refine import Smoothed, refine_candidates
+from aicalib_tf.detect.chessboard.zoom import from_zoom, zoom_box, zoom_in
 from aicalib_tf.io import read_image
 
 __all__ = ["Detection", "detect_corners", "detect_charuco", "order_full_board", "refined_points"]
@@ -130,7 +130,7 @@ class Detection:
     relative : the ids are relative to the visible grid, not fixed on the pattern (asked for with
         ``detect_corners(..., relative=True)``; a board larger than the frame, say).
     sigmas : (N,) float32 px, each corner's expected error, one standard deviation per axis
-        (:mod:`aicalib_tf.detect.corner_sigma`); None from a detector that does not give it.
+        (:mod:`aicalib_tf.detect.corners.sigma`); None from a detector that does not give it.
     """
 
     corners: np.ndarray
@@ -173,9 +173,9 @@ def _own_grids(grids: list[Grid]) -> list[Grid]:
     """Without a pattern: each grid's filled part, largest first.
 
     A grid with every position filled is kept as it is. In any other grid, corners off their
-    neighbours' lattice (:func:`aicalib_tf.detect.lattice.drop_outliers`, as for partial boards; a grid
+    neighbours' lattice (:func:`aicalib_tf.detect.chessboard.lattice.drop_outliers`, as for partial boards; a grid
     that would lose more than a tenth of them is dropped) leave holes, then the largest filled rectangle is kept
-    (:func:`aicalib_tf.detect.grid.full_subgrid`): a line cut by the frame that kept a few corners never
+    (:func:`aicalib_tf.detect.chessboard.grid.full_subgrid`): a line cut by the frame that kept a few corners never
     hides the rest of the grid, and a corner pulled by an object in front does not come back with it.
     """
     out = []
@@ -205,7 +205,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     threshold : CNN corner weight above which a peak is a candidate.
     relative : with ``pattern_size``, a grid whose place on the pattern the image leaves open (a
         board larger than the frame, no edge in view) comes back with ids relative to it and
-        ``relative=True`` (:func:`aicalib_tf.detect.partial.relative_board`), rather than not at all.
+        ``relative=True`` (:func:`aicalib_tf.detect.chessboard.partial.relative_board`), rather than not at all.
         Enough for calibration, where each view has its own pose; not a detection of the pattern.
     Returns a :class:`Detection`; ``found`` is False when no board is there. With ``pattern_size``,
     a board partly out of frame or hidden is returned with ``complete=False`` when the image
@@ -250,10 +250,10 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
 
 def _zoomed(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: float, seen: Grid,
             others: np.ndarray | None = None) -> Detection | None:
-    """The search again on the region of a thin grid, enlarged (:mod:`aicalib_tf.detect.zoom`).
+    """The search again on the region of a thin grid, enlarged (:mod:`aicalib_tf.detect.chessboard.zoom`).
 
     gray : (H, W) float32, full size. seen : the largest grid assembled on it. others : (M, 2) px,
-    the corner candidates found on it (they narrow the region, :func:`aicalib_tf.detect.zoom.zoom_box`).
+    the corner candidates found on it (they narrow the region, :func:`aicalib_tf.detect.chessboard.zoom.zoom_box`).
     Returns the detection in the enlarged region, in gray's coordinates, or None when the grid is
     not thin, its region too large, or nothing is found there.
     """
@@ -275,9 +275,9 @@ def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed:
 
     gray : (H, W) float32 or uint8. The network's points (:func:`aicalib_tf.cnn.inference.corner_points`,
     at most ``MAX_CANDIDATES``, strongest first) are moved to the saddle point of the image around
-    them (:func:`aicalib_tf.detect.refine.refine_candidates`, a window fitting the local spacing); points
+    them (:func:`aicalib_tf.detect.corners.refine.refine_candidates`, a window fitting the local spacing); points
     whose fit fails are dropped, and of points that meet within 1.5 px the strongest stays.
-    smoothed : the image's :class:`~aicalib_tf.detect.refine.Smoothed` when the caller has it.
+    smoothed : the image's :class:`~aicalib_tf.detect.corners.refine.Smoothed` when the caller has it.
     min_points : fewer network points than this give no candidates (nothing is refined).
     weak : also return ``weak_points() -> (K, 2)`` px, the network's points from ``weak``·threshold up to it.
     Returns points (N, 2) float32 (x, y) px and weights (N,) float32, strongest first (and weak_points).
@@ -375,15 +375,15 @@ def _as_detection(det, board, size: tuple[int, int], why: str | None = None) -> 
 
 
 def detect_charuco(image, boards, *, model=None, threshold: float = 0.5, refused: dict | None = None) -> list:
-    """Every ChArUco board of ``boards`` in the image (:mod:`aicalib_tf.detect.charuco`).
+    """Every ChArUco board of ``boards`` in the image (:mod:`aicalib_tf.detect.charuco.detector`).
 
     image : path or array (the image gate). boards : CharucoBoards or their descriptions
     (``charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100``). The corners are the chessboard
     stages' (CNN, saddle refinement, grid assembly), their ids come from the markers. Returns a list of
-    :class:`~aicalib_tf.detect.charuco.CharucoDetection`, largest first (empty when none). refused : a dict
-    that receives {board: why} for a board whose markers contradict it (:mod:`aicalib_tf.detect.charuco_layout`).
+    :class:`~aicalib_tf.detect.charuco.detector.CharucoDetection`, largest first (empty when none). refused : a dict
+    that receives {board: why} for a board whose markers contradict it (:mod:`aicalib_tf.detect.charuco.layout`).
     """
-    from aicalib_tf.detect.charuco import detect_charuco_boards
+    from aicalib_tf.detect.charuco.detector import detect_charuco_boards
 
     frame = Frame(read_image(image))  # a large photo: coarse to fine (pyramid.charuco_scales), refined on the full image
     boards = [_charuco_board(b) for b in ([boards] if isinstance(boards, str) or not hasattr(boards, "__iter__") else boards)]

@@ -22,9 +22,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from aicalib_tf.detect.junctions import nearest_spacing
+from aicalib_tf.detect.corners.junctions import nearest_spacing
 from aicalib_tf.detect.pyramid_kernels import block_mean_colour, block_mean_grey
-from aicalib_tf.detect.refine import Smoothed, refine_windowed, window_radius
+from aicalib_tf.detect.corners.refine import Smoothed, refine_windowed, window_radius
 from aicalib_tf.geometry.pose import in_frame
 from aicalib_tf.io import as_gray_float
 
@@ -169,7 +169,7 @@ def to_full(points: np.ndarray, factor: int) -> np.ndarray:
 
 
 def refine_full(image, points: np.ndarray, max_shift: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
-    """Refine corners found at a reduced scale on the full image (saddle fit, :mod:`aicalib_tf.detect.refine`).
+    """Refine corners found at a reduced scale on the full image (saddle fit, :mod:`aicalib_tf.detect.corners.refine`).
 
     image : a :class:`Frame`, or (H, W) float32 grey, the full image. points : (N, 2) px on it (from
     :func:`to_full`), N ≥ 2, of one board. Only the board's bounding box (plus the largest window)
@@ -228,7 +228,7 @@ def charuco_scales(width: int, height: int) -> list[int]:
 
 
 def boards_to_full(frame: Frame, found: list, factor: int) -> list:
-    """ChArUco detections (:class:`aicalib_tf.detect.charuco.CharucoDetection`) made on the image
+    """ChArUco detections (:class:`aicalib_tf.detect.charuco.detector.CharucoDetection`) made on the image
     reduced by ``factor``, brought to the full image (a :class:`Frame`).
 
     Corners go through :func:`to_full` and :func:`refine_full` (windows about them, at most 2 px

@@ -50,7 +50,7 @@ def make_detectors(names, pattern: tuple[int, int], model: str = DETECTOR_NETWOR
     Returns (detectors, info) where info maps a CNN detector to its model path and sha256.
     Raises ValueError for an unknown name, FileNotFoundError/ValueError for a bad model.
     """
-    from aicalib_tf.detect.board_order import full_board_ids
+    from aicalib_tf.detect.chessboard.board_order import full_board_ids
     from aicalib_tf.detect.opencv import opencv_classic, opencv_sb
 
     unknown = [n for n in names if n not in DETECTORS]

@@ -10,7 +10,7 @@ cheaper searches first:
    the corner spacing from its prediction (a corner that slid to a neighbouring one moves a whole
    spacing), and the corners still form a lattice (:func:`lattice_bent` at most ``MAX_BEND``);
    its order is then decided again by the full-board rule
-   (:func:`aicalib_tf.detect.board_order.reading`), as :func:`aicalib_tf.detect.pipeline.detect_corners`
+   (:func:`aicalib_tf.detect.chessboard.board_order.reading`), as :func:`aicalib_tf.detect.pipeline.detect_corners`
    decides it. Its scores are the CNN weights of the board it followed.
 2. *region*: :func:`aicalib_tf.detect.pipeline.detect_corners` on the region around the last board
    (:func:`search_box`: its corners' bounding box, ``ROI_STEPS`` spacings and the last motion
@@ -35,9 +35,9 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
-from aicalib_tf.detect.board_order import full_board_ids, reading
-from aicalib_tf.detect.corner_sigma import with_sigmas
-from aicalib_tf.detect.junctions import nearest_spacing
+from aicalib_tf.detect.chessboard.board_order import full_board_ids, reading
+from aicalib_tf.detect.corners.sigma import with_sigmas
+from aicalib_tf.detect.corners.junctions import nearest_spacing
 from aicalib_tf.detect.pipeline import Detection, detect_corners
 from aicalib_tf.detect.pyramid import refine_full
 from aicalib_tf.geometry.image_circle import thumbnail

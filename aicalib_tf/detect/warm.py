@@ -60,7 +60,7 @@ def warm(model=None, size: tuple[int, int] = (640, 480)) -> float:
 def shadowed(gray: np.ndarray, factor: float = 0.55) -> np.ndarray:
     """``gray`` (H, W) uint8 with a hard shadow edge across it: the pixels right of a slanted line
     through the centre darkened by ``factor``. Corners on the edge take the shadow-robust fit
-    (:mod:`aicalib_tf.detect.shadow`), whose kernels the plain views never reach."""
+    (:mod:`aicalib_tf.detect.corners.shadow`), whose kernels the plain views never reach."""
     h, w = gray.shape
     y, x = np.mgrid[0:h, 0:w]
     dark = x > w / 2 + 0.3 * (y - h / 2)

@@ -388,7 +388,7 @@ def test_no_wrong_ids_where_noise_misleads_the_shadow_fit_restarts(model, index)
 
 @pytest.mark.parametrize("index", [0, 1, 2])
 def test_without_a_pattern_columns_run_nearest_the_image_x_axis(model, index):
-    from aicalib_tf.detect.board_order import _steps
+    from aicalib_tf.detect.chessboard.board_order import _steps
 
     s = make_sample("clean", 8, index, pattern=(9, 6), size=(640, 480))
     for img in (s.image, np.ascontiguousarray(s.image.T)):  # and the board turned on its side
@@ -444,9 +444,9 @@ def test_weak_network_points_confirm_a_darkened_rim_corner_only_for_the_bent_gri
     # typical corner (the ring test asks for 0.3) and the network weighs it 0.42; the plain proposer
     # rejects the saddle there, the bent grid's takes it with the network's weak point beside it
     from aicalib_tf.bench.conditions import PATTERN, named_conditions
-    from aicalib_tf.detect.grid import MIN_CORNERS
-    from aicalib_tf.detect.junctions import nearest_spacing, proposer, ring_symmetry
-    from aicalib_tf.detect.refine import Smoothed
+    from aicalib_tf.detect.chessboard.grid import MIN_CORNERS
+    from aicalib_tf.detect.corners.junctions import nearest_spacing, proposer, ring_symmetry
+    from aicalib_tf.detect.corners.refine import Smoothed
     from aicalib_tf.io import load_image
 
     cond = next(c for c in named_conditions() if c.name == "fisheye_closeup")

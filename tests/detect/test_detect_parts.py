@@ -4,10 +4,10 @@ import cv2
 import numpy as np
 import pytest
 
-from aicalib_tf.detect.board_order import symmetric_ids
-from aicalib_tf.detect.junctions import proposer, ring_symmetry
-from aicalib_tf.detect.lattice import curved_residuals, drop_outliers, lattice_residuals, predict_ids
-from aicalib_tf.detect.refine import Smoothed, refine_saddle
+from aicalib_tf.detect.chessboard.board_order import symmetric_ids
+from aicalib_tf.detect.corners.junctions import proposer, ring_symmetry
+from aicalib_tf.detect.chessboard.lattice import curved_residuals, drop_outliers, lattice_residuals, predict_ids
+from aicalib_tf.detect.corners.refine import Smoothed, refine_saddle
 from data_gen import make_sample
 
 
@@ -140,7 +140,7 @@ def test_the_proposer_takes_shadowed_corners_and_leaves_the_board_edge():
 def test_the_proposer_skips_the_shadow_fit_where_the_ring_test_must_fail(monkeypatch):
     # evaluate shading #11's shadowed corners need the shadow-robust fit; asked with a reference
     # amplitude no ring reaches (as behind an object), the costly fit is never run and none is taken
-    import aicalib_tf.detect.refine as refine
+    import aicalib_tf.detect.corners.refine as refine
     from aicalib_tf.bench.conditions import PATTERN, named_conditions
 
     cond = {c.name: c for c in named_conditions()}["shading"]
@@ -160,7 +160,7 @@ def test_the_proposer_skips_the_shadow_fit_where_the_ring_test_must_fail(monkeyp
 
 
 def test_dedupe_keeps_the_strongest_of_points_that_meet_in_turn():
-    from aicalib_tf.detect.junctions import dedupe
+    from aicalib_tf.detect.corners.junctions import dedupe
 
     def greedy(pts, scores, d):  # strongest first, each kept point removes the weaker points near it
         keep = []
@@ -179,7 +179,7 @@ def test_dedupe_keeps_the_strongest_of_points_that_meet_in_turn():
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_nearest_spacing_is_the_nearest_other_points_distance_bit_for_bit(dtype):
-    from aicalib_tf.detect.junctions import nearest_spacing
+    from aicalib_tf.detect.corners.junctions import nearest_spacing
     from aicalib_tf.geometry.points import sq_distances
 
     rng = np.random.default_rng(3)
@@ -196,7 +196,7 @@ def test_nearest_spacing_is_the_nearest_other_points_distance_bit_for_bit(dtype)
 
 
 def test_board_steps_are_the_affine_least_squares_fit():
-    from aicalib_tf.detect.board_order import _steps
+    from aicalib_tf.detect.chessboard.board_order import _steps
 
     rng = np.random.default_rng(5)
     for trial in range(200):

@@ -3,7 +3,7 @@
 import cv2
 import numpy as np
 
-from aicalib_tf.detect.partial import _fit_pattern
+from aicalib_tf.detect.chessboard.partial import _fit_pattern
 from aicalib_tf.detect.pipeline import UNDECIDED, detect_corners
 from aicalib_tf.detect.warm import synthetic_board
 

@@ -1,0 +1,210 @@
+"""Find a Kalibr AprilGrid (:mod:`aicalib_tf.geometry.aprilgrid`) in an image: tags decoded by
+OpenCV's aruco, each tag corner placed by the project's saddle fit.
+
+OpenCV's ``cv2.aruco.ArucoDetector`` (the grid's AprilTag dictionary, two-bit borders) decodes the
+tags. Tags of ids outside the grid, or seen twice, are dropped. Which of a tag's corners OpenCV
+reports first depends on how the codes were drawn: with two tags or more, the quarter turn whose
+corners a homography from the board fits best decides (one tag alone keeps
+:data:`~aicalib_tf.geometry.aprilgrid.PRINT_ROTATION`). Each corner is an X-junction: the tag's
+black border and the small square at its corner meet there, in a clean square of side
+min(gap, two bits) on the board. OpenCV's quad corners lie up to that far off, pushed out along the
+tag's diagonals where its contour runs into the corner squares, so a coarse saddle fit in a wide
+window starts where a homography over the tag and its neighbours puts the corner (else at the
+quad's corner), and :func:`aicalib_tf.detect.corners.refine.refine_windowed` finishes in a window inside the
+clean square. A corner whose fit fails, or whose window leaves the image, is dropped. Corner ids are
+lattice positions (the geometry module's docstring), so a partial view keeps its ids.
+``refine="opencv"`` returns OpenCV's own sub-pixel corners instead, for comparison.
+
+Coordinates are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from aicalib_tf.detect.corners.refine import Smoothed, refine_saddle, refine_windowed, window_radius
+from aicalib_tf.geometry.aprilgrid import BORDER_BITS, PRINT_ROTATION, AprilGrid, dictionary
+
+__all__ = ["AprilGridDetection", "detect_aprilgrid", "detect_corners_aprilgrid", "decode_tags", "clean_window_px", "predicted_corners",
+           "make_detector", "REFINES"]
+
+REFINES = ("saddle", "opencv", "none")
+_OPENCV_REFINE = {"saddle": "CORNER_REFINE_NONE", "none": "CORNER_REFINE_NONE", "opencv": "CORNER_REFINE_SUBPIX",
+                  "apriltag": "CORNER_REFINE_APRILTAG"}
+
+
+@dataclass(frozen=True)
+class AprilGridDetection:
+    """corners (N, 2) float64 px; ids (N, 2) int64 lattice (col, row); tags (K,) int64 tag ids
+    seen; rotation: the quarter turn used; why: "" or why nothing was found."""
+
+    corners: np.ndarray
+    ids: np.ndarray
+    tags: np.ndarray
+    rotation: int
+    why: str = ""
+
+
+def _detector(family: str, refine: str):
+    p = cv2.aruco.DetectorParameters()
+    p.markerBorderBits = BORDER_BITS
+    p.cornerRefinementMethod = getattr(cv2.aruco, _OPENCV_REFINE[refine])
+    return cv2.aruco.ArucoDetector(dictionary(family), p)
+
+
+def decode_tags(gray: np.ndarray, board: AprilGrid, refine: str = "none") -> tuple[np.ndarray, np.ndarray]:
+    """Tags of ``board`` in the uint8 image: ids (K,) int64 and corners (K, 4, 2) float64 px, in
+    OpenCV's order; ids outside the grid and ids seen twice are left out. refine: a key of
+    ``_OPENCV_REFINE`` (OpenCV's own corner refinement)."""
+    corners, ids, _ = _detector(board.family, refine).detectMarkers(gray)
+    if ids is None or not len(ids):
+        return np.zeros(0, np.int64), np.zeros((0, 4, 2))
+    ids = ids.ravel().astype(np.int64)
+    quads = np.concatenate([np.asarray(c, np.float64).reshape(1, 4, 2) for c in corners])
+    uniq, counts = np.unique(ids, return_counts=True)
+    lo, hi = board.first_id, board.first_id + board.tags[0] * board.tags[1]
+    keep = (ids >= lo) & (ids < hi) & np.isin(ids, uniq[counts == 1])
+    return ids[keep], quads[keep]
+
+
+def _rotation(board: AprilGrid, ids: np.ndarray, quads: np.ndarray) -> int:
+    """The quarter turn of the corner order that a homography from the board fits best."""
+    if len(ids) < 2:
+        return PRINT_ROTATION
+    img = quads.reshape(-1, 2)
+    best, best_err = PRINT_ROTATION, np.inf
+    for r in range(4):
+        obj = board.tag_corner_ids(ids, r).reshape(-1, 2).astype(np.float64)
+        H, _ = cv2.findHomography(obj, img, 0)
+        if H is None:
+            continue
+        proj = cv2.perspectiveTransform(obj.reshape(-1, 1, 2), H).reshape(-1, 2)
+        err = float(np.mean(np.sum((proj - img) ** 2, axis=1)))
+        if err < best_err:
+            best, best_err = r, err
+    return best
+
+
+def clean_window_px(board: AprilGrid, quads: np.ndarray) -> np.ndarray:
+    """(K, 4) px: the side, in the image, of the clean square at each tag corner: min(gap, two bits)
+    on the board, times the tag's smaller height at that corner (a foreshortened or sheared tag's
+    clean square is narrower across than along)."""
+    e1 = np.roll(quads, -1, axis=1) - quads
+    e2 = np.roll(quads, 1, axis=1) - quads
+    cross = np.abs(e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0])
+    height = cross / np.maximum(np.maximum(np.linalg.norm(e1, axis=2), np.linalg.norm(e2, axis=2)), 1e-9)
+    return height * min(float(board.spacing), BORDER_BITS / (board.bits + 2 * BORDER_BITS))
+
+
+PULL_IN_RADIUS = 12  # px, the widest window of the first, coarse saddle fit
+PULL_IN_WINDOWS = (0.6, 0.8, 0.45)  # its windows' half-sizes over the clean square, tried in turn
+PULL_IN_REACH = 0.6  # clean squares: how far from the predicted (or the quad's) corner its result may lie
+
+
+def predicted_corners(board: AprilGrid, ids: np.ndarray, quads: np.ndarray, rotation: int) -> np.ndarray:
+    """(K, 4, 2) px: each tag's corners where a homography fitted to its quad and those of the tags
+    next to it (least squares) puts them, or the quad where no neighbour was decoded. A quad pushed
+    out along its diagonals (the contour running into the corner squares) is pushed out about its
+    own centre; a homography over several tags keeps their centres and spacing, not that."""
+    lattice = board.tag_corner_ids(ids, rotation).astype(np.float64)
+    cells = board.tag_cell(ids)
+    out = quads.astype(np.float64).copy()
+    for k in range(len(ids)):
+        near = np.flatnonzero(np.max(np.abs(cells - cells[k]), axis=1) <= 1)
+        if len(near) < 2:
+            continue
+        H, _ = cv2.findHomography(lattice[near].reshape(-1, 2), quads[near].reshape(-1, 2), 0)
+        if H is not None:
+            out[k] = cv2.perspectiveTransform(lattice[k].reshape(-1, 1, 2), H).reshape(4, 2)
+    return out
+
+
+def _pull_in(smoothed: Smoothed, quads: np.ndarray, predicted: np.ndarray, spacing: np.ndarray):
+    """A coarse saddle fit in a wide window (up to ``PULL_IN_RADIUS``) about the clean square.
+
+    OpenCV's quad corners can lie up to a clean square off, outwards along the diagonal, where the
+    tag's contour runs into its corner squares: the fit starts at the corner the tag and its
+    neighbours predict (:func:`predicted_corners`), then where that fails at the quad's corner,
+    each with the windows ``PULL_IN_WINDOWS`` (fractions of the clean square) in turn; it must end
+    within ``PULL_IN_REACH`` clean squares of the prediction or of the quad's corner.
+    quads, predicted (K, 4, 2), spacing (K, 4) px. Returns (4K, 2) float64 and ok (4K,) bool.
+    """
+    pred = predicted.reshape(-1, 2)
+    sp = spacing.reshape(-1)
+    quad = quads.reshape(-1, 2).astype(np.float64)
+    out, ok = pred.copy(), np.zeros(len(pred), bool)
+    for start in (pred, quad):
+        for frac in PULL_IN_WINDOWS:
+            todo = np.flatnonzero(~ok)
+            radius = np.clip(np.round(frac * sp[todo]), 2, PULL_IN_RADIUS).astype(int)
+            for r in sorted(set(radius.tolist())):
+                sel = todo[radius == r]
+                got, good = refine_saddle(smoothed[int(r)], start[sel], sigma=0.0, radius=int(r), iterations=15,
+                                          max_shift=2.0 * r)
+                near = np.minimum(np.linalg.norm(got - pred[sel], axis=1), np.linalg.norm(got - quad[sel], axis=1))
+                good &= near <= PULL_IN_REACH * sp[sel] + 1.0
+                out[sel[good]], ok[sel[good]] = got[good], True
+    return out, ok
+
+
+def detect_aprilgrid(gray: np.ndarray, board: AprilGrid, refine: str = "saddle") -> AprilGridDetection:
+    """The corners of ``board`` in ``gray`` (H, W) uint8 or float in [0, 1].
+
+    refine : "saddle" (the project's fit, from OpenCV's unrefined quads), "opencv" (OpenCV's
+    CORNER_REFINE_SUBPIX), "apriltag" (OpenCV's CORNER_REFINE_APRILTAG) or "none".
+    Returns an :class:`AprilGridDetection`, corners sorted by (row, col) id.
+    """
+    g = np.asarray(gray)
+    u8 = g if g.dtype == np.uint8 else np.clip(np.rint(np.asarray(g, np.float64) * 255.0), 0, 255).astype(np.uint8)
+    ids, quads = decode_tags(u8, board, refine)
+    if not len(ids):
+        return AprilGridDetection(np.zeros((0, 2)), np.zeros((0, 2), np.int64), ids, PRINT_ROTATION,
+                                  f"no {board.family} tag with ids {board.first_id}.."
+                                  f"{board.first_id + board.tags[0] * board.tags[1] - 1}: check the family and first=")
+    rot = _rotation(board, ids, quads)
+    lattice = board.tag_corner_ids(ids, rot).reshape(-1, 2)
+    pts = quads.reshape(-1, 2)
+    ok = np.ones(len(pts), bool)
+    if refine == "saddle":
+        clean = clean_window_px(board, quads)
+        spacing = clean.reshape(-1)
+        smoothed = Smoothed(u8.astype(np.float32) / 255.0)
+        start, ok = _pull_in(smoothed, quads, predicted_corners(board, ids, quads, rot), clean)
+        pts, fine = refine_windowed(smoothed, start, spacing, max_shift=0.25 * spacing + 1.0)
+        pts, ok = pts.astype(np.float64), ok & fine
+        r = window_radius(spacing) + 1
+        h, w = u8.shape[:2]
+        ok &= (pts[:, 0] >= r) & (pts[:, 1] >= r) & (pts[:, 0] <= w - 1 - r) & (pts[:, 1] <= h - 1 - r)
+    pts, lattice = pts[ok], lattice[ok]
+    order = np.lexsort((lattice[:, 0], lattice[:, 1]))
+    why = "" if len(order) else "no tag corner could be placed (each fit failed)"
+    return AprilGridDetection(pts[order], lattice[order], ids, rot, why)
+
+
+def detect_corners_aprilgrid(gray: np.ndarray, board: AprilGrid):
+    """:func:`detect_aprilgrid` as a :class:`aicalib_tf.detect.pipeline.Detection` (scores 1, the
+    board's lattice as its pattern; complete when every tag corner is placed)."""
+    from aicalib_tf.detect.pipeline import Detection
+
+    g = np.asarray(gray)
+    det = detect_aprilgrid(g, board)
+    n = len(det.ids)
+    return Detection(det.corners.astype(np.float32), det.ids.astype(np.int32), np.ones(n, np.float32),
+                     board.pattern_size, n == 4 * board.tags[0] * board.tags[1], (g.shape[1], g.shape[0]), det.why)
+
+
+def make_detector(board: AprilGrid):
+    """The calibration's detector (:func:`aicalib_tf.calib.workflow.make_detector`) for an AprilGrid:
+    grey image -> (corners (N, 2), ids (N, 2)) or None, ``why`` set after a miss."""
+
+    def detect(gray):
+        det = detect_aprilgrid(gray, board)
+        detect.why = det.why
+        return (det.corners, det.ids) if len(det.ids) else None
+
+    detect.info = {"board": board.describe(), "kind": "AprilGrid"}
+    detect.why, detect.relative, detect.sigmas = "", False, None
+    return detect

@@ -1,0 +1,213 @@
+"""Subpixel corner refinement on the original image (numpy/OpenCV, loops compiled by numba).
+
+An ideal X-junction is point-symmetric: the intensity at c + d equals the intensity at c − d,
+whatever the angles of its two lines. Any symmetric blur keeps that, so the centre is a
+stationary point (a saddle) of the smoothed image. :func:`refine_saddle` finds it: it fits a
+quadratic surface to a Gaussian-weighted window of the smoothed image around each estimate, moves
+to the quadratic's saddle point and repeats until the step is below 1e-3 px, each point on its
+own (:func:`aicalib_tf.detect.corners.saddle_kernels.saddle_refine`), so its result never depends on the others. :func:`refine_windowed` picks
+each point's window to fit inside its squares, on an image smoothed once per window size
+(:class:`Smoothed`). A hard shadow edge across the window pulls the saddle up to ~3 px towards it
+(evaluate ``shading``: 15 wrong boards); where the window about the saddle is not point-symmetric
+(:func:`aicalib_tf.detect.corners.shadow.asymmetry` above ``MAX_ASYMMETRY``), the fit that models a
+shadow edge (:func:`aicalib_tf.detect.corners.shadow.refine_symmetric`) decides instead, started again
+around the point where its result is not symmetric even with a shadow edge (``RESTART``).
+:func:`refine_subpix` wraps OpenCV's ``cornerSubPix`` behind the same signature, for comparison.
+
+Coordinates are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from aicalib_tf.detect.corners.saddle import saddle_fit_matrix
+from aicalib_tf.detect.corners.saddle_kernels import saddle_refine
+
+__all__ = ["Smoothed", "gaussian", "refine_saddle", "refine_subpix", "refine_windowed", "refine_candidates", "window_radius"]
+
+
+def refine_saddle(
+    gray: np.ndarray,
+    points: np.ndarray,
+    *,
+    sigma: float = 1.0,
+    radius: int = 3,
+    iterations: int = 6,
+    max_shift: float | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Move each point to the saddle of the smoothed image near it.
+
+    gray : (H, W) float or uint8. points : (N, 2) (x, y) px, within about a pixel of a corner.
+    sigma : px, Gaussian smoothing (more for noisy images). radius : px, half-size of the fit window.
+    max_shift : px, the furthest a point may end from where it started (default: radius).
+    Returns refined (N, 2) float32 and ok (N,) bool: False where the fit is not a saddle, did not
+    settle, or left ``max_shift``; those points are returned unrefined.
+    """
+    pts0 = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    if len(pts0) == 0:
+        return np.zeros((0, 2), np.float32), np.zeros(0, bool)
+    g = np.asarray(gray, dtype=np.float32)
+    if sigma > 0:
+        g = gaussian(g, sigma)
+    _, fit = saddle_fit_matrix(radius)
+    max_shift = float(radius if max_shift is None else max_shift)
+    out, ok = saddle_refine(np.ascontiguousarray(g), pts0, fit, int(radius), int(iterations), max_shift)
+    return out.astype(np.float32), ok
+
+
+def gaussian(gray: np.ndarray, sigma: float) -> np.ndarray:
+    """``gray`` blurred by a Gaussian of ``sigma`` px, its kernel cut at 3σ (OpenCV's default for
+    float images is 4σ, a third more work for under 0.3% of the kernel's weight); borders reflected."""
+    k = 2 * int(np.ceil(3.0 * sigma)) + 1
+    return cv2.GaussianBlur(gray, (k, k), sigma)
+
+
+class Smoothed:
+    """The image smoothed for each refinement radius r (σ = 0.4·r) or σ, made once per image on demand.
+
+    window_sigma : None, or one σ (px) for every radius: one smoothing serves all windows (the
+    detector's quick passes, whose corners are refined again on the full image).
+    """
+
+    def __init__(self, gray: np.ndarray, window_sigma: float | None = None):
+        self.gray, self.cache, self.window_sigma = gray, {}, window_sigma
+
+    def __getitem__(self, r: int) -> np.ndarray:
+        return self.sigma(0.4 * r if self.window_sigma is None else self.window_sigma)
+
+    def sigma(self, sigma: float) -> np.ndarray:
+        """The image smoothed with a Gaussian of ``sigma`` px."""
+        key = round(float(sigma), 6)
+        if key not in self.cache:
+            self.cache[key] = gaussian(self.gray, key)
+        return self.cache[key]
+
+
+MAX_ASYMMETRY = 0.004  # above it (robust_refine.asymmetry at the saddle) the shadow-robust fit decides
+SHADOWED = 0.02  # above it, and the shadow-robust fit failing, the point is not refined (ok False)
+SHADOW_SIGMA = 0.7  # px, the smoothing of the image for the shadow-robust fit
+
+
+def window_radius(spacing: np.ndarray) -> np.ndarray:
+    """Refinement window half-size (px) that fits inside squares of ``spacing`` px: 2..5."""
+    return np.minimum(np.maximum(np.round(0.45 * np.asarray(spacing, np.float64)), 2), 5).astype(int)  # np.clip's values
+
+
+def refine_windowed(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray, max_shift: np.ndarray | None = None,
+                    *, restarts: bool = True, shadow_gate=None):
+    """Saddle refinement with a window that fits inside the local squares.
+
+    pts : (N, 2). spacing : (N,) px, the local corner spacing. max_shift : (N,) px or None.
+    restarts : let the shadow-robust fit start again where its result is not symmetric (see
+        :func:`_shadow_fit`; costly where many windows are asymmetric, e.g. beside objects).
+    shadow_gate : None, or ``gate(idx (M,) int, saddles (M, 2)) -> (M,) bool``: which of the points
+        ``idx`` whose window is not point-symmetric about their saddle ``saddles`` may still be a
+        corner. The shadow-robust fit, the costly part, runs for those only; the others keep their
+        saddle and stay ok (without a gate, a far-from-symmetric window whose shadow fit failed
+        would not be ok), so the caller's own test must reject them. None: all.
+    Returns refined (N, 2) float32 and ok (N,) bool.
+    """
+    from aicalib_tf.detect.corners.shadow import asymmetry  # it uses this module's saddle fit
+
+    pts = np.asarray(pts, np.float64).reshape(-1, 2)
+    radius = window_radius(spacing)
+    out = pts.astype(np.float32)
+    ok = np.zeros(len(pts), bool)
+    for r in sorted(set(radius.tolist())):
+        sel = np.flatnonzero(radius == r)
+        img = smoothed[int(r)]
+        out[sel], ok[sel] = refine_saddle(img, pts[sel], sigma=0.0, radius=int(r))
+        held = np.flatnonzero(ok[sel])
+        if not len(held):
+            continue
+        # a shadow edge across the window pulls the saddle fit: where the window is not point-symmetric
+        # about it, the fit that allows a shadow edge decides (asked only about the saddles that hold)
+        asym = np.zeros(len(sel))
+        asym[held] = asymmetry(img, out[sel[held]], int(r))
+        odd = ok[sel] & (asym > MAX_ASYMMETRY)
+        if shadow_gate is not None and odd.any():
+            odd[odd] = shadow_gate(sel[odd], out[sel[odd]])
+        if odd.any():
+            # restarts only where a shadow edge is likely (SHADOWED), not for the asymmetry of noise alone
+            got, got_ok = _shadow_fit(smoothed, pts[sel[odd]], int(r), restarts & (asym[odd] > SHADOWED))
+            out[sel[odd][got_ok]] = got[got_ok]
+            # neither fit to be trusted where the window is far from symmetric and this fit failed
+            ok[sel[odd][~got_ok & (asym[odd] > SHADOWED)]] = False
+    if max_shift is not None:
+        d = out - pts
+        ok &= np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) <= max_shift  # np.linalg.norm's values
+    return out, ok
+
+
+SQUEEZED_WINDOW = 0.6  # a failed fit tries again in the window of squares this much narrower
+
+
+def refine_candidates(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray):
+    """:func:`refine_windowed` for the network's corner candidates, with a second, narrower try.
+
+    A corner squeezed towards a fisheye's rim has squares narrower across than the corner spacing
+    says, and the window sized from the spacing straddles them: where that fit fails, the point is
+    fitted again in the window of squares ``SQUEEZED_WINDOW`` times as wide, when that window is
+    smaller. pts : (N, 2) px. spacing : (N,) px. Returns refined (N, 2) float32 and ok (N,) bool.
+    """
+    refined, ok = refine_windowed(smoothed, pts, spacing)
+    again = np.flatnonzero(~ok & (window_radius(SQUEEZED_WINDOW * spacing) < window_radius(spacing)))
+    if len(again):
+        refined[again], ok[again] = refine_windowed(smoothed, np.asarray(pts)[again], SQUEEZED_WINDOW * spacing[again])
+    return refined, ok
+
+
+RESTART = 0.012  # above it (robust_refine.shadow_asymmetry at its result) the shadow-robust fit starts again nearby
+RESTARTS = 4  # starts on a circle of 0.4 window radius around the point (8: the same boards on evaluate
+# and data_gen hard seed 5, about 5% slower on tilt60, occluded, shading and partial)
+
+
+def _shadow_fit(smoothed: Smoothed, pts: np.ndarray, r: int, restarts=True) -> tuple[np.ndarray, np.ndarray]:
+    """The shadow-robust fit (:func:`aicalib_tf.detect.corners.shadow.refine_symmetric`) of a radius-``r`` window's points.
+
+    On a lightly smoothed image (more smoothing mixes the shadow into the board), in a window one
+    px wider. The fit can settle on the wrong side of a shadow edge, up to ~2 px off (evaluate
+    ``shading`` #86): where the window about a result is not point-symmetric even allowing for a
+    shadow edge (``RESTART``), it starts again from ``RESTARTS`` points around the first start; the
+    restart that leaves the least of it, within r + 1 px of the start, replaces the first result
+    only where it leaves at most ``RESTART`` and less than half the first's (under heavy noise no
+    window is symmetric, and the least asymmetric of several noisy fits can be a neighbouring
+    feature: data_gen ``hard`` seed 5, 6 wrong ids). restarts : bool, or (M,) bool per point: which
+    points may start again.
+    Returns (M, 2) float32 and ok (M,) bool.
+    """
+    from aicalib_tf.detect.corners.shadow import refine_symmetric, shadow_asymmetry
+
+    img = smoothed.sigma(SHADOW_SIGMA)
+    got, ok = refine_symmetric(img, pts, radius=r + 1)
+    left = shadow_asymmetry(img, got, r + 1)
+    again = np.flatnonzero(ok & (left > RESTART) & np.broadcast_to(restarts, ok.shape))
+    if len(again):
+        ang = 2 * np.pi * np.arange(RESTARTS) / RESTARTS
+        ring = 0.4 * r * np.stack([np.cos(ang), np.sin(ang)], 1)
+        starts = (pts[again, None, :] + ring[None]).reshape(-1, 2)
+        more, more_ok = refine_symmetric(img, starts, radius=r + 1)
+        more_ok &= np.linalg.norm(more - np.repeat(pts[again], RESTARTS, axis=0), axis=1) <= r + 1
+        more_left = np.where(more_ok, shadow_asymmetry(img, more, r + 1), np.inf).reshape(-1, RESTARTS)
+        best = np.argmin(more_left, axis=1)
+        least = more_left[np.arange(len(again)), best]
+        better = (least <= RESTART) & (least < 0.5 * left[again])
+        got[again[better]] = more.reshape(-1, RESTARTS, 2)[better, best[better]]
+    return got, ok
+
+
+def refine_subpix(gray: np.ndarray, points: np.ndarray, *, half_window: int = 5) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV's ``cornerSubPix`` (30 iterations or 1e-3 px) behind :func:`refine_saddle`'s signature.
+
+    ok is False where the point moved more than ``half_window`` px (it slid off the corner).
+    """
+    pts0 = np.asarray(points, dtype=np.float32).reshape(-1, 2)
+    if len(pts0) == 0:
+        return pts0.copy(), np.zeros(0, bool)
+    g = np.asarray(gray, dtype=np.float32)
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-3)
+    out = cv2.cornerSubPix(g, pts0.reshape(-1, 1, 2).copy(), (half_window, half_window), (-1, -1), crit).reshape(-1, 2)
+    ok = np.linalg.norm(out - pts0, axis=1) <= half_window
+    return np.where(ok[:, None], out, pts0), ok

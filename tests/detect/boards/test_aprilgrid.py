@@ -1,0 +1,115 @@
+"""AprilGrid detection on rendered views with exact truth: ids, the saddle fit against OpenCV's
+refined corners, partial views, and a calibration from rendered views."""
+
+import cv2
+import numpy as np
+import pytest
+
+from aicalib_tf.detect.boards.aprilgrid import detect_aprilgrid, make_detector
+from aicalib_tf.geometry.aprilgrid import PRINT_ROTATION, layout_image, parse_board, render_view
+
+BOARD = parse_board("aprilgrid:6x6,tag=88mm,spacing=0.3")
+K = np.array([[900.0, 0, 639.5], [0, 900.0, 479.5], [0, 0, 1]])
+SIZE = (1280, 960)
+Q = 8
+MARGIN = BOARD.fraction[0] * Q + 8
+
+
+@pytest.fixture(scope="module")
+def layout():
+    return layout_image(BOARD, Q, MARGIN)
+
+
+def pose(rvec, centre_px, z):
+    """(rvec, tvec) in lattice units: the grid's centre seen at ``centre_px`` from distance z."""
+    R, _ = cv2.Rodrigues(np.asarray(rvec, np.float64))
+    L = (np.array(BOARD.pattern_size) - 1) / 2.0
+    return np.asarray(rvec, np.float64), z * np.linalg.solve(K, [*centre_px, 1.0]) - R @ np.array([L[0], L[1], 0.0])
+
+
+def render(layout, rvec, tvec, seed=0, noise=2 / 255):
+    R, _ = cv2.Rodrigues(rvec)
+    img = render_view(layout, Q, MARGIN, K @ np.column_stack([R[:, 0], R[:, 1], tvec]), SIZE, 4)
+    img = cv2.GaussianBlur(img, (0, 0), 0.7) + np.random.default_rng(seed).normal(0, noise, img.shape).astype(np.float32)
+    return np.clip(np.rint(img * 255), 0, 255).astype(np.uint8)
+
+
+def truth(ids, rvec, tvec):
+    return cv2.projectPoints(BOARD.object_points(ids) / BOARD.square_size, rvec, tvec, K, None)[0].reshape(-1, 2)
+
+
+def test_full_view_every_corner_with_its_id_and_better_than_opencv(layout):
+    rvec, tvec = pose([0.35, -0.25, 0.1], (640, 480), 110)
+    img = render(layout, rvec, tvec)
+    ours = detect_aprilgrid(img, BOARD)
+    assert len(ours.ids) == 144 and ours.rotation == PRINT_ROTATION and ours.why == ""
+    assert sorted(map(tuple, ours.ids.tolist())) == sorted(map(tuple, BOARD.corner_ids().tolist()))
+    err = np.linalg.norm(ours.corners - truth(ours.ids, rvec, tvec), axis=1)
+    assert np.median(err) < 0.03 and err.max() < 0.15
+    cv = detect_aprilgrid(img, BOARD, refine="opencv")
+    cv_err = np.linalg.norm(cv.corners - truth(cv.ids, rvec, tvec), axis=1)
+    assert np.median(err) <= 0.5 * np.median(cv_err)
+
+
+def test_partial_view_keeps_the_true_ids(layout):
+    rvec, tvec = pose([-0.3, 0.4, -0.2], (1230, 420), 100)  # the grid's centre near the right edge
+    img = render(layout, rvec, tvec, seed=1)
+    det = detect_aprilgrid(img, BOARD)
+    assert 0 < len(det.ids) < 144 and 0 < len(det.tags) < 36
+    err = np.linalg.norm(det.corners - truth(det.ids, rvec, tvec), axis=1)
+    assert err.max() < 0.15  # a wrong id would put its truth a lattice step away
+    whole = [k for k in BOARD.tag_ids() if (truth(BOARD.tag_corner_ids(k), rvec, tvec)[:, 0] < SIZE[0] - 4).all()]
+    assert 0 < len(whole) < 36 and len(det.ids) >= 0.95 * 4 * len(whole)  # the corners of the tags seen whole
+
+
+def test_a_grid_of_other_ids_is_not_found(layout):
+    rvec, tvec = pose([0.2, 0.1, 0.0], (640, 480), 120)
+    img = render(layout, rvec, tvec)
+    other = parse_board("aprilgrid:6x6,tag=88mm,spacing=0.3,first=100")
+    det = detect_aprilgrid(img, other)
+    assert len(det.ids) == 0 and "first=" in det.why
+    d = make_detector(other)
+    assert d(img) is None and "family" in d.why
+
+
+def test_calibration_from_eight_rendered_views_recovers_fx(layout):
+    from aicalib_tf.calib.fit import View, calibrate_camera
+
+    rng = np.random.default_rng(3)
+    detect = make_detector(BOARD)
+    views = []
+    for v in range(8):
+        rvec, tvec = pose(np.r_[rng.uniform(-0.6, 0.6, 2), rng.uniform(-0.4, 0.4)],
+                          (rng.uniform(450, 830), rng.uniform(330, 630)) if v % 4 else (1150, 480), rng.uniform(100, 140))
+        corners, ids = detect(render(layout, rvec, tvec, seed=v))
+        views.append(View(f"v{v}", corners, ids))
+    cal = calibrate_camera(views, BOARD.pattern_size, BOARD.square_size, SIZE, model="plumb_bob", square_unit="mm")
+    assert abs(cal.K[0, 0] / 900.0 - 1) < 0.01 and abs(cal.K[1, 1] / 900.0 - 1) < 0.01
+    assert cal.rms < 0.05
+
+
+def test_the_printed_page_reads_back_with_every_corner():
+    from aicalib_tf.board import page_image
+
+    board = parse_board("aprilgrid:6x6,tag=20mm,spacing=0.3")
+    page = cv2.GaussianBlur(page_image(board, "A4", 150), (0, 0), 0.8)
+    det = detect_aprilgrid(page, board)
+    assert len(det.ids) == 144 and det.rotation == PRINT_ROTATION
+    # the corners are evenly spaced lattice points: an affine map from ids fits them to a pixel's fraction
+    A = np.c_[det.ids, np.ones(len(det.ids))]
+    fit, *_ = np.linalg.lstsq(A, det.corners, rcond=None)
+    assert np.abs(A @ fit - det.corners).max() < 0.3
+    px_per_mm = 150 / 25.4
+    assert fit[0, 0] == pytest.approx(round(board.square_size * px_per_mm), rel=1e-3)  # the bitmap: whole px a unit
+
+
+def test_tags_printed_another_way_round_keep_their_ids(monkeypatch):
+    import aicalib_tf.geometry.aprilgrid as geometry
+
+    monkeypatch.setattr(geometry, "PRINT_ROTATION", 1)  # every tag's code turned a quarter
+    turned = layout_image(BOARD, Q, MARGIN)
+    monkeypatch.undo()
+    rvec, tvec = pose([0.2, -0.3, 0.4], (640, 480), 120)
+    det = detect_aprilgrid(render(turned, rvec, tvec), BOARD)
+    assert det.rotation == 1 and len(det.ids) == 144
+    assert np.linalg.norm(det.corners - truth(det.ids, rvec, tvec), axis=1).max() < 0.15

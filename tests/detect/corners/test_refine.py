@@ -1,0 +1,137 @@
+import numpy as np
+
+from aicalib_tf.detect.corners.refine import refine_saddle, refine_subpix
+from aicalib_tf.detect.corners.saddle import saddle_fit_matrix
+from data_gen import make_sample
+
+
+def _starts(corners, rng, radius=0.7):
+    ang = rng.uniform(0, 2 * np.pi, len(corners))
+    rad = radius * np.sqrt(rng.uniform(0, 1, len(corners)))
+    return corners + np.stack([np.cos(ang), np.sin(ang)], 1) * rad[:, None]
+
+
+def test_fit_operator_recovers_a_quadratic_exactly():
+    offsets, p = saddle_fit_matrix(3)
+    coef = np.array([0.3, -1.2, -0.5, 0.7, 0.1, 2.0])
+    x, y = offsets[:, 0].astype(np.float64), offsets[:, 1].astype(np.float64)
+    vals = coef[0] * x * x + coef[1] * x * y + coef[2] * y * y + coef[3] * x + coef[4] * y + coef[5]
+    np.testing.assert_allclose(p @ vals, coef, atol=1e-10)
+
+
+def test_saddle_fit_beats_cornersubpix_on_exact_renders():
+    rng = np.random.default_rng(0)
+    e_saddle, e_subpix = [], []
+    for i in range(4):
+        s = make_sample("clean", 2, i, pattern=(9, 6))
+        gt = s.corners[s.visible]
+        start = _starts(gt, rng)
+        out, ok = refine_saddle(s.image, start)
+        assert ok.all()
+        e_saddle.append(np.linalg.norm(out - gt, axis=1))
+        e_subpix.append(np.linalg.norm(refine_subpix(s.image, start)[0] - gt, axis=1))
+    med_saddle, med_subpix = np.median(np.concatenate(e_saddle)), np.median(np.concatenate(e_subpix))
+    assert med_saddle < 0.015  # measured ~0.007 px
+    assert med_saddle < 0.5 * med_subpix
+
+
+def test_no_saddle_in_flat_or_edge_regions_leaves_points_unrefined():
+    img = np.zeros((40, 40), np.float32)
+    img[:, 20:] = 1.0  # a straight edge: no saddle anywhere
+    pts = np.array([[20.0, 20.0], [8.0, 8.0]])
+    out, ok = refine_saddle(img, pts)
+    assert not ok.any()
+    np.testing.assert_array_equal(out, pts.astype(np.float32))
+    out, ok = refine_saddle(img, np.zeros((0, 2)))
+    assert out.shape == (0, 2) and ok.shape == (0,)
+
+
+def test_a_hard_shadow_edge_does_not_pull_the_windowed_refinement():
+    # evaluate's shading image #1 (seed 21): a shadow edge crosses the windows of corners 10, 19 and
+    # 45, which the saddle fit alone put 1.6-2.7 px off (a wrong board); all must stay within 0.5 px
+    from aicalib_tf.bench.conditions import PATTERN, named_conditions
+    from aicalib_tf.detect.corners.junctions import nearest_spacing
+    from aicalib_tf.detect.corners.refine import Smoothed, refine_windowed, window_radius
+    from data_gen import make_sample
+
+    cond = {c.name: c for c in named_conditions()}["shading"]
+    s = make_sample(cond.preset, cond.seed, 1, size=cond.size, pattern=PATTERN)
+    gray = s.image.astype(np.float32) / 255.0
+    gt = s.corners[s.visible]
+    start = _starts(gt, np.random.default_rng(3), radius=0.5)
+    spacing = nearest_spacing(gt)
+    smoothed = Smoothed(gray)
+    saddle_err = np.zeros(len(gt))
+    for r in np.unique(window_radius(spacing)):
+        sel = window_radius(spacing) == r
+        q, _ = refine_saddle(smoothed[int(r)], start[sel], sigma=0.0, radius=int(r))
+        saddle_err[sel] = np.linalg.norm(q - gt[sel], axis=1)
+    assert saddle_err.max() > 1.5  # the case is still the hard one
+    out, ok = refine_windowed(smoothed, start, spacing)
+    err = np.linalg.norm(out - gt, axis=1)
+    assert ok.mean() > 0.95
+    assert err[ok].max() < 0.5
+    # a gate that lets every asymmetric window through changes nothing; one that lets none through
+    # leaves those points at their saddle (the pulled ones), each gate call seeing saddles of its points
+    asked = []
+
+    def gate(value):
+        def g(idx, saddles):
+            asked.append((idx.copy(), saddles.copy()))
+            return np.full(len(idx), value)
+        return g
+
+    out_all, ok_all = refine_windowed(smoothed, start, spacing, shadow_gate=gate(True))
+    np.testing.assert_array_equal(out_all, out)
+    np.testing.assert_array_equal(ok_all, ok)
+    asked.clear()
+    out_none, _ = refine_windowed(smoothed, start, spacing, shadow_gate=gate(False))
+    idx = np.concatenate([a[0] for a in asked])
+    assert len(idx) >= 3 and np.linalg.norm(out_none - gt, axis=1).max() > 1.5
+    for i, q in asked:
+        np.testing.assert_array_equal(out_none[i], q)
+    rest = np.setdiff1d(np.arange(len(gt)), idx)
+    np.testing.assert_array_equal(out_none[rest], out[rest])
+
+
+
+def _shading_image(index):
+    from aicalib_tf.bench.conditions import PATTERN, named_conditions
+
+    cond = {c.name: c for c in named_conditions()}["shading"]
+    s = make_sample(cond.preset, cond.seed, index, size=cond.size, pattern=PATTERN)
+    return s, s.image.astype(np.float32) / 255.0
+
+
+def test_shadowed_corners_that_the_fits_missed_are_refined():
+    # evaluate shading: the CNN's points (hard-coded) of corners that a shadow edge crosses. #86 (5, 4):
+    # the shadow fit settled 2.07 px off (a wrong board); #29 (7, 0): it swung between two points
+    # 0.16 px apart and never settled
+    from aicalib_tf.detect.corners.refine import Smoothed, refine_windowed
+
+    for index, corner, start, spacing in [(86, 4 * 9 + 5, (445.02017, 218.79204), 19.6),
+                                          (29, 7, (505.5934, 235.4693), 18.6)]:
+        s, gray = _shading_image(index)
+        out, ok = refine_windowed(Smoothed(gray), np.array([start]), np.array([spacing]))
+        assert ok[0], index
+        assert np.linalg.norm(out[0] - s.corners[corner]) < 0.25, index
+
+
+def test_one_window_smoothing_serves_every_radius_and_still_finds_the_corners():
+    # the quick passes smooth once (window_sigma) instead of once per window radius; the corners of
+    # a clean render are found as well, to a few hundredths of a pixel
+    from aicalib_tf.detect.corners.refine import Smoothed, gaussian, refine_windowed
+
+    s = make_sample("clean", 3, 0, pattern=(9, 6))
+    gray = s.image.astype(np.float32) / 255.0
+    one = Smoothed(gray, window_sigma=1.0)
+    assert one[2] is one[5] and np.array_equal(one[5], gaussian(gray, 1.0))
+    per_radius = Smoothed(gray)
+    assert not np.array_equal(per_radius[2], per_radius[5])
+    spacing = np.full(len(s.corners), 30.0)
+    start = s.corners + 0.7
+    a, ok_a = refine_windowed(one, start, spacing)
+    b, ok_b = refine_windowed(per_radius, start, spacing)
+    assert ok_a.all() and ok_b.all()
+    assert np.median(np.linalg.norm(a - s.corners, axis=1)) < 0.05
+    assert np.abs(a - b).max() < 0.1

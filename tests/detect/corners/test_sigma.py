@@ -1,0 +1,113 @@
+"""Each corner's σ (aicalib_tf.detect.corners.sigma): its measurements, the model, and the detector's sigmas."""
+
+import numpy as np
+import pytest
+
+from aicalib_tf.detect.corners import sigma as cs
+from aicalib_tf.detect.corners.sigma_kernels import design_columns, lattice_bend, window_measures
+from aicalib_tf.detect.pipeline import Detection, detect_corners
+from aicalib_tf.detect.warm import synthetic_board
+
+PATTERN = (9, 6)
+
+
+def _noisy(img: np.ndarray, sigma: float, seed: int = 0, contrast: float = 1.0) -> np.ndarray:
+    """img (uint8) with its contrast scaled about mid-grey and Gaussian noise of ``sigma`` grey levels."""
+    rng = np.random.default_rng(seed)
+    out = 128.0 + contrast * (img.astype(np.float64) - 128.0) + rng.normal(0.0, sigma, img.shape)
+    return np.clip(np.round(out), 0, 255).astype(np.uint8)
+
+
+@pytest.fixture(scope="module")
+def board():
+    return synthetic_board(PATTERN, square=30, angle=7.0)
+
+
+def test_a_detected_board_carries_one_positive_sigma_per_corner(board):
+    det = detect_corners(board, PATTERN)
+    assert det.complete
+    assert det.sigmas.dtype == np.float32 and det.sigmas.shape == (len(det.corners),)
+    assert np.all(np.isfinite(det.sigmas)) and np.all(det.sigmas > 0)
+
+
+def test_sigma_grows_with_noise_and_with_lower_contrast(board):
+    clean = detect_corners(_noisy(board, 1.0), PATTERN).sigmas
+    noisy = detect_corners(_noisy(board, 30.0), PATTERN).sigmas
+    faint = detect_corners(_noisy(board, 1.0, contrast=0.2), PATTERN).sigmas
+    assert np.median(noisy) > 4 * np.median(clean)
+    assert np.median(faint) > 2 * np.median(clean)
+
+
+def test_a_board_found_nowhere_keeps_no_sigmas():
+    det = detect_corners(np.full((120, 160), 128, np.uint8), PATTERN)
+    assert not det.found and det.sigmas is None
+    empty = Detection(np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32), np.zeros(0, np.float32), PATTERN, False, (4, 4))
+    assert cs.with_sigmas(empty, lambda *box: np.zeros((4, 4), np.float32)) is empty
+
+
+def _junction(size: int = 41, centre=(20.0, 20.0), angle: float = 0.3) -> np.ndarray:
+    """An X-junction of two lines through ``centre`` (px), black/white 0.2/0.8, sharp."""
+    y, x = np.mgrid[0:size, 0:size].astype(np.float64)
+    u, v = x - centre[0], y - centre[1]
+    a = np.cos(angle) * u + np.sin(angle) * v
+    b = -np.sin(angle) * u + np.cos(angle) * v
+    return np.where(a * b > 0, 0.8, 0.2).astype(np.float32)
+
+
+def test_window_measures_of_a_point_symmetric_junction_have_no_odd_part():
+    fits, weights = cs._operators()
+    img = _junction()
+    got = window_measures(img, np.array([[20.0, 20.0]]), np.array([3]), fits, weights)[0]
+    odd, odd_median, even, residual = got
+    assert odd < 1e-6 and odd_median < 1e-6
+    assert 0.2 < even < 0.35 and residual > 0
+    moved = window_measures(img, np.array([[21.0, 20.0]]), np.array([3]), fits, weights)[0]
+    assert moved[0] > 0.05  # a px off the centre, the window is far from point-symmetric
+
+
+def test_lattice_bend_is_zero_on_a_straight_lattice_and_the_second_difference_otherwise():
+    ids = np.array([(c, r) for r in range(3) for c in range(4)], np.int64)
+    pts = ids.astype(np.float64) * 10.0
+    bend = lattice_bend(pts, ids)
+    assert np.all(bend[[5, 6]] == 0)  # the two inner corners
+    assert np.all(bend[[0, 3, 8, 11]] == -1)  # the four outer corners have no row or column through them
+    pts[5] += [0.0, 0.3]  # (1, 1) moved 0.3 px along y: both second differences through it are 2 · 0.3
+    bend = lattice_bend(pts, ids)
+    assert bend[5] == pytest.approx(0.6) and bend[6] == pytest.approx(0.15)  # (2, 1): its row 0.3, its column 0
+
+
+def test_design_columns_take_the_boards_medians_and_the_usual_bend_where_a_corner_has_none():
+    measures = np.array([[0.02, 0.01, 0.2, 0.05], [0.02, 0.04, 0.2, 0.05], [0.08, 0.01, 0.1, 0.05]])
+    x = design_columns(measures, np.array([0.1, -1.0, 0.3]), np.full(3, 10.0), np.array([1.0, 0.0, 0.5]), 0.05, 1e-6)
+    noise = np.log(0.01)  # the median odd_median
+    np.testing.assert_allclose(x[:, 0], noise - np.log([0.2, 0.2, 0.1]))
+    np.testing.assert_allclose(x[:, 1], np.log([0.01, 0.04, 0.01]) - noise)
+    np.testing.assert_allclose(x[:, 3], np.log(0.02) - noise)
+    np.testing.assert_allclose(x[:, 4], np.log([0.1, 0.2, 0.3]) - np.log(10.0))  # (0.1 + 0.3) / 2 for the second
+    np.testing.assert_allclose(x[:, 5], np.log([1.0, 0.05, 0.5]))
+    np.testing.assert_allclose(x[:, 6], x[:, 0] ** 2)
+
+
+def test_the_model_clips_its_columns_to_the_fitted_range():
+    x = np.zeros((2, len(cs.COLUMNS)))
+    x[1, 0] = 50.0  # far beyond the range fitted
+    top = x.copy()
+    top[1, 0] = cs.HIGH[0]
+    np.testing.assert_array_equal(cs.sigma_from_design(x)[1], cs.sigma_from_design(top)[1])
+    assert cs.sigma_from_design(x).dtype == np.float32
+
+
+def test_the_opencv_detectors_give_no_sigmas_and_the_cnn_detector_does(board):
+    from aicalib_tf.calib.workflow import make_detector
+
+    cnn, cv = make_detector("cnn", PATTERN), make_detector("opencv", PATTERN)
+    corners, _ = cnn(board)
+    assert cnn.sigmas is not None and len(cnn.sigmas) == len(corners)
+    assert cv(board) is not None and cv.sigmas is None
+
+
+def test_a_uint8_frame_and_its_float_grey_give_the_same_columns(board):
+    det = detect_corners(board, PATTERN)
+    grey = board.astype(np.float32) / 255.0
+    np.testing.assert_allclose(cs.design(board, det.corners, det.ids, det.scores),
+                               cs.design(grey, det.corners, det.ids, det.scores), atol=1e-4)
