@@ -2,12 +2,14 @@
 
 Usage:
   python -m data_gen --out DIR --count N --preset NAME --seed S [--size WxH] [--pattern CxR] [--workers K]
-      [--board charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100]
+      [--board charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100 | aprilgrid:6x6,tag=88mm,spacing=0.3]
   python -m data_gen --format tfrecord --shards N [--shard i/N] --out DIR --count N --preset NAME ...
 
 Writes DIR/index.csv, DIR/images/*.png, DIR/labels/*.json and DIR/meta.json (format in
 DESIGN.md). The same arguments give byte-identical files whatever --workers is. --board renders a
-ChArUco board instead of the preset's chessboards (labels then hold the markers' ids and corners).
+ChArUco board instead of the preset's chessboards (labels then hold the markers' ids and corners), or
+a Kalibr AprilGrid (its description or target YAML: labels hold every tag corner, its lattice ``ids``,
+and the ``tags``' ids and corners).
 
 With --format tfrecord it writes DIR/data-IIIII-of-NNNNN.tfrecord files (tf.train.Example: the
 raw pixels, grey statistics, visible corners and label) and DIR/meta.json with the schema, for
@@ -26,6 +28,8 @@ from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
 from .dataset import MAX_COUNT, DatasetConfig, check_count, check_output_dir, check_pixels, write_dataset
 from .presets import PRESETS
 from .shards import ShardConfig, check_shards, with_default_shards, write_shards
+from .targets import HELP as BOARD_HELP
+from .targets import parse_marker_board
 
 __all__ = ["main", "parse_args"]
 
@@ -58,7 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--size", help="WIDTHxHEIGHT, at most 12,000,000 pixels (default: the preset's sizes)")
     ap.add_argument("--pattern", help="COLSxROWS inner corners (default: the preset's)")
     ap.add_argument("--workers", type=int, default=1, help="processes (output does not depend on it)")
-    ap.add_argument("--board", help="a ChArUco board instead of chessboards: charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100")
+    ap.add_argument("--board", help=BOARD_HELP)
     ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     ap.add_argument("--format", choices=("folder", "tfrecord"), default="folder", help="(default: %(default)s)")
     ap.add_argument("--shards", type=int, help="tfrecord: number of files (default: files of about 200 MB)")
@@ -82,9 +86,7 @@ def parse_args(argv=None) -> tuple[DatasetConfig | ShardConfig, bool]:
     size = _parse_size(a.size) if a.size else None
     pattern = check_pattern(parse_pattern(a.pattern)) if a.pattern else None
     if a.board:
-        from aicalib_tf.geometry.charuco import parse_board
-
-        parse_board(a.board)  # a bad description is a bad argument
+        parse_marker_board(a.board)  # a bad description is a bad argument
         if a.format == "tfrecord":
             raise ValueError("--board renders image folders only; --format tfrecord writes chessboard presets")
     cfg = DatasetConfig(out=a.out, count=a.count, preset=a.preset, seed=a.seed, size=size, pattern=pattern, workers=a.workers,

@@ -51,7 +51,7 @@ class DatasetConfig:
     size: tuple[int, int] | None = None
     pattern: tuple[int, int] | None = None
     workers: int = 1
-    board: str | None = None  # a ChArUco description replacing the preset's chessboards
+    board: str | None = None  # a ChArUco board or an AprilGrid (data_gen.targets) replacing the preset's chessboards
 
     def recipe(self):
         """The preset, with the board replaced when ``board`` is given."""

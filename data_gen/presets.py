@@ -41,8 +41,9 @@ class Preset:
     with full FOV from ``fisheye_fov_deg``, :func:`data_gen.camera.sample_unified_fisheye`), or a
     tuple of these names, one drawn per camera. ``fisheye_circular_from_deg``: fisheyes of at least
     this FOV are circular (the whole image circle inside the frame), narrower ones full frame.
-    board : None (chessboards, sized by ``pattern`` or the ranges) or a ChArUco description,
-    ``charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100`` (:mod:`aicalib_tf.geometry.charuco`).
+    board : None (chessboards, sized by ``pattern`` or the ranges), a ChArUco description,
+    ``charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100`` (:mod:`aicalib_tf.geometry.charuco`), or an
+    AprilGrid, ``aprilgrid:6x6,tag=88mm,spacing=0.3`` or a Kalibr target YAML (:mod:`data_gen.targets`).
     flex : (w_x, w_y) every chessboard's parabolic sag in squares (:class:`data_gen.board.Board`'s ``flex``,
     recorded in the label's ``board``); (0, 0): flat boards.
     """
@@ -77,9 +78,9 @@ class Preset:
         if not lenses or any(ln not in LENSES for ln in lenses):
             raise ValueError(f"preset {self.name!r}: lens must be one of {LENSES} or a tuple of them, got {self.lens!r}")
         if self.board is not None:
-            from aicalib_tf.geometry.charuco import parse_board
+            from .targets import parse_marker_board
 
-            parse_board(self.board)  # a bad description fails here, before anything is drawn
+            parse_marker_board(self.board)  # a bad description fails here, before anything is drawn
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -19,12 +19,14 @@ from aicalib_tf.geometry.camera import Camera
 from .background import make_background
 from .board import Board, sample_board
 from .camera import UNIFIED_MODELS, sample_camera, sample_fisheye, sample_unified_fisheye
-from .charuco import CharucoTarget, marker_truth, sample_charuco
+from .aprilgrid import AprilGridTarget
+from .charuco import CharucoTarget
 from .degrade import CIRCLE_STEPS, apply_degradations
 from .occlude import draw_occluders, occluded, sample_occluders
 from .pose import corner_visibility, sample_pose
 from .presets import INT_PARAMS, Preset, Rule, get_preset
 from .render import lens_coverage, render_board
+from .targets import label_extras, parse_marker_board, sample_target
 
 __all__ = ["Sample", "Scene", "draw_scene", "make_sample", "make_sequence", "draw_steps", "scene_for"]
 
@@ -88,10 +90,8 @@ def scene_for(preset: Preset, seed: int, camera_id: int, size=None, pattern=None
         cam = sample_unified_fisheye(rng, size, lens, fov_deg=preset.fisheye_fov_deg, circular_from_deg=circular)
     else:
         cam = sample_camera(rng, size, hfov_deg=preset.hfov_deg, distortion=preset.distortion)
-    if preset.board is not None:  # a ChArUco board: its squares are fixed, only the paper is drawn
-        from aicalib_tf.geometry.charuco import parse_board
-
-        return cam, sample_charuco(rng, parse_board(preset.board))
+    if preset.board is not None:  # a ChArUco board or an AprilGrid: its print is fixed, only the paper is drawn
+        return cam, sample_target(rng, parse_marker_board(preset.board))
     board = sample_board(
         rng,
         pattern_size=pattern or preset.pattern,
@@ -258,24 +258,26 @@ def make_sample(
             framing=sc.framing,
             occluders=[poly.tolist() for poly in sc.occluders],
         )
-    if sc.has_board and isinstance(board, CharucoTarget):
-        label["markers"] = _markers_label(sc)
+    if sc.has_board and isinstance(board, (CharucoTarget, AprilGridTarget)):
+        label.update(_markers_label(sc))
     label["degradations"] = sc.steps
     return Sample(image=sc.render(), label=label)
 
 
 def _markers_label(sc: Scene) -> dict:
-    """A ChArUco board's markers: ids, corners (M, 4, 2) px, centres and visible (all four corners
-    in frame, imaged and not hidden by an occluder)."""
+    """A ChArUco board's ``markers`` or an AprilGrid's ``tags`` (and its corners' lattice ``ids``):
+    ids, corners (M, 4, 2) px, centres and visible (all four corners in frame, imaged and not
+    hidden by an occluder)."""
     from aicalib_tf.geometry.pose import in_frame
 
-    truth = marker_truth(sc.board, sc.rvec, sc.tvec, sc.camera)
+    extras = label_extras(sc.board, sc.rvec, sc.tvec, sc.camera)
+    truth = extras["markers" if "markers" in extras else "tags"]
     px = np.asarray(truth["corners"], dtype=np.float64).reshape(-1, 2)
     seen = in_frame(px, sc.camera.image_size, border=0.5) & np.isfinite(px).all(axis=1)
     if sc.occluders:
         seen &= ~occluded(px, sc.occluders)
     truth["visible"] = seen.reshape(-1, 4).all(axis=1).tolist()
-    return truth
+    return extras
 
 
 def make_sequence(

@@ -3,7 +3,7 @@
     python -m data_gen.video --out DIR [--seconds 60] [--fps 30] [--size 1280x720]
         [--lens mild|strong|fisheye150] [--pattern 9x6] [--square 25] [--seed 0]
         [--shutter 0.0167] [--rolling-shutter 0] [--noise 2] [--format avi|mp4] [--y4m] [--workers N] [--pace 1]
-        [--rig-baseline MM] [--board charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100]
+        [--rig-baseline MM] [--board charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100 | aprilgrid:6x6,tag=88mm,spacing=0.3]
 
 A board moves along a smooth hand-held path (:mod:`data_gen.path`: rests at poses spread over the
 image with varied tilts, minimum-jerk moves between them, some poses cut by the frame, some out
@@ -34,7 +34,9 @@ same board path at the same instants. It writes video_cam0/video_cam1 and labels
 
 ``--board charuco:...`` films a ChArUco board (:mod:`data_gen.charuco`) instead of the chessboard:
 its inner corners replace --pattern and --square (corner ids are OpenCV's ChArUco ids), and each
-label also holds ``board`` (the description).
+label also holds ``board`` (the description). ``--board aprilgrid:...`` (or a Kalibr target YAML)
+films a Kalibr AprilGrid (:mod:`data_gen.aprilgrid`): the corners are its tag corners, and each label
+also holds their lattice ``ids``.
 """
 
 from __future__ import annotations
@@ -49,13 +51,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from aicalib_tf.geometry.charuco import parse_board
 from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
 from aicalib_tf.geometry.pose import in_frame
 
 from .background import make_background
 from .board import Board
-from .charuco import CharucoTarget
 from .camera import sample_camera, sample_fisheye
 from .dataset import check_pixels
 from .degrade import gaussian_blur, gaussian_noise
@@ -64,6 +64,8 @@ from .pose import corner_visibility
 from .render import lens_coverage, render_board
 from .rig import rig_placement
 from .sample import OUTSIDE_CIRCLE
+from .targets import HELP as BOARD_HELP
+from .targets import marker_target, parse_marker_board
 
 __all__ = ["VideoConfig", "VideoScene", "make_scene", "rig_pose", "render_frame", "frame_truth", "write_video", "write_y4m_header",
            "y4m_frame", "LENSES", "main"]
@@ -94,13 +96,13 @@ class VideoConfig:
     workers: int = 1
     pace: float = 1.0  # the hand's speed: rests and moves last 1/pace as long (short test videos: 3)
     rig_baseline: float = 0.0  # board units between two cameras (0: one camera)
-    board: str | None = None  # a ChArUco description (charuco:...): its corners replace pattern and square
+    board: str | None = None  # a marker board (data_gen.targets): its corners replace pattern and square
 
     def __post_init__(self):
         if self.board:  # a bad description is a ValueError naming the field
-            b = parse_board(self.board)
+            b = marker_target(parse_marker_board(self.board))
             object.__setattr__(self, "pattern", b.pattern_size)
-            object.__setattr__(self, "square", float(b.square))
+            object.__setattr__(self, "square", float(b.square_size))
         if self.lens not in LENSES:
             raise ValueError(f"--lens must be one of {', '.join(LENSES)}, got {self.lens!r}")
         if self.format not in ("avi", "mp4"):
@@ -152,7 +154,7 @@ def make_scene(cfg: VideoConfig, camera: int = 0) -> VideoScene:
     second camera of the stereo pair (``cfg.rig_baseline``), its own lens and background, the same path."""
     rng = np.random.default_rng([cfg.seed, 11])
     cam = _camera(cfg.lens, cfg.size, rng)
-    board = CharucoTarget(parse_board(cfg.board)) if cfg.board else Board(check_pattern(cfg.pattern), float(cfg.square))
+    board = marker_target(parse_marker_board(cfg.board)) if cfg.board else Board(check_pattern(cfg.pattern), float(cfg.square))
     bg = _background(rng, cam)
     path = hand_path(rng, cam, board, cfg.seconds + 1.0 / cfg.fps, dwell_s=(0.25 / cfg.pace, 0.6 / cfg.pace),
                      move_s=(0.8 / cfg.pace, 1.8 / cfg.pace))
@@ -242,7 +244,8 @@ def frame_truth(scene: VideoScene, index: int) -> dict:
             "corners": [[float(x), float(y)] if np.isfinite(x) and np.isfinite(y) else None for x, y in corners],
             "visible": visible.tolist(), "has_board": bool(visible.any()), "motion_px": motion,
             "subframes": int(np.clip(math.ceil(motion / 0.7), 1, _MAX_SUBFRAMES)),
-            **({"board": cfg.board} if cfg.board else {})}
+            **({"board": cfg.board} if cfg.board else {}),
+            **({"ids": scene.board.corner_ids().tolist()} if hasattr(scene.board, "corner_ids") else {})}
 
 
 def render_frame(scene: VideoScene, index: int) -> tuple[np.ndarray, dict]:
@@ -383,7 +386,7 @@ def build_parser():
     ap.add_argument("--pace", type=float, default=1.0, help="hand speed factor (default: %(default)s)")
     ap.add_argument("--rig-baseline", type=float, default=0.0,
                     help="render a stereo pair this many board units apart (default: one camera)")
-    ap.add_argument("--board", help="film a ChArUco board instead: charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100")
+    ap.add_argument("--board", help=BOARD_HELP.replace("instead of chessboards", "to film instead"))
     ap.add_argument("--quiet", action="store_true")
     return ap
 
