@@ -39,7 +39,8 @@ prefetched; ``--deterministic`` fixes the element order, see :mod:`aicalib_tf.cn
 instead of rendering a pool in memory (the default, for a small run). ``--strategy mirrored``
 trains on every local GPU, ``--strategy multiworker`` on a cluster described by TF_CONFIG
 (chief-only run folder, restart from a BackupAndRestore backup, see
-:mod:`aicalib_tf.cnn.distribute`). ``--batch-size`` and ``--learning-rate`` are per replica: the
+:mod:`aicalib_tf.cnn.distribute`; the training runs in a child of this command, which owns
+SIGTERM: it ends the run at once with one line and exit 143, see :mod:`aicalib_tf.cnn.cluster`). ``--batch-size`` and ``--learning-rate`` are per replica: the
 global batch and rate scale with the replicas and are recorded in config.json and metrics.json.
 
 Determinism: the same seed gives the same pool, crops and data order. On CPU the weights are
@@ -59,6 +60,7 @@ import sys
 from pathlib import Path
 
 from aicalib_tf.cli import debug_flag, parser, run_main
+from aicalib_tf.cnn.cluster import CHILD_ENV, run_supervised
 from aicalib_tf.cnn.train import TrainConfig, train
 
 
@@ -110,6 +112,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run(argv: list[str] | None) -> int:
     args = build_parser().parse_args(argv)
+    if args.strategy == "multiworker" and CHILD_ENV not in os.environ:  # a supervisor owns SIGTERM
+        return run_supervised(list(sys.argv[1:] if argv is None else argv))
     d = TrainConfig(out="")
     cfg = TrainConfig(
         out=args.out, arch=args.arch, epochs=args.epochs if args.epochs is not None else d.epochs, steps=args.steps, batch_size=args.batch_size,

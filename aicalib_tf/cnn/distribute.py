@@ -33,6 +33,8 @@ from pathlib import Path
 import keras
 import tensorflow as tf
 
+from aicalib_tf.cnn.cluster import check_tf_config, peers, report_connected
+
 __all__ = ["STRATEGIES", "make_strategy", "is_chief", "worker_dir", "WorkerBackup", "backup_epoch", "build_for_fit",
            "discard", "BACKUP_DIR"]
 
@@ -40,45 +42,25 @@ STRATEGIES = ("default", "mirrored", "multiworker")
 BACKUP_DIR = "backup"
 
 
-def _check_tf_config() -> None:
-    text = os.environ.get("TF_CONFIG")
-    if not text:
-        raise ValueError("--strategy multiworker needs TF_CONFIG set to the cluster and this worker's task, e.g. "
-                         '{"cluster": {"worker": ["host0:12345", "host1:12345"]}, "task": {"type": "worker", "index": 0}}')
-    try:
-        cfg = json.loads(text)
-        workers = cfg["cluster"]["worker"]
-        task = cfg["task"]
-        ok = isinstance(workers, list) and task["type"] in cfg["cluster"] and 0 <= int(task["index"]) < len(cfg["cluster"][task["type"]])
-    except (ValueError, KeyError, TypeError):
-        ok = False
-    if not ok:
-        raise ValueError(f"TF_CONFIG: not a cluster with this worker's task in it: {text[:200]}")
-
-
 def make_strategy(name: str, connect_timeout_s: float | None = None) -> tf.distribute.Strategy:
     """The strategy ``name`` (see the module docstring). Call it before any other TensorFlow work.
 
     ``multiworker`` waits for every worker of TF_CONFIG to answer, at most ``connect_timeout_s``
     seconds (None: as long as TensorFlow waits): then one line names the peers and the process ends.
-    Ctrl-C ends the wait at once; TensorFlow's own wait would ignore it.
+    Ctrl-C ends the wait at once; TensorFlow's own wait would ignore it. TensorFlow also swallows
+    SIGTERM from then on: ``train`` runs this in a child of a supervisor that owns SIGTERM
+    (:mod:`aicalib_tf.cnn.cluster`), which it tells here that the cluster is up.
     """
     if name not in STRATEGIES:
         raise ValueError(f"--strategy: unknown strategy {name!r}; choose from: {', '.join(STRATEGIES)}")
     if name == "mirrored":
         return tf.distribute.MirroredStrategy()
     if name == "multiworker":
-        _check_tf_config()
-        return _interruptible(tf.distribute.MultiWorkerMirroredStrategy, connect_timeout_s or float("inf"), _peers())
+        check_tf_config()
+        strategy = _interruptible(tf.distribute.MultiWorkerMirroredStrategy, connect_timeout_s or float("inf"), peers())
+        report_connected()  # to the supervisor that owns SIGTERM (aicalib_tf.cnn.cluster)
+        return strategy
     return tf.distribute.get_strategy()
-
-
-def _peers() -> str:
-    """The other tasks of TF_CONFIG's cluster, as ``worker 1 at host:port, ...``."""
-    cfg = json.loads(os.environ["TF_CONFIG"])
-    me = (cfg["task"]["type"], int(cfg["task"]["index"]))
-    return ", ".join(f"{kind} {i} at {addr}" for kind, addrs in cfg["cluster"].items() for i, addr in enumerate(addrs)
-                     if (kind, i) != me)
 
 
 # the watchdog's program: wait for the parent to close our stdin (it is connected) or for the deadline
