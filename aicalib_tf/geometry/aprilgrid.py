@@ -152,6 +152,13 @@ class AprilGrid:
         offs = np.roll(offs, int(rotation) % 4, axis=0)  # np.rot90 turns the code counter-clockwise on the page
         return np.stack([x0, y0], axis=-1)[..., None, :] + offs
 
+    def tag_of(self, ids) -> np.ndarray:
+        """(N,) int64 id of the tag whose corner each lattice id of ``ids`` (N, 2) is (every corner is one tag's)."""
+        a, b = self.fraction
+        cell = np.asarray(ids, np.int64).reshape(-1, 2) // (a + b)  # a corner's lattice offset in its tag is 0 or b < a + b
+        cols, rows = self.tags
+        return self.first_id + (rows - 1 - cell[:, 1]) * cols + cell[:, 0]
+
     def corner_ids(self) -> np.ndarray:
         """(4·cols·rows, 2) int64 lattice ids of every corner, row-major from the top-left."""
         cols, rows = self.tags

@@ -16,7 +16,9 @@ missing, and the verdict (the predicted projection uncertainty against ``--targe
 calibration" writes the files of the photo path into ``--out`` (camera.yaml, camera.json,
 camera_info.yaml, report.png, report.txt). ``--host 0.0.0.0`` serves other machines too.
 A ChArUco board (``--board``) names each corner by the markers beside it: a board cut by the
-frame is a view, and the page writes each corner's id beside it.
+frame is a view, and the page writes each corner's id beside it. A Kalibr AprilGrid (``--board
+aprilgrid:6x6,tag=88mm,spacing=0.3`` or a Kalibr target YAML) names the corners by their tags
+likewise: the page writes each tag's id at its centre.
 
 Exit codes: 0 after Ctrl-C; 2 bad input (a bad pattern, square or board, a port in use, a source that
 cannot be opened).

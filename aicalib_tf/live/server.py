@@ -69,7 +69,7 @@ class LiveConfig:
     model: str = "auto"
     target_px: float = 0.1
     max_views: int = 40
-    board: str | None = None  # a ChArUco description (pattern and square follow from it); None: a chessboard
+    board: str | None = None  # a ChArUco board or an AprilGrid (pattern and square follow from it); None: a chessboard
 
 
 def _finite(x):
@@ -78,8 +78,24 @@ def _finite(x):
     return x if np.isfinite(x) else None
 
 
-def update_json(update, session, *, ids: bool = False) -> dict:
-    """One update as the page reads it (strict JSON; no NaN); ``ids``: with a marker board's corner ids (row·cols + col)."""
+def corner_labels(cfg: LiveConfig):
+    """What the page writes beside a marker board's corners: ``(N, 2) ids -> [int] * N``, a ChArUco
+    corner's id (row·cols + col, OpenCV's) or the id of the AprilGrid tag the corner belongs to (the page
+    writes it once, at the tag's corners' centre); None for a chessboard (its ids are relative)."""
+    if not cfg.board:
+        return None
+    from aicalib_tf.geometry.aprilgrid import AprilGrid, is_aprilgrid, load_board
+
+    if is_aprilgrid(cfg.board):
+        grid = load_board(cfg.board)
+        return (lambda ids: [int(k) for k in grid.tag_of(ids)]) if isinstance(grid, AprilGrid) else None
+    cols = int(cfg.pattern[0])
+    return lambda ids: [int(c + r * cols) for c, r in np.asarray(ids, np.int64).reshape(-1, 2)]
+
+
+def update_json(update, session, *, labels=None) -> dict:
+    """One update as the page reads it (strict JSON; no NaN); ``labels``: :func:`corner_labels`' function,
+    which adds the marker board's ``ids``, one a corner."""
     est = update.estimate
     size = session.image_size or (1, 1)
     cover = coverage_counts(session.views, size, COVERAGE_CELLS) if session.views else np.zeros(COVERAGE_CELLS[::-1])
@@ -96,7 +112,7 @@ def update_json(update, session, *, ids: bool = False) -> dict:
         "coverage": cover.astype(int).tolist(),
         "frames": int(session.frames_seen), "examined_frames": int(session.examined), "views": len(session.views),
         "target_px": _finite(session.cfg.target_px),
-        **({"ids": [int(c + r * session.cfg.pattern[0]) for c, r in update.ids]} if ids and update.ids is not None else {}),
+        **({"ids": labels(update.ids)} if labels is not None and update.ids is not None else {}),
     }
 
 
@@ -128,6 +144,7 @@ class LiveState:
 
         self.cfg, self.clock = cfg, clock  # clock: () -> s, for the stall rule
         self.detector = detector
+        self.labels = corner_labels(cfg)
         self.session = GuidedCalibration(GuidedConfig(cfg.pattern, cfg.square, cfg.square_unit, cfg.model,
                                                       cfg.target_px, cfg.max_views, gate=False), detector)
         self.watch = StallWatch(cfg.target_px)
@@ -142,7 +159,7 @@ class LiveState:
             t = time.monotonic()
             update = self.session.add((self.index, t, gray))
             self.index += 1
-            self.last = update_json(update, self.session, ids=bool(self.cfg.board))
+            self.last = update_json(update, self.session, labels=self.labels)
             self.last["stall"] = self.watch.note(update, len(self.session.views), self.clock())
             self.last["bad_frames"] = self.bad_frames
             now = time.monotonic()
