@@ -191,7 +191,7 @@ def _main(args) -> int:
         raise ValueError(f"{', '.join(given)} cannot be used with --rig (give --model per camera instead; "
                          "every image of a camera must have one size)")
     if args.rig:
-        from aicalib_tf.calib.rig_workflow import RigConfig, parse_rig, run_rig
+        from aicalib_tf.calib.rig.workflow import RigConfig, parse_rig, run_rig
         from aicalib_tf.guided.rig_video import is_rig_video, run_rig_video
 
         cameras = tuple(parse_rig(args.rig))

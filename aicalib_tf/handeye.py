@@ -68,7 +68,7 @@ def parse_robot_sigma(text: str) -> tuple[float, float]:
 
 def build_parser():
     """The command line's parser (docs/cli.md is generated from it)."""
-    from aicalib_tf.calib.handeye import SETUPS
+    from aicalib_tf.calib.handeye.calibrate import SETUPS
     from aicalib_tf.calib.workflow import DETECTORS
     from aicalib_tf.cli import parser
     from aicalib_tf.geometry.lens import MODELS
@@ -100,7 +100,7 @@ def build_parser():
 
 
 def _config(args):
-    from aicalib_tf.calib.handeye_workflow import HandEyeConfig
+    from aicalib_tf.calib.handeye.workflow import HandEyeConfig
     from aicalib_tf.calib.workflow import parse_square
     from aicalib_tf.geometry.lens import MODELS
     from aicalib_tf.geometry.pattern import check_pattern, parse_pattern
@@ -129,7 +129,7 @@ def _config(args):
 
 
 def _main(args) -> int:
-    from aicalib_tf.calib.handeye_workflow import run_handeye
+    from aicalib_tf.calib.handeye.workflow import run_handeye
 
     cfg = _config(args)
     result, report = run_handeye(cfg)

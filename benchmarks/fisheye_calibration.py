@@ -121,13 +121,14 @@ def _rotation_compensated(lab, r, views, size) -> float:
     rotation of the camera frame (:func:`aicalib_tf.calib.quality.rotation_compensated_diff`), px:
     what is left once the principal point's trade with the views' poses is taken out."""
     from aicalib_tf.calib import quality as Q
+    from aicalib_tf.calib.coverage import coverage_counts
     from aicalib_tf.calib.fit import View
     from aicalib_tf.geometry.lens import Lens
 
     true = Lens(lab.get("distortion_model", "plumb_bob"), lab["K"], lab["dist"], size)
     est = Lens(r["model"], r["K"], r["dist"], size)
     pts = Q.grid_points(size)
-    covered = Q.coverage_counts([View(n, c, i) for n, c, i in views], size, (32, 24)).ravel() > 0
+    covered = coverage_counts([View(n, c, i) for n, c, i in views], size, (32, 24)).ravel() > 0
     d, _ = Q.rotation_compensated_diff(true, est, pts, fit_mask=covered)
     return float(np.nanmean(d[covered]))
 

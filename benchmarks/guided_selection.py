@@ -45,6 +45,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from aicalib_tf.calib import quality as Q  # noqa: E402
+from aicalib_tf.calib.coverage import coverage_counts
 from aicalib_tf.calib.fit import CalibrationError, View, fit_views  # noqa: E402
 from aicalib_tf.calib.view_checks import duplicates  # noqa: E402
 from aicalib_tf.geometry.lens import Lens  # noqa: E402
@@ -109,7 +110,7 @@ def _score(lab: dict, views: list[View], model: str, redraw=None) -> tuple[float
     except (CalibrationError, np.linalg.LinAlgError):
         return float("nan"), float("nan"), 0
     true = Lens(lab["distortion_model"], lab["K"], lab["dist"], size)
-    covered = Q.coverage_counts(views, size, (32, 24)).ravel() > 0
+    covered = coverage_counts(views, size, (32, 24)).ravel() > 0
     d, _ = Q.rotation_compensated_diff(true, Q.lens_of(cal), Q.grid_points(size), fit_mask=covered)
     return float(np.nanmean(d)), float(np.nanmean(d[covered])), len(cal.views)
 

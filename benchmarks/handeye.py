@@ -173,7 +173,7 @@ def summary(case: dict) -> dict:
 def zscores(seeds: int, views: int = 20, noise_px: float = 0.1) -> dict:
     """RMS z-score of the transform's error over ``seeds`` corner-level sets (module docstring)."""
     from aicalib_tf.calib.fit import View, calibrate_camera
-    from aicalib_tf.calib.handeye import calibrate_handeye
+    from aicalib_tf.calib.handeye.calibrate import calibrate_handeye
     from aicalib_tf.geometry.pattern import pattern_ids
     from data_gen.handeye import HandEyeSetConfig, sample_handeye
 

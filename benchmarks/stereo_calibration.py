@@ -8,8 +8,8 @@ vergence up to 10°, boards cut by the frame in the other camera allowed):
 
 Pipelines:
 
-* ``ours``: the CNN detector (partial boards with ids), :func:`aicalib_tf.calib.rig.calibrate_rig`
-  (lens model chosen per camera, one joint fit), :func:`aicalib_tf.calib.rig_quality.assess_rig`;
+* ``ours``: the CNN detector (partial boards with ids), :func:`aicalib_tf.calib.rig.fit.calibrate_rig`
+  (lens model chosen per camera, one joint fit), :func:`aicalib_tf.calib.rig.quality.assess_rig`;
 * ``opencv``: ``cv2.findChessboardCorners`` + ``cornerSubPix`` (full boards only), each camera by
   ``cv2.calibrateCamera`` (5 coefficients) or ``cv2.fisheye.calibrate`` for the fisheye lenses (the
   user knows which lens is which), then ``cv2.stereoCalibrate`` / ``cv2.fisheye.stereoCalibrate`` with
@@ -45,14 +45,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from aicalib_tf.bench.detectors import make_detectors  # noqa: E402
 from aicalib_tf.bench.rigs import RIGS, evaluate_rig, opencv_rig_pair  # noqa: E402
 from aicalib_tf.calib.fit import View  # noqa: E402
-from aicalib_tf.calib.rig import calibrate_rig  # noqa: E402
-from aicalib_tf.calib.rig_quality import assess_rig  # noqa: E402
+from aicalib_tf.calib.rig.fit import calibrate_rig  # noqa: E402
+from aicalib_tf.calib.rig.quality import assess_rig  # noqa: E402
 from aicalib_tf.geometry.pattern import parse_pattern  # noqa: E402
 
 
 def evaluate_real(items, pattern, square, fisheye=()) -> list[dict]:
     """Both pipelines on real image pairs (no truth): |Δy| RMS in-sample and held-out per pair with camera 0."""
-    from aicalib_tf.calib.rig_workflow import pair_images, parse_rig
+    from aicalib_tf.calib.rig.workflow import pair_images, parse_rig
     from aicalib_tf.io import expand_images, load_image, quantize
 
     cams = parse_rig(items)

@@ -43,6 +43,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from aicalib_tf.calib import quality as Q  # noqa: E402
+from aicalib_tf.calib.coverage import coverage_counts
 from aicalib_tf.calib.fit import CalibrationError, View, calibrate_camera  # noqa: E402
 from aicalib_tf.calib.workflow import make_detector  # noqa: E402
 from aicalib_tf.geometry.lens import Lens  # noqa: E402
@@ -63,7 +64,7 @@ def _error(lab: dict, cal, views, region=None) -> tuple[float, float]:
     true = Lens(lab["distortion_model"], lab["K"], lab["dist"], size)
     pts = Q.grid_points(size)
     if region is None:
-        region = Q.coverage_counts([v for v in views if v.name in set(cal.views)], size, (32, 24)).ravel() > 0
+        region = coverage_counts([v for v in views if v.name in set(cal.views)], size, (32, 24)).ravel() > 0
     d, _ = Q.rotation_compensated_diff(true, cal.lens, pts, fit_mask=region)
     return float(np.nanmean(d[region])), float(np.nanmean(d))
 
@@ -138,7 +139,7 @@ def bench(folder: Path, target: float, draws: int, rng, sizes) -> list[dict]:
     every = detect_frames(video, range(0, n, 30))
     found = detect_frames(video, rng.choice(n, size=min(n, 150), replace=False))
     everything = [*every.values(), *found.values(), *g["ranked"], *g["kept"]]
-    region = REGION[folder.name] = Q.coverage_counts(everything, tuple(lab["image_size"]), (32, 24)).ravel() > 0
+    region = REGION[folder.name] = coverage_counts(everything, tuple(lab["image_size"]), (32, 24)).ravel() > 0
     err, err_img = _error(lab, g["cal"], g["views"], region)
     rows = [dict(video=folder.name, method="guided", views=len(g["cal"].views), err_px=err, image_px=err_img,
                  wall_s=g["wall_s"], cpu_s=g["cpu_s"],

@@ -1,10 +1,10 @@
-"""Tables, figures and report.md for ``python -m aicalib_tf.evaluate`` (pandas + matplotlib Agg).
+"""Tables and report.md for ``python -m aicalib_tf.evaluate`` (pandas); the figures the page links are
+drawn by :mod:`aicalib_tf.bench.figures`.
 
 Every file is written atomically (aicalib_tf.io): CSVs are rendered to a string first, figures
 to PNG bytes in memory.
 """
 
-# size: the report page in the order a reader sees it, and the CSV and figures it links.
 from __future__ import annotations
 
 import math
@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from aicalib_tf.bench.metrics import WRONG_PX, corner_error_stats
+from aicalib_tf.bench.figures import SWEEP_AXES, error_histogram, example_figure, sweep_figure, time_figure
+from aicalib_tf.bench.metrics import corner_error_stats
 from aicalib_tf.bench.targets import check_targets
-from aicalib_tf.io import atomic_write_bytes, atomic_write_text
+from aicalib_tf.io import atomic_write_text
 from aicalib_tf.jsonio import dumps
-from aicalib_tf.plotting import new_figure, png_bytes
 
 __all__ = ["summarize", "write_report", "write_photo_report", "SUMMARY_COLUMNS", "RESULT_COLUMNS"]
 
@@ -27,10 +27,6 @@ RESULT_COLUMNS = ["condition", "sweep", "level", "index", "seed", "camera_id", "
 SUMMARY_COLUMNS = ["condition", "sweep", "level", "severity", "width", "height", "detector", "images", "boards",
                    "hits", "wrong", "wrong_worst_px", "partial", "misses", "detection_rate", "err_median", "err_rmse", "err_p95",
                    "err_max", "recall", "wrong_ids", "false_boards", "false_partial", "time_median_ms", "time_max_ms"]
-SWEEP_AXES = {"noise": ("Gaussian noise σ (grey levels)", False), "blur": ("Gaussian blur σ (px)", False),
-              "contrast": ("contrast factor (1 = full)", True), "jpeg": ("JPEG quality", True),
-              "distortion": ("lens distortion k1 (median of the images)", True),
-              "tilt": ("board tilt (median, degrees)", False)}
 
 
 def _strings_for_objects(x):
@@ -40,10 +36,6 @@ def _strings_for_objects(x):
     if isinstance(x, (list, tuple)):
         return [_strings_for_objects(v) for v in x]
     return x if x is None or isinstance(x, (bool, int, float, str, np.generic, np.ndarray)) else str(x)
-
-
-def _save_fig(fig, path: Path) -> None:
-    atomic_write_bytes(path, png_bytes(fig))
 
 
 def _csv(df: pd.DataFrame, path: Path) -> None:
@@ -84,80 +76,6 @@ def summarize(results: pd.DataFrame, errors: dict) -> pd.DataFrame:
             "time_median_ms": float(g["time_ms"].median()), "time_max_ms": float(g["time_ms"].max()),
         })
     return pd.DataFrame(out, columns=SUMMARY_COLUMNS)
-
-
-# --- figures --------------------------------------------------------------------------------
-
-def _sweep_figure(summary: pd.DataFrame, sweep: str, path: Path) -> None:
-    s = summary[summary["sweep"] == sweep].sort_values("severity")
-    label, invert = SWEEP_AXES.get(sweep, (sweep, False))
-    fig = new_figure((10, 3.6))
-    a1, a2 = fig.subplots(1, 2)
-    for k, (det, g) in enumerate(s.groupby("detector", sort=False)):
-        style = dict(marker="os^vD"[k % 5], ls=("-", "--", "-.", ":")[k % 4], ms=6 - k, label=det)
-        a1.plot(g["severity"], 100 * g["detection_rate"], **style)
-        a2.plot(g["severity"], g["err_median"], **style)
-    a1.set(xlabel=label, ylabel="full boards found correctly (%)", ylim=(-3, 103), title=f"{sweep}: detection rate")
-    a2.set(xlabel=label, ylabel="median corner error of hits (px)", yscale="log", title=f"{sweep}: corner error")
-    for a in (a1, a2):
-        a.grid(alpha=0.3)
-        if invert:
-            a.invert_xaxis()
-    a1.legend(fontsize=8)
-    _save_fig(fig, path)
-
-
-def _error_hist(errors: dict, named: set, path: Path) -> None:
-    fig = new_figure((7, 3.6))
-    ax = fig.subplots()
-    bins = np.logspace(-4, math.log10(WRONG_PX), 50)
-    dets = sorted({d for _, d in errors}, key=list({d: 0 for _, d in errors}).index)
-    for det in dets:
-        e = [x for (c, d), arrs in errors.items() if d == det and c in named for x in arrs]
-        e = np.concatenate(e) if e else np.zeros(0)
-        if e.size:
-            ax.hist(np.clip(e, 1e-4, None), bins=bins, histtype="step", lw=1.5, label=f"{det} ({e.size} corners)")
-    ax.set(xscale="log", xlabel="corner error (px)", ylabel="corners",
-           title="Corner errors: hits and correct partial corners (named conditions, calibration views)")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    _save_fig(fig, path)
-
-
-
-
-def _time_figure(results: pd.DataFrame, path: Path) -> None:
-    sizes = sorted({(int(w), int(h)) for w, h in zip(results["width"], results["height"])})
-    dets = list(dict.fromkeys(results["detector"]))
-    fig = new_figure((4.5 * len(sizes), 3.6))
-    axes = fig.subplots(1, len(sizes), squeeze=False)
-    for ax, (w, h) in zip(axes[0], sizes):
-        g = results[(results["width"] == w) & (results["height"] == h)]
-        data = [g.loc[g["detector"] == d, "time_ms"].to_numpy() for d in dets]
-        ax.boxplot(data, whis=(0, 100))
-        ax.set_xticks(range(1, len(dets) + 1), dets)
-        ax.set(yscale="log", ylabel="ms per image", title=f"{w}×{h}: time per image ({len(g) // max(1, len(dets))} images)")
-        ax.grid(alpha=0.3, axis="y")
-    _save_fig(fig, path)
-
-
-def _example_figure(title: str, image: np.ndarray, truth, found_by: dict, path: Path) -> None:
-    n = len(found_by)
-    fig = new_figure((4.2 * n, 3.6))
-    axes = fig.subplots(1, n, squeeze=False)
-    for ax, (det, (found, outcome)) in zip(axes[0], found_by.items()):
-        ax.imshow(image, cmap="gray", vmin=0, vmax=255)
-        if truth is not None and len(truth):
-            ax.plot(truth[:, 0], truth[:, 1], "+", color="cyan", ms=4, mew=0.8)
-        c = found.corners
-        if len(c):
-            colour = {"hit": "lime", "partial": "yellow"}.get(outcome, "red")
-            ax.plot(c[:, 0], c[:, 1], "o", mfc="none", mec=colour, ms=5, mew=1.0)
-            ax.plot(c[:1, 0], c[:1, 1], "s", mfc="none", mec="magenta", ms=7)
-        ax.set_title(f"{det}: {outcome} ({len(c)} corners)", fontsize=9)
-        ax.axis("off")
-    fig.suptitle(title + "  (cyan +: truth/reference; circles: detected, red = wrong/false)", fontsize=9)
-    _save_fig(fig, path)
 
 
 # --- markdown -------------------------------------------------------------------------------
@@ -288,17 +206,17 @@ def write_report(out: Path, cfg, conds, result: dict, info: dict, versions: dict
     figures = []
     for sweep in dict.fromkeys(c.sweep for c in conds if c.sweep):
         p = fig_dir / f"sweep_{sweep}.png"
-        _sweep_figure(summary, sweep, p)
+        sweep_figure(summary, sweep, p)
         figures.append((f"Sweep: {sweep}", p))
     named = {c.name for c in conds if not c.sweep} | {"calib"} | {f"calib_{f}" for f in FISHEYE_SEQUENCES}
     if len(results):
-        _error_hist(result["errors"], named, fig_dir / "error_histogram.png")
+        error_histogram(result["errors"], named, fig_dir / "error_histogram.png")
         figures.append(("Corner error histogram", fig_dir / "error_histogram.png"))
-        _time_figure(results, fig_dir / "time.png")
+        time_figure(results, fig_dir / "time.png")
         figures.append(("Time per image", fig_dir / "time.png"))
     for k, (score, cname, index, image, truth, found_by) in enumerate(result["examples"]):
         p = fig_dir / f"example_{k}_{cname}.png"
-        _example_figure(f"{cname} #{index}", image, truth, found_by, p)
+        example_figure(f"{cname} #{index}", image, truth, found_by, p)
         figures.append((f"Hard example: {cname} image {index}", p))
 
     cond_table = pd.DataFrame([{"condition": c.name, "sweep": c.sweep or "", "size": f"{c.size[0]}×{c.size[1]}",
@@ -419,7 +337,7 @@ def write_photo_report(out: Path, cfg, result: dict, info: dict, versions: dict)
                                                         time_max_ms=("time_ms", "max")).reset_index()
         per["partial"] = per["partial"] - per["full_boards"]
         md += ["\n## Detections on the photos\n", _md_table(per, {"time_median_ms": ".1f", "time_max_ms": ".0f"})]
-        _time_figure(clean, fig_dir / "time.png")
+        time_figure(clean, fig_dir / "time.png")
         figures.append(("Time per photo", fig_dir / "time.png"))
     if len(agree):
         both = agree[agree["both_found"]]
@@ -458,7 +376,7 @@ def write_photo_report(out: Path, cfg, result: dict, info: dict, versions: dict)
                _md_table(piv), "\nFull table: degrade.csv.\n"]
         for k, (title, img, ref, outcomes) in enumerate(result["examples"]):
             p = fig_dir / f"example_{k}.png"
-            _example_figure(title, img, ref, outcomes, p)
+            example_figure(title, img, ref, outcomes, p)
             figures.append((f"Hard example: {title}", p))
     md += ["\n## Figures\n"] + [f"- [{t}](figures/{p.name})" for t, p in figures]
     md += [f"\n![{t}](figures/{p.name})" for t, p in figures]

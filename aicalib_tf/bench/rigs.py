@@ -1,8 +1,8 @@
 """Rig sequences scored against the truth: our rig calibration and OpenCV's stereo pipeline side by side.
 
 Rigs come from :mod:`data_gen.rig` (:data:`RIGS`: two pinholes, pinhole + fisheye, two fisheyes,
-three cameras). ``ours`` is the CNN detector (partial boards with ids), :func:`aicalib_tf.calib.rig.calibrate_rig`
-and :func:`aicalib_tf.calib.rig_quality.assess_rig`. ``opencv`` is ``findChessboardCorners`` +
+three cameras). ``ours`` is the CNN detector (partial boards with ids), :func:`aicalib_tf.calib.rig.fit.calibrate_rig`
+and :func:`aicalib_tf.calib.rig.quality.assess_rig`. ``opencv`` is ``findChessboardCorners`` +
 ``cornerSubPix`` (full boards), each camera by ``cv2.calibrateCamera`` or ``cv2.fisheye.calibrate``
 (the user knows which lens is a fisheye), then ``cv2.stereoCalibrate`` / ``cv2.fisheye.stereoCalibrate``
 with ``CALIB_FIX_INTRINSIC`` on the frames both cameras found (a mixed pair: ``cv2.stereoCalibrate`` on
@@ -19,8 +19,8 @@ import cv2
 import numpy as np
 
 from aicalib_tf.calib.fit import View
-from aicalib_tf.calib.rig import calibrate_rig
-from aicalib_tf.calib.rig_quality import MAX_FOLDS, assess_rig, epipolar_deltas
+from aicalib_tf.calib.rig.fit import calibrate_rig
+from aicalib_tf.calib.rig.quality import MAX_FOLDS, assess_rig, epipolar_deltas
 from aicalib_tf.geometry.lens import Lens
 from aicalib_tf.geometry.pattern import board_points
 from aicalib_tf.geometry.rectify import rectify_pair, rotation_angle_deg

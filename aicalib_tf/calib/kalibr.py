@@ -81,7 +81,7 @@ def _camera_text(index: int, n_cams: int, entry: dict, T: np.ndarray | None) -> 
 
 def to_camchain_yaml(cal_or_rig) -> str:
     """Kalibr ``camchain.yaml`` text of a :class:`~aicalib_tf.calib.fit.Calibration` (one camera) or a
-    :class:`~aicalib_tf.calib.rig_result.RigCalibration` (its ``cameras`` with ``R`` and ``T``)."""
+    :class:`~aicalib_tf.calib.rig.result.RigCalibration` (its ``cameras`` with ``R`` and ``T``)."""
     cams = list(getattr(cal_or_rig, "cameras", None) or [cal_or_rig])
     R, T = getattr(cal_or_rig, "R", None), getattr(cal_or_rig, "T", None)
     head = ["# Kalibr camchain, written by aicalib_tf"]

@@ -3,7 +3,7 @@
 A problem has ``nf`` global parameters (a camera's intrinsics, a board's flex, a rig's extrinsics)
 followed by 6 per pose; a pose's residuals depend on its own 6 parameters and the global ones only,
 so JᵀJ has 6×6 pose blocks, and a step solves an (nf × nf) system: O(poses) per step. Used by the
-bundle (:mod:`aicalib_tf.calib.bundle`) and the rig fit (:mod:`aicalib_tf.calib.rig_bundle`).
+bundle (:mod:`aicalib_tf.calib.bundle`) and the rig fit (:mod:`aicalib_tf.calib.rig.bundle`).
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ def levenberg_marquardt(prob, x0, max_nfev: int):
 
     prob : any problem whose parameters are ``prob.nf`` global ones followed by 6 per pose, with
     ``prob.fun(x)`` -> residuals and ``prob.normal_blocks(x)`` -> :func:`reduce_blocks`' tuple
-    (this module's bundle, and the rig fit of :mod:`aicalib_tf.calib.rig_bundle`)."""
+    (this module's bundle, and the rig fit of :mod:`aicalib_tf.calib.rig.bundle`)."""
     x = x0.copy()
     r = prob.fun(x)
     cost, nfev, lam, nf, improved, done = 0.5 * float(r @ r), 1, 1e-3, prob.nf, False, False

@@ -1,4 +1,4 @@
-"""Is a calibration good? Projection uncertainty, half-vs-half difference, coverage, one verdict.
+"""Is a calibration good? Projection uncertainty, half-vs-half difference, one verdict.
 
 * :func:`projection_uncertainty`: the 1σ projection uncertainty (px) over the image, propagated
   from the covariance of the intrinsics (``cal.covariance``, poses marginalised).
@@ -7,7 +7,8 @@
   the difference itself is :func:`aicalib_tf.calib.diff.projection_diff`, which
   ``python -m aicalib_tf.compare`` uses too).
 * :func:`predicted_half_difference`: what the two halves' covariances predict for that number.
-* :func:`verdict` and :func:`assess`: one line for the user and the dict kept in ``cal.quality``.
+* :func:`verdict` and :func:`assess`: one line for the user and the dict kept in ``cal.quality``,
+  with the regions no board covered (:mod:`aicalib_tf.calib.coverage`).
 
 The image circle. A circular fisheye's calibration carries its image circle (``cal.image_circle``,
 :mod:`aicalib_tf.geometry.image_circle`): cells outside it are no part of the camera's image. The
@@ -34,14 +35,12 @@ import inspect
 import cv2
 import numpy as np
 
-from aicalib_tf.calib.diff import cell_counts, grid_points, projection_diff, rotation_compensated_diff, split_views
+from aicalib_tf.calib.coverage import covered_mask, in_circle, rim_gaps, uncovered_regions
+from aicalib_tf.calib.diff import grid_points, projection_diff, rotation_compensated_diff, split_views
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.pattern import board_points
 
-# size: the uncertainty map, its reusable basis (for guided calibration's many predicted covariances),
-# one view's information and the half-vs-half test share the private Jacobian helpers below.
-
-__all__ = ["lens_of", "grid_points", "coverage_counts", "uncovered_regions", "in_circle", "rim_gaps", "projection_uncertainty", "verdict",
+__all__ = ["lens_of", "grid_points", "projection_uncertainty", "verdict",
            "rotation_compensated_diff", "half_difference", "predicted_half_difference", "intrinsics_covariance",
            "covariance_of", "default_fit", "assess", "SIGMA_LADDER_PX", "view_information", "uncertainty_basis",
            "sigma_from_basis"]
@@ -60,66 +59,6 @@ def lens_of(cal) -> L.Lens:
         return lens
     model = getattr(cal, "model", None) or _DEFAULT_MODEL.get(len(np.ravel(cal.dist)), "plumb_bob")
     return L.Lens(model, cal.K, cal.dist, tuple(cal.image_size))
-
-
-def coverage_counts(views, image_size, cells=(16, 12)) -> np.ndarray:
-    """(cells_y, cells_x) int64: how many detected corners of ``views`` fall in each image cell."""
-    pts = np.concatenate([np.asarray(v.corners, np.float64).reshape(-1, 2) for v in views]) if len(views) else np.zeros((0, 2))
-    return cell_counts(pts, image_size, cells)
-
-
-_REGIONS = {"top-left": (0, 0), "top": (0, 1), "top-right": (0, 2), "left": (1, 0), "centre": (1, 1),
-            "right": (1, 2), "bottom-left": (2, 0), "bottom": (2, 1), "bottom-right": (2, 2)}
-
-
-def in_circle(image_size, grid, circle) -> np.ndarray:
-    """(gy·gx,) bool over :func:`grid_points`: the cell centres inside the image ``circle`` (all True
-    for None: the lens fills the frame)."""
-    pts = grid_points(image_size, grid)
-    return np.ones(len(pts), bool) if circle is None else circle.contains(pts)
-
-
-def _reachable(image_size, circle, cells=(4, 4), min_share: float = 0.25) -> np.ndarray:
-    """(cells_y, cells_x) bool: the cells of which at least ``min_share`` lies inside ``circle`` (a
-    board can reach them; a cell the circle's edge only clips is left to :func:`rim_gaps`); all
-    True without a circle."""
-    cx, cy = (int(v) for v in cells)
-    inside = in_circle(image_size, (16 * cx, 16 * cy), circle).reshape(16 * cy, 16 * cx)
-    return inside.reshape(cy, 16, cx, 16).mean(axis=(1, 3)) >= min_share
-
-
-def uncovered_regions(views, image_size, circle=None) -> list[str]:
-    """Names of the image's nine regions (a 4 × 4 split: corners are the corner cells, "top" the two
-    top middle cells, "centre" the middle four, ...) that no detected corner falls in; a region
-    mostly outside the image ``circle`` (less than a quarter of each of its cells inside) does not count."""
-    c = coverage_counts(views, image_size, (4, 4))
-    reach = _reachable(image_size, circle)
-    spans = (slice(0, 1), slice(1, 3), slice(3, 4))
-    return [name for name, (r, k) in _REGIONS.items()
-            if c[spans[r], spans[k]].sum() == 0 and reach[spans[r], spans[k]].any()]
-
-
-_SECTORS = ("right", "bottom-right", "bottom", "bottom-left", "left", "top-left", "top", "top-right")  # y down
-
-
-def rim_gaps(views, image_size, circle, rim: float = 0.8) -> list[str]:
-    """Names of the eight 45° sectors of the image ``circle``'s rim (the ring from ``rim``·radius to the
-    radius; "right" centred on +x, "bottom" on +y) that lie in the frame and hold no detected corner."""
-    w, h = (int(v) for v in image_size)
-    pts = np.concatenate([np.asarray(v.corners, np.float64).reshape(-1, 2) for v in views]) if len(views) else np.zeros((0, 2))
-    d = np.hypot(pts[:, 0] - circle.cx, pts[:, 1] - circle.cy)
-    sector = np.round(np.arctan2(pts[:, 1] - circle.cy, pts[:, 0] - circle.cx) / (np.pi / 4)).astype(int) % 8
-    hit = set(sector[d >= rim * circle.radius].tolist())
-    a = np.radians(np.arange(8) * 45.0)
-    r = 0.5 * (1 + rim) * circle.radius  # a sector counts when the middle of its ring is in the frame
-    mx, my = circle.cx + r * np.cos(a), circle.cy + r * np.sin(a)
-    in_frame = (mx >= -0.5) & (mx <= w - 0.5) & (my >= -0.5) & (my <= h - 0.5)
-    return [_SECTORS[k] for k in range(8) if in_frame[k] and k not in hit]
-
-
-def _covered_mask(views, image_size, grid) -> np.ndarray:
-    """(M,) bool over :func:`grid_points`: the grid cells with at least one detected corner."""
-    return coverage_counts(views, image_size, grid).ravel() > 0
 
 
 def _frame_basis(lens: L.Lens, rays: np.ndarray, distance=None) -> tuple[np.ndarray, np.ndarray]:
@@ -225,7 +164,7 @@ def half_difference(views, fit, pattern_size, square_size, image_size, model, sp
     cal_a = fit(a, pattern_size, square_size, image_size, model, **kw)
     cal_b = fit(b, pattern_size, square_size, image_size, model, **kw)
     inside = in_circle(image_size, grid, circle)
-    d = projection_diff(lens_of(cal_a), lens_of(cal_b), grid=grid, covered=_covered_mask(views, image_size, grid) & inside,
+    d = projection_diff(lens_of(cal_a), lens_of(cal_b), grid=grid, covered=covered_mask(views, image_size, grid) & inside,
                         inside=inside)
     c, w = d["covered_stats"], d["all_stats"]
     return {"split": split, "n_a": len(a), "n_b": len(b), "median_covered": c["median"], "mean_covered": c["mean"],
@@ -372,7 +311,7 @@ def verdict(cal, views, *, sigma=None, half=None, grid=(32, 24)) -> str:
     if sigma is None and getattr(cal, "covariance", None) is not None:
         sigma = projection_uncertainty(cal, grid)[1]
     if sigma is not None:
-        covered = _covered_mask(views, cal.image_size, grid)
+        covered = covered_mask(views, cal.image_size, grid)
         s_cov = sigma[covered & np.isfinite(sigma)]
         if s_cov.size:
             x = _ladder(float(np.percentile(s_cov, 90)))
@@ -422,7 +361,7 @@ def assess(cal, views, *, fit=None, split="evenodd", grid=(32, 24), choose=None)
     used = [v for v in views if v.name in set(cal.views)] or list(views)
     circle = getattr(cal, "image_circle", None)
     inside = in_circle(cal.image_size, grid, circle)
-    covered = _covered_mask(used, cal.image_size, grid)
+    covered = covered_mask(used, cal.image_size, grid)
     try:
         cov = covariance_of(cal, used)
     except (ValueError, np.linalg.LinAlgError):

@@ -7,7 +7,7 @@ that fits its own images but is wrong elsewhere):
   off against the distance;
 * no corner in one of the image's corner regions (the outer 1/4 × 1/4): distortion is
   extrapolated there (a corner region outside a circular fisheye's image circle is passed over:
-  no board can reach it; the circle's rim is checked instead, :func:`~aicalib_tf.calib.quality.rim_gaps`);
+  no board can reach it; the circle's rim is checked instead, :func:`~aicalib_tf.calib.coverage.rim_gaps`);
 * an image circle that the lens model does not agree with
   (:func:`~aicalib_tf.geometry.image_circle.circle_problem`);
 * a focal length with a 1σ uncertainty above 1%, or fewer than 6 views;
@@ -24,7 +24,7 @@ import numpy as np
 from aicalib_tf.calib import quality as Q
 from aicalib_tf.calib.fit import Calibration, View
 from aicalib_tf.calib.flex import flex_line
-from aicalib_tf.calib.quality import coverage_counts
+from aicalib_tf.calib.coverage import coverage_counts, in_circle, rim_gaps, uncovered_regions
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.image_circle import circle_fov_deg, circle_problem
 from aicalib_tf.geometry.aprilgrid import corner_count
@@ -78,11 +78,11 @@ def calibration_warnings(cal: Calibration, views: list[View]) -> list[str]:
     if cal.meta.get("image_circle_note"):
         warnings.append(f"{cal.meta['image_circle_note']}: no image circle is used; coverage, uncertainty and "
                         "field of view count the full frame")
-    empty = [name for name in Q.uncovered_regions(views, cal.image_size, circle) if "-" in name]
+    empty = [name for name in uncovered_regions(views, cal.image_size, circle) if "-" in name]
     if empty:
         warnings.append(f"no corners in the image's {', '.join(empty)} region{'s' if len(empty) > 1 else ''}: "
                         "distortion is extrapolated there; add views with the board near the image corners")
-    gaps = Q.rim_gaps(views, cal.image_size, circle) if circle is not None else []
+    gaps = rim_gaps(views, cal.image_size, circle) if circle is not None else []
     if gaps:
         warnings.append(f"no corners near the image circle's {', '.join(gaps)} rim: distortion is extrapolated "
                         "there; add views with the board near the edge of the image circle")
@@ -204,7 +204,7 @@ def report_figure(cal: Calibration, views: list[View]) -> bytes:
 
     ax = axes[2]
     cov = coverage_counts(views, cal.image_size).astype(np.float64)
-    inside = Q.in_circle(cal.image_size, cov.shape[::-1], getattr(cal, "image_circle", None)).reshape(cov.shape)
+    inside = in_circle(cal.image_size, cov.shape[::-1], getattr(cal, "image_circle", None)).reshape(cov.shape)
     share = float(np.mean(cov[inside] > 0)) if inside.any() else 0.0
     cov[~inside & (cov == 0)] = np.nan  # outside the image circle: not missing, left blank
     im = ax.imshow(cov, extent=(-0.5, w - 0.5, h - 0.5, -0.5), cmap="magma", interpolation="nearest")

@@ -21,7 +21,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from aicalib_tf.calib.quality import sigma_from_basis, uncovered_regions, view_information
+from aicalib_tf.calib.coverage import uncovered_regions
+from aicalib_tf.calib.quality import sigma_from_basis, view_information
 from aicalib_tf.geometry.lens import Lens
 from aicalib_tf.geometry.pattern import board_points, pattern_ids
 from aicalib_tf.geometry.pose import in_frame

@@ -15,8 +15,8 @@
    kept by either camera becomes a shared frame that ties the cameras. Cameras out of sync beyond
    the tolerance are refused (ValueError with the measured offset, naming both sources), checked
    every :data:`SYNC_CHECK_EVERY` frames and at the end.
-4. **The rig.** :func:`aicalib_tf.calib.rig_workflow.calibrate_views` (calibrate_rig, assess_rig,
-   the sanity checks) and :func:`~aicalib_tf.calib.rig_workflow.write_rig_files`: the files of the
+4. **The rig.** :func:`aicalib_tf.calib.rig.workflow.calibrate_views` (calibrate_rig, assess_rig,
+   the sanity checks) and :func:`~aicalib_tf.calib.rig.workflow.write_rig_files`: the files of the
    photo rig path. Views are named ``frame<camera 0's frame index>``; a kept frame with no partner
    serves its own camera's lens only. rig.json's ``meta`` holds each camera's kept frames, the
    frames used, the pairing and the measured offset.
@@ -305,7 +305,7 @@ def run_rig_video(cfg: RigVideoConfig) -> tuple[object, str]:
     that fails) writes nothing unless ``save_partial``: then the rig from the frames read so far,
     ``"partial": true`` in rig.json's ``meta`` and PARTIAL at the top of the report.
     """
-    from aicalib_tf.calib.rig_workflow import Pairing, calibrate_views, rig_models, write_rig_files
+    from aicalib_tf.calib.rig.workflow import Pairing, calibrate_views, rig_models, write_rig_files
     from aicalib_tf.calib.workflow import make_detector
     from aicalib_tf.outfolder import OutputFolder
 

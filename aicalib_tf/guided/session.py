@@ -33,8 +33,8 @@ import cv2
 import numpy as np
 
 from aicalib_tf.calib.fit import Calibration, CalibrationError, View, calibrate_camera, fit_views
-from aicalib_tf.calib.quality import (coverage_counts, in_circle, lens_of, sigma_from_basis, uncertainty_basis,
-                                      view_information)
+from aicalib_tf.calib.coverage import coverage_counts, in_circle
+from aicalib_tf.calib.quality import lens_of, sigma_from_basis, uncertainty_basis, view_information
 from aicalib_tf.geometry.image_circle import ImageCircle, find_image_circle, thumbnail
 from aicalib_tf.geometry.pattern import board_points
 from aicalib_tf.guided.design import design_weight, elimination_order

@@ -39,7 +39,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from aicalib_tf.calib.quality import coverage_counts
+from aicalib_tf.calib.coverage import coverage_counts
 from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 
 __all__ = ["LiveConfig", "LiveState", "make_app", "token_of", "update_json", "tracking_detector", "COVERAGE_CELLS"]

@@ -10,6 +10,7 @@ import pytest
 
 from aicalib_tf.calib import diff as D
 from aicalib_tf.calib import quality as Q
+from aicalib_tf.calib.coverage import coverage_counts
 from aicalib_tf.calib.fit import fit_views
 from aicalib_tf.geometry import lens as L
 from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views
@@ -79,7 +80,7 @@ def test_two_calibrations_of_one_camera_differ_little(two_fits):
 def test_half_difference_is_projection_diff_of_its_halves(two_fits):
     views, _ = two_fits
     h = Q.half_difference(views, fit_views, PATTERN, SQUARE, SIZE, "plumb_bob", "evenodd")
-    covered = Q.coverage_counts(views, SIZE, D.GRID).ravel() > 0
+    covered = coverage_counts(views, SIZE, D.GRID).ravel() > 0
     r = D.projection_diff(h["cal_a"].lens, h["cal_b"].lens, covered=covered)
     assert h["median_covered"] == pytest.approx(r["covered_stats"]["median"], rel=1e-9)
     assert h["p95_covered"] == pytest.approx(r["covered_stats"]["p95"], rel=1e-9)

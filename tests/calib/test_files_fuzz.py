@@ -23,8 +23,8 @@ from scipy.spatial.transform import Rotation
 
 from aicalib_tf.calib import files as F
 from aicalib_tf.calib.fit import calibrate_camera
-from aicalib_tf.calib.rig_files import load_rig, load_stereo_yml, save_rig
-from aicalib_tf.calib.rig_result import RigCalibration
+from aicalib_tf.calib.rig.files import load_rig, load_stereo_yml, save_rig
+from aicalib_tf.calib.rig.result import RigCalibration
 from aicalib_tf.geometry.lens import Lens
 from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views
 from tests.calib.test_files import _cal
@@ -155,7 +155,7 @@ def test_deep_or_binary_yaml_is_refused_without_a_crash_or_a_hang(tmp_path):
     binary.write_text("M1: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n"
                       "   data: [ 520., 0., !!binary 0., 525.20000000000005, 238.25, 0., 0., 1. ]\n")
     code = ("import sys\nfrom aicalib_tf.calib.files import load_calibration\n"
-            "from aicalib_tf.calib.rig_files import load_stereo_yml\n"
+            "from aicalib_tf.calib.rig.files import load_stereo_yml\n"
             "for f, arg in ((load_calibration, sys.argv[1]), (load_stereo_yml, sys.argv[2]), (load_calibration, sys.argv[3])):\n"
             "    try:\n        f(arg)\n    except ValueError as e:\n        print(e)\n")
     out = subprocess.run([sys.executable, "-c", code, str(deep), str(dash.parent), str(binary)], capture_output=True,

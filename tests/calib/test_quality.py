@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from aicalib_tf.calib import quality as Q
+from aicalib_tf.calib.coverage import rim_gaps, uncovered_regions
 from aicalib_tf.geometry import lens as L
 from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views
 
@@ -162,13 +163,13 @@ def test_regions_outside_the_image_circle_are_not_uncovered_and_its_rim_is_check
     central = [v for v in synthetic_views(CIRCLE_LENS, 30, 0.0, seed=4, distance=(0.2, 0.3))
                if np.all(cal.image_circle.contains(v.corners, -0.3 * cal.image_circle.radius))]
     assert central
-    assert set(Q.uncovered_regions(central, SIZE)) >= {"top-left", "bottom-right"}
-    assert not {"top-left", "top-right", "bottom-left", "bottom-right"} & set(Q.uncovered_regions(central, SIZE, cal.image_circle))
-    assert set(Q.rim_gaps(central, SIZE, cal.image_circle)) == {"right", "bottom-right", "bottom", "bottom-left", "left",
+    assert set(uncovered_regions(central, SIZE)) >= {"top-left", "bottom-right"}
+    assert not {"top-left", "top-right", "bottom-left", "bottom-right"} & set(uncovered_regions(central, SIZE, cal.image_circle))
+    assert set(rim_gaps(central, SIZE, cal.image_circle)) == {"right", "bottom-right", "bottom", "bottom-left", "left",
                                                                "top-left", "top", "top-right"}
     from aicalib_tf.calib.fit import View
     rim = View("rim", np.array([[319.5 + 150.0, 239.5]]), np.array([[0, 0]]))
-    assert "right" not in Q.rim_gaps(central + [rim], SIZE, cal.image_circle)
+    assert "right" not in rim_gaps(central + [rim], SIZE, cal.image_circle)
 
 
 def test_verdict_says_when_the_halves_choose_different_model_families():

@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from aicalib_tf.calib.handeye_poses import read_poses
+from aicalib_tf.calib.handeye.poses import read_poses
 from aicalib_tf.geometry.transform import inv, rotation_angle
 from data_gen.handeye import HandEyeSetConfig, main, render_view, sample_handeye
 

@@ -3,7 +3,8 @@
 import numpy as np
 
 from aicalib_tf.calib.fit import fit_views
-from aicalib_tf.calib.quality import coverage_counts, sigma_from_basis, uncertainty_basis
+from aicalib_tf.calib.coverage import coverage_counts
+from aicalib_tf.calib.quality import sigma_from_basis, uncertainty_basis
 from aicalib_tf.geometry.lens import Lens
 from aicalib_tf.guided.guidance import missing, next_views
 
@@ -50,7 +51,7 @@ def test_missing_does_not_ask_for_corners_outside_the_image_circle():
 
 def test_next_view_never_points_outside_the_image_circle():
     from aicalib_tf.calib.fit import View
-    from aicalib_tf.calib.quality import in_circle
+    from aicalib_tf.calib.coverage import in_circle
     from aicalib_tf.geometry.image_circle import ImageCircle
     from aicalib_tf.guided.guidance import REGIONS, TILTS, candidate_points
 

@@ -117,7 +117,7 @@ def test_a_stopped_rig_run_saves_only_with_save_partial(pair, tmp_path, monkeypa
 
 
 def test_a_circular_fisheye_rig_video_keeps_each_cameras_image_circle(tmp_path, capsys):
-    from tests.calib.rig_synthetic import check_circular_rig_output, circular_rig
+    from tests.calib.rig.synthetic import check_circular_rig_output, circular_rig
 
     truth, frames = circular_rig()
     for k in (0, 1):  # each board pose held for 4 frames at 10 fps: the motion gate sees it rest

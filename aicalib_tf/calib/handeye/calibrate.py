@@ -10,16 +10,16 @@ Two setups (frames as ROS names them; ``T_a_b`` maps b's coordinates into a; met
 :func:`calibrate_handeye` runs, in order:
 
 1. each view's board pose by PnP with the camera's intrinsics (:func:`aicalib_tf.calib.bundle.solve_pose`);
-2. the rotations' spread (:func:`~aicalib_tf.calib.handeye_solve.rotation_spread`): rotations all
+2. the rotations' spread (:func:`~aicalib_tf.calib.handeye.solve.rotation_spread`): rotations all
    about one axis leave the transform unfixed and are refused;
-3. a robust closed-form start (:func:`~aicalib_tf.calib.handeye_solve.robust_start`): views whose
+3. a robust closed-form start (:func:`~aicalib_tf.calib.handeye.solve.robust_start`): views whose
    robot pose disagrees with their image by more than 1° or 2 cm are left out, with the reason;
-4. the joint fit (:func:`~aicalib_tf.calib.handeye_fit.joint_fit`) of the corners over the
+4. the joint fit (:func:`~aicalib_tf.calib.handeye.fit.joint_fit`) of the corners over the
    transform, the board's pose, the robot poses (with their σ) and, when asked, the intrinsics;
 5. a finer outlier test: the robot pose each image implies (through the fitted chain) against
    the reported one; a view more than max(5 × the median, 4√3 σ) off, in rotation or in
    translation, is left out and the fit rerun (worst first, at most a third of the views);
-6. the verdict (:mod:`aicalib_tf.calib.handeye_quality`).
+6. the verdict (:mod:`aicalib_tf.calib.handeye.quality`).
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from aicalib_tf.calib.bundle import CalibrationError, solve_pose
-from aicalib_tf.calib.handeye_fit import SETUPS, JointFit, chain_G, joint_fit
-from aicalib_tf.calib.handeye_solve import board_flips, chain_discrepancy, inv, robust_start, rotation_angle, to_T
+from aicalib_tf.calib.handeye.fit import SETUPS, JointFit, chain_G, joint_fit
+from aicalib_tf.calib.handeye.solve import board_flips, chain_discrepancy, inv, robust_start, rotation_angle, to_T
 from aicalib_tf.geometry.lens import Lens, project
 from aicalib_tf.geometry.pattern import board_points
 
@@ -56,7 +56,7 @@ class HandEyeResult:
     how far the fit moved the reported poses. A : (V, 4, 4) reported T_base_flange; C : (V, 4, 4)
     fitted T_camera_board per view. rejected : {view name: reason}. sigma_px : the corners' noise per
     coordinate; sigma_rot_deg, sigma_t_mm : the robot's stated σ. rms : px. chi2 : reduced χ².
-    quality : the verdict (:mod:`aicalib_tf.calib.handeye_quality`).
+    quality : the verdict (:mod:`aicalib_tf.calib.handeye.quality`).
     """
 
     setup: str
@@ -216,7 +216,7 @@ def calibrate_handeye(views, poses: dict, setup: str, lens: Lens, square: float,
     rejected : views already left out {name: reason}, extended here.
     Raises :class:`CalibrationError` with fewer than 3 usable views or rotations about one axis.
     """
-    from aicalib_tf.calib.handeye_quality import assess, check_spread
+    from aicalib_tf.calib.handeye.quality import assess, check_spread
 
     _check_inputs(setup, views, poses, square)
     rng = rng if rng is not None else np.random.default_rng(0)

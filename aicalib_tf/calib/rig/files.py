@@ -32,8 +32,8 @@ from aicalib_tf.calib import schema as S
 from aicalib_tf.calib.files import (FILES, calibration_dict, calibration_from_dict, existing_file, to_camera_info_yaml,
                                     to_json, to_opencv_yaml)
 from aicalib_tf.calib.kalibr import to_camchain_yaml
-from aicalib_tf.calib.rig_quality import pair_rectification
-from aicalib_tf.calib.rig_result import RigCalibration
+from aicalib_tf.calib.rig.quality import pair_rectification
+from aicalib_tf.calib.rig.result import RigCalibration
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.rectify import Rectification, essential_matrix, fundamental_matrix
 from aicalib_tf.io import atomic_write_text

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from aicalib_tf.calibrate import main
-from aicalib_tf.calib.rig_workflow import pair_images, parse_rig
+from aicalib_tf.calib.rig.workflow import pair_images, parse_rig
 from aicalib_tf.geometry.rectify import rotation_angle_deg
 
 
@@ -151,7 +151,7 @@ def test_a_charuco_rig_calibrates_from_views_that_each_camera_sees_in_part(tmp_p
 
 
 def test_a_circular_fisheye_rig_keeps_and_uses_each_cameras_image_circle(tmp_path, capsys):
-    from tests.calib.rig_synthetic import check_circular_rig_output, circular_rig
+    from tests.calib.rig.synthetic import check_circular_rig_output, circular_rig
 
     truth, frames = circular_rig()
     for side, k in (("left", 0), ("right", 1)):

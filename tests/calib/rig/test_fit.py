@@ -7,10 +7,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from aicalib_tf.calib.fit import CalibrationError, View
-from aicalib_tf.calib.rig import MIN_SHARED_VIEWS, calibrate_rig
-from aicalib_tf.calib.rig_quality import assess_rig, baseline_std, rotation_std_deg
+from aicalib_tf.calib.rig.fit import MIN_SHARED_VIEWS, calibrate_rig
+from aicalib_tf.calib.rig.quality import assess_rig, baseline_std, rotation_std_deg
 from aicalib_tf.geometry.rectify import rotation_angle_deg
-from tests.calib.rig_synthetic import PATTERN, SQUARE, fisheye, pinhole, rig_pose, rig_views
+from tests.calib.rig.synthetic import PATTERN, SQUARE, fisheye, pinhole, rig_pose, rig_views
 
 SIZE = (800, 600)
 

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from aicalib_tf.calib.rig import calibrate_rig
-from aicalib_tf.calib.rig_files import load_rig, load_stereo_yml, save_rig
-from aicalib_tf.calib.rig_quality import assess_rig, pair_rectification
+from aicalib_tf.calib.rig.fit import calibrate_rig
+from aicalib_tf.calib.rig.files import load_rig, load_stereo_yml, save_rig
+from aicalib_tf.calib.rig.quality import assess_rig, pair_rectification
 from aicalib_tf.geometry.rectify import essential_matrix
-from tests.calib.rig_synthetic import PATTERN, SQUARE, fisheye, pinhole, rig_pose, rig_views
+from tests.calib.rig.synthetic import PATTERN, SQUARE, fisheye, pinhole, rig_pose, rig_views
 
 SIZE = (800, 600)
 

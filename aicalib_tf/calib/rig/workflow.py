@@ -141,7 +141,7 @@ def _save_failed_rig(rig, folder: Path) -> None:
     """A failed rig's files: rig.json (status "failed", the problems) and each camera's own calibration
     (alone, never the joint fit's) in a folder of its name; no stereo files to be used by mistake."""
     from aicalib_tf.calib.files import FILES
-    from aicalib_tf.calib.rig_files import rig_texts
+    from aicalib_tf.calib.rig.files import rig_texts
     from aicalib_tf.io import atomic_write_text
 
     texts = rig_texts(dataclasses.replace(rig, cameras=rig.single or rig.cameras))
@@ -230,9 +230,9 @@ def rig_models(model: str, names: list[str]) -> list[str]:
 
 def write_rig_files(folder: Path, rig, report: str, figure: bytes) -> None:
     """Write a calibrated rig's files into ``folder`` (an :class:`~aicalib_tf.outfolder.OutputFolder`'s
-    staging path): every file of :func:`~aicalib_tf.calib.rig_files.save_rig`, or only rig.json and each
+    staging path): every file of :func:`~aicalib_tf.calib.rig.files.save_rig`, or only rig.json and each
     camera's own files for a failed rig; report.png and report.txt."""
-    from aicalib_tf.calib.rig_files import save_rig
+    from aicalib_tf.calib.rig.files import save_rig
     from aicalib_tf.io import atomic_write_bytes, atomic_write_text
 
     if rig.quality.get("status") == "failed":
@@ -253,10 +253,10 @@ def calibrate_views(views: dict, sizes: dict, pairing, skipped: dict, cfg, model
     pairing : a :class:`Pairing` ({camera: file path or (H, W) image} per frame, for the preview);
     skipped : {"camera/frame": why}; cfg : pattern, square, square_unit (:class:`RigConfig` or alike).
     """
-    from aicalib_tf.calib.rig import calibrate_rig
-    from aicalib_tf.calib.rig_quality import assess_rig
-    from aicalib_tf.calib.rig_report import format_rig_report, rig_figure
-    from aicalib_tf.calib.rig_sanity import rig_problems
+    from aicalib_tf.calib.rig.fit import calibrate_rig
+    from aicalib_tf.calib.rig.quality import assess_rig
+    from aicalib_tf.calib.rig.report import format_rig_report, rig_figure
+    from aicalib_tf.calib.rig.sanity import rig_problems
 
     names = list(views)
     rig = calibrate_rig([views[c] for c in names], cfg.pattern, cfg.square, [sizes[c] for c in names], names=names,

@@ -6,8 +6,8 @@ import cv2
 import numpy as np
 
 from aicalib_tf.calib.report import fov_line
-from aicalib_tf.calib.rig_quality import pair_rectification
-from aicalib_tf.calib.rig_result import RigCalibration
+from aicalib_tf.calib.rig.quality import pair_rectification
+from aicalib_tf.calib.rig.result import RigCalibration
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.io import ImageError, load_image, quantize
 
@@ -17,7 +17,7 @@ PREVIEW_LINES = 16  # horizontal lines drawn across the rectified preview
 
 
 def format_rig_report(rig: RigCalibration, pairing, skipped: dict) -> str:
-    """The text the CLI prints. pairing : :class:`~aicalib_tf.calib.rig_workflow.Pairing`; skipped : {"cam/frame": why}."""
+    """The text the CLI prints. pairing : :class:`~aicalib_tf.calib.rig.workflow.Pairing`; skipped : {"cam/frame": why}."""
     n_img = sum(len(fs) for _, fs in pairing.frames)
     lines = [f"{len(rig.names)} cameras, {len(pairing.frames)} frames ({n_img} images) paired by {pairing.rule}; "
              f"{len(rig.frames)} frames seen by two or more cameras used"]

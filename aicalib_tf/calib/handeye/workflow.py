@@ -13,7 +13,7 @@ import numpy as np
 
 from aicalib_tf.calib.bundle import CalibrationError
 from aicalib_tf.calib.fit import View
-from aicalib_tf.calib.handeye import DEFAULT_SIGMA_ROT_DEG, DEFAULT_SIGMA_T_MM, SETUPS, HandEyeResult, calibrate_handeye
+from aicalib_tf.calib.handeye.calibrate import DEFAULT_SIGMA_ROT_DEG, DEFAULT_SIGMA_T_MM, SETUPS, HandEyeResult, calibrate_handeye
 from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 
 __all__ = ["HandEyeConfig", "run_handeye", "square_in_metres"]
@@ -117,8 +117,8 @@ def run_handeye(cfg: HandEyeConfig) -> tuple[HandEyeResult, str]:
 
     Raises ValueError / CalibrationError / OSError for bad input, before writing anything (with
     ``save_partial``, a failed fit first writes handeye.json marked failed)."""
-    from aicalib_tf.calib.handeye_files import write_handeye_files
-    from aicalib_tf.calib.handeye_poses import match_poses, read_poses
+    from aicalib_tf.calib.handeye.files import write_handeye_files
+    from aicalib_tf.calib.handeye.poses import match_poses, read_poses
     from aicalib_tf.calib.workflow import make_detector, _target
     from aicalib_tf.io import expand_images
     from aicalib_tf.outfolder import OutputFolder
@@ -153,8 +153,8 @@ def run_handeye(cfg: HandEyeConfig) -> tuple[HandEyeResult, str]:
 
 
 def _calibrate(cfg, files, labels, matched, square_m, total, state, extra):
-    from aicalib_tf.calib.handeye_files import format_report
-    from aicalib_tf.calib.handeye_report import report_figure
+    from aicalib_tf.calib.handeye.files import format_report
+    from aicalib_tf.calib.handeye.report import report_figure
 
     skipped, rejected = state["skipped"], state["rejected"]
     views, size = _views(files, labels, cfg, skipped)
@@ -172,7 +172,7 @@ def _calibrate(cfg, files, labels, matched, square_m, total, state, extra):
 
 def _write_partial(cfg, error: str, state: dict, extra: dict) -> None:
     """handeye.json marked failed, in its own output folder (the run then fails with the error)."""
-    from aicalib_tf.calib.handeye_files import partial_dict
+    from aicalib_tf.calib.handeye.files import partial_dict
     from aicalib_tf.io import atomic_write_text
     from aicalib_tf.jsonio import dumps
     from aicalib_tf.outfolder import OutputFolder

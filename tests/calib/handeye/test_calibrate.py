@@ -10,10 +10,10 @@ import pytest
 
 from aicalib_tf.calib.bundle import CalibrationError
 from aicalib_tf.calib.fit import View
-from aicalib_tf.calib.handeye import calibrate_handeye
-from aicalib_tf.calib.handeye_fit import chain_G
-from aicalib_tf.calib.handeye_poses import match_poses, parse_poses
-from aicalib_tf.calib.handeye_solve import board_flips, closed_form, robust_start
+from aicalib_tf.calib.handeye.calibrate import calibrate_handeye
+from aicalib_tf.calib.handeye.fit import chain_G
+from aicalib_tf.calib.handeye.poses import match_poses, parse_poses
+from aicalib_tf.calib.handeye.solve import board_flips, closed_form, robust_start
 from aicalib_tf.cli import InputError
 from aicalib_tf.geometry.pattern import pattern_ids
 from aicalib_tf.geometry.transform import inv, matrix_to_quat, quat_to_matrix, rotation_angle, to_T

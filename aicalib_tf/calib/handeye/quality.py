@@ -2,7 +2,7 @@
 
 * σ of the transform (from the joint fit's covariance): translation mm and rotation degrees.
 * Spread: the RMS rotation of the robot's motions about their principal axes
-  (:func:`~aicalib_tf.calib.handeye_solve.rotation_spread`). Hand-eye needs rotations about at least two
+  (:func:`~aicalib_tf.calib.handeye.solve.rotation_spread`). Hand-eye needs rotations about at least two
   non-parallel axes: a second axis under ``MIN_SPREAD_DEG`` is refused (the transform is not
   fixed), under ``WARN_SPREAD_DEG`` it is a warning naming the axis to turn about.
 * Halves: the used views split into even and odd, each fitted alone (intrinsics held), and the two
@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from aicalib_tf.calib.bundle import CalibrationError
-from aicalib_tf.calib.handeye_solve import inv, rotation_angle, rotation_spread
+from aicalib_tf.calib.handeye.solve import inv, rotation_angle, rotation_spread
 
 __all__ = ["MIN_SPREAD_DEG", "WARN_SPREAD_DEG", "check_spread", "assess", "axis_name"]
 
@@ -86,9 +86,9 @@ def _halves(result, half_fit) -> dict:
 
 
 def assess(result, half_fit=None) -> dict:
-    """The verdict of a :class:`~aicalib_tf.calib.handeye.HandEyeResult`. half_fit : mask (V,) bool ->
-    a :class:`~aicalib_tf.calib.handeye_fit.JointFit` of those views, or None to skip the halves."""
-    from aicalib_tf.calib.handeye_fit import chain_G
+    """The verdict of a :class:`~aicalib_tf.calib.handeye.calibrate.HandEyeResult`. half_fit : mask (V,) bool ->
+    a :class:`~aicalib_tf.calib.handeye.fit.JointFit` of those views, or None to skip the halves."""
+    from aicalib_tf.calib.handeye.fit import chain_G
 
     s_mm, s_deg = result.std_X
     spread, warnings = check_spread(chain_G(result.setup, result.A), result.setup)

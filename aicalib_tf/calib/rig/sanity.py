@@ -13,7 +13,7 @@ A joint fit always returns numbers. These checks say when the numbers cannot des
   by more than :data:`MOVED_SIGMAS` combined standard deviations.
 
 A rig with a problem is written with ``"status": "failed"`` and its problems in ``rig.json``;
-each camera keeps its own calibration, never the joint fit's (:mod:`aicalib_tf.calib.rig_workflow`).
+each camera keeps its own calibration, never the joint fit's (:mod:`aicalib_tf.calib.rig.workflow`).
 """
 
 from __future__ import annotations
@@ -75,5 +75,5 @@ def _moved_problems(rig) -> list[str]:
 
 
 def rig_problems(rig) -> list[str]:
-    """What makes ``rig`` (a :class:`~aicalib_tf.calib.rig_result.RigCalibration`) absurd; [] when nothing does."""
+    """What makes ``rig`` (a :class:`~aicalib_tf.calib.rig.result.RigCalibration`) absurd; [] when nothing does."""
     return _baseline_problems(rig) + _disagreement_problems(rig) + _moved_problems(rig)

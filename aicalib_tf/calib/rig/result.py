@@ -10,7 +10,7 @@ import numpy as np
 
 from aicalib_tf.calib.bundle import param_names
 from aicalib_tf.calib.fit import Calibration
-from aicalib_tf.calib.rig_bundle import Observation, RigFit, global_layout
+from aicalib_tf.calib.rig.bundle import Observation, RigFit, global_layout
 from aicalib_tf.geometry.lens import Lens
 from aicalib_tf.geometry.rectify import compose, invert
 
@@ -28,9 +28,9 @@ class RigCalibration:
     frames : names of the frames seen by two or more cameras and kept; frame_rms : (F,) px, RMS
     over all their corners; frame_cameras : per frame, the indices of the cameras that saw it.
     rejected : {"camera/frame" or "frame": reason}. rms : px over every corner of the joint fit.
-    quality : filled by :func:`aicalib_tf.calib.rig_quality.assess_rig`. meta : provenance.
+    quality : filled by :func:`aicalib_tf.calib.rig.quality.assess_rig`. meta : provenance.
     single : each camera's own calibration (alone, before the joint fit), for the sanity checks
-    of :mod:`aicalib_tf.calib.rig_sanity`; not written to the files.
+    of :mod:`aicalib_tf.calib.rig.sanity`; not written to the files.
     """
 
     names: tuple[str, ...]

@@ -3,7 +3,7 @@
 One least-squares problem over
 
 * X (the hand-eye transform) and Y (the board's pose in the base, or on the flange), see
-  :mod:`aicalib_tf.calib.handeye_solve` for the chain ``C_i = X⁻¹ · G_i⁻¹ · Y``;
+  :mod:`aicalib_tf.calib.handeye.solve` for the chain ``C_i = X⁻¹ · G_i⁻¹ · Y``;
 * each view's robot pose ``A_i = T_base_flange``, which enters as a parameter with a prior: the
   reported pose, with σ_rot (radians, about each base axis) and σ_t (metres, each axis);
 * optionally the intrinsics ([fx, fy, cx, cy, *dist] of the lens model).

@@ -7,10 +7,10 @@ import pytest
 
 from aicalib_tf.calib.files import undistort
 from aicalib_tf.calib.fit import CalibrationError, View, calibrate_camera
-from aicalib_tf.calib.rig import calibrate_rig
-from aicalib_tf.calib.rig_sanity import rig_problems
+from aicalib_tf.calib.rig.fit import calibrate_rig
+from aicalib_tf.calib.rig.sanity import rig_problems
 from aicalib_tf.calib.view_checks import duplicates, view_problem
-from tests.calib.rig_synthetic import PATTERN, SQUARE, pinhole, rig_pose, rig_views
+from tests.calib.rig.synthetic import PATTERN, SQUARE, pinhole, rig_pose, rig_views
 from tests.calib.synthetic import synthetic_views
 
 SIZE = (800, 600)

@@ -19,8 +19,8 @@ import cv2
 import numpy as np
 
 from aicalib_tf.calib.quality import assess
-from aicalib_tf.calib.rig import RigCalibration, frame_groups, joint_start, pose_vector
-from aicalib_tf.calib.rig_bundle import rig_adjust
+from aicalib_tf.calib.rig.fit import RigCalibration, frame_groups, joint_start, pose_vector
+from aicalib_tf.calib.rig.bundle import rig_adjust
 from aicalib_tf.geometry.lens import Lens
 from aicalib_tf.geometry.rectify import Rectification, compose, invert, rectified_points, rectify_pair
 
@@ -144,7 +144,7 @@ def rig_verdict(pair: dict, unit: str = "") -> str:
 def assess_rig(rig: RigCalibration, views, *, holdout: bool = True, folds: int = MAX_FOLDS) -> RigCalibration:
     """``rig`` with ``quality`` filled (and each camera's own quality, without its half-vs-half fit).
 
-    views : per camera the views given to :func:`~aicalib_tf.calib.rig.calibrate_rig`. quality =
+    views : per camera the views given to :func:`~aicalib_tf.calib.rig.fit.calibrate_rig`. quality =
     {"pairs": [one dict per pair (0, k): cameras, pairs, in_sample_rms_px, held_out_rms_px, per_frame,
     baseline, baseline_std, rotation_deg, rotation_std_deg], "folds": k, "verdict": str}.
     """

@@ -10,7 +10,7 @@ cameras with one name were taken at the same instant (a pair), so they share the
    reference; the others are reached through the pair with the most shared frames (so a camera
    that never shares a frame with camera 0 is placed through another one). Each shared frame gives
    one estimate of the relative pose; the medoid of the estimates starts the fit.
-3. One least-squares fit over every camera and frame (:mod:`aicalib_tf.calib.rig_bundle`). A frame
+3. One least-squares fit over every camera and frame (:mod:`aicalib_tf.calib.rig.bundle`). A frame
    seen by two cameras ties them through the board's pose, whichever corners each sees: partial
    boards with board ids count. A view with ids relative to its visible grid (a board larger than
    the frame) keeps a pose of its own and serves its camera's lens only.
@@ -19,7 +19,7 @@ cameras with one name were taken at the same instant (a pair), so they share the
    (:func:`~aicalib_tf.calib.fit.outlier_threshold` on the frames' RMS), at most a third.
 
 Quality (epipolar errors on held-out pairs, baseline and rotation with σ) is in
-:mod:`aicalib_tf.calib.rig_quality`.
+:mod:`aicalib_tf.calib.rig.quality`.
 """
 
 from __future__ import annotations
@@ -31,8 +31,8 @@ import numpy as np
 
 from aicalib_tf.calib.bundle import CalibrationError
 from aicalib_tf.calib.fit import Calibration, calibrate_camera, outlier_threshold
-from aicalib_tf.calib.rig_bundle import Observation, RigFit, rig_adjust
-from aicalib_tf.calib.rig_result import RigCalibration, relative_flags, rig_result
+from aicalib_tf.calib.rig.bundle import Observation, RigFit, rig_adjust
+from aicalib_tf.calib.rig.result import RigCalibration, relative_flags, rig_result
 from aicalib_tf.geometry.pattern import board_points, check_lattice
 from aicalib_tf.geometry.rectify import compose, invert, relative_pose
 
