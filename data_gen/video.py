@@ -41,7 +41,6 @@ also holds their lattice ``ids``.
 
 from __future__ import annotations
 
-# size: one video's frame model (scene, truth, motion blur, rolling shutter), its writers and its command line
 import json
 import math
 import sys

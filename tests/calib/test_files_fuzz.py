@@ -1,4 +1,4 @@
-"""calib.files / calib.rig_files on hostile input: every bad file is a ValueError naming the file, never a crash.
+"""calib.files / calib.rig.files on hostile input: every bad file is a ValueError naming the file, never a crash.
 
 Random bytes, truncations, deep nesting and mutated fields go to ``load_calibration``,
 ``load_rig`` and ``load_stereo_yml``: each must return a valid calibration or raise

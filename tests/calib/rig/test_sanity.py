@@ -1,4 +1,4 @@
-"""Absurd calibrations are refused or marked failed, never written as good (view_checks, rig_sanity)."""
+"""Absurd calibrations are refused or marked failed, never written as good (view_checks, rig.sanity)."""
 
 from __future__ import annotations
 
