@@ -128,16 +128,11 @@ def _parse_args(argv):
 
 
 def _main(args) -> int:
-    from aicalib_tf.geometry.aprilgrid import AprilGrid, is_aprilgrid, load_board
-    from aicalib_tf.geometry.charuco import parse_board
-    from aicalib_tf.geometry.circles import is_circles
-    from aicalib_tf.geometry.circles import parse_board as parse_circles
+    from aicalib_tf.geometry.aprilgrid import AprilGrid
+    from aicalib_tf.geometry.boards import read_board
     from aicalib_tf.io import atomic_write_bytes
 
-    if is_circles(args.board):  # a bad description names its field; a good one is not printed here
-        raise ValueError(f"board {parse_circles(args.board).describe()}: circle grids are not printed by this command "
-                         "(it prints ChArUco boards and AprilGrids)")
-    board = load_board(args.board) if is_aprilgrid(args.board) else parse_board(args.board)
+    board = read_board(args.board, circles_refused="the board printer (it prints ChArUco boards and AprilGrids)")
     if not isinstance(board, AprilGrid) and not hasattr(board, "squares"):
         raise ValueError(f"{args.board}: a Kalibr checkerboard is a chessboard; this prints ChArUco boards and AprilGrids")
     if not 50 <= args.dpi <= 1200:

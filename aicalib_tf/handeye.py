@@ -113,10 +113,10 @@ def _config(args):
                   sigma_rot_deg=rot, sigma_t_mm=tr, save_partial=args.save_partial, quiet=args.quiet,
                   workers=args.workers, seed=args.seed)
     if args.board:
-        from aicalib_tf.geometry.aprilgrid import AprilGrid, Checkerboard, is_aprilgrid, load_board
-        from aicalib_tf.geometry.charuco import parse_board
+        from aicalib_tf.geometry.aprilgrid import AprilGrid, Checkerboard
+        from aicalib_tf.geometry.boards import read_board
 
-        board = load_board(args.board) if is_aprilgrid(args.board) else parse_board(args.board)
+        board = read_board(args.board, circles_refused="handeye")
         if isinstance(board, Checkerboard):  # a Kalibr checkerboard target: a chessboard
             return HandEyeConfig(pattern=board.pattern_size, square=board.square, square_unit=board.unit, **common)
         square = board.square_size if isinstance(board, AprilGrid) else board.square

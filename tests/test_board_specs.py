@@ -1,11 +1,14 @@
 """Bad board descriptions and Kalibr target files through every command that reads a board:
-calibrate, detect and board each give one line naming the field, and exit 2, before reading an image."""
+calibrate, detect, board, live and handeye each give one line naming the field, and exit 2, before
+reading an image."""
 
 import pytest
 
 from aicalib_tf.board import main as board_main
 from aicalib_tf.calibrate import main as calibrate_main
 from aicalib_tf.detect.__main__ import main as detect_main
+from aicalib_tf.handeye import main as handeye_main
+from aicalib_tf.live.__main__ import main as live_main
 
 SPECS = [  # (description or a target file's text, the field the line must name)
     ("aprilgrid:6x6,tag=88mm,spacing=1", "spacing"),
@@ -34,6 +37,9 @@ COMMANDS = {
     "calibrate": lambda board, tmp: calibrate_main([str(tmp / "x.png"), "--board", board, "--out", str(tmp / "cal")]),
     "detect": lambda board, tmp: detect_main([str(tmp / "x.png"), "--board", board, "--out", str(tmp / "det")]),
     "board": lambda board, tmp: board_main([board, "--out", str(tmp / "board.png")]),
+    "live": lambda board, tmp: live_main(["--board", board, "--out", str(tmp / "cal"), "--port", "0"]),
+    "handeye": lambda board, tmp: handeye_main([str(tmp / "x.png"), "--poses", str(tmp / "poses.csv"), "--board", board,
+                                                "--setup", "eye-in-hand", "--out", str(tmp / "cal")]),
 }
 
 
@@ -77,7 +83,7 @@ def test_a_kalibr_checkerboard_reads_as_a_chessboard(tmp_path):
     assert np.linalg.norm(found[:, None] - truth[None], axis=2).min(axis=0).max() < 0.1
 
 
-@pytest.mark.parametrize("command", ["detect", "board"])
+@pytest.mark.parametrize("command", ["detect", "board", "live", "handeye"])
 def test_a_good_circle_grid_is_refused_where_it_is_not_read(tmp_path, capsys, command):
     assert COMMANDS[command]("circles:4x11,spacing=20mm,asymmetric", tmp_path) == 2
     err = capsys.readouterr().err.strip().splitlines()

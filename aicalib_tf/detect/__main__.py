@@ -59,15 +59,10 @@ def _main(args) -> int:
     from aicalib_tf.outfolder import OutputFolder
 
     if args.board:  # detect_corners dispatches on a ChArUco board, the file detector on an AprilGrid
-        from aicalib_tf.geometry.aprilgrid import Checkerboard, is_aprilgrid, load_board
-        from aicalib_tf.geometry.charuco import parse_board
-        from aicalib_tf.geometry.circles import is_circles
-        from aicalib_tf.geometry.circles import parse_board as parse_circles
+        from aicalib_tf.geometry.aprilgrid import Checkerboard
+        from aicalib_tf.geometry.boards import read_board
 
-        if is_circles(args.board):  # a bad description names its field; a good one is calibrate's
-            raise ValueError(f"board {parse_circles(args.board).describe()}: detect does not read circle grids (their "
-                             "centres are placed with the lens): give it to calibrate --board")
-        pattern = load_board(args.board) if is_aprilgrid(args.board) else parse_board(args.board)
+        pattern = read_board(args.board, circles_refused="detect")  # circle centres are placed with the lens
         pattern = pattern.pattern_size if isinstance(pattern, Checkerboard) else pattern  # a Kalibr checkerboard
     elif args.pattern:
         pattern = check_pattern(parse_pattern(args.pattern))

@@ -86,17 +86,16 @@ def _config(args):
     check_max_views(args.max_views)
     check_out_path(args.out)
     if args.board:
-        from aicalib_tf.geometry.charuco import parse_board
-
         if args.pattern:
-            raise ValueError("give --pattern (a chessboard) or --board (a ChArUco board), not both")
-        from aicalib_tf.geometry.aprilgrid import AprilGrid, Checkerboard, is_aprilgrid, load_board
+            raise ValueError("give --pattern (a chessboard) or --board (a marker board), not both")
+        from aicalib_tf.geometry.aprilgrid import AprilGrid, Checkerboard
+        from aicalib_tf.geometry.boards import read_board
 
-        b = load_board(args.board) if is_aprilgrid(args.board) else parse_board(args.board)
+        b = read_board(args.board, circles_refused="the live page")
         pattern, square, unit = b.pattern_size, float(b.square_size if isinstance(b, AprilGrid) else b.square), b.unit
         board = None if isinstance(b, Checkerboard) else args.board  # a Kalibr checkerboard: a chessboard
     elif not args.pattern:
-        raise ValueError("give --pattern COLSxROWS (a chessboard) or --board charuco:... (a ChArUco board)")
+        raise ValueError("give --pattern COLSxROWS (a chessboard) or --board charuco:... or aprilgrid:... (a marker board)")
     else:
         pattern, board = check_pattern(parse_pattern(args.pattern)), None
         square, unit = parse_square(args.square)
