@@ -1,9 +1,12 @@
 """Chessboard detection: image -> corner map -> candidates -> sub-pixel refinement -> junctions
 -> grid -> board order or partial board -> :class:`Detection`.
 
-:mod:`aicalib_tf.detect.pipeline` runs the stages; each stage has its module, and each compiled
-kernel sits beside the module whose maths it implements (``*_kernels.py``; how they are compiled:
-:mod:`aicalib_tf.kernels`). Never imports the
+:mod:`aicalib_tf.detect.pipeline` runs the stages, which live in subpackages along the pipeline:
+:mod:`~aicalib_tf.detect.corners` (candidates to refined, tested corners),
+:mod:`~aicalib_tf.detect.chessboard` (grids, lattices, board order, partial boards),
+:mod:`~aicalib_tf.detect.charuco` and :mod:`~aicalib_tf.detect.boards` (AprilGrid, circle grids);
+each imports only those before it. Each compiled kernel sits beside the module whose maths it
+implements (``*_kernels.py``; how they are compiled: :mod:`aicalib_tf.kernels`). Never imports the
 benchmark. ``python -m aicalib_tf.detect`` is the command line.
 """
 
