@@ -43,7 +43,8 @@ def _view(cam: Camera, rvec, centre_px, z):
     R, _ = cv2.Rodrigues(np.asarray(rvec, np.float64))
     ray = cam.pixel_to_ray(np.asarray(centre_px, np.float64))
     tvec = z * ray / ray[2] - R @ target.centre()
-    img = render_board(cam, target, rvec, tvec, np.full(cam.image_size[::-1], 0.5, np.float32))
+    bg = np.full(cam.image_size[::-1], 0.5, np.float32)
+    img = render_board(cam, target, rvec, tvec, bg, samples=34, junction_samples=89)  # the video's sampling
     img = cv2.GaussianBlur(img, (0, 0), 0.7)
     return np.clip(np.rint(img * 255), 0, 255).astype(np.uint8), np.asarray(rvec, np.float64), tvec
 

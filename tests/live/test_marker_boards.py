@@ -37,6 +37,7 @@ def test_an_aprilgrid_runs_the_loop_and_the_page_gets_tag_ids(tmp_path):
         frame, truth = _frame(cut)
         update = state.add_gray(frame)
         assert update["examined"] and len(update["ids"]) == len(update["corners"]), update
+        assert update["missing"]  # what the views still lack, as for a chessboard
         want = board.tag_of(list(truth))  # each seen corner's tag
         assert sorted(update["ids"]) == sorted(want.tolist())
         assert all(update["ids"].count(k) == 4 for k in set(update["ids"]))  # the tags seen whole
