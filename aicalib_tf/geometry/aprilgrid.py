@@ -39,7 +39,7 @@ from aicalib_tf.geometry.charuco import parse_length
 from aicalib_tf.geometry.pattern import board_points, check_pattern
 
 __all__ = ["AprilGrid", "Checkerboard", "FAMILIES", "PREFIX", "MAX_LATTICE", "PRINT_ROTATION", "is_aprilgrid",
-           "parse_board", "read_kalibr_target", "load_board", "corner_count", "layout_image", "render_view"]
+           "parse_board", "read_kalibr_target", "load_board", "corner_count", "tag_image", "layout_image", "render_view"]
 
 PREFIX = "aprilgrid:"
 FAMILIES = {"tag36h11": "DICT_APRILTAG_36h11", "tag36h10": "DICT_APRILTAG_36h10",
