@@ -9,7 +9,7 @@ Chromium with ``autostart=1&autosave=1``: the page sends the fake camera's frame
 until the loop's stop rule holds, then saves. Prints whether a calibration file came out, the
 seconds it took, the frames the page sent and the views kept, the rate the page reached, and the
 saved calibration's fx error (%) and principal point error (px) against the render's truth.
-Needs Chromium (``apt-get install chromium``).
+``--board aprilgrid:...`` runs the same with a Kalibr AprilGrid. Needs Chromium (``apt-get install chromium``).
 """
 
 from __future__ import annotations
@@ -87,7 +87,10 @@ def main(argv=None) -> int:
     truth = json.loads((video / "labels.jsonl").read_text().splitlines()[0])
     K, Kt = cam["camera_matrix"], truth["K"]
     pp = ((K[0][2] - Kt[0][2]) ** 2 + (K[1][2] - Kt[1][2]) ** 2) ** 0.5
-    partial = sum(1 for v in cam["views"] if v["corners"] < truth["pattern_size"][0] * truth["pattern_size"][1])
+    from aicalib_tf.geometry.aprilgrid import corner_count
+
+    whole = corner_count(a.board) or truth["pattern_size"][0] * truth["pattern_size"][1]  # an AprilGrid's: its tag corners
+    partial = sum(1 for v in cam["views"] if v["corners"] < whole)
     print(f"saved {calib / 'camera.json'} after {took:.0f} s: {state.get('frames')} frames from the page, "
           f"{state.get('views')} views kept, {state.get('fps')} frames/s handled; {len(cam['views'])} views used "
           f"({partial} partial), fx error {100 * (K[0][0] / Kt[0][0] - 1):+.3f} %, principal point error {pp:.2f} px, "
