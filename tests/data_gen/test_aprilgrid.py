@@ -98,3 +98,22 @@ def test_a_kalibr_checkerboard_is_not_a_marker_board(tmp_path):
     with pytest.raises(ValueError, match="--pattern 7x5"):
         parse_marker_board(str(f))
     assert parse_marker_board("aprilgrid:6x6,tag=88mm,spacing=0.3") == BOARD
+
+
+def test_a_video_frame_of_a_grid_reads_back_with_its_labelled_ids(tmp_path):
+    from aicalib_tf.detect.boards.aprilgrid import detect_aprilgrid
+    from data_gen.video import VideoConfig, make_scene, render_frame
+
+    grid = "aprilgrid:4x3,tag=40mm,spacing=0.3"
+    cfg = VideoConfig(out=str(tmp_path), seconds=2.0, fps=2.0, size=(480, 360), board=grid, noise=0.0, shutter=0.0)
+    assert cfg.pattern == parse_board(grid).pattern_size and cfg.square == pytest.approx(4.0)
+    scene = make_scene(cfg)
+    for index in range(4):
+        img, lab = render_frame(scene, index)
+        det = detect_aprilgrid(img, parse_board(grid))
+        if len(det.ids):
+            break
+    assert len(det.ids) >= 8, "no frame of the video showed the grid"
+    at = {tuple(i): c for i, c in zip(lab["ids"], lab["corners"])}
+    err = [np.hypot(*np.subtract(c, at[tuple(i)])) for c, i in zip(det.corners, det.ids.tolist())]
+    assert lab["board"] == grid and len(lab["ids"]) == 48 and max(err) < 0.05, (index, max(err))
