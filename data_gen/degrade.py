@@ -16,7 +16,7 @@ import numpy as np
 
 from aicalib_tf.io import quantize
 
-__all__ = ["gaussian_noise", "shot_noise", "gaussian_blur", "motion_blur", "defocus", "contrast", "illumination_gradient", "vignetting", "shadow", "exposure", "jpeg", "salt_pepper", "circle_falloff", "field_blur", "apply_degradations", "DEGRADATIONS", "PIPELINE_ORDER", "CIRCLE_STEPS"]
+__all__ = ["gaussian_noise", "shot_noise", "gaussian_blur", "motion_blur", "defocus", "contrast", "illumination_gradient", "vignetting", "shadow", "exposure", "jpeg", "salt_pepper", "circle_falloff", "rim_vignetting", "field_blur", "apply_degradations", "DEGRADATIONS", "PIPELINE_ORDER", "CIRCLE_STEPS"]
 
 
 def illumination_gradient(img: np.ndarray, rng: np.random.Generator, *, strength: float) -> np.ndarray:
@@ -60,6 +60,36 @@ def circle_falloff(img: np.ndarray, rng: np.random.Generator, *, strength: float
     del rng
     rho = _circle_rho(img.shape, cx, cy, radius)
     return (img * np.clip(1.0 - np.float32(strength) * rho ** np.float32(power), 0.0, 1.0)).astype(np.float32)
+
+
+RIM_LAWS = ("cos4", "poly", "hard")
+
+
+def rim_vignetting(img: np.ndarray, rng: np.random.Generator, *, law: str, strength: float, edge: float,
+                   cx: float, cy: float, radius: float) -> np.ndarray:
+    """A fisheye's light fall-off by one of three laws of ρ, the distance from the image circle's
+    centre (cx, cy) px over its ``radius`` px; every law is black at ρ >= 1 when ``strength`` is 1.
+
+    law "cos4": light × (1 - strength·(1 - cos⁴(ρ·π/2))) (the cos⁴ law with the rim at 90°);
+    "poly": light × (1 - strength·(0.3ρ² + 0.7ρ⁶)) (flat centre, steep outer ring);
+    "hard": light unchanged inside ``edge`` (0..1 of the radius), falling linearly to
+    ``1 - strength`` over the rest (a hard black rim).
+
+    >>> [round(float(v), 2) for v in rim_vignetting(np.ones((1, 3), np.float32), None, law="hard",
+    ...  strength=1.0, edge=0.5, cx=0.0, cy=0.0, radius=2.0)[0]]
+    [1.0, 1.0, 0.0]
+    """
+    del rng
+    if law not in RIM_LAWS:
+        raise ValueError(f"rim_vignetting law must be one of {RIM_LAWS}, got {law!r}")
+    rho = np.minimum(_circle_rho(img.shape, cx, cy, radius), 1.0)
+    if law == "cos4":
+        loss = 1.0 - np.cos(rho * np.float32(math.pi / 2.0)) ** 4
+    elif law == "poly":
+        loss = 0.3 * rho ** 2 + 0.7 * rho ** 6
+    else:
+        loss = np.clip((rho - np.float32(edge)) / np.float32(max(1.0 - edge, 1e-6)), 0.0, 1.0)
+    return (img * np.clip(1.0 - np.float32(strength) * loss, 0.0, 1.0)).astype(np.float32)
 
 
 def field_blur(img: np.ndarray, rng: np.random.Generator, *, sigma_centre: float, sigma_rim: float, power: float,
@@ -195,6 +225,7 @@ DEGRADATIONS = {
     "illumination_gradient": illumination_gradient,
     "vignetting": vignetting,
     "circle_falloff": circle_falloff,
+    "rim_vignetting": rim_vignetting,
     "shadow": shadow,
     "contrast": contrast,
     "exposure": exposure,
@@ -211,7 +242,7 @@ DEGRADATIONS = {
 # Scene light, then lens, then sensor, then encoding and transmission.
 PIPELINE_ORDER = tuple(DEGRADATIONS)
 # Steps that follow a fisheye's image circle: the scene gives them ``cx``, ``cy`` and ``radius`` (px).
-CIRCLE_STEPS = ("circle_falloff", "field_blur")
+CIRCLE_STEPS = ("circle_falloff", "rim_vignetting", "field_blur")
 
 
 def apply_degradations(img: np.ndarray, steps: list[dict], rng: np.random.Generator) -> np.ndarray:

@@ -44,6 +44,8 @@ class Preset:
     board : None (chessboards, sized by ``pattern`` or the ranges), a ChArUco description,
     ``charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100`` (:mod:`aicalib_tf.geometry.charuco`), or an
     AprilGrid, ``aprilgrid:6x6,tag=88mm,spacing=0.3`` or a Kalibr target YAML (:mod:`data_gen.targets`).
+    margin_range : the chessboard paper's white margin around the outer squares, in squares.
+    paper_black, paper_white : the ranges of the chessboard's black and white reflectance (0..1).
     flex : (w_x, w_y) every chessboard's parabolic sag in squares (:class:`data_gen.board.Board`'s ``flex``,
     recorded in the label's ``board``); (0, 0): flat boards.
     """
@@ -70,6 +72,9 @@ class Preset:
     board: str | None = None
     fisheye_circular_from_deg: float = 175.0
     flex: tuple[float, float] = (0.0, 0.0)
+    margin_range: tuple[float, float] = (0.15, 1.0)
+    paper_black: tuple[float, float] = (0.04, 0.22)
+    paper_white: tuple[float, float] = (0.7, 0.95)
 
     def __post_init__(self):
         if any(self.flex) and self.board is not None:
@@ -254,6 +259,38 @@ _add(Preset(
         Rule.of("field_blur", sigma_centre=(0.5, 0.9), sigma_rim=(1.2, 2.5), power=(1.5, 3.0)),
         Rule.of("gaussian_noise", sigma=2.0),
     ),
+))
+_add(Preset(
+    name="closeup_laws",
+    description="Close-up boards through circular 150–210° fisheyes (equidistant, DS, EUCM) under other laws "
+                "than fisheye_closeup's: the paper spans 30–90% of the image circle and reaches its rim, light "
+                "falls by a cos⁴, a polynomial or a hard black-rim law, blur grows linearly to quadratically "
+                "towards the rim (to σ 3.5 px), narrow margins, lower contrast, small checker patterns in clutter.",
+    sizes=((640, 480), (1280, 960)),
+    lens=("fisheye", "ds", "eucm"),
+    fisheye_fov_deg=(150.0, 210.0),
+    fisheye_circular_from_deg=0.0,
+    pose=PoseConfig(tilt_max_deg=50.0, circle_fill=(0.3, 0.9), max_view_angle_deg=88.0),
+    clutter=(0.5, 2.0),
+    checker_distractors=(1.0, 3.0),
+    margin_range=(0.05, 1.0),
+    paper_black=(0.04, 0.4),
+    paper_white=(0.55, 0.95),
+    rules=(
+        Rule.of("rim_vignetting", law=("cos4", "poly", "hard"), strength=(0.9, 1.0), edge=(0.6, 0.9)),
+        Rule.of("field_blur", sigma_centre=(0.4, 1.0), sigma_rim=(1.0, 3.5), power=(1.0, 2.0)),
+        Rule.of("gaussian_noise", sigma=(1.0, 6.0)),
+    ),
+))
+_add(Preset(
+    name="tilt_steep",
+    description="Boards tilted up to 80° from facing the camera (squares foreshortened to 3–4 px along the "
+                "tilt), pinhole lenses with no or mild distortion, some clutter.",
+    hfov_deg=(40.0, 90.0),
+    pose=PoseConfig(tilt_max_deg=80.0, fill=(0.45, 0.95), max_view_angle_deg=88.0),
+    clutter=(0.0, 1.0),
+    checker_distractors=(0.0, 1.0),
+    rules=(_OPTICS, Rule.of("gaussian_noise", sigma=(1.0, 4.0))),
 ))
 
 

@@ -57,6 +57,8 @@ class Sample:
 
 
 def _draw(rng: np.random.Generator, value):
+    if isinstance(value, (tuple, list)) and value and all(isinstance(v, str) for v in value):
+        return value[int(rng.integers(len(value)))]  # a choice among named laws
     if isinstance(value, (tuple, list)) and len(value) == 2:
         return float(rng.uniform(value[0], value[1]))
     return value
@@ -97,6 +99,9 @@ def scene_for(preset: Preset, seed: int, camera_id: int, size=None, pattern=None
         pattern_size=pattern or preset.pattern,
         cols_range=preset.cols_range,
         rows_range=preset.rows_range,
+        margin_range=preset.margin_range,
+        black_range=preset.paper_black,
+        white_range=preset.paper_white,
     )
     if any(preset.flex):  # after the draws: the same camera and board as the flat preset
         board = replace(board, flex=preset.flex)

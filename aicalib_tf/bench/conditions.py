@@ -25,7 +25,7 @@ from data_gen.sample import Sample, make_sample
 __all__ = [
     "PATTERN", "is_fisheye", "Condition", "named_conditions", "sweep_conditions", "all_conditions", "select_conditions",
     "condition_samples", "calibration_sequences", "board_tilt_deg", "square_px", "CALIB_SEED", "CALIB_CAMERAS",
-    "FISHEYE_SEQUENCES", "fisheye_preset",
+    "FISHEYE_SEQUENCES", "fisheye_preset", "generalize_conditions",
 ]
 
 PATTERN = (9, 6)
@@ -169,6 +169,21 @@ def sweep_conditions() -> list[Condition]:
     return out
 
 
+def generalize_conditions() -> list[Condition]:
+    """Conditions the detector was not tuned on (seed 41, 640×480): data_gen's ``closeup_laws`` split by
+    lens family (``closeup-eq``: equidistant; ``closeup-unified``: DS and EUCM, the held-out family)
+    and ``tilt_steep`` kept at 55–80°. Not in ``all``: select them by name or as ``generalize``."""
+    laws = replace(get_preset("closeup_laws"), sizes=(VGA,))
+    return [
+        Condition("closeup-eq", replace(laws, name="closeup-eq", lens="fisheye"), seed=41,
+                  description="close-ups, equidistant 150–210° circles, cos⁴/polynomial/hard rim, field blur"),
+        Condition("closeup-unified", replace(laws, name="closeup-unified", lens=("ds", "eucm")), seed=41,
+                  description="close-ups, DS and EUCM 150–210° circles, cos⁴/polynomial/hard rim, field blur"),
+        Condition("tilt-steep", get_preset("tilt_steep"), seed=41, min_tilt_deg=55.0,
+                  description="steep tilt: 55–80° between board normal and optical axis"),
+    ]
+
+
 def all_conditions() -> list[Condition]:
     """The named conditions followed by every sweep level."""
     return named_conditions() + sweep_conditions()
@@ -187,14 +202,17 @@ def select_conditions(spec: str | None) -> list[Condition]:
     for item in (s.strip() for s in spec.split(",") if s.strip()):
         if item == "named":
             picked = named_conditions()
+        elif item == "generalize":
+            picked = generalize_conditions()
         elif item == "sweeps":
             picked = sweep_conditions()
         elif item in sweeps:
             picked = [c for c in everything if c.sweep == item]
         else:
-            picked = [c for c in everything if c.name == item]
+            picked = [c for c in everything + generalize_conditions() if c.name == item]
             if not picked:
-                names = ", ".join([c.name for c in named_conditions()] + sorted(sweeps) + ["named", "sweeps", "all"])
+                names = ", ".join([c.name for c in named_conditions() + generalize_conditions()] + sorted(sweeps)
+                                  + ["named", "sweeps", "generalize", "all"])
                 raise ValueError(f"unknown condition {item!r}; choose from: {names}")
         chosen += [c for c in picked if c not in chosen]
     return chosen

@@ -1,0 +1,136 @@
+"""Which stage of the detector loses each board it misses, judged against the truth.
+
+    python benchmarks/stage_misses.py --conditions generalize --count 40 [--model PATH] [--show]
+
+For each image of the named evaluate conditions (``aicalib_tf.bench.conditions``: the same renders,
+``generalize`` for the close-up and steep-tilt conditions the detector was not tuned on), the shipped
+pipeline (:func:`aicalib_tf.detect_corners` with the 9×6 pattern) is scored as evaluate scores it
+(hit, wrong, miss). Each board not hit is then followed through the stages at full size, as
+:mod:`aicalib_tf.detect.pipeline` runs them, with the true corners as the yardstick:
+
+- **map**: the share of true corners with a network point (strong or weak) within 3 px;
+- **candidates**: the share with a refined candidate within 1.5 px;
+- **grid**: the most true corners one assembled grid holds (straight seeds, then bent ones), a
+  grid point counting when it is within 2 px of a true corner;
+- **order**: whether the board order accepts a grid that holds every true corner.
+
+The stage blamed is the first that falls short: map (under 80% of the corners), candidates (under
+80%, or a fifth fewer than the map had), grid (no grid with every corner), order (a grid with every
+corner refused), else ``pipeline`` (the full-size stages find it: a scale, the quick pass or the
+zoom loses it). Prints one line per miss with these figures and the counts per condition and stage.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections import Counter
+
+import numpy as np
+
+from aicalib_tf.bench.conditions import PATTERN, condition_samples, select_conditions
+from aicalib_tf.bench.metrics import board_detection_outcome
+
+STAGES = ("map", "candidates", "grid", "order", "pipeline")
+
+
+def _recall(truth: np.ndarray, pts: np.ndarray, tol: float) -> np.ndarray:
+    """(N,) bool: true corners (N, 2) with a point of (M, 2) within ``tol`` px."""
+    if len(pts) == 0:
+        return np.zeros(len(truth), bool)
+    d = np.linalg.norm(truth[:, None, :] - np.asarray(pts, np.float64)[None, :, :], axis=2)
+    return d.min(axis=1) <= tol
+
+
+def trace(gray: np.ndarray, truth: np.ndarray, model, pattern=PATTERN, threshold: float = 0.5) -> dict:
+    """The full-size stages on ``gray`` (H, W) float32 against ``truth`` (cols·rows, 2) px.
+
+    Returns {"map", "candidates"}: shares of true corners found; "grid": most true corners in one
+    grid; "grid_shape"; "accepted": a grid with every corner passes the board order; "stage".
+    """
+    from aicalib_tf.cnn.inference import weak_corner_points
+    from aicalib_tf.detect import pipeline as pl
+
+    n = len(truth)
+    strong, _, lower = weak_corner_points(model, gray, threshold, pl.WEAK * threshold)
+    net = np.concatenate([strong.reshape(-1, 2), np.asarray(lower()[0]).reshape(-1, 2)])
+    smoothed = pl.Smoothed(gray, None)
+    refined, scores, weak = pl.refined_points(model, gray, threshold, smoothed=smoothed, min_points=pl.MIN_CORNERS,
+                                              weak=pl.WEAK)
+    out = {"map": float(_recall(truth, net, 3.0).mean()), "candidates": float(_recall(truth, refined, 1.5).mean()),
+           "grid": 0, "grid_shape": None, "accepted": False}
+    grids = []
+    if len(refined) >= pl.MIN_CORNERS:
+        smooth = smoothed.sigma(pl.RING_SIGMA)
+        propose = pl.proposer(smoothed, smooth, pl.typical_amplitude(smooth, refined, pl.MIN_CORNERS), weak=weak)
+        limit = max(pattern) + 1
+        grids = pl.assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit)
+        grids += pl.assemble_grids(refined, scores, gray=smooth, propose=propose.bent, limit=limit, bend=True)
+        for g in grids:
+            held = int(_recall(truth, g.points, 2.0).sum())
+            on = _recall(g.points, truth, 2.0).all()
+            if held > out["grid"] or (held == out["grid"] == n and on):
+                out["grid"], out["grid_shape"] = held, list(g.shape)
+            if held == n and len(g) == n and pl.full_board(g, scores, pattern, smooth) is not None:
+                out["accepted"] = True
+    out["stage"] = _blame(out, n)
+    return out
+
+
+def _blame(t: dict, n: int) -> str:
+    if t["map"] < 0.8:
+        return "map"
+    if t["candidates"] < 0.8 or t["candidates"] < t["map"] - 0.2:
+        return "candidates"
+    if t["grid"] < n:
+        return "grid"
+    if not t["accepted"]:
+        return "order"
+    return "pipeline"
+
+
+def run_condition(cond, count: int, model, show: bool) -> Counter:
+    """Counts of outcomes and blamed stages over ``count`` images of ``cond``; prints each miss."""
+    from aicalib_tf import detect_corners
+
+    counts: Counter = Counter()
+    for index, s in condition_samples(cond, count):
+        det = detect_corners(s.image, PATTERN, model=model)
+        found = det.corners if det.complete else None
+        outcome, _ = board_detection_outcome(found, s.corners, PATTERN)
+        counts[outcome] += 1
+        if outcome == "hit":
+            continue
+        t = trace(s.image.astype(np.float32), s.corners, model)
+        counts[t["stage"]] += 1
+        lab = s.label
+        if show:
+            print(f"  {cond.name} #{index}: {outcome}, {t['stage']}: map {t['map']:.2f} cand {t['candidates']:.2f} "
+                  f"grid {t['grid']}/{len(s.corners)} {t['grid_shape']} accepted {t['accepted']} | "
+                  f"{lab['distortion_model']} {2 * (lab['max_theta_deg'] or 0):.0f}° reason {det.reason!r}", flush=True)
+    return counts
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--conditions", default="generalize", help="evaluate condition names, or 'generalize'")
+    ap.add_argument("--count", type=int, default=40, help="images per condition")
+    ap.add_argument("--model", default=None, help="corner model (default: the shipped one)")
+    ap.add_argument("--show", action="store_true", help="one line per miss")
+    args = ap.parse_args(argv)
+    from aicalib_tf.cnn.model import load_model
+    from aicalib_tf.cnn.spec import DETECTOR_NETWORK
+
+    model = load_model(args.model or DETECTOR_NETWORK)
+    print(f"| condition | hit | wrong | miss | {' | '.join(STAGES)} |\n|---|---|---|---|{'---|' * len(STAGES)}")
+    rows = []
+    for cond in select_conditions(args.conditions):
+        c = run_condition(cond, args.count, model, args.show)
+        rows.append(f"| {cond.name} | {c['hit']} | {c['wrong']} | {c['miss']} | "
+                    + " | ".join(str(c[s]) for s in STAGES) + " |")
+        print(rows[-1], flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
