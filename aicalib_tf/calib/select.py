@@ -55,6 +55,15 @@ rational_polynomial beat equidistant's held-out RMS by 1.5 standard errors (0.16
 0.171 ± 0.002 px) with k1 = 0.34 ± 0.23, and the two halves of the views chose different families:
 beyond the boards its pixels were a pinhole's extrapolation of a lens it cannot image.
 
+Wide lenses. When the boards or the image circle's rim reach :data:`WIDE_REACH_DEG` or more
+off-axis (and a pinhole is still eligible, below 85°), a pinhole-family model is chosen only by a
+clear held-out margin over the best of the fisheye family and the spline: its gain over that model
+at least :data:`PINHOLE_MARGIN_SE` times the gain's noise (:func:`_gain_noise`) and
+:data:`PINHOLE_MARGIN_FRACTION` of that model's held-out RMS; short of it, the pinhole rows leave the
+choice and their notes say so. The one-SE rule alone handed the 1.5-SE edge of the example above to
+rational_polynomial, whose field of view over the image circle was then a pinhole's extrapolation
+(147° for a 185° lens).
+
 A model whose fit chooses its layout from the views (the spline, ``START == "layout"``) comes last, and
 is fitted only when the best model so far leaves a pattern in its residuals over the image
 (:func:`~aicalib_tf.calib.splined_fit.misfit_note`); its row says so otherwise. A spline refused by its
@@ -83,7 +92,7 @@ from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens, get_model
 from aicalib_tf.geometry.pattern import board_points
 
 __all__ = ["select_model", "cross_validate", "fold_scores", "choose", "undetermined_extras", "widest_ray_deg", "COMPLEXITY",
-           "RAY_MARGIN_DEG"]
+           "RAY_MARGIN_DEG", "WIDE_REACH_DEG", "PINHOLE_MARGIN_SE", "PINHOLE_MARGIN_FRACTION", "pinhole_margin_note"]
 
 COMPLEXITY = tuple(sorted(MODELS, key=lambda m: get_model(m).RANK))  # simplest first (each model's RANK), see above
 MAX_FOLDS = 5
@@ -93,6 +102,9 @@ MIN_CV_VIEWS = 4  # every fold then leaves at least 3 views to fit
 # folds also take minutes, which a small calibration should not wait for
 AUTO_SPLINE_VIEWS = 20
 RAY_MARGIN_DEG = 5.0  # a model must image rays this far beyond the widest reached (pinholes: below 85°)
+WIDE_REACH_DEG = 70.0  # from this reach on, a pinhole needs a clear held-out margin over the wide models
+PINHOLE_MARGIN_SE = 2.0  # that margin: this many standard errors of the gain ...
+PINHOLE_MARGIN_FRACTION = 0.05  # ... and this fraction of the wide model's held-out RMS
 
 
 
@@ -171,11 +183,38 @@ def _gain(r: dict, best: dict) -> float:
     return min(gain, float(folds[:-1].mean()))
 
 
-def choose(rows: list[dict]) -> str | None:
+def pinhole_margin_note(rows: list[dict], reach_deg: float) -> dict[str, str]:
+    """{pinhole model: why it leaves the choice} for a lens reaching ``reach_deg`` off-axis: every
+    cross-validated pinhole-family row whose held-out gain over the best fisheye-family or spline row
+    falls short of the clear margin (module docstring, "Wide lenses"); {} below :data:`WIDE_REACH_DEG`
+    or without a cross-validated wide row."""
+    ok = [r for r in rows if np.isfinite(r["cv_rms"])]
+    wide = [r for r in ok if get_model(r["model"]).IS_FISHEYE]
+    if not reach_deg >= WIDE_REACH_DEG or not wide:
+        return {}
+    ref = min(wide, key=lambda r: r["cv_rms"])
+    out = {}
+    for r in ok:
+        if get_model(r["model"]).IS_FISHEYE:
+            continue
+        gain, noise = ref["cv_rms"] - r["cv_rms"], _gain_noise(ref, r)
+        need = max(PINHOLE_MARGIN_SE * noise, PINHOLE_MARGIN_FRACTION * ref["cv_rms"])
+        if not gain > need:
+            out[r["model"]] = (f"rays reach {reach_deg:.1f}° off-axis: a pinhole model needs a held-out gain of "
+                               f"{need:.4f} px over {ref['model']} ({PINHOLE_MARGIN_SE:g} SE and "
+                               f"{100 * PINHOLE_MARGIN_FRACTION:g}%), got {gain:+.4f} (not chosen)")
+    return out
+
+
+def choose(rows: list[dict], reach_deg: float = float("nan")) -> str | None:
     """The simplest model whose held-out RMS is within the noise of the best's (:func:`_gain` within
     :func:`_gain_noise`: one standard error) and whose extras are determined (rows as in
-    :func:`select_model`; a row without "determined" counts as determined)."""
+    :func:`select_model`; a row without "determined" counts as determined). reach_deg : the widest ray
+    the boards or the image circle reach (degrees; NaN: unknown); from :data:`WIDE_REACH_DEG` on, the
+    pinholes without a clear margin (:func:`pinhole_margin_note`) leave the choice."""
     ok = [r for r in rows if np.isfinite(r["cv_rms"])]
+    out = pinhole_margin_note(ok, reach_deg)
+    ok = [r for r in ok if r["model"] not in out] or ok
     if not ok:
         return None
     best = min(ok, key=lambda r: r["cv_rms"])
@@ -277,7 +316,11 @@ def select_model(views, square_size: float, fit, models=MODELS, *, circle=None):
         except CalibrationError as exc:
             row["note"] = str(exc)
     table = [rows[m] for m in models]
-    chosen = choose(table) if len(views) >= MIN_CV_VIEWS else next((m for m in models if m in fits), None)
+    reach = float("nan") if widest is None else widest
+    if len(views) >= MIN_CV_VIEWS:
+        for m, note in pinhole_margin_note(table, reach).items():
+            rows[m]["note"] = "; ".join(n for n in (rows[m]["note"], note) if n)
+    chosen = choose(table, reach) if len(views) >= MIN_CV_VIEWS else next((m for m in models if m in fits), None)
     if chosen is None:
         raise CalibrationError("no lens model could be fitted: " + "; ".join(f"{r['note']}" for r in table))
     for r in table:

@@ -219,3 +219,27 @@ def test_the_image_circles_rim_makes_pinholes_ineligible_when_the_boards_stop_sh
     rows = {r["model"]: r for r in table}
     assert chosen == "equidistant" and not np.isfinite(rows["plumb_bob"]["rms"])
     assert "the image circle's rim is at rays 92." in rows["plumb_bob"]["note"] and "not eligible" in rows["plumb_bob"]["note"]
+
+
+def test_a_pinhole_needs_a_clear_held_out_margin_once_the_rays_reach_70_degrees():
+    from aicalib_tf.calib.select import PINHOLE_MARGIN_SE, WIDE_REACH_DEG, pinhole_margin_note
+
+    eq, ra = [0.170, 0.174, 0.169, 0.172, 0.170], [0.167, 0.171, 0.166, 0.170, 0.166]  # rational 1.5 SE ahead
+    rows = [dict(_row("equidistant", np.mean(eq), np.std(eq, ddof=1) / np.sqrt(5)), cv_folds=eq),
+            dict(_row("rational_polynomial", np.mean(ra), np.std(ra, ddof=1) / np.sqrt(5)), cv_folds=ra)]
+    assert choose(rows) == choose(rows, 60.0) == "rational_polynomial"  # a narrow reach: the one-SE rule alone
+    assert choose(rows, WIDE_REACH_DEG) == "equidistant"
+    note = pinhole_margin_note(rows, 78.0)["rational_polynomial"]
+    assert "rays reach 78.0° off-axis" in note and "over equidistant" in note and "not chosen" in note
+    clear = [x - 0.03 for x in eq]  # 18% and many standard errors ahead: the pinhole wins
+    rows[1] = dict(rows[1], cv_rms=float(np.mean(clear)), cv_folds=clear, cv_se=float(np.std(clear, ddof=1) / np.sqrt(5)))
+    assert pinhole_margin_note(rows, 78.0) == {} and choose(rows, 78.0) == "rational_polynomial"
+    uneven = [x - (0.030 if i % 2 == 0 else -0.005) for i, x in enumerate(eq)]  # 9% ahead, but within 2 SE of its gain
+    rows[1] = dict(rows[1], cv_rms=float(np.mean(uneven)), cv_folds=uneven,
+                   cv_se=float(np.std(uneven, ddof=1) / np.sqrt(5)))
+    gain = np.subtract(eq, uneven)
+    assert PINHOLE_MARGIN_SE * gain.std(ddof=1) / np.sqrt(5) > gain.mean() > 0.05 * np.mean(eq)
+    assert choose(rows) == "rational_polynomial"
+    assert choose(rows, 78.0) == "equidistant"
+    assert choose([rows[1]], 78.0) == "rational_polynomial"  # no wide model cross-validated: nothing to hold it to
+
