@@ -59,6 +59,18 @@ def test_a_flex_the_views_cannot_determine_stays_off_and_says_why():
     assert solve_lines(cal)[-1].startswith("board flex: not solved")
 
 
+def test_a_flex_too_noisy_to_determine_is_left_off_in_the_fit_the_report_and_camera_json():
+    views = flexed_views(6, noise=1.5, flex=(0.01, 0.0), seed=6)  # six views at 1.5 px: σ of the flex ≈ 0.01 squares
+    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="auto")
+    flat = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="off")
+    assert cal.flex is None and cal.flex_note.startswith("not determined by these views (σ")
+    assert abs(cal.fx - flat.fx) < 1e-3 * flat.std["fx"]  # the fit is the flat one
+    assert solve_lines(cal)[-1] == f"board flex: {cal.flex_note}"
+    d = json.loads(to_json(cal))["board_flex"]
+    assert d["wx"] is None and d["wy"] is None and d["note"] == cal.flex_note
+    assert calibration_from_dict(json.loads(to_json(cal))).flex is None
+
+
 def test_displaced_corners_are_the_ones_rejected_and_the_fit_is_the_clean_one():
     views = flexed_views(seed=3)
     rng = np.random.default_rng(7)
