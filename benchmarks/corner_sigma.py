@@ -12,16 +12,18 @@ prints the corners matched, the measured RMS error per axis, the RMS of the pred
 |error| with σ among the condition's corners.
 
 ``--fit`` renders the conditions of ``--fit-on`` again with other seeds (``FIT_SEEDS``: other
-scenes, cameras, poses and noise), fits the model there (:func:`fit_coeffs`) and reports with the
+scenes, cameras, poses and noise), fits the model there (:func:`fit_table`) and reports with the
 fitted table on the benchmark's own renders, which the fit never saw; paste the printed table into
 the module. ``--fit-on sweeps`` leaves the named conditions (shading, occluders, fisheyes, ...) out
 of the fit altogether, to see how the model carries to conditions it was not fitted on.
 
 ``--calibrate`` degrades the calibration sequences' views (:func:`aicalib_tf.bench.conditions.calibration_sequences`,
 cameras 0–3) one by one with a blur and a noise drawn from ``MIXED`` (seeded per view), detects them
-and calibrates each camera with its corners weighted in each way of ``WEIGHTINGS`` (all equal, by
-their σ, by σ with a floor added in quadrature, by the view's median σ), with the lens model the truth has (plumb_bob); it prints the rotation-free errors against the true camera: fx %, the
-principal point and the mean projection error over the area the boards covered.
+and calibrates each camera with its corners weighted by each rule of ``WEIGHTINGS`` (all equal; each
+view's median σ; each corner's σ clipped to 0.5-2x the view's median; each corner's own σ:
+:mod:`aicalib_tf.calib.weights`), with the lens model the truth has (plumb_bob); it prints the
+rotation-free errors against the true camera: fx %, the principal point and the mean projection
+error over the area the boards covered.
 """
 
 from __future__ import annotations
@@ -39,17 +41,17 @@ sys.path.insert(0, str(ROOT))
 
 from aicalib_tf.bench.conditions import PATTERN, condition_samples, select_conditions  # noqa: E402
 from aicalib_tf.bench.metrics import WRONG_PX  # noqa: E402
+from aicalib_tf.calib import weights  # noqa: E402
 from aicalib_tf.detect.corners import sigma as cs  # noqa: E402
 from aicalib_tf.detect.pipeline import detect_corners  # noqa: E402
 from aicalib_tf.detect.pyramid import Frame  # noqa: E402
 from aicalib_tf.io import read_image  # noqa: E402
 
 FIT_SEEDS = (1031, 1032)  # scenes for fitting; the benchmark's own seeds are 21 (named) and 31 (sweeps)
-ML_WEIGHT = 0.1  # the maximum-likelihood term's weight beside the per-image agreement
 
 
 def board_errors(image: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
-    """Detect the board in ``image``; its design columns (K, 6), errors (K, 2) px and the gross count.
+    """Detect the board in ``image``; its design columns (K, len(COLUMNS)), errors (K, 2) px and the gross count.
 
     truth : (M, 2) px, the visible true corners. Each detected corner is matched to the nearest of
     them; errors are detected − true for those within ``WRONG_PX``, the others counted as gross.
@@ -67,7 +69,7 @@ def board_errors(image: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def collect(conditions, images: int) -> dict[str, dict[str, np.ndarray]]:
-    """{condition: {"x": (K, 6), "err": (K, 2) px, "image": (K,) int, "gross": ()}} over ``images`` renders each."""
+    """{condition: {"x": (K, len(COLUMNS)), "err": (K, 2) px, "image": (K,) int, "gross": ()}} over ``images`` renders each."""
     out = {}
     for cond in conditions:
         if not cond.has_board:
@@ -84,12 +86,12 @@ def collect(conditions, images: int) -> dict[str, dict[str, np.ndarray]]:
     return out
 
 
-def fit_coeffs(x: np.ndarray, errors: np.ndarray, groups: np.ndarray, ml_weight: float = ML_WEIGHT) -> np.ndarray:
-    """Coefficients (1 + k,) of log σ = c · [1, x] that make each group's (image's) mean σ² agree with its
-    mean squared error per axis, in the least-squares sense on their logarithms, plus ``ml_weight``
-    times the mean negative log-likelihood of the errors (Gaussian, σ per axis), which orders the
-    corners inside an image. x : (K, k) design columns, already clipped. errors : (K, 2) px.
-    groups : (K,) int, the image of each corner.
+def fit_board(x: np.ndarray, offset: np.ndarray, errors: np.ndarray, groups: np.ndarray) -> np.ndarray:
+    """Coefficients (1 + k,) of log σ = c · [1, x] + offset that make each group's (image's) mean σ² agree
+    with its mean squared error per axis, in the least-squares sense on their logarithms.
+
+    x : (K, k) board columns, already clipped. offset : (K,) each corner's own part of log σ (fixed).
+    errors : (K, 2) px. groups : (K,) int, the image of each corner.
     """
     from scipy.optimize import minimize
 
@@ -100,28 +102,53 @@ def fit_coeffs(x: np.ndarray, errors: np.ndarray, groups: np.ndarray, ml_weight:
     mean_e2 = np.maximum(np.bincount(g, e2) / count, 1e-12)
 
     def loss(c):
-        t = a @ c
-        s2 = np.exp(2 * t)
+        s2 = np.exp(2 * (a @ c + offset))
         ms2 = np.bincount(g, s2) / count
         r = np.log(mean_e2) - np.log(ms2)
         d_ms2 = np.stack([np.bincount(g, 2 * s2 * a[:, j], len(count)) for j in range(a.shape[1])], axis=1) / count[:, None]
-        u = e2 * np.exp(-2 * t)
-        value = float(r @ r) + ml_weight * float(np.mean(u + 2 * t))
-        grad = -2 * (r / ms2) @ d_ms2 + ml_weight * ((2 - 2 * u) @ a) / len(a)
-        return value, grad
+        return float(r @ r), -2 * (r / ms2) @ d_ms2
 
     c0 = np.zeros(a.shape[1])
     c0[0] = 0.5 * np.log(np.mean(e2))
     return minimize(loss, c0, jac=True, method="BFGS").x
 
 
+def fit_corner(d: np.ndarray, errors: np.ndarray, groups: np.ndarray) -> np.ndarray:
+    """Coefficients (k,) of each corner's part b · d of log σ: the maximum likelihood of the errors (Gaussian,
+    σ per axis) with a free scale per group (image), so only the order of σ inside an image is fitted.
+
+    d : (K, k) corner columns (excess over the board's median), clipped. errors : (K, 2) px. groups : (K,).
+    """
+    from scipy.optimize import minimize
+
+    e2 = 0.5 * np.einsum("nk,nk->n", errors, errors)
+    _, g = np.unique(groups, return_inverse=True)
+    count = np.bincount(g).astype(np.float64)
+
+    def loss(b):
+        t = d @ b
+        u = e2 * np.exp(-2 * t)
+        s2 = np.maximum(np.bincount(g, u, len(count)) / count, 1e-30)
+        grad_s2 = -2 * np.stack([np.bincount(g, u * d[:, j], len(count)) for j in range(d.shape[1])], axis=1) / count[:, None]
+        value = float(np.sum(count * np.log(s2)) + 2 * np.sum(t)) / len(t)
+        grad = ((count / s2) @ grad_s2 + 2 * d.sum(axis=0)) / len(t)
+        return value, grad
+
+    return minimize(loss, np.zeros(d.shape[1]), jac=True, method="BFGS").x
+
+
 def fit_table(train: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(coeffs, low, high) fitted on the collected conditions ``train`` (clip bounds: the 1st and 99th percentiles)."""
+    """(coeffs, low, high) fitted on the collected conditions ``train`` (clip bounds: the 1st and 99th
+    percentiles): first each corner's columns by :func:`fit_corner`, then the board's by :func:`fit_board`."""
     x = np.concatenate([v["x"] for v in train.values()])
     err = np.concatenate([v["err"] for v in train.values()])
     groups = np.concatenate([k * 100000 + v["image"] for k, v in enumerate(train.values())])
     low, high = np.percentile(x, 1, axis=0), np.percentile(x, 99, axis=0)
-    return fit_coeffs(np.clip(x, low, high), err, groups), low, high
+    xc = np.clip(x, low, high)
+    nb = cs.BOARD_COLUMNS
+    b = fit_corner(xc[:, nb:], err, groups)
+    c = fit_board(xc[:, :nb], xc[:, nb:] @ b, err, groups)
+    return np.r_[c, b], low, high
 
 
 def report(data: dict, table=None) -> list[float]:
@@ -173,17 +200,7 @@ def _degraded(image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.clip(np.round(out), 0, 255).astype(np.uint8)
 
 
-WEIGHTINGS = {"equal": None, "σ": 0.0, "σ ⊕ 0.02": 0.02, "σ ⊕ 0.05": 0.05,  # floor px added in quadrature
-              "view σ": "view"}  # each view's median σ for all its corners
-
-
-def _weights(sigmas: np.ndarray, how) -> np.ndarray | None:
-    """The σ a view's corners enter the fit with under one of ``WEIGHTINGS``."""
-    if how is None:
-        return None
-    if how == "view":
-        return np.full(len(sigmas), float(np.median(sigmas)))
-    return np.hypot(sigmas, how)
+WEIGHTINGS = ("equal",) + weights.WEIGHTINGS  # "equal": the views without σ; the others: aicalib_tf.calib.weights
 
 
 def calibrate_weighted(views: int, degrade: bool = True, repeats: int = 1) -> None:
@@ -195,6 +212,7 @@ def calibrate_weighted(views: int, degrade: bool = True, repeats: int = 1) -> No
 
     print(f"{'camera':>6s} {'draw':>4s} {'weights':>9s} {'fx %':>8s} {'fy %':>8s} {'pp px':>7s} {'proj seen px':>12s} {'rms px':>7s}")
     totals = {w: [] for w in WEIGHTINGS}
+    shipped = weights.WEIGHTING
     for cam, samples in calibration_sequences(views):
         lab = samples[0].label
         seen = np.concatenate([s.corners[s.visible] for s in samples])
@@ -202,9 +220,14 @@ def calibrate_weighted(views: int, degrade: bool = True, repeats: int = 1) -> No
             rng = np.random.default_rng(1000 * (draw + 1) + cam)
             found = [(f"view{k:02d}", d) for k, s in enumerate(samples)
                      if (d := detect_corners(_degraded(s.image, rng) if degrade else s.image, PATTERN)).found]
-            for label, floor in WEIGHTINGS.items():
-                vs = [View(n, d.corners, d.ids, sigmas=_weights(d.sigmas, floor)) for n, d in found]
-                cal = calibrate_camera(vs, PATTERN, float(lab["square_size"]), tuple(lab["image_size"]), model="plumb_bob")
+            for label in WEIGHTINGS:
+                vs = [View(n, d.corners, d.ids, sigmas=None if label == "equal" else d.sigmas) for n, d in found]
+                weights.WEIGHTING = weights.WEIGHTING if label == "equal" else label
+                try:
+                    cal = calibrate_camera(vs, PATTERN, float(lab["square_size"]), tuple(lab["image_size"]),
+                                           model="plumb_bob")
+                finally:
+                    weights.WEIGHTING = shipped
                 err = calibration_errors(cal.K, cal.dist, np.asarray(lab["K"]), np.asarray(lab["dist"]), tuple(lab["image_size"]),
                                          model=cal.model, model_true=lab["distortion_model"], seen=seen)
                 totals[label].append((abs(err["fx_pct"]), err["pp_px"], err["proj_err_seen_mean_px"]))

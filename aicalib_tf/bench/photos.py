@@ -177,7 +177,7 @@ def run_photos(folder: Path, pattern: tuple[int, int], detectors: dict, *, degra
                     agreement.append(rec)
                 for d, (fo, _) in found_by.items():
                     if len(fo.corners):
-                        views[d].append(View(f.name, fo.corners, fo.ids))
+                        views[d].append(View(f.name, fo.corners, fo.ids, sigmas=fo.sigmas))
             outcomes = {}
             for d, (fo, ms) in found_by.items():
                 row = {"file": f.name, "width": gray.shape[1], "height": gray.shape[0], "degradation": var,

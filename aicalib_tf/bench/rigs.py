@@ -39,7 +39,8 @@ def detect_views(images, detector) -> tuple[list[View], float]:
     for f, img in enumerate(images):
         found = detector(img)
         if len(found.corners) >= 6:
-            out.append(View(f"{f:02d}", found.corners, found.ids, relative=bool(found.relative)))
+            out.append(View(f"{f:02d}", found.corners, found.ids, relative=bool(found.relative),
+                            sigmas=found.sigmas))
     return out, time.perf_counter() - t0
 
 

@@ -204,7 +204,7 @@ def calibrate_sequences(seqs, detectors: dict, rows: list, errors: dict, bar=Non
                 keep_slowest(slowest, img_rows, s.image)
             for d, (found, _) in found_by.items():
                 if len(found.corners):
-                    views[d].append(View(f"view{s.label['index']:03d}", found.corners, found.ids))
+                    views[d].append(View(f"view{s.label['index']:03d}", found.corners, found.ids, sigmas=found.sigmas))
             if bar is not None:
                 bar.update(1)
         for d, vs in views.items():

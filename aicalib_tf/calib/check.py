@@ -60,6 +60,8 @@ from aicalib_tf.calib.bundle import CalibrationError, _Problem, bundle_adjust, p
 from aicalib_tf.calib.fit import _sort_views, outlier_threshold
 from aicalib_tf.calib.check_prior import PARAMS, calibration_covariance, check_fields, corner_noise
 from aicalib_tf.calib.quality import lens_of
+from aicalib_tf.calib.robust import view_sigmas, with_floor
+from aicalib_tf.calib.weights import corner_weights
 from aicalib_tf.calib.significance import chi2_noncentrality, f_quantile, f_sf
 from aicalib_tf.geometry.pattern import board_points
 
@@ -205,15 +207,28 @@ def _fixed_fit(lens, obj, px, names, skipped):
     return [keep[i] for i in kept], fit
 
 
-def _schur(model, obj, px, intrinsics, rvecs, tvecs) -> np.ndarray:
-    """(4+n, 4+n) JᵀJ of the views over the intrinsics with their poses eliminated, at the given parameters."""
-    prob = _Problem(model, obj, px, intrinsics, np.ones(len(intrinsics), bool))
+def _schur(model, obj, px, intrinsics, rvecs, tvecs, sigmas=None) -> np.ndarray:
+    """(4+n, 4+n) JᵀJ of the views over the intrinsics with their poses eliminated, at the given parameters
+    (weighted by the views' σ, :func:`_fit_sigmas`)."""
+    prob = _Problem(model, obj, px, intrinsics, np.ones(len(intrinsics), bool), _weights(sigmas, px))
     x = np.concatenate([intrinsics, np.hstack([rvecs, tvecs]).ravel()])
     U, W, Vb, _, _ = prob.normal_blocks(x)
     return schur_complement(U, W, Vb)[0]
 
 
-def _view_inflation(model, obj, px, new, free) -> float:
+def _weights(sigmas, px):
+    """Per-corner weights σ_ref / σ over all views' corners (None: all 1)."""
+    return corner_weights(sigmas, None, sum(len(p) for p in px)) if sigmas is not None else None
+
+
+def _fit_sigmas(views, fit) -> list | None:
+    """The views' corners' σ by the rule every calibration fit shares (:func:`aicalib_tf.calib.robust.view_sigmas`,
+    :func:`~aicalib_tf.calib.robust.with_floor` from the held fit ``fit``); None when no view has any."""
+    sigmas = view_sigmas(views)
+    return None if sigmas is None else with_floor(sigmas, fit)
+
+
+def _view_inflation(model, obj, px, new, free, sigmas=None) -> float:
     """κ >= 1: the views-as-clusters (sandwich) covariance of fx, fy, cx, cy over the formal one
     (mean of the eigenvalue ratios; 1 with fewer than 5 views or a singular fit).
 
@@ -225,7 +240,7 @@ def _view_inflation(model, obj, px, new, free) -> float:
     if V < 5:
         return 1.0
     x = np.concatenate([new.intrinsics[free], np.hstack([new.rvecs, new.tvecs]).ravel()])
-    r, Ji, Jp, _ = _Problem(model, obj, px, new.intrinsics, free)._evaluate(x)
+    r, Ji, Jp, _ = _Problem(model, obj, px, new.intrinsics, free, _weights(sigmas, px))._evaluate(x)
     r = r.reshape(-1, 2)
     nf = int(np.sum(free))
     S, G = np.zeros((nf, nf)), np.zeros((nf, nf))
@@ -263,32 +278,34 @@ def _smallest_changes(precision, alpha) -> tuple[float, float]:
     return fx, (math.sqrt(lam / w) if w > 0 else math.inf)
 
 
-def _free_fit(lens, obj, px, fit):
+def _free_fit(lens, obj, px, fit, sigmas=None):
     """(every-intrinsic fit or None, σ̂² px², dof) of the new views: the check footage's noise."""
     n = 4 + lens.dist.size
     N, V = sum(len(p) for p in px), len(px)
     try:
-        free = bundle_adjust(lens.model, obj, px, lens.intrinsics(), fit.rvecs, fit.tvecs, rank_strict=False)
+        free = bundle_adjust(lens.model, obj, px, lens.intrinsics(), fit.rvecs, fit.tvecs, rank_strict=False,
+                             sigmas=sigmas)
     except CalibrationError:
         return None, float(2 * fit.cost / max(2 * N - 6 * V, 1)), float(max(2 * N - 6 * V, 1))
     dof = max(2 * N - 6 * V - n, 1)
     return free, float(2 * free.cost / dof), float(dof)
 
 
-def _drift(lens, obj, px, fit, free, S, cov, sigma2, hold_distortion):
+def _drift(lens, obj, px, fit, free, S, cov, sigma2, hold_distortion, sigmas=None):
     """(measured (4,), the new views' covariance of it at σ̂² (4, 4), M·Σ·Mᵀ (4, 4), κ) (module docstring)."""
     n = 4 + lens.dist.size
     M = np.hstack([-np.eye(4), np.zeros((4, n - 4))])
     if hold_distortion or free is None:
         mask = np.arange(n) < 4
-        new = bundle_adjust(lens.model, obj, px, lens.intrinsics(), fit.rvecs, fit.tvecs, free=mask, rank_strict=False)
+        new = bundle_adjust(lens.model, obj, px, lens.intrinsics(), fit.rvecs, fit.tvecs, free=mask, rank_strict=False,
+                            sigmas=sigmas)
         cnew = new.covariance[:4, :4] * (sigma2 / max(new.sigma2, 1e-300))
         if n > 4:
             M[:, 4:] = -np.linalg.solve(S[:4, :4], S[:4, 4:])
     else:
         mask, new = np.ones(n, bool), free
         cnew = free.covariance[:4, :4] * (sigma2 / max(free.sigma2, 1e-300))
-    return new.intrinsics[:4], cnew, M @ cov @ M.T, _view_inflation(lens.model, obj, px, new, mask)
+    return new.intrinsics[:4], cnew, M @ cov @ M.T, _view_inflation(lens.model, obj, px, new, mask, sigmas)
 
 
 def _lens_test(lens, free, fit, S, cov, sigma2, kappa, measured2):
@@ -329,13 +346,14 @@ def check_calibration(cal, views, *, alpha: float = ALPHA, hold_distortion: bool
     px = [v.corners for v in usable]
     kept, fit = _fixed_fit(lens, obj, px, names, skipped)
     obj, px = [obj[k] for k in kept], [px[k] for k in kept]
-    free, measured2, dof = _free_fit(lens, obj, px, fit)
+    sig = _fit_sigmas([usable[k] for k in kept], fit)  # each view's corners weighed as a calibration weighs them
+    free, measured2, dof = _free_fit(lens, obj, px, fit, sig)
     cal_noise = corner_noise(cal)[0]
     sigma2 = measured2 + SYSTEMATIC_PX ** 2
     file_std = np.sqrt(np.diag(cov)[:4])
     cov = cov * (1.0 + (SYSTEMATIC_PX / cal_noise) ** 2)
-    S = _schur(lens.model, obj, px, lens.intrinsics(), fit.rvecs, fit.tvecs)
-    measured, cnew, carried, kappa = _drift(lens, obj, px, fit, free, S, cov, sigma2, hold_distortion)
+    S = _schur(lens.model, obj, px, lens.intrinsics(), fit.rvecs, fit.tvecs, sig)
+    measured, cnew, carried, kappa = _drift(lens, obj, px, fit, free, S, cov, sigma2, hold_distortion, sig)
     C = kappa * (cnew + carried)
     precision = np.linalg.pinv(C, hermitian=True)  # the inverse when C is regular (it is, with 3+ views)
     calibrated = lens.intrinsics()[:4]

@@ -33,6 +33,7 @@ import numpy as np
 from aicalib_tf.calib.bundle import BundleResult, CalibrationError, bundle_adjust
 from aicalib_tf.calib.flex import FLEX_MODES, basis_of_views, flex_problem
 from aicalib_tf.calib.view_checks import MIN_VIEW_CORNERS
+from aicalib_tf.calib.weights import fit_sigmas
 
 __all__ = ["SolveOptions", "solve", "view_sigmas", "with_floor", "flag_corners", "CORNER_K", "CORNER_FLOOR_PX", "MAX_ROUNDS",
            "MAX_CORNER_FRACTION"]
@@ -63,20 +64,15 @@ class SolveOptions:
 
 def view_sigmas(views) -> list | None:
     """Per-view (N_v,) σ px for :func:`~aicalib_tf.calib.bundle.bundle_adjust`, or None when no view has
-    any: each view's corners all take the median of its σ (views without their own take the median of
-    the others').
+    any, by the rule every fit shares (:func:`aicalib_tf.calib.weights.fit_sigmas`): each view's corners
+    all take the median of its σ (views without their own take the median of the others').
 
     A view's median, not each corner's own σ: on rendered calibration sequences with mixed blur and
     noise (``benchmarks/corner_sigma.py --calibrate``, 4 cameras, 20 views) the corners' own σ made the
     projection error over the boards' area 3.2 times that of equal weights (1.55 against 0.49 px; the
     σ spread 40-fold inside a board, the weights with it), while each view's median gave 0.488 px. The
     view's σ still says which views are blurred or noisy."""
-    given = [getattr(v, "sigmas", None) for v in views]
-    if all(g is None for g in given):
-        return None
-    medians = [None if g is None else float(np.median(np.asarray(g, np.float64))) for g in given]
-    fill = float(np.median([m for m in medians if m is not None]))
-    return [np.full(len(v.ids), fill if m is None else m) for v, m in zip(views, medians)]
+    return fit_sigmas([getattr(v, "sigmas", None) for v in views], [len(v.ids) for v in views])
 
 
 def with_floor(sigmas, fit: BundleResult) -> list:

@@ -1,14 +1,62 @@
-"""Per-corner weights of a calibration fit: σ_ref / σ from each corner's σ, 0 for rejected corners.
+"""Per-corner weights of a calibration fit: which σ each corner enters a fit with, and the weights σ_ref / σ.
 
-σ_ref is the median σ, so the weighted residuals stay in px-like units and a fit whose corners all
-share one σ weighs them all 1 (the unweighted fit's numbers).
+Every fit (one camera, a rig's joint fit, the field check, the live page's calibrations) takes its
+corners' σ from :func:`fit_sigmas`, so all of them weigh corners by one rule, ``WEIGHTING``:
+
+* ``"view"`` (the default): each corner takes the median σ of its view. The detector's σ says well
+  which views are blurred or noisy, but inside one view its spread is mostly the noise of the
+  window measurements: on rendered calibration sequences with mixed blur and noise
+  (``python benchmarks/corner_sigma.py --calibrate``) each corner's own σ made the error of the
+  calibration several times that of equal weights, the view's median did not (docs/benchmark.md,
+  "Per-corner σ");
+* ``"clipped"``: each corner's own σ, held within ``CLIP`` times its view's median;
+* ``"corner"``: each corner's own σ.
+
+Views without σ (an OpenCV detector's) take the median of the others' (all equal when none has).
+:func:`corner_weights` turns the σ into weights σ_ref / σ with σ_ref the median σ, so the weighted
+residuals stay in px-like units and a fit whose corners all share one σ weighs them all 1 (the
+unweighted fit's numbers).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["corner_weights"]
+__all__ = ["WEIGHTING", "WEIGHTINGS", "CLIP", "fit_sigmas", "corner_weights"]
+
+WEIGHTINGS = ("view", "clipped", "corner")
+WEIGHTING = "view"  # the rule every fit uses (benchmarks/corner_sigma.py --calibrate compares the others)
+CLIP = (0.5, 2.0)  # "clipped": a corner's σ within these multiples of its view's median σ
+
+
+def fit_sigmas(given, counts, rule: str | None = None) -> list | None:
+    """Per-view (N_v,) float64 σ px that the views' corners enter a fit with, or None when no view has any.
+
+    given : per view an (N_v,) σ px array or None (no σ: the detector gave none). counts : per view N_v,
+    its number of corners. rule : one of ``WEIGHTINGS`` (None: ``WEIGHTING``). A view without σ takes
+    the median over the others' medians. Raises ValueError for an unknown rule or a σ array of the wrong
+    length, not finite, or not > 0.
+    """
+    rule = WEIGHTING if rule is None else rule
+    if rule not in WEIGHTINGS:
+        raise ValueError(f"weighting must be one of {', '.join(WEIGHTINGS)}, got {rule!r}")
+    given = [None if g is None else np.asarray(g, np.float64).ravel() for g in given]
+    if all(g is None for g in given):
+        return None
+    for g, n in zip(given, counts):
+        if g is not None and (g.size != n or not np.all(np.isfinite(g)) or np.any(g <= 0)):
+            raise ValueError(f"sigmas must hold {n} finite values > 0 px, one per corner, got {g.size}")
+    medians = [None if g is None else float(np.median(g)) for g in given]
+    fill = float(np.median([m for m in medians if m is not None]))
+    out = []
+    for g, m, n in zip(given, medians, counts):
+        if g is None or rule == "view":
+            out.append(np.full(int(n), fill if m is None else m))
+        elif rule == "clipped":
+            out.append(np.clip(g, CLIP[0] * m, CLIP[1] * m))
+        else:
+            out.append(g.copy())
+    return out
 
 
 def corner_weights(sigmas, inliers, n: int) -> np.ndarray | None:

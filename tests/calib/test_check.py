@@ -207,3 +207,20 @@ def test_the_examples_run():
     from aicalib_tf.calib import significance
 
     assert doctest.testmod(significance).failed == 0
+
+
+def test_the_views_sigmas_weigh_the_check_as_they_weigh_a_calibration():
+    """Every other view 10x noisier: weighed by each view's σ the check detects a four times smaller
+    change than with equal weights; one σ for all changes nothing."""
+    views = synthetic_views(PINHOLE, 20, 0.15, seed=3, distance=DISTANCE["plumb_bob"])
+    cal = calibrate_camera(views, PATTERN, SQUARE, PINHOLE.image_size, model="plumb_bob")
+    noise = lambda k: 1.5 if k % 2 else 0.15  # noqa: E731
+    new = synthetic_views(PINHOLE, 16, seed=11, distance=DISTANCE["plumb_bob"], noise_of=noise)
+    weighed = check_calibration(cal, [View(v.name, v.corners, v.ids, sigmas=np.full(len(v.ids), noise(k)))
+                                      for k, v in enumerate(new)])
+    equal = check_calibration(cal, new)
+    same = check_calibration(cal, [View(v.name, v.corners, v.ids, sigmas=np.full(len(v.ids), 0.3)) for v in new])
+    assert weighed.holds and equal.holds
+    assert weighed.detectable_fx < 0.4 * equal.detectable_fx and weighed.detectable_pp < 0.4 * equal.detectable_pp
+    np.testing.assert_allclose(same.measured, equal.measured)
+    assert same.detectable_fx == pytest.approx(equal.detectable_fx)

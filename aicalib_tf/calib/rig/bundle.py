@@ -21,6 +21,8 @@ import numpy as np
 
 from aicalib_tf.calib.bundle import (_PENALTY, _RANK_TOL, CalibrationError, SchurProblem, levenberg_marquardt,
                                      schur_complement)
+from aicalib_tf.calib.robust import with_floor
+from aicalib_tf.calib.weights import corner_weights, fit_sigmas
 from aicalib_tf.geometry.lens import N_COEFFS, check_model, projection_jacobian
 
 __all__ = ["Observation", "RigFit", "rig_adjust", "global_layout"]
@@ -28,13 +30,22 @@ __all__ = ["Observation", "RigFit", "rig_adjust", "global_layout"]
 
 @dataclass(frozen=True)
 class Observation:
-    """Camera ``camera`` saw board pose ``group``: board points obj (N, 3) at pixels px (N, 2); name: its view's."""
+    """Camera ``camera`` saw board pose ``group``: board points obj (N, 3) at pixels px (N, 2); name: its view's;
+    sigmas: (N,) px, its corners' σ from the detector, or None (:mod:`aicalib_tf.calib.weights`)."""
 
     camera: int
     group: int
     obj: np.ndarray
     px: np.ndarray
     name: str = ""
+    sigmas: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class _Residuals:
+    """A first fit's per-observation residuals (N_v, 2) px, as :func:`~aicalib_tf.calib.robust.with_floor` reads them."""
+
+    residuals: list
 
 
 @dataclass(frozen=True)
@@ -84,7 +95,7 @@ def _rodrigues(rvecs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class _RigProblem(SchurProblem):
     """Residuals and Jacobian blocks of one rig problem; corners sorted by board pose."""
 
-    def __init__(self, models, observations, base, free, n_groups):
+    def __init__(self, models, observations, base, free, n_groups, sigmas=None):
         self.models = tuple(models)
         self.intr_sl, self.extr_sl = global_layout(models)
         order = sorted(range(len(observations)), key=lambda i: observations[i].group)
@@ -105,7 +116,8 @@ class _RigProblem(SchurProblem):
         self.free = np.asarray(free, bool)
         self.nf = int(self.free.sum())
         self.shape = (2 * self.N, self.nf + 6 * self.V)
-        self._key = self._val = None
+        self.w = None if sigmas is None else corner_weights([sigmas[i] for i in order], None, self.N)
+        self._key = self._val = self.px_residuals = None
 
     def unpack(self, x):
         g = self.base.copy()
@@ -149,6 +161,9 @@ class _RigProblem(SchurProblem):
         J_glob = Jg[:, :, self.free]
         J_pose[bad], J_glob[bad] = 0.0, 0.0
         J_pose, J_glob = np.nan_to_num(J_pose), np.nan_to_num(J_glob)
+        self.px_residuals = res  # unweighted, px
+        if self.w is not None:
+            res, J_pose, J_glob = res * self.w[:, None], J_pose * self.w[:, None, None], J_glob * self.w[:, None, None]
         self._key, self._val = x.copy(), (res.ravel(), J_glob, J_pose, int(bad.sum()))
         return self._val
 
@@ -188,6 +203,11 @@ def rig_adjust(models, observations, intrinsics, extrinsics, poses, *, free=None
     (C, 6) start poses from camera 0 (row 0 ignored). poses : (G, 6) start board poses in camera 0's
     frame. free : bool over the global vector of :func:`global_layout` (default all). Raises
     :class:`CalibrationError` when the fit diverges or leaves a camera unconstrained.
+
+    The observations' ``sigmas`` weigh their corners by the rule every fit shares
+    (:func:`aicalib_tf.calib.weights.fit_sigmas`), with the error they leave unexplained added from a
+    first fit (:func:`aicalib_tf.calib.robust.with_floor`), as a single camera's solve does; residuals
+    and rms stay in px.
     """
     models = tuple(models)
     for m, v in zip(models, intrinsics):
@@ -196,18 +216,29 @@ def rig_adjust(models, observations, intrinsics, extrinsics, poses, *, free=None
     base = np.concatenate([np.asarray(v, np.float64) for v in intrinsics] + [extrinsics[k] for k in range(1, len(models))])
     free = np.ones(base.size, bool) if free is None else np.asarray(free, bool)
     poses = np.asarray(poses, np.float64).reshape(-1, 6)
-    prob = _RigProblem(models, observations, base, free, len(poses))
+    sigmas = fit_sigmas([o.sigmas for o in observations], [len(o.px) for o in observations])
+    prob = _RigProblem(models, observations, base, free, len(poses), sigmas)
     x0 = np.concatenate([base[free], poses.ravel()])
     if not np.all(np.isfinite(x0)):
         raise CalibrationError("rig: non-finite start parameters")
     x, cost, nfev, _ = levenberg_marquardt(prob, x0, max_nfev)
+    if sigmas is not None and np.all(np.isfinite(x)):  # the error the σ's leave unexplained, then the weighted refit
+        prob._evaluate(x)
+        parts = np.split(prob.px_residuals, prob.obs_splits)
+        firsts = [None] * len(observations)
+        for pos, i in enumerate(prob.order):
+            firsts[i] = parts[pos]
+        floored = with_floor(sigmas, _Residuals(firsts))
+        prob = _RigProblem(models, observations, base, free, len(poses), floored)
+        x, cost, more, _ = levenberg_marquardt(prob, x, max_nfev)
+        nfev += more
     res, _, _, n_bad = prob._evaluate(x)
     if n_bad or not np.all(np.isfinite(x)):
         raise CalibrationError(f"rig: the fit diverged ({n_bad} of {prob.N} corners cannot be projected); "
                                "do the images paired as one frame show the board at one moment?")
     _, intr, extr, pose_out = prob.unpack(x)
-    res2 = res.reshape(-1, 2)
-    parts = np.split(res2, prob.obs_splits)
+    res2, px2 = res.reshape(-1, 2), prob.px_residuals
+    parts = np.split(px2, prob.obs_splits)
     residuals = [None] * len(observations)
     for pos, i in enumerate(prob.order):
         residuals[i] = parts[pos]
@@ -215,4 +246,4 @@ def rig_adjust(models, observations, intrinsics, extrinsics, poses, *, free=None
     if covariance:
         cov, sigma2, note = _covariance(prob, x, cost, rank_strict)
     return RigFit(models, [v.copy() for v in intr], extr, pose_out.copy(), residuals,
-                  float(np.sqrt(np.mean(np.sum(res2 * res2, axis=1)))), cov, sigma2, cost, nfev, note)
+                  float(np.sqrt(np.mean(np.sum(px2 * px2, axis=1)))), cov, sigma2, cost, nfev, note)

@@ -119,12 +119,12 @@ def joint_start(cals, extr, frames, solo, views_by_cam, square_size):
         seen = [k for k in range(len(cals)) if f in absolute[k]]
         for k in seen:
             v = by_name[k][f]
-            obs.append(Observation(k, g, board_points(v.ids, square_size), v.corners, f))
+            obs.append(Observation(k, g, board_points(v.ids, square_size), v.corners, f, getattr(v, "sigmas", None)))
         poses.append(_board_in_cam0(cam_pose[seen[0]], cals[seen[0]], absolute[seen[0]][f]))
         names.append(f)
     for k, n in solo:
         v = by_name[k][n]
-        obs.append(Observation(k, len(poses), board_points(v.ids, square_size), v.corners, n))
+        obs.append(Observation(k, len(poses), board_points(v.ids, square_size), v.corners, n, getattr(v, "sigmas", None)))
         poses.append(_board_in_cam0(cam_pose[k], cals[k], cals[k].views.index(n)))
         names.append(f"{n} ({k})")
     return obs, np.array(poses), names

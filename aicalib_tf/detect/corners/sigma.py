@@ -2,33 +2,37 @@
 
 A refined corner is the saddle of the smoothed image in a window about it (:mod:`aicalib_tf.detect.corners.refine`).
 Its error grows with the noise in that window and with whatever breaks the X-junction's point
-symmetry (a shadow edge, an object in front, JPEG blocks), with blur, and with lines that bend
-across the window (a strong lens), and shrinks with the junction's contrast. It is measured in
-each corner's window of the unsmoothed image (bilinear samples on the (2r + 1)² grid about the
-corner, r the refinement's radius for the distance to the nearest other corner,
+symmetry (a shadow edge, an object in front, JPEG blocks, salt-and-pepper pixels), with blur, and
+with lines that bend across the window (a strong lens), and shrinks with the junction's contrast. It
+is measured in each corner's window of the unsmoothed image (bilinear samples on the (2r + 1)² grid
+about the corner, r the refinement's radius for the distance to the nearest other corner,
 :func:`aicalib_tf.detect.corners.refine.window_radius`, at most 3 px; :func:`aicalib_tf.detect.corners.sigma_kernels.window_measures`):
 
 * ``odd``: √(Σ w o²), o(d) = (I(c + d) − I(c − d)) / 2 the part of the window that is not
   point-symmetric about the corner (noise and asymmetry), w the saddle fit's Gaussian weights
   (summing to 1), grey levels in [0, 1]; ``odd_median``: the median of |o|, the same for noise but
-  hardly moved by an edge across part of the window;
+  hardly moved by an edge or a few impulsive pixels (odd / odd_median: impulsiveness);
 * ``even``: the weighted standard deviation of the symmetric part, the junction's contrast;
 * ``residual``: the weighted RMS of what the saddle fit's quadratic leaves (small under blur);
+* ``curvature``: √|det| of the quadratic's Hessian, grey per px² (over the contrast: how sharp the saddle is);
 * ``bend``: |c(i−1) − 2c(i) + c(i+1)| along the board's rows and columns by id, px
   (:func:`aicalib_tf.detect.corners.sigma_kernels.lattice_bend`), over the corner spacing;
 * the network's ``score``.
 
-The noise is one per image, so it is taken as the board's median ``odd_median`` (a corner's own is
-a noisy estimate of it); the corner's own enters as its excess over that. The model is
-log σ = c₀ + Σ cₖ xₖ, x the columns of :func:`design` clipped to [``LOW``, ``HIGH``], the range they
-took in fitting; σ px is one standard deviation per axis (isotropic).
+The model has two parts (``COLUMNS``). The board's: medians over its corners of these features (the
+noise is one per image, so the board's median ``odd_median`` is its estimate), their spread (90th
+percentile over median) and a few hinges (the detector's own error floor on clean images, heavy blur,
+impulsive noise, strongly bent lines). Each corner's: its excess over the board's median of each
+feature. log σ = c₀ + Σ cₖ xₖ, x the columns of :func:`design` clipped to [``LOW``, ``HIGH``], the
+range they took in fitting; σ px is one standard deviation per axis (isotropic).
 
 ``COEFFS``, ``LOW`` and ``HIGH`` were fitted on rendered boards with exact truth (data_gen renders of
-the benchmark's sweeps and named conditions with other seeds than the benchmark's), to make the
-mean σ² of each image agree with its mean squared error per axis, with a small maximum-likelihood
-term (each error Gaussian with its corner's σ). ``python benchmarks/corner_sigma.py --fit`` refits
-and prints them; ``python benchmarks/corner_sigma.py`` compares predicted and measured errors per
-condition on the benchmark's own renders.
+the benchmark's sweeps and named conditions with other seeds than the benchmark's): the corner's
+part by the maximum likelihood of the errors with a free scale per image (so it only orders the
+corners inside an image, and its spread matches theirs), then the board's part to make each image's
+mean σ² agree with its mean squared error per axis. ``python benchmarks/corner_sigma.py --fit``
+refits and prints them; ``python benchmarks/corner_sigma.py`` compares predicted and measured errors
+per condition on the benchmark's own renders.
 """
 
 from __future__ import annotations
@@ -38,19 +42,27 @@ from dataclasses import replace
 
 import numpy as np
 
-from aicalib_tf.detect.corners.sigma_kernels import board_columns
+from aicalib_tf.detect.corners.sigma_kernels import BOARD_COLUMNS as _BOARD_COLUMNS, board_columns
 from aicalib_tf.detect.corners.refine import window_radius
 from aicalib_tf.detect.corners.saddle import saddle_fit_matrix
 
-__all__ = ["COLUMNS", "COEFFS", "LOW", "HIGH", "design", "sigma_from_design", "board_design", "board_sigmas",
+__all__ = ["COLUMNS", "BOARD_COLUMNS", "COEFFS", "LOW", "HIGH", "design", "sigma_from_design", "board_design", "board_sigmas",
            "with_sigmas"]
 
-COLUMNS = ("noise/contrast", "own excess asymmetry", "residual/contrast", "impulsive noise", "bend/spacing", "score",
-           "(noise/contrast)²")
+COLUMNS = ("noise/contrast", "residual/contrast", "impulsive noise", "bend/spacing", "score", "(noise/contrast)²",
+           "curvature/contrast", "spacing", "bend hinge²", "noise/contrast p90 excess", "bend p90 excess",
+           "impulsive × noise hinge", "own impulsiveness", "noise floor hinge", "blur hinge",  # the board's
+           "Δ noise/contrast", "Δ own asymmetry", "Δ residual/contrast", "Δ own impulsiveness", "Δ bend/spacing",
+           "Δ score", "Δ curvature/contrast", "Δ bend hinge²")  # each corner's excess over the board's median
+BOARD_COLUMNS = _BOARD_COLUMNS
 # log σ = COEFFS[0] + Σ COEFFS[1 + k] · clip(design[:, k], LOW[k], HIGH[k]); refit: python benchmarks/corner_sigma.py --fit
-COEFFS = np.array([-0.679, 0.497, 2.325, 0.464, -0.230, 0.100, -0.707, -0.092])
-LOW = np.array([-4.855, -0.901, -2.336, 0.266, -6.022, -0.693, 1.274])
-HIGH = np.array([-1.129, 0.720, -0.252, 1.187, -1.660, 0.000, 23.575])
+COEFFS = np.array([-0.987, 0.783, -0.208, -0.402, 0.086, 0.361, -0.033, -0.678, -0.282, -0.027, 2.916, -0.008, 3.564,
+                   -0.756, -0.121, -1.199, 1.435, 0.513, -0.255, 0.377, 0.023, -0.232, -0.861,
+                   0.323])
+LOW = np.array([-4.835, -2.288, 0.266, -5.062, -0.293, 1.355, -1.845, 1.929, 0.000, 0.014, 0.058, 0.000, -0.160,
+                0.000, 0.000, -0.186, -0.901, -0.340, -0.446, -2.254, -0.601, -0.129, -0.442])
+HIGH = np.array([-1.164, -0.349, 1.187, -1.701, -0.014, 23.373, -1.437, 3.917, 1.689, 0.345, 0.679, 0.339, 0.066,
+                 1.335, 0.788, 0.233, 0.720, 0.314, 0.702, 0.704, 0.134, 0.099, 0.627])
 MIN_SCORE = 0.05  # a corner the network missed (score 0) counts as this weak
 _TINY = 1e-6  # grey levels (px for the bend): keeps the logarithms finite in a flat window
 _MAX_RADIUS = 3  # px: the refinement's window radius, at most this (a 7×7 window: the measures' cost)
@@ -70,17 +82,14 @@ def _operators() -> tuple[np.ndarray, np.ndarray]:
 
 
 def design(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray) -> np.ndarray:
-    """The model's columns (N, 7) (``COLUMNS``) of one board's corners, unclipped (module docstring).
+    """The model's columns (N, 23) (``COLUMNS``) of one board's corners, unclipped (module docstring).
 
     gray : (H, W) float32 grey in [0, 1] or uint8, unsmoothed (every column is a ratio of grey levels
-    or of px, so either scale gives the same). corners : (N, 2) (x, y) px. ids : (N, 2) int
-    (col, row), distinct. scores : (N,) network responses in [0, 1].
-    Columns: log(board noise / contrast), log(own odd_median / board's), log(residual / contrast),
-    log(board odd / board odd_median) (salt-and-pepper pixels raise the first, not the second),
-    log(bend / spacing), log(score), and the first column squared (the error grows faster than the
-    noise once it is well above the floor of a clean render). The board's values are medians of the
-    logarithms over its corners; a corner with no row or column through it takes the board's median bend
-    (:func:`aicalib_tf.detect.corners.sigma_kernels.design_columns`).
+    or of px, or a log spacing in px, so either scale gives the same). corners : (N, 2) (x, y) px.
+    ids : (N, 2) int (col, row), distinct. scores : (N,) network responses in [0, 1].
+    Columns 0..``BOARD_COLUMNS`` − 1 are the board's (the same for all its corners), the rest each
+    corner's excess over the board's median of its feature; a corner with no row or column through it
+    takes the board's median bend (:func:`aicalib_tf.detect.corners.sigma_kernels.design_columns`).
     """
     from aicalib_tf.detect.corners.junctions import nearest_spacing
 
@@ -97,13 +106,13 @@ def design(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray, scores: np.nd
 
 
 def sigma_from_design(x: np.ndarray, coeffs: np.ndarray = COEFFS, low: np.ndarray = LOW, high: np.ndarray = HIGH) -> np.ndarray:
-    """σ (N,) float32 px of design columns x (N, 7) under the model (``coeffs`` (8,), clip bounds (7,) each)."""
+    """σ (N,) float32 px of design columns x (N, 23) under the model (``coeffs`` (24,), clip bounds (23,) each)."""
     x = np.clip(np.asarray(x, np.float64).reshape(-1, len(COLUMNS)), low, high)
     return np.exp(coeffs[0] + x @ np.asarray(coeffs[1:], np.float64)).astype(np.float32)
 
 
 def board_design(image, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """:func:`design` (N, 7) of a board in ``image``, converting no more of it than needed.
+    """:func:`design` (N, 23) of a board in ``image``, converting no more of it than needed.
 
     image : a :class:`~aicalib_tf.detect.pyramid.Frame` (a grey uint8 frame is read as it is, any other
     through its float grey), or ``region(x0, y0, x1, y1) -> (y1 − y0, x1 − x0) float32`` grey of the

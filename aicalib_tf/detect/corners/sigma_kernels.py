@@ -15,7 +15,16 @@ import numpy as np
 from aicalib_tf.kernels import helper, kernel
 
 
-__all__ = ["window_measures", "lattice_bend", "design_columns", "board_columns"]
+__all__ = ["window_measures", "lattice_bend", "corner_features", "design_columns", "board_columns", "BOARD_COLUMNS",
+           "CORNER_COLUMNS"]
+
+BEND_KNOT = -3.0  # log(bend / spacing) above which lines bend enough to bias the saddle (hinge squared)
+IMPULSE_KNOT = 0.8  # log(RMS / median antisymmetric part) above which the board's noise is impulsive (counted as much
+# as the noise stands above NOISE_KNOT: an almost noise-free image's few grey-level steps look impulsive too)
+NOISE_KNOT = -3.5  # log(noise / contrast) below which the detector's own error floor takes over
+RESIDUAL_KNOT = -1.5  # log(residual / contrast) below which the junction is blurred smooth
+BOARD_COLUMNS = 15  # design columns 0..14: the board's; the next CORNER_COLUMNS: each corner's excess over them
+CORNER_COLUMNS = 8
 
 
 @helper
@@ -40,7 +49,7 @@ def _sample_window(img, x, y, r, out):
 
 @helper
 def window_measures(img, pts, radius, fits, weights):
-    """Per point (P, 4) float64: odd, odd_median, even, residual (:mod:`~aicalib_tf.detect.corners.sigma`).
+    """Per point (P, 5) float64: odd, odd_median, even, residual, curvature (:mod:`~aicalib_tf.detect.corners.sigma`).
 
     img (H, W) float32 or uint8 (the measures used are ratios: the grey scale does not matter), pts
     (P, 2) float64 px, radius (P,) int64 window radii in 1 .. R, fits
@@ -48,7 +57,7 @@ def window_measures(img, pts, radius, fits, weights):
     weights (R + 1, (2R+1)²) each radius' window weights, summing to 1.
     """
     n = pts.shape[0]
-    out = np.zeros((n, 4))
+    out = np.zeros((n, 5))
     big = fits.shape[2]
     vals = np.empty(big)
     anti = np.empty(big)
@@ -88,6 +97,7 @@ def window_measures(img, pts, radius, fits, weights):
         out[p, 1] = np.median(anti[:half])
         out[p, 2] = math.sqrt(even2)
         out[p, 3] = math.sqrt(left2)
+        out[p, 4] = 0.5 * math.sqrt(abs(4.0 * a * c - b * b))  # √|det| of the fitted quadratic's Hessian
     return out
 
 
@@ -129,49 +139,84 @@ def lattice_bend(pts, ids):
 
 
 @helper
-def design_columns(measures, bend, spacing, scores, min_score, tiny):
-    """The σ model's columns (P, 7) of one board (:func:`aicalib_tf.detect.corners.sigma.design`).
-
-    measures (P, 4) :func:`window_measures`, bend (P,) :func:`lattice_bend` px (−1: none), spacing (P,)
-    px, scores (P,). Values are floored at ``tiny`` and scores at ``min_score`` before the logarithms;
-    a corner without a bend takes the board's median bend.
-    """
-    n = measures.shape[0]
-    out = np.zeros((n, 7))
-    if n == 0:
-        return out
-    log_odd, log_med = np.empty(n), np.empty(n)
+def _board_median_fill(bend, tiny):
+    """bend (P,) px with −1 (none) replaced by the board's median bend (``tiny`` when no corner has one)."""
     seen = 0
+    for v in bend:
+        seen += v >= 0
+    present = np.empty(seen)
+    k = 0
+    for v in bend:
+        if v >= 0:
+            present[k] = v
+            k += 1
+    usual = np.median(present) if seen else tiny
+    out = np.empty(bend.shape[0])
+    for p in range(bend.shape[0]):
+        out[p] = bend[p] if bend[p] >= 0 else usual
+    return out
+
+
+@helper
+def corner_features(measures, bend, spacing, scores, min_score, tiny):
+    """(P, 8) per-corner features and the board's impulsiveness (:func:`aicalib_tf.detect.corners.sigma.design`):
+    noise/contrast, own excess asymmetry, residual/contrast, own impulsiveness, bend/spacing, score,
+    curvature/contrast, the bend's excess over ``BEND_KNOT`` squared; all logarithms."""
+    n = measures.shape[0]
+    f = np.zeros((n, 8))
+    log_odd, log_med = np.empty(n), np.empty(n)
     for p in range(n):
         log_odd[p] = math.log(max(measures[p, 0], tiny))
         log_med[p] = math.log(max(measures[p, 1], tiny))
-        seen += bend[p] >= 0
-    bends = np.empty(seen)
-    k = 0
-    for p in range(n):
-        if bend[p] >= 0:
-            bends[k] = bend[p]
-            k += 1
-    usual = np.median(bends) if seen else tiny
     noise = np.median(log_med)
     impulsive = np.median(log_odd) - noise
+    b = _board_median_fill(bend, tiny)
     for p in range(n):
         even = math.log(max(measures[p, 2], tiny))
-        b = bend[p] if bend[p] >= 0 else usual
-        out[p, 0] = noise - even
-        out[p, 1] = log_med[p] - noise
-        out[p, 2] = math.log(max(measures[p, 3], tiny)) - even
-        out[p, 3] = impulsive
-        out[p, 4] = math.log(max(b, tiny)) - math.log(max(spacing[p], tiny))
-        out[p, 5] = math.log(max(scores[p], min_score))
-        out[p, 6] = out[p, 0] * out[p, 0]
+        f[p, 0] = noise - even
+        f[p, 1] = log_med[p] - noise
+        f[p, 2] = math.log(max(measures[p, 3], tiny)) - even
+        f[p, 3] = log_odd[p] - log_med[p] - impulsive
+        f[p, 4] = math.log(max(b[p], tiny)) - math.log(max(spacing[p], tiny))
+        f[p, 5] = math.log(max(scores[p], min_score))
+        f[p, 6] = math.log(max(measures[p, 4], tiny)) - even
+        f[p, 7] = max(f[p, 4] - BEND_KNOT, 0.0) ** 2
+    return f, impulsive
+
+
+@helper
+def design_columns(measures, bend, spacing, scores, min_score, tiny):
+    """The σ model's columns (P, 23) of one board (:func:`aicalib_tf.detect.corners.sigma.design`).
+
+    measures (P, 5) :func:`window_measures`, bend (P,) :func:`lattice_bend` px (−1: none), spacing (P,)
+    px, scores (P,). Values are floored at ``tiny`` and scores at ``min_score`` before the logarithms.
+    Columns 0–14 are the board's (the same for all its corners), 15–22 each corner's excess over the
+    board's median of its feature.
+    """
+    n = measures.shape[0]
+    out = np.zeros((n, BOARD_COLUMNS + CORNER_COLUMNS))
+    if n == 0:
+        return out
+    f, impulsive = corner_features(measures, bend, spacing, scores, min_score, tiny)
+    med = np.empty(8)
+    for k in range(8):
+        med[k] = np.median(f[:, k])
+    q9_noise = np.percentile(f[:, 0], 90.0) - med[0]
+    q9_bend = np.percentile(f[:, 4], 90.0) - med[4]
+    board = np.array([med[0], med[2], impulsive, med[4], med[5], med[0] * med[0], med[6], np.median(np.log(np.maximum(spacing, tiny))),
+                      max(med[4] - BEND_KNOT, 0.0) ** 2, q9_noise, q9_bend, max(impulsive - IMPULSE_KNOT, 0.0) * max(med[0] - NOISE_KNOT, 0.0), med[3],
+                      max(NOISE_KNOT - med[0], 0.0), max(RESIDUAL_KNOT - med[2], 0.0)])
+    for p in range(n):
+        out[p, :BOARD_COLUMNS] = board
+        for k in range(CORNER_COLUMNS):
+            out[p, BOARD_COLUMNS + k] = f[p, k] - med[k]
     return out
 
 
 @kernel("f4[:, ::1], f8[:, ::1], i8[:, ::1], f8[::1], i8[::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8, f8",
         "u1[:, ::1], f8[:, ::1], i8[:, ::1], f8[::1], i8[::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8, f8")
 def board_columns(img, pts, ids, spacing, radius, scores, fits, weights, min_score, tiny):
-    """The σ model's columns (P, 7) of one board in one call: :func:`window_measures`, :func:`lattice_bend`
+    """The σ model's columns (P, 23) of one board in one call: :func:`window_measures`, :func:`lattice_bend`
     and :func:`design_columns` of its points (ids shifted to start at 0)."""
     return design_columns(window_measures(img, pts, radius, fits, weights), lattice_bend(pts, ids), spacing, scores,
                           min_score, tiny)

@@ -58,9 +58,11 @@ def test_window_measures_of_a_point_symmetric_junction_have_no_odd_part():
     fits, weights = cs._operators()
     img = _junction()
     got = window_measures(img, np.array([[20.0, 20.0]]), np.array([3]), fits, weights)[0]
-    odd, odd_median, even, residual = got
+    odd, odd_median, even, residual, curvature = got
     assert odd < 1e-6 and odd_median < 1e-6
-    assert 0.2 < even < 0.35 and residual > 0
+    assert 0.2 < even < 0.35 and residual > 0 and curvature > 0
+    stronger = window_measures(0.5 + 1.5 * (img - 0.5), np.array([[20.0, 20.0]]), np.array([3]), fits, weights)[0]
+    np.testing.assert_allclose(stronger[[2, 3, 4]], 1.5 * got[[2, 3, 4]], rtol=1e-6)  # contrast, residual, curvature: grey levels
     moved = window_measures(img, np.array([[21.0, 20.0]]), np.array([3]), fits, weights)[0]
     assert moved[0] > 0.05  # a px off the centre, the window is far from point-symmetric
 
@@ -77,15 +79,31 @@ def test_lattice_bend_is_zero_on_a_straight_lattice_and_the_second_difference_ot
 
 
 def test_design_columns_take_the_boards_medians_and_the_usual_bend_where_a_corner_has_none():
-    measures = np.array([[0.02, 0.01, 0.2, 0.05], [0.02, 0.04, 0.2, 0.05], [0.08, 0.01, 0.1, 0.05]])
+    measures = np.array([[0.02, 0.01, 0.2, 0.05, 0.1], [0.02, 0.04, 0.2, 0.05, 0.1], [0.08, 0.01, 0.1, 0.05, 0.2]])
     x = design_columns(measures, np.array([0.1, -1.0, 0.3]), np.full(3, 10.0), np.array([1.0, 0.0, 0.5]), 0.05, 1e-6)
+    nb = cs.BOARD_COLUMNS
+    assert x.shape == (3, len(cs.COLUMNS)) and np.all(x[:, :nb] == x[0, :nb])  # the board's columns: one row
     noise = np.log(0.01)  # the median odd_median
-    np.testing.assert_allclose(x[:, 0], noise - np.log([0.2, 0.2, 0.1]))
-    np.testing.assert_allclose(x[:, 1], np.log([0.01, 0.04, 0.01]) - noise)
-    np.testing.assert_allclose(x[:, 3], np.log(0.02) - noise)
-    np.testing.assert_allclose(x[:, 4], np.log([0.1, 0.2, 0.3]) - np.log(10.0))  # (0.1 + 0.3) / 2 for the second
-    np.testing.assert_allclose(x[:, 5], np.log([1.0, 0.05, 0.5]))
-    np.testing.assert_allclose(x[:, 6], x[:, 0] ** 2)
+    n = noise - np.log([0.2, 0.2, 0.1])
+    np.testing.assert_allclose(x[0, 0], np.median(n))
+    np.testing.assert_allclose(x[:, nb], n - np.median(n))
+    np.testing.assert_allclose(x[:, nb + 1], np.log([0.01, 0.04, 0.01]) - noise)
+    np.testing.assert_allclose(x[0, 2], np.median(np.log([0.02, 0.02, 0.08])) - noise)  # the board's impulsiveness
+    bend = np.log([0.1, 0.2, 0.3]) - np.log(10.0)  # (0.1 + 0.3) / 2 for the second
+    np.testing.assert_allclose(x[0, 3], np.median(bend))
+    np.testing.assert_allclose(x[:, nb + 4], bend - np.median(bend))
+    np.testing.assert_allclose(x[:, nb + 5], np.log([1.0, 0.05, 0.5]) - np.log(0.5))
+    np.testing.assert_allclose(x[0, 5], x[0, 0] ** 2)
+    np.testing.assert_allclose(x[:, nb + 6], np.log([0.5, 0.5, 2.0]) - np.log(0.5))  # curvature over contrast
+
+
+def test_sigma_inside_a_board_spreads_less_than_between_noise_levels(board):
+    """The corner's part only orders corners inside an image: its spread stays far below the board's part."""
+    quiet = detect_corners(_noisy(board, 2.0), PATTERN).sigmas
+    noisy = detect_corners(_noisy(board, 30.0, seed=1), PATTERN).sigmas
+    for s in (quiet, noisy):
+        assert np.percentile(s, 90) / np.percentile(s, 10) < 2.0
+    assert np.median(noisy) > 4 * np.median(quiet)
 
 
 def test_the_model_clips_its_columns_to_the_fitted_range():
