@@ -1,0 +1,125 @@
+"""A board whose outer ring is squeezed and darkened at a fisheye's rim: its last corners placed.
+
+Close to a circular fisheye, a board's outer squares are squeezed to a few px towards the image
+circle, blurred more and darkened almost to black. Their corners still hold a saddle, but the ring
+test that confirms a grid's predictions (:func:`aicalib_tf.detect.corners.junctions.proposer`)
+fails there: the ring's amplitude falls with the light, and the light's gradient across the ring
+makes it look like a T-junction. The grid then holds every corner of the pattern but a few on its
+outer ring, and is no full board.
+
+:func:`complete_rim` places those few corners where the grid's lines lead: each is extrapolated
+from the two or three corners inwards of it along every grid line through it (by the ratio of the
+lines' last steps, as squares shrink towards the rim), refined by the saddle fit in a window that
+fits the corner's smallest step (windows down to 2 px where that fit fails: the squeezed direction),
+and kept only when the fit stays within a third of that step, the ring about it keeps ``RIM_GATE``
+of a typical corner's amplitude, and it is no other corner's point. A board's corner is predicted
+by its cell's parallelogram (its two neighbours on the ring and the diagonal one inside). A grid missing more than ``MAX_MISSING`` corners, or any inside its outer
+ring, is left as it is.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from aicalib_tf.detect.chessboard.grid import Grid
+from aicalib_tf.detect.corners.junctions import ring_symmetry
+from aicalib_tf.detect.corners.refine import Smoothed, refine_windowed, window_radius
+
+__all__ = ["complete_rim", "MAX_MISSING", "SHIFT"]
+
+MAX_MISSING = 3  # most corners of the outer ring placed here
+SHIFT = 0.34  # of the smallest local step: the farthest the saddle fit may move a prediction
+RIM_GATE = 0.1  # of a typical corner's ring amplitude: the least a placed corner keeps (the light falls to black)
+RATIO = (0.3, 1.25)  # bounds of a line's step ratio used to extrapolate its next step
+
+
+def _along(cells: dict, i: int, j: int, di: int, dj: int):
+    """(prediction (2,), its step px) for (i, j) from the corners inwards of it along (di, dj), or None."""
+    a, b, c = (cells.get((i + k * di, j + k * dj)) for k in (1, 2, 3))
+    if a is None or b is None:
+        return None
+    step = a - b
+    ratio = 1.0
+    if c is not None:
+        prev = float(np.hypot(*(b - c)))
+        ratio = float(np.clip(np.hypot(*step) / max(prev, 1e-9), *RATIO))
+    step = step * ratio
+    return a + step, float(np.hypot(*step))
+
+
+def _edge_steps(cells: dict, i: int, j: int) -> list[float]:
+    """Distances (px) between the outer-ring neighbours of (i, j) present on both sides of it, halved."""
+    out = []
+    for di, dj in ((1, 0), (0, 1)):
+        p, q = cells.get((i - di, j - dj)), cells.get((i + di, j + dj))
+        if p is not None and q is not None:
+            out.append(0.5 * float(np.hypot(*(p - q))))
+    return out
+
+
+def _predict(cells: dict, i: int, j: int, shape: tuple[int, int]):
+    """(prediction (2,), smallest local step px) for a missing outer-ring position, or None."""
+    a, b = shape
+    preds, steps = [], []
+    for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        got = _along(cells, i, j, di, dj)  # positions outside the grid are never in cells
+        if got is not None:
+            preds.append(got[0])
+            steps.append(got[1])
+    if not preds:
+        return None
+    pred = np.mean(preds, axis=0)
+    closure = [cells[(i + di, j)] + cells[(i, j + dj)] - cells[(i + di, j + dj)]
+               for di in (1, -1) for dj in (1, -1)
+               if all(k in cells for k in ((i + di, j), (i, j + dj), (i + di, j + dj)))]
+    if closure:  # the cell's parallelogram: where the lines' steps shrink fastest, nearer than they lead
+        pred = np.mean(closure, axis=0)
+    return pred, min(steps + _edge_steps(cells, i, j))
+
+
+def complete_rim(grid: Grid, shape: tuple[int, int], smoothed: Smoothed, ring_image: np.ndarray,
+                 ref_amp: float) -> Grid | None:
+    """``grid`` with the missing corners of its outer ring placed, or None when it cannot be.
+
+    shape : (a, b), the grid's full extent in (i, j) positions (the pattern's, either way round).
+    smoothed : the image's :class:`~aicalib_tf.detect.corners.refine.Smoothed`. ring_image : (H, W)
+    float32, smoothed (σ = 1 px). ref_amp : a typical corner's ring amplitude
+    (:func:`aicalib_tf.detect.corners.junctions.typical_amplitude`).
+    Returns a grid with every position of ``shape`` filled (placed corners get index -1), or None
+    when the grid's extent is not ``shape``, more than ``MAX_MISSING`` corners are missing, one is
+    inside the outer ring, or a corner's fit fails.
+    """
+    a, b = shape
+    if grid.shape != (a, b) or len(grid) >= a * b or a * b - len(grid) > MAX_MISSING or min(a, b) < 4:
+        return None
+    cells = {(int(i), int(j)): np.asarray(p, np.float64) for (i, j), p in zip(grid.ij, grid.points)}
+    missing = [(i, j) for i in range(a) for j in range(b) if (i, j) not in cells]
+    if any(0 < i < a - 1 and 0 < j < b - 1 for i, j in missing):
+        return None
+    h, w = ring_image.shape
+    placed = {}
+    for i, j in missing:
+        got = _predict(cells, i, j, shape)  # from the grid's own corners: never one placed here
+        if got is None:
+            return None
+        pred, step = got
+        if not (step >= 2.0 and 1 <= pred[0] <= w - 2 and 1 <= pred[1] <= h - 2):
+            return None
+        for radius in range(int(window_radius(np.array([step]))[0]), 1, -1):  # the squeezed direction may be
+            # narrower than the smallest step says: ever smaller windows (2 px the least)
+            q, ok = refine_windowed(smoothed, pred[None], np.array([radius / 0.45]),
+                                    max_shift=np.array([SHIFT * step]), restarts=False)
+            if ok[0]:
+                break
+        else:
+            return None
+        amp, _ = ring_symmetry(ring_image, q.astype(np.float64), np.array([max(1.5, 0.3 * step)]))
+        others = np.array(list(cells.values()) + list(placed.values()))
+        if amp[0] < RIM_GATE * ref_amp or np.min(np.hypot(*(others - q[0]).T)) < 0.5 * step:
+            return None
+        placed[(i, j)] = q[0].astype(np.float64)
+    cells.update(placed)
+    keys = list(cells)
+    index = {(int(i), int(j)): int(k) for (i, j), k in zip(grid.ij, grid.index)}
+    return Grid(index=np.array([index.get(key, -1) for key in keys]), ij=np.array(keys),
+                points=np.array([cells[key] for key in keys]))
