@@ -77,6 +77,38 @@ def _predict(cells: dict, i: int, j: int, shape: tuple[int, int]):
     return pred, min(steps + _edge_steps(cells, i, j))
 
 
+def _place(cells: dict, pred: np.ndarray, step: float, smoothed: Smoothed, ring_image: np.ndarray,
+           ref_amp: float):
+    """(2,) px: the corner the saddle fit finds at ``pred`` with the smallest local ``step`` px, or None.
+
+    Windows from the step's down to 2 px until the fit holds within ``SHIFT``·step; kept when its ring
+    (0.3 step) keeps ``RIM_GATE``·``ref_amp`` and no point of ``cells`` is within half a step."""
+    h, w = ring_image.shape
+    if not (step >= 2.0 and 1 <= pred[0] <= w - 2 and 1 <= pred[1] <= h - 2):
+        return None
+    for radius in range(int(window_radius(np.array([step]))[0]), 1, -1):  # the squeezed direction may be
+        # narrower than the smallest step says: ever smaller windows (2 px the least)
+        q, ok = refine_windowed(smoothed, pred[None], np.array([radius / 0.45]),
+                                max_shift=np.array([SHIFT * step]), restarts=False)
+        if ok[0]:
+            break
+    else:
+        return None
+    amp, _ = ring_symmetry(ring_image, q.astype(np.float64), np.array([max(1.5, 0.3 * step)]))
+    others = np.array(list(cells.values()))
+    if amp[0] < RIM_GATE * ref_amp or np.min(np.hypot(*(others - q[0]).T)) < 0.5 * step:
+        return None
+    return q[0].astype(np.float64)
+
+
+def _as_grid(grid: Grid, cells: dict) -> Grid:
+    """A grid of ``cells`` {(i, j): (2,) px}; ``grid``'s own points keep their index, the others get -1."""
+    index = {(int(i), int(j)): int(k) for (i, j), k in zip(grid.ij, grid.index)}
+    keys = list(cells)
+    return Grid(index=np.array([index.get(key, -1) for key in keys]), ij=np.array(keys),
+                points=np.array([cells[key] for key in keys]))
+
+
 def complete_rim(grid: Grid, shape: tuple[int, int], smoothed: Smoothed, ring_image: np.ndarray,
                  ref_amp: float) -> Grid | None:
     """``grid`` with the missing corners of its outer ring placed, or None when it cannot be.
@@ -96,30 +128,11 @@ def complete_rim(grid: Grid, shape: tuple[int, int], smoothed: Smoothed, ring_im
     missing = [(i, j) for i in range(a) for j in range(b) if (i, j) not in cells]
     if any(0 < i < a - 1 and 0 < j < b - 1 for i, j in missing):
         return None
-    h, w = ring_image.shape
     placed = {}
     for i, j in missing:
         got = _predict(cells, i, j, shape)  # from the grid's own corners: never one placed here
-        if got is None:
+        q = None if got is None else _place({**cells, **placed}, *got, smoothed, ring_image, ref_amp)
+        if q is None:
             return None
-        pred, step = got
-        if not (step >= 2.0 and 1 <= pred[0] <= w - 2 and 1 <= pred[1] <= h - 2):
-            return None
-        for radius in range(int(window_radius(np.array([step]))[0]), 1, -1):  # the squeezed direction may be
-            # narrower than the smallest step says: ever smaller windows (2 px the least)
-            q, ok = refine_windowed(smoothed, pred[None], np.array([radius / 0.45]),
-                                    max_shift=np.array([SHIFT * step]), restarts=False)
-            if ok[0]:
-                break
-        else:
-            return None
-        amp, _ = ring_symmetry(ring_image, q.astype(np.float64), np.array([max(1.5, 0.3 * step)]))
-        others = np.array(list(cells.values()) + list(placed.values()))
-        if amp[0] < RIM_GATE * ref_amp or np.min(np.hypot(*(others - q[0]).T)) < 0.5 * step:
-            return None
-        placed[(i, j)] = q[0].astype(np.float64)
-    cells.update(placed)
-    keys = list(cells)
-    index = {(int(i), int(j)): int(k) for (i, j), k in zip(grid.ij, grid.index)}
-    return Grid(index=np.array([index.get(key, -1) for key in keys]), ij=np.array(keys),
-                points=np.array([cells[key] for key in keys]))
+        placed[(i, j)] = q
+    return _as_grid(grid, {**cells, **placed})
