@@ -1,7 +1,7 @@
 """Predicted against measured corner error per condition: the detector's per-corner σ on rendered truth.
 
     python benchmarks/corner_sigma.py [--images 6] [--conditions named,sweeps] [--cache DIR]
-    python benchmarks/corner_sigma.py --fit [--fit-on sweeps,named] [--images 6]   # refit COEFFS, LOW, HIGH
+    python benchmarks/corner_sigma.py --fit [--fit-on sweeps,named] [--images 6] [--leave-out]   # refit COEFFS, LOW, HIGH
     python benchmarks/corner_sigma.py --calibrate [--views 20] [--repeats 3] [--as-rendered]   # calibration with and without σ
 
 Renders the benchmark's conditions (:mod:`aicalib_tf.bench.conditions`, with their own seeds), detects
@@ -9,13 +9,16 @@ each board with the shipped model and matches every detected corner to the neare
 corner (within ``WRONG_PX``; further ones are counted as gross and left out). Per condition it
 prints the corners matched, the measured RMS error per axis, the RMS of the predicted σ
 (:mod:`aicalib_tf.detect.corners.sigma`), their ratio (target 0.8–1.25) and the rank correlation of
-|error| with σ among the condition's corners.
+|error| with σ among the condition's corners; then, over all boards, whether σ spreads inside a board
+as the errors do (:func:`spread`).
 
 ``--fit`` renders the conditions of ``--fit-on`` again with other seeds (``FIT_SEEDS``: other
 scenes, cameras, poses and noise), fits the model there (:func:`fit_table`) and reports with the
 fitted table on the benchmark's own renders, which the fit never saw; paste the printed table into
 the module. ``--fit-on sweeps`` leaves the named conditions (shading, occluders, fisheyes, ...) out
-of the fit altogether, to see how the model carries to conditions it was not fitted on.
+of the fit altogether; ``--leave-out`` refits once per family of conditions (a sweep's levels, or one
+named condition) without it and reports that family on the benchmark's renders: conditions as well
+as seeds held out.
 
 ``--calibrate`` degrades the calibration sequences' views (:func:`aicalib_tf.bench.conditions.calibration_sequences`,
 cameras 0–3) one by one with a blur and a noise drawn from ``MIXED`` (seeded per view), detects them
@@ -170,7 +173,50 @@ def report(data: dict, table=None) -> list[float]:
     inside = sum(0.8 <= r <= 1.25 for r in ratios)
     print(f"{inside} of {len(ratios)} conditions with the ratio in [0.8, 1.25]; "
           f"RMS of log ratio {float(np.sqrt(np.mean(np.log(ratios) ** 2))):.3f}")
+    spread(data, table)
     return ratios
+
+
+def spread(data: dict, table) -> None:
+    """Print σ against error inside the boards: per fifth of the corners by σ / their board's median σ, that
+    ratio's median and the RMS of error / the board's RMS error (equal when σ spreads as the errors do)."""
+    rel, err = [], []
+    for k, v in enumerate(data.values()):
+        if len(v["x"]) == 0:
+            continue
+        sig = cs.sigma_from_design(v["x"], *table).astype(np.float64)
+        e2 = 0.5 * np.einsum("nk,nk->n", v["err"], v["err"])
+        for i in np.unique(v["image"]):
+            m = v["image"] == i
+            rel.append(sig[m] / np.median(sig[m]))
+            err.append(e2[m] / max(float(np.mean(e2[m])), 1e-30))
+    rel, err = np.concatenate(rel), np.concatenate(err)
+    edges = np.quantile(rel, np.linspace(0, 1, 6))
+    cells = [(float(np.median(rel[m])), float(np.sqrt(np.mean(err[m]))))
+             for m in ((rel >= a) & (rel <= b) for a, b in zip(edges[:-1], edges[1:]))]
+    print("inside boards, σ / board median σ : RMS error / board RMS error, per fifth: "
+          + ", ".join(f"{a:.2f} : {b:.2f}" for a, b in cells))
+
+
+def family(name: str) -> str:
+    """A condition's family: a sweep's levels are one (``sweep-noise-10`` -> ``sweep-noise``), a named condition its own."""
+    name = name.split("@")[0]
+    return name.rsplit("-", 1)[0] if name.startswith("sweep-") else name
+
+
+def leave_out(train: dict, held: dict) -> None:
+    """Print each family's ratios on ``held`` from a table fitted on ``train`` without that family (held-out
+    conditions as well as seeds), and the count within 0.8-1.25."""
+    ratios = []
+    for fam in dict.fromkeys(family(n) for n in held):
+        table = fit_table({n: v for n, v in train.items() if family(n) != fam and len(v["x"])})
+        for name, v in held.items():
+            if family(name) == fam and len(v["x"]):
+                sig = cs.sigma_from_design(v["x"], *table).astype(np.float64)
+                ratios.append(float(np.sqrt(np.mean(v["err"] ** 2)) / np.sqrt(np.mean(sig ** 2))))
+                print(f"{name:26s} left out of the fit: ratio {ratios[-1]:.2f}")
+    print(f"held-out conditions: {sum(0.8 <= r <= 1.25 for r in ratios)} of {len(ratios)} with the ratio in "
+          f"[0.8, 1.25]; RMS of log ratio {float(np.sqrt(np.mean(np.log(ratios) ** 2))):.3f}")
 
 
 def _cached(path: Path | None, make) -> dict:
@@ -244,6 +290,7 @@ def main(argv=None) -> int:
     ap.add_argument("--conditions", default="named,sweeps", help="conditions reported (aicalib_tf.bench.conditions names)")
     ap.add_argument("--fit", action="store_true", help="refit the table on --fit-on rendered with FIT_SEEDS")
     ap.add_argument("--fit-on", default="sweeps,named", help="conditions fitted on (with other seeds)")
+    ap.add_argument("--leave-out", action="store_true", help="with --fit: each family's ratios fitted without it")
     ap.add_argument("--cache", type=Path, help="folder for the collected corners (read when present, else written)")
     ap.add_argument("--calibrate", action="store_true", help="calibrate mixed-degradation sequences with and without σ")
     ap.add_argument("--views", type=int, default=20, help="views per calibration sequence (--calibrate)")
@@ -267,6 +314,8 @@ def main(argv=None) -> int:
         table = fit_table(train)
         print(f"fitted on {sum(len(v['x']) for v in train.values())} corners, {len(train)} conditions "
               f"({', '.join(select_conditions(a.fit_on)[k].name for k in range(2))}, ...) with seeds {FIT_SEEDS}")
+        if a.leave_out:
+            leave_out(train, held)
         for label, arr in zip(("COEFFS", "LOW", "HIGH"), table):
             print(f"{label} = np.array([{', '.join(f'{v:.3f}' for v in arr)}])")
     report(held, table)

@@ -56,13 +56,13 @@ COLUMNS = ("noise/contrast", "residual/contrast", "impulsive noise", "bend/spaci
            "Δ score", "Δ curvature/contrast", "Δ bend hinge²")  # each corner's excess over the board's median
 BOARD_COLUMNS = _BOARD_COLUMNS
 # log σ = COEFFS[0] + Σ COEFFS[1 + k] · clip(design[:, k], LOW[k], HIGH[k]); refit: python benchmarks/corner_sigma.py --fit
-COEFFS = np.array([-0.987, 0.783, -0.208, -0.402, 0.086, 0.361, -0.033, -0.678, -0.282, -0.027, 2.916, -0.008, 3.564,
-                   -0.756, -0.121, -1.199, 1.435, 0.513, -0.255, 0.377, 0.023, -0.232, -0.861,
-                   0.323])
+COEFFS = np.array([-0.898, 0.809, -0.211, -0.395, 0.093, 0.373, -0.029, -0.673, -0.288, -0.033, 2.774, 0.005, 3.566,
+                   -0.756, -0.128, -1.208, 1.432, 0.518, -0.242, 0.378, 0.024, -0.236, -0.801,
+                   0.292])
 LOW = np.array([-4.835, -2.288, 0.266, -5.062, -0.293, 1.355, -1.845, 1.929, 0.000, 0.014, 0.058, 0.000, -0.160,
-                0.000, 0.000, -0.186, -0.901, -0.340, -0.446, -2.254, -0.601, -0.129, -0.442])
-HIGH = np.array([-1.164, -0.349, 1.187, -1.701, -0.014, 23.373, -1.437, 3.917, 1.689, 0.345, 0.679, 0.339, 0.066,
-                 1.335, 0.788, 0.233, 0.720, 0.314, 0.702, 0.704, 0.134, 0.099, 0.627])
+                0.000, 0.000, -0.187, -0.901, -0.340, -0.446, -2.252, -0.605, -0.130, -0.491])
+HIGH = np.array([-1.164, -0.349, 1.187, -1.545, -0.014, 23.373, -1.437, 3.917, 2.118, 0.387, 0.679, 0.339, 0.066,
+                 1.335, 0.788, 0.242, 0.722, 0.316, 0.702, 0.704, 0.136, 0.099, 0.669])
 MIN_SCORE = 0.05  # a corner the network missed (score 0) counts as this weak
 _TINY = 1e-6  # grey levels (px for the bend): keeps the logarithms finite in a flat window
 _MAX_RADIUS = 3  # px: the refinement's window radius, at most this (a 7×7 window: the measures' cost)
