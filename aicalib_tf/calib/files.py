@@ -316,8 +316,8 @@ def undistort_camera_matrix(cal: Calibration, alpha: float = 0.0) -> np.ndarray:
 
     Pinhole models: ``cv2.getOptimalNewCameraMatrix`` (alpha 0 keeps only valid pixels, 1 keeps
     every source pixel). The fisheye models (``IS_FISHEYE``: equidistant, ds, eucm; a pinhole
-    cannot show 180°): the principal point at the
-    image centre and a focal f = (1 − alpha)·fx + alpha·f₁ (likewise for y), where f₁ makes the
+    cannot show 180°) and any other model OpenCV does not hold (a spline of a narrow lens): the
+    principal point at the image centre and a focal f = (1 − alpha)·fx + alpha·f₁ (likewise for y), where f₁ makes the
     output's left/right edges see the lens's horizontal half-field, capped at 75°
     (:data:`MAX_FISHEYE_HALF_ANGLE_DEG`): alpha 0 keeps the central magnification and crops the
     periphery, alpha 1 shows as much of the horizontal field as a pinhole reasonably can.
@@ -327,7 +327,7 @@ def undistort_camera_matrix(cal: Calibration, alpha: float = 0.0) -> np.ndarray:
         raise ValueError(f"alpha must be in [0, 1], got {alpha!r}")
     lens = lens_of(cal)
     w, h = lens.image_size
-    if not lens.spec.IS_FISHEYE:
+    if not lens.spec.IS_FISHEYE and not needs_maps(lens):  # a model OpenCV holds (a narrow spline is not one)
         new_K, _ = cv2.getOptimalNewCameraMatrix(lens.K, lens.dist, (w, h), a)
         return np.asarray(new_K, np.float64)
     half = float(np.radians(lens.field_of_view(getattr(cal, "image_circle", None))["horizontal"]) / 2)

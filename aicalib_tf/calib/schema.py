@@ -340,9 +340,15 @@ def require_rotation(d: dict, key: str, shape: tuple = (3, 3)) -> np.ndarray:
     return R
 
 
+MAX_DIST_COEFF = 1e6  # |coefficient| of any lens model's distortion; real lenses stay many decades below
+
+
 def require_dist(d: dict, key: str, model: str) -> np.ndarray:
     """The (n,) coefficients of lens ``model`` (OpenCV order; extra zero OpenCV coefficients dropped)."""
     dist = require_vector(d, key)
+    if dist.size and np.abs(dist).max() > MAX_DIST_COEFF:  # no lens has one; its projection would overflow
+        raise FieldError(key, f"holds {_short(dist[np.argmax(np.abs(dist))])}, not a lens coefficient "
+                              f"(|value| over {MAX_DIST_COEFF:g})")
     try:
         return L.check_model(model, dist)[1]
     except ValueError as exc:

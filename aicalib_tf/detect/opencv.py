@@ -9,17 +9,21 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-__all__ = ["opencv_classic", "opencv_sb", "CLASSIC_FLAGS"]
+__all__ = ["opencv_classic", "opencv_sb", "CLASSIC_FLAGS", "MIN_CLASSIC_SIDE"]
 
 CLASSIC_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+MIN_CLASSIC_SIDE = 16  # findChessboardCorners' threshold block (a tenth of the short side, odd, > 1) needs 15 px
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-3)
 
 
 def opencv_classic(image: np.ndarray, pattern_size: tuple[int, int], *, half_window: int = 5, flags: int = CLASSIC_FLAGS):
     """``cv2.findChessboardCorners`` then ``cv2.cornerSubPix`` (half-window px, 30 it / 1e-3).
 
-    The classic pipeline of ../shared/data/README.md. Returns (found, (N, 2) float32 | None).
+    The classic pipeline of ../shared/data/README.md. Returns (found, (N, 2) float32 | None); not
+    found in an image under :data:`MIN_CLASSIC_SIDE` px a side (OpenCV's adaptive threshold asserts there).
     """
+    if min(image.shape[:2]) < MIN_CLASSIC_SIDE:
+        return False, None
     ok, corners = cv2.findChessboardCorners(image, tuple(pattern_size), flags=flags)
     if not ok:
         return False, None

@@ -87,7 +87,7 @@ class AprilGrid:
         if cols < 2 or rows < 2:
             raise ValueError(f"tags: an AprilGrid needs at least 2x2 tags, got {cols}x{rows}")
         if not (0 < self.tag < 1e6):
-            raise ValueError(f"tag: the tag size must be > 0, got {self.tag!r}")
+            raise ValueError(f"tag: the tag size must be > 0 and under 1e6, got {self.tag!r}")
         if not 0 < self.spacing < 1:
             raise ValueError(f"spacing: the gap between tags over the tag size must be in (0, 1), got {self.spacing!r}")
         if self.family not in FAMILIES:

@@ -66,7 +66,7 @@ class CircleGrid:
         if self.layout == "asymmetric" and rows < 3:
             raise ValueError(f"grid: an asymmetric circle grid needs at least 3 rows, got {cols}x{rows}")
         if not 0 < float(self.spacing) < 1e6:
-            raise ValueError(f"spacing: must be > 0, got {self.spacing!r}")
+            raise ValueError(f"spacing: must be > 0 and under 1e6, got {self.spacing!r}")
         if not self.diameter:
             object.__setattr__(self, "diameter", float(self.nearest / 2))
         if not 0 < float(self.diameter) < self.nearest:
@@ -158,9 +158,11 @@ def parse_board(text: str) -> CircleGrid:
     for p in parts[1:]:
         key, eq, value = p.partition("=")
         key = key.strip().lower()
-        if not eq and key in LAYOUTS:
+        if not eq and key in LAYOUTS and layout in (None, key):
             layout = key
-        elif eq and key in ("spacing", "diameter"):
+        elif not eq and key in LAYOUTS:
+            raise ValueError(f"board {text!r}: both symmetric and asymmetric; give one layout")
+        elif eq and key in ("spacing", "diameter") and key not in fields:
             fields[key] = value
         else:
             raise ValueError(f"board {text!r}: unexpected {p!r} (fields: spacing=, diameter=, symmetric or asymmetric)")

@@ -1,0 +1,92 @@
+"""Regression tests of the third hostile-input campaign (benchmarks/hostile_inputs.py): each case
+keeps the property (exit 0, 1 or 2; one error line naming the file or field; no traceback; a
+complete set of output files or none)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from aicalib_tf import board, compare
+from aicalib_tf.calib.files import save_calibration, undistort_camera_matrix
+from aicalib_tf.calib.fit import fit_views
+from aicalib_tf.detect.opencv import opencv_classic
+from aicalib_tf.geometry import lens as L
+from aicalib_tf.geometry.lens_registry import get_model
+from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views
+
+SIZE = (640, 480)
+LENS = L.Lens("plumb_bob", [[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]], [-0.25, 0.08, 0.001, -0.0005, 0.0], SIZE)
+NARROW_SPLINE = "splined_equidistant_nx=8_ny=6_fov=120_smooth=1"  # a spline of a lens under 180°: not IS_FISHEYE
+
+
+@pytest.fixture(scope="module")
+def cal():
+    return fit_views(synthetic_views(LENS, 6, 0.2, seed=3), PATTERN, SQUARE, SIZE, "plumb_bob")
+
+
+def _one_error(capsys) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and "bug in aicalib_tf" not in err[0], err
+    return err[0]
+
+
+def test_a_spline_of_a_narrow_lens_is_saved_with_its_maps(cal, tmp_path):
+    """OpenCV holds no spline: its undistorted camera matrix cannot come from getOptimalNewCameraMatrix."""
+    spec = get_model(NARROW_SPLINE)
+    assert not spec.IS_FISHEYE
+    spline = dataclasses.replace(cal, model=NARROW_SPLINE, dist=np.zeros(spec.n_coeffs))
+    K = undistort_camera_matrix(spline)
+    assert np.all(np.isfinite(K)) and abs(K[0, 0] - cal.K[0, 0]) < 1e-6
+    save_calibration(spline, tmp_path)
+    assert {"camera.json", "undistort_map_x.npy", "undistort_map_y.npy"} <= {p.name for p in tmp_path.iterdir()}
+
+
+@pytest.mark.parametrize("value", [1e308, -1e7])
+def test_an_absurd_distortion_coefficient_is_refused_naming_the_field(cal, tmp_path, capsys, value):
+    for name in ("a", "b"):
+        save_calibration(cal, tmp_path / name)
+    doc = json.loads((tmp_path / "b" / "camera.json").read_text())
+    doc["distortion_coefficients"][0] = value
+    (tmp_path / "b" / "camera.json").write_text(json.dumps(doc))
+    (tmp_path / "b" / "camera.yaml").unlink()
+    png = tmp_path / "d.png"
+    assert compare.main([str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(png)]) == 2
+    line = _one_error(capsys)
+    assert "camera.json: field distortion_coefficients" in line and "not a lens coefficient" in line
+    assert not png.exists()
+
+
+@pytest.mark.parametrize("spec, words", [
+    ("circles:4x11,spacing=20mm,asymmetric,symmetric", "both symmetric and asymmetric"),
+    ("circles:4x11,spacing=20mm,spacing=40mm,symmetric", "unexpected 'spacing=40mm'"),
+    ("circles:4x11,spacing=1e308mm,symmetric", "under 1e6"),
+    ("aprilgrid:6x6,tag=1e308mm,spacing=0.3", "under 1e6"),
+])
+def test_contradictory_or_huge_board_fields_are_one_line(spec, words, tmp_path, capsys):
+    out = tmp_path / "b.png"
+    assert board.main([spec, "--out", str(out)]) == 2
+    assert words in _one_error(capsys)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("shape", [(1, 640), (480, 1), (2, 2), (14, 14)])
+def test_opencv_classic_finds_nothing_in_a_sliver_of_an_image(shape):
+    img = np.full(shape, 128, np.uint8)
+    assert opencv_classic(img, (9, 6)) == (False, None)
+
+
+def test_calibrate_with_opencv_counts_a_1xn_photo_as_no_board(tmp_path, capsys):
+    from aicalib_tf import calibrate
+
+    photo = tmp_path / "row.png"
+    cv2.imwrite(str(photo), np.full((1, 640), 200, np.uint8))
+    out = tmp_path / "cal"
+    assert calibrate.main([str(photo), "--pattern", "9x6", "--detector", "opencv", "--out", str(out), "--quiet",
+                           "--workers", "1"]) == 2
+    assert "no 9x6 board found" in _one_error(capsys)
+    assert not out.exists()
