@@ -128,10 +128,10 @@ def tracking_detector(pattern: tuple[int, int], network: str, base):
 
     def detect(gray):
         det = tracker(gray)
-        detect.why, detect.relative = det.reason, det.relative
+        detect.why, detect.relative, detect.sigmas = det.reason, det.relative, det.sigmas  # σ weigh the live fits
         return (det.corners, det.ids) if len(det.corners) else None
 
-    detect.info, detect.why, detect.relative = base.info, "", False
+    detect.info, detect.why, detect.relative, detect.sigmas = base.info, "", False, None
     return detect
 
 

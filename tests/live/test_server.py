@@ -322,3 +322,16 @@ def test_the_live_command_takes_a_board_or_a_pattern(tmp_path, capsys):
         assert main(args + ["--out", str(tmp_path / "o"), "--port", "0"]) == 2
         err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
         assert len(err) == 1 and why in err[0], err
+
+
+def test_the_tracking_detector_hands_each_corners_sigma_to_the_guided_loop():
+    """The live page's calibrations weigh corners as every other fit does: the detector keeps their σ."""
+    from aicalib_tf.calib.workflow import DETECTOR_NETWORK, make_detector
+    from aicalib_tf.detect.warm import synthetic_board
+    from aicalib_tf.live.server import tracking_detector
+
+    detect = tracking_detector((9, 6), DETECTOR_NETWORK, make_detector("cnn", (9, 6)))
+    assert detect.sigmas is None
+    corners, _ = detect(synthetic_board((9, 6), square=30))
+    assert detect.sigmas is not None and len(detect.sigmas) == len(corners) and np.all(detect.sigmas > 0)
+    assert detect(np.full((480, 640), 128, np.uint8)) is None and detect.sigmas is None

@@ -101,10 +101,12 @@ class _Views:
     px: list
     A: np.ndarray
     Cs: np.ndarray  # (V, F, 4, 4) PnP pose in each of the board's orders
+    sigmas: list  # per view the detector's (N,) σ px or None
+    scale: list | None = None  # per view (N,) each corner's σ over the corners' noise (_corner_scale), None: all 1
 
 
 def _pnp_views(views, poses, lens: Lens, square: float, flips, rejected) -> _Views:
-    names, obj, px, A, Cs = [], [], [], [], []
+    names, obj, px, A, Cs, sigmas = [], [], [], [], [], []
     for v in views:
         o = board_points(v.ids, square)
         found = solve_pose(lens, o, v.corners)
@@ -117,12 +119,14 @@ def _pnp_views(views, poses, lens: Lens, square: float, flips, rejected) -> _Vie
         px.append(np.asarray(v.corners, np.float64))
         A.append(np.asarray(poses[v.name], np.float64))
         Cs.append([C @ F for F in flips])
-    return _Views(names, obj, px, np.array(A).reshape(-1, 4, 4), np.array(Cs).reshape(-1, len(flips), 4, 4))
+        sigmas.append(getattr(v, "sigmas", None))
+    return _Views(names, obj, px, np.array(A).reshape(-1, 4, 4), np.array(Cs).reshape(-1, len(flips), 4, 4), sigmas)
 
 
 def _keep(d: _Views, mask) -> _Views:
     idx = np.flatnonzero(mask)
-    return _Views([d.names[k] for k in idx], [d.obj[k] for k in idx], [d.px[k] for k in idx], d.A[idx], d.Cs[idx])
+    return _Views([d.names[k] for k in idx], [d.obj[k] for k in idx], [d.px[k] for k in idx], d.A[idx], d.Cs[idx],
+                  [d.sigmas[k] for k in idx], None if d.scale is None else [d.scale[k] for k in idx])
 
 
 def _apply_order(d: _Views, order, flips) -> None:
@@ -135,12 +139,39 @@ def _apply_order(d: _Views, order, flips) -> None:
     d.Cs = d.Cs[:, :1]
 
 
+def _pnp_residuals(d: _Views, lens: Lens) -> list:
+    """Per view (N, 2) px: projected − detected at each view's PnP pose."""
+    return [project(o @ C[:3, :3].T + C[:3, 3], lens.model, lens.K, lens.dist) - q
+            for o, q, C in zip(d.obj, d.px, d.Cs[:, 0])]
+
+
+def _corner_scale(d: _Views, lens: Lens) -> list | None:
+    """Per view (N,) each corner's σ over their median, by the rule every fit shares (the views' σ,
+    :func:`~aicalib_tf.calib.weights.fit_sigmas`, with the error they leave unexplained in the PnP
+    residuals added, :func:`~aicalib_tf.calib.robust.with_floor`); None when no view has σ."""
+    from aicalib_tf.calib.robust import with_floor
+    from aicalib_tf.calib.weights import fit_sigmas
+
+    sig = fit_sigmas(d.sigmas, [len(q) for q in d.px])
+    if sig is None:
+        return None
+    sig = with_floor(sig, _Fit(_pnp_residuals(d, lens)))
+    ref = float(np.median(np.concatenate(sig)))
+    return [s / ref for s in sig]
+
+
+@dataclass
+class _Fit:
+    residuals: list  # per view (N, 2) px, as with_floor reads a fit
+
+
 def _sigma_px(d: _Views, lens: Lens) -> float:
-    """The corners' noise per coordinate from each view's PnP residuals (6 pose parameters a view)."""
+    """The corners' noise per coordinate from each view's PnP residuals (6 pose parameters a view), each
+    corner's over its ``scale``."""
     e2, n = 0.0, 0
-    for o, q, C in zip(d.obj, d.px, d.Cs[:, 0]):
-        uv = project(o @ C[:3, :3].T + C[:3, 3], lens.model, lens.K, lens.dist)
-        e2 += float(np.nansum((uv - q) ** 2))
+    scale = d.scale or [np.ones(len(q)) for q in d.px]
+    for r, q, s in zip(_pnp_residuals(d, lens), d.px, scale):
+        e2 += float(np.nansum((r / s[:, None]) ** 2))
         n += q.size
     dof = n - 6 * len(d.obj)
     return max(math.sqrt(e2 / max(dof, 1)), 0.01)
@@ -164,7 +195,7 @@ def _repnp(d: _Views, lens: Lens) -> np.ndarray:
 
 def _fit(setup, d: _Views, lens, X0, Y0, sig, free) -> JointFit:
     return joint_fit(setup, lens, d.obj, d.px, d.A, X0, Y0, sigma_px=sig[0], sigma_rot=sig[1], sigma_t=sig[2],
-                     free_intrinsics=free)
+                     free_intrinsics=free, corner_scale=d.scale)
 
 
 def _outlier_loop(setup, d: _Views, lens, fit: JointFit, sig, free, rejected) -> tuple[_Views, JointFit]:
@@ -173,13 +204,15 @@ def _outlier_loop(setup, d: _Views, lens, fit: JointFit, sig, free, rejected) ->
     budget = len(d.names) // 3
     while budget > 0 and len(d.names) > 3:
         deg, mm = _implied(setup, d.A, fit.X, fit.Y, _repnp(d, fit.lens))
-        thr_deg, thr_mm = max(5 * np.median(deg), floor_deg), max(5 * np.median(mm), floor_mm)
+        scale = np.ones(len(deg)) if d.scale is None else np.array([float(np.median(c)) for c in d.scale])
+        thr_deg = np.maximum(5 * np.median(deg / scale) * scale, floor_deg)  # a view's image noise: its own σ
+        thr_mm = np.maximum(5 * np.median(mm / scale) * scale, floor_mm)
         ratio = np.maximum(deg / thr_deg, mm / thr_mm)
         k = int(np.argmax(ratio))
         if ratio[k] <= 1.0:
             break
         rejected[d.names[k]] = (f"robot pose disagrees with the image: {deg[k]:.3f}° and {mm[k]:.2f} mm from the pose "
-                                f"the fitted chain implies (limit {thr_deg:.3f}°, {thr_mm:.2f} mm)")
+                                f"the fitted chain implies (limit {thr_deg[k]:.3f}°, {thr_mm[k]:.2f} mm)")
         d = _keep(d, np.arange(len(d.names)) != k)
         fit = _fit(setup, d, fit.lens if free else lens, fit.X, fit.Y, sig, free)
         budget -= 1
@@ -237,6 +270,7 @@ def calibrate_handeye(views, poses: dict, setup: str, lens: Lens, square: float,
     order = order[inl]
     d = _keep(d, inl)
     _apply_order(d, order, flips)
+    d.scale = _corner_scale(d, lens)
     sig = (_sigma_px(d, lens), math.radians(sigma_rot_deg), sigma_t_mm * 1e-3)
     fit = _fit(setup, d, lens, X0, Y0, sig, free_intrinsics)
     d, fit = _outlier_loop(setup, d, lens, fit, sig, free_intrinsics, rejected)

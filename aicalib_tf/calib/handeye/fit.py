@@ -63,7 +63,7 @@ class JointFit:
 class _Problem:
     """The stacked residuals of the module docstring and their grouped finite-difference Jacobian."""
 
-    def __init__(self, setup, lens, obj, px, A, X0, Y0, sigma_px, sigma_rot, sigma_t, free_intrinsics):
+    def __init__(self, setup, lens, obj, px, A, X0, Y0, sigma_px, sigma_rot, sigma_t, free_intrinsics, corner_scale=None):
         self.setup, self.model, self.size = setup, lens.model, lens.image_size
         self.V = len(obj)
         self.view = np.concatenate([np.full(len(o), k) for k, o in enumerate(obj)])
@@ -73,6 +73,8 @@ class _Problem:
         self.intr0 = lens.intrinsics()
         self.free = bool(free_intrinsics)
         self.sigma = (float(sigma_px), float(sigma_rot), float(sigma_t))
+        self.sp = float(sigma_px) * (np.ones(len(self.px)) if corner_scale is None  # each corner's σ px
+                                     else np.concatenate([np.asarray(c, np.float64).ravel() for c in corner_scale]))
         self.n_global = 12 + (self.intr0.size if self.free else 0)
         self.n = self.n_global + 6 * self.V
         # rows: 2 per corner, then 6 per view's prior
@@ -96,8 +98,8 @@ class _Problem:
         pc = np.einsum("nij,nj->ni", R, self.obj) + t
         K = np.array([[intr[0], 0, intr[2]], [0, intr[1], intr[3]], [0, 0, 1.0]])
         uv = project(pc, self.model, K, intr[4:])
-        sp, sr, st = self.sigma
-        rp = ((uv - self.px) / sp).ravel()
+        _, sr, st = self.sigma
+        rp = ((uv - self.px) / self.sp[:, None]).ravel()
         prior = np.concatenate([d[:, :3] / sr, d[:, 3:] / st], axis=1).ravel()
         return np.concatenate([rp, prior])
 
@@ -161,23 +163,25 @@ def _lm(prob: _Problem, p, max_iter: int = 60) -> tuple[np.ndarray, np.ndarray, 
 
 
 def joint_fit(setup: str, lens: Lens, obj, px, A, X0, Y0, *, sigma_px: float, sigma_rot: float, sigma_t: float,
-              free_intrinsics: bool = False, max_iter: int = 60) -> JointFit:
+              free_intrinsics: bool = False, max_iter: int = 60, corner_scale=None) -> JointFit:
     """Fit X, Y, the robot poses (and the intrinsics) to the views' corners (module docstring).
 
     setup : "eye-in-hand" or "eye-to-hand". lens : the camera (its intrinsics are the start when free).
     obj : V arrays (N_i, 3) board points, metres, each in the board's frame as that view's
     detection reads it (turned detections mapped back). px : V arrays (N_i, 2) detected corners, px.
     A : (V, 4, 4) reported T_base_flange, metres. X0, Y0 : (4, 4) start. sigma_px : the corners' noise
-    per coordinate, px; sigma_rot (radians), sigma_t (metres): the robot's per axis.
+    per coordinate, px; sigma_rot (radians), sigma_t (metres): the robot's per axis. corner_scale : V
+    arrays (N_i,), each corner's σ over ``sigma_px`` (the detector's σ by the rule every fit shares,
+    :func:`aicalib_tf.calib.weights.fit_sigmas`), or None (all 1).
     """
     prob = _Problem(setup, lens, [np.asarray(o, np.float64) for o in obj], [np.asarray(q, np.float64) for q in px],
                     A, np.asarray(X0, np.float64), np.asarray(Y0, np.float64), sigma_px, sigma_rot, sigma_t,
-                    free_intrinsics)
+                    free_intrinsics, corner_scale)
     p, _, it = _lm(prob, np.zeros(prob.n), max_iter)
     X, Y, intr, d, A_fit = prob.unpack(p)
     # re-centre at the solution so that the covariance is that of a small perturbation there
     prob2 = _Problem(setup, Lens.from_intrinsics(lens.model, intr, lens.image_size), obj, px, A_fit, X, Y,
-                     sigma_px, sigma_rot, sigma_t, free_intrinsics)
+                     sigma_px, sigma_rot, sigma_t, free_intrinsics, corner_scale)
     prob2.A0 = prob.A0  # the priors stay on the reported poses
     p2 = np.zeros(prob2.n)
     p2[prob2.n_global:] = _relative(prob.A0, A_fit).ravel()
@@ -186,7 +190,7 @@ def joint_fit(setup: str, lens: Lens, obj, px, A, X0, Y0, *, sigma_px: float, si
     m, n = r.size, p2.size
     chi2 = float(r @ r) / max(m - n, 1)
     cov = np.linalg.pinv(J.T @ J) * max(chi2, 1.0)
-    res = (r[:prob.px.size] * sigma_px).reshape(-1, 2)
+    res = r[:prob.px.size].reshape(-1, 2) * prob.sp[:, None]
     e2 = np.bincount(prob.view, weights=(res ** 2).sum(1), minlength=prob.V)
     per_view = np.sqrt(e2 / np.bincount(prob.view, minlength=prob.V))
     return JointFit(X, Y, A_fit, Lens.from_intrinsics(lens.model, intr, lens.image_size), cov, per_view,

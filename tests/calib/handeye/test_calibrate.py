@@ -146,3 +146,23 @@ def test_rows_match_images_by_name_then_stem_and_the_rest_is_listed():
     p = parse_poses(CSV + "c.jpg,0,0,0,0,0,0,1\nzz.png,0,0,0,0,0,0,1\n", "poses.csv")
     matched, images, rows = match_poses(p, ["a.png", "b.png", "c.png", "d.png"])
     assert set(matched) == {"a.png", "b.png", "c.png"} and images == ["d.png"] and rows == ["zz.png"]
+
+
+def test_the_views_sigmas_weigh_the_joint_fit_and_the_outlier_limits():
+    """Every other view 20x noisier: with each view's σ, X is several times nearer the truth, and a noisy
+    view is judged against its own noise, not taken for a robot pose that disagrees."""
+    s = sample_handeye(HandEyeSetConfig(views=12, seed=8, robot_noise=(1e-5, 1e-5)))
+    rng = np.random.default_rng(8)
+    ids = pattern_ids(s.board.pattern_size)
+    obj = s.board.object_points() * 1e-3
+    weighed, equal, poses = [], [], {}
+    for k, C in enumerate(s.C):
+        noise = 2.0 if k % 2 else 0.1
+        uv = s.camera.lens.project(obj @ C[:3, :3].T + C[:3, 3]) + rng.normal(0, noise, (len(ids), 2))
+        weighed.append(View(f"v{k:02d}.png", uv, ids, sigmas=np.full(len(ids), noise)))
+        equal.append(View(f"v{k:02d}.png", uv, ids))
+        poses[f"v{k:02d}.png"] = s.A_reported[k]
+    a, b = (calibrate_handeye(vs, poses, "eye-in-hand", s.camera.lens, s.square_m, pattern_size=s.board.pattern_size,
+                              halves=False) for vs in (weighed, equal))
+    assert not a.rejected and len(a.views) == 12
+    assert _errors(s.X, a.X)[1] < 0.3 * _errors(s.X, b.X)[1] and _errors(s.X, a.X)[0] < 0.5 * _errors(s.X, b.X)[0]
