@@ -9,7 +9,9 @@ counted once), the photos (natural order, the most common image size only) are s
 even/odd and first/second half, and each half is calibrated by:
 
 - aicalib_tf: ``python -m aicalib_tf.calibrate HALF --model auto`` (its own detector, everything the
-  command line does), the halves' camera.json read back;
+  command line does), the halves' camera.json read back; once with the default solve and once with
+  ``--flex auto`` (each half keeps or drops the flex by its own held-out check; ``--no-flex-column``
+  skips it);
 - OpenCV: ``calibrateCamera`` with 5 coefficients and with the rational model, and
   ``cv2.fisheye.calibrate``, on OpenCV's classic corners (``findChessboardCorners`` with adaptive
   threshold and normalisation, ``cornerSubPix`` 5x5, 30 iterations / 1e-3);
@@ -54,7 +56,7 @@ SETS = {"opencv_left": ((9, 6), 1.0, "1"), "udacity_lane_cal": ((9, 6), 1.0, "1"
         "ocam_fisheye": ((8, 6), 0.0325, "32.5mm")}
 SPLITS = ("evenodd", "halves")
 MRCAL_MODELS = ("opencv8", "splined")
-COLUMNS = (("aicalib_tf", "aicalib_tf auto"), ("cv_plumb_bob", "OpenCV 5-coef"), ("cv_rational", "OpenCV rational"),
+COLUMNS = (("aicalib_tf", "aicalib_tf default"), ("aicalib_tf_flex", "aicalib_tf --flex auto"), ("cv_plumb_bob", "OpenCV 5-coef"), ("cv_rational", "OpenCV rational"),
            ("cv_fisheye", "OpenCV fisheye"), ("mrcal_opencv8", "mrcal OPENCV8"), ("mrcal_splined", "mrcal splined"))
 
 
@@ -164,7 +166,7 @@ def mrcal_worker(job_path: str) -> int:
     job = json.loads(Path(job_path).read_text())
     size, grid, cells = tuple(job["size"]), tuple(job["grid"]), np.asarray(job["covered_cells"], int)
     out = {}
-    for model in MRCAL_MODELS:
+    for model in job.get("models", MRCAL_MODELS):
         runs, errors = [], []
         for k in range(int(job.get("repeats", 1))):
             try:
@@ -249,12 +251,14 @@ def opencv_lens(kind: str, corners: list, pattern, size):
     return L.Lens(kind, K, np.ravel(D)[:L.N_COEFFS[kind]], size), float(rms)
 
 
-def project_half(files, pattern_text, square_text, folder: Path):
-    """Calibrate one half with the command line; the Calibration read back from its camera.json."""
+def project_half(files, pattern_text, square_text, folder: Path, flex: str | None = None):
+    """Calibrate one half with the command line (``--flex flex`` when given); the Calibration read back
+    from its camera.json."""
     from aicalib_tf.calib.files import load_calibration
 
     cmd = [sys.executable, "-m", "aicalib_tf.calibrate", *map(str, files), "--pattern", pattern_text, "--square",
-           square_text, "--model", "auto", "--out", str(folder), "--workers", "1", "--quiet"]
+           square_text, "--model", "auto", "--out", str(folder), "--workers", "1", "--quiet",
+           *(["--flex", flex] if flex else [])]
     run = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env={**os.environ, "TF_CPP_MIN_LOG_LEVEL": "3"})
     if run.returncode:
         raise RuntimeError((run.stderr.strip().splitlines() or ["calibrate failed"])[-1])
@@ -313,8 +317,8 @@ def _attempt(fn, *args) -> dict:
         return {"error": f"{type(exc).__name__}: {' '.join(str(exc).split())[:160]}"}
 
 
-def _project_split(halves, set_cfg, work: Path, size) -> tuple[dict, list]:
-    """aicalib_tf on both halves; (table entry, the two Calibrations or Nones)."""
+def _project_split(halves, set_cfg, work: Path, size, flex: str | None = None) -> tuple[dict, list]:
+    """aicalib_tf on both halves (``--flex flex`` when given); (table entry, the two Calibrations or Nones)."""
     import numpy as np
 
     from aicalib_tf.calib.diff import board_coverage
@@ -323,7 +327,8 @@ def _project_split(halves, set_cfg, work: Path, size) -> tuple[dict, list]:
     cals = []
     for k, files in enumerate(halves):
         try:
-            cals.append(project_half(files, f"{pattern[0]}x{pattern[1]}", square_text, work / f"project_{k}"))
+            cals.append(project_half(files, f"{pattern[0]}x{pattern[1]}", square_text,
+                                     work / f"project_{k}{'_' + flex if flex else ''}", flex))
         except Exception as exc:  # noqa: BLE001
             return {"error": f"half {k}: {exc}"}, [None, None]
     covered = np.zeros(GRID[0] * GRID[1], bool)
@@ -332,6 +337,7 @@ def _project_split(halves, set_cfg, work: Path, size) -> tuple[dict, list]:
     entry = _diff_entry(cals[0].lens, cals[1].lens, np.flatnonzero(covered), size)
     entry["models"] = [c.lens.model for c in cals]
     entry["fov_deg"] = [horizontal_fov_deg(c.lens) for c in cals]
+    entry["flex_kept"] = [c.flex is not None for c in cals]
     return entry, cals
 
 
@@ -374,7 +380,7 @@ def _mrcal_split(venv: Path, names_halves, corners_halves, set_cfg, size, seeds,
     job = {"size": list(size), "grid": list(GRID), "pattern": list(pattern), "spacing": spacing, "vnl": vnl,
            "focal": [s[0] for s in seeds], "fov_deg": [s[1] for s in seeds], "workdir": str(work),
            "covered_cells": _covered_cells(found, size), "cross": cross, "repeats": repeats,
-           "spline_nx": spline_nx}
+           "spline_nx": spline_nx, "models": list(MRCAL_MODELS)}
     (work / "job.json").write_text(json.dumps(job))
     run = subprocess.run([str(venv / "bin" / "python"), __file__, "--mrcal-worker", str(work / "job.json")],
                          capture_output=True, text=True, timeout=3600)
@@ -391,7 +397,8 @@ def _mrcal_split(venv: Path, names_halves, corners_halves, set_cfg, size, seeds,
     return res
 
 
-def run_set(name: str, folder: Path, venv: Path | None, tmp: Path, repeats: int = 3, spline_nx: int = 10) -> dict:
+def run_set(name: str, folder: Path, venv: Path | None, tmp: Path, repeats: int = 3, spline_nx: int = 10,
+            flex_column: bool = True) -> dict:
     """Every split of one set through every tool; {"set", "photos", "size", "left_out", "splits": {...}}."""
     from aicalib_tf.calib.diff import split_views
 
@@ -406,6 +413,8 @@ def run_set(name: str, folder: Path, venv: Path | None, tmp: Path, repeats: int 
         halves = split_views(files, split)
         row = {}
         row["aicalib_tf"], cals = _project_split(halves, cfg, work, size)
+        if flex_column:
+            row["aicalib_tf_flex"] = _project_split(halves, cfg, work, size, "auto")[0]
         cv = _opencv_split([[corners[p] for p in h] for h in halves], cfg[0], size)
         row.update({"cv_plumb_bob": cv["plumb_bob"], "cv_rational": cv["rational_polynomial"],
                     "cv_fisheye": cv["equidistant"]})
@@ -450,7 +459,9 @@ def table(results: list[dict]) -> str:
             cells = [_cell(row.get(k)) for k, _ in COLUMNS]
             if row.get("aicalib_tf", {}).get("models"):
                 cells[0] += f" ({'/'.join(sorted(set(row['aicalib_tf']['models'])))})"
-            anchors = [(_median(row.get(k)), t) for k, t in COLUMNS[1:] if _median(row.get(k)) is not None]
+            if row.get("aicalib_tf_flex", {}).get("flex_kept"):
+                cells[1] += f" (flex {'/'.join('kept' if k else 'flat' for k in row['aicalib_tf_flex']['flex_kept'])})"
+            anchors = [(_median(row.get(k)), t) for k, t in COLUMNS[2:] if _median(row.get(k)) is not None]
             best = min(anchors) if anchors else None
             ours = _median(row.get("aicalib_tf"))
             lead = "-" if best is None or ours is None else ("yes" if ours <= best[0] else "no")
@@ -510,6 +521,7 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-mrcal", action="store_true")
     ap.add_argument("--mrcal-repeats", type=int, default=3, help="mrcal solves per half and model (default: 3)")
     ap.add_argument("--spline-nx", type=int, default=10, help="mrcal splined model's knots across (default: 10)")
+    ap.add_argument("--no-flex-column", action="store_true", help="skip the aicalib_tf --flex auto column")
     ap.add_argument("--json", default=None, help="write every figure as JSON here")
     ap.add_argument("--data", default=str(SHARED), help="the real sets' folder (default: ../shared/data)")
     args = ap.parse_args(argv)
@@ -522,7 +534,8 @@ def main(argv=None) -> int:
     results = []
     with tempfile.TemporaryDirectory(prefix="real_repeatability_") as tmp:
         for name, folder in find_sets(args.sets, Path(args.data)):
-            results.append(run_set(name, folder, venv, Path(tmp), args.mrcal_repeats, args.spline_nx))
+            results.append(run_set(name, folder, venv, Path(tmp), args.mrcal_repeats, args.spline_nx,
+                                   not args.no_flex_column))
     print()
     print(table(results))
     if venv is not None:

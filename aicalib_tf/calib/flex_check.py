@@ -9,7 +9,9 @@ fold's other views are fitted with the flex and with a flat board, each held-out
 with those intrinsics (and that flex applied to its board points), and the fold's score is the RMS
 over its held-out corners. The flex stays when the mean gain (flat − flexed) exceeds its standard
 error over the folds (the one-SE rule of the model choice); with fewer than
-:data:`~aicalib_tf.calib.select.MIN_CV_VIEWS` views the σ rule alone decides.
+:data:`~aicalib_tf.calib.select.MIN_CV_VIEWS` views the σ rule alone decides. A flex that passes must
+also move the projection beyond the flat fit's own noise (:mod:`aicalib_tf.calib.flex_shift`), when the
+image size is given.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import dataclasses
 import numpy as np
 
 from aicalib_tf.calib.bundle import CalibrationError, solve_pose
+from aicalib_tf.calib.flex_shift import shift_note
 from aicalib_tf.calib.select import MAX_FOLDS, MIN_CV_VIEWS
 from aicalib_tf.geometry.board_flex import flexed_points
 from aicalib_tf.geometry.lens import Lens
@@ -74,15 +77,22 @@ def flex_earned(views, fit, pattern_size, square_size: float = 1.0) -> tuple[boo
                    f"{len(g)} folds; the board is taken as flat)")
 
 
-def confirm_flex(fit, views, refit, pattern_size):
-    """``fit`` when it has no flex or held-out views confirm its flex (:func:`flex_earned`), else the views
-    refitted flat, its ``flex_note`` saying why. refit(views, "auto" | "off") -> BundleResult (unit square)."""
+def confirm_flex(fit, views, refit, pattern_size, image_size=None):
+    """``fit`` when it has no flex or held-out views confirm its flex (:func:`flex_earned`) and, given the
+    image size (w, h) px and enough views for the held-out check, its flex moves the projection beyond the
+    flat fit's noise (:func:`aicalib_tf.calib.flex_shift.shift_note`); else the views refitted flat, its
+    ``flex_note`` saying why. refit(views, "auto" | "off") -> BundleResult (unit square)."""
     if getattr(fit, "flex", None) is None:
         return fit
     keep, why = flex_earned(views, refit, pattern_size)
-    if keep:
+    if keep and (image_size is None or len(views) < MIN_CV_VIEWS):
         return fit
-    return dataclasses.replace(refit(views, "off"), flex_note=why)
+    flat = refit(views, "off")
+    if keep:
+        why = shift_note(flat, fit, views, image_size)
+        if not why:
+            return fit
+    return dataclasses.replace(flat, flex_note=why)
 
 
 def solve_fields(fit, views) -> dict:

@@ -1,0 +1,183 @@
+"""How noisy one split's halves difference is: many random half-splits of each real set, every tool.
+
+    .venv/bin/python benchmarks/real_split_noise.py [--sets opencv_left ...] [--splits 30] [--skip-mrcal]
+        [--json noise.json]
+
+``benchmarks/real_repeatability.py`` scores two fixed splits of each set (even/odd, first/second). One
+split is one draw: here each set's photos (as that benchmark reads them) are split at random into
+halves (⌈n/2⌉ and ⌊n/2⌋ photos, seeds 0..N-1, the same splits for every tool) and every split is
+scored as there (rotation-fitted projection difference, median over the covered cells):
+
+- aicalib_tf, in process on the photos' detections (the calibrate command's CNN detector, each photo
+  once), with the lens model ``auto`` chooses on all the photos held for every half:
+  flat (the default solve), ``flex="auto"`` (each half's held-out check keeps or drops the flex,
+  :mod:`aicalib_tf.calib.flex_check`) and the flex as solved in both halves (no held-out check);
+  and, for the flat halves, what their covariances predict for the difference
+  (:func:`aicalib_tf.calib.quality.predicted_half_difference`: the mean and the 10-90% band of one draw);
+- OpenCV 5-coefficient, rational and fisheye on classic corners, and mrcal OPENCV8 (one solve a half,
+  board flex and outlier rejection; ``--skip-mrcal`` leaves it out), as in real_repeatability.py.
+
+Printed per set: each column's median and quartiles over the splits, how often the flat default is at
+or below each anchor on the same split, and how often it is at or below the best of them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import real_repeatability as rr  # noqa: E402
+
+OURS = ("flat", "auto", "flex")
+ANCHORS = (("cv_plumb_bob", "OpenCV 5-coef"), ("cv_rational", "OpenCV rational"), ("cv_fisheye", "OpenCV fisheye"),
+           ("mrcal_opencv8", "mrcal OPENCV8"))
+
+
+def detections(files, pattern):
+    """(views, image circle or None): each photo through the calibrate command's detector."""
+    from aicalib_tf.calib.fit import View
+    from aicalib_tf.calib.workflow import make_detector
+    from aicalib_tf.cnn.spec import DETECTOR_NETWORK
+    from aicalib_tf.geometry.image_circle import find_image_circle, thumbnail
+    from aicalib_tf.io import load_image
+
+    detect = make_detector("cnn", tuple(pattern), DETECTOR_NETWORK)
+    views, thumbs, size = [], [], None
+    for f in files:
+        gray = load_image(str(f))
+        size = gray.shape[::-1]
+        hit = detect(gray)
+        thumbs.append(np.clip(thumbnail(gray), 0.0, 1.0))
+        views.append(None if hit is None else View(f.name, *hit, relative=detect.relative, sigmas=detect.sigmas))
+    return views, find_image_circle(np.mean(thumbs, axis=0), size)[0]
+
+
+def random_split(n: int, seed: int) -> tuple[list[int], list[int]]:
+    p = np.random.default_rng(seed).permutation(n)
+    k = (n + 1) // 2
+    return sorted(p[:k].tolist()), sorted(p[k:].tolist())
+
+
+def _ours(views, halves, cfg, size, circle, model) -> dict:
+    """The three aicalib_tf columns and the flat halves' predicted difference for one split."""
+    from aicalib_tf.calib import fit as F
+    from aicalib_tf.calib.diff import board_coverage
+    from aicalib_tf.calib.quality import predicted_half_difference
+    from aicalib_tf.calib.robust import SolveOptions
+
+    pattern, square = cfg[0], 1.0
+    out = {}
+    for mode in OURS:
+        cals = []
+        for idx in halves:
+            vs = [views[i] for i in idx if views[i] is not None]
+            if mode == "flex":  # the flex as the solve keeps it (its σ rule), no held-out check
+                fit = F._fit_model(model, vs, 1.0, size, None, False, False, SolveOptions(pattern, "auto", True))
+                cals.append(F._calibration(fit, vs, pattern, square, size, {}, "", None, (), circle))
+            else:
+                cals.append(F.calibrate_camera(vs, pattern, square, size, model=model, image_circle=circle,
+                                               flex="off" if mode == "flat" else "auto"))
+        covered = np.zeros(rr.GRID[0] * rr.GRID[1], bool)
+        for c in cals:
+            covered |= board_coverage(c.lens, c.pattern_size, c.square_size, c.rvecs, c.tvecs, rr.GRID)
+        out[mode] = rr._diff_entry(cals[0].lens, cals[1].lens, np.flatnonzero(covered), size)
+        out[mode]["flex_kept"] = [c.flex is not None for c in cals]
+        out[mode]["fx"] = float(cals[0].K[0, 0])
+        if mode == "flat":
+            out["predicted"] = predicted_half_difference(cals[0], cals[1], covered, grid=rr.GRID)
+    return out
+
+
+def run_set(name, folder, n_splits, venv, tmp: Path) -> dict:
+    from aicalib_tf.calib.fit import calibrate_camera
+
+    cfg = rr.SETS[name]
+    files, size, _ = rr.photos(folder)
+    views, circle = detections(files, cfg[0])
+    model = calibrate_camera([v for v in views if v is not None], cfg[0], 1.0, size, image_circle=circle).model
+    classic = [rr.classic_corners(p, cfg[0]) for p in files]
+    rows = []
+    for seed in range(n_splits):
+        halves = random_split(len(files), seed)
+        row = {"seed": seed, **_ours(views, halves, cfg, size, circle, model)}
+        cv = rr._opencv_split([[classic[i] for i in h] for h in halves], cfg[0], size)
+        row.update(cv_plumb_bob=cv["plumb_bob"], cv_rational=cv["rational_polynomial"], cv_fisheye=cv["equidistant"])
+        if venv is not None:
+            rr.MRCAL_MODELS = ("opencv8",)
+            work = tmp / f"{name}_{seed}"
+            work.mkdir(parents=True)
+            names = [[f"frame{i:03d}.jpg" for i in h] for h in halves]
+            m = rr._mrcal_split(venv, names, [[classic[i] for i in h] for h in halves], cfg, size,
+                                [(row["flat"]["fx"], 90.0)] * 2, None, work, repeats=1)
+            row["mrcal_opencv8"] = m.get("opencv8", m)
+        rows.append(row)
+        print(f"{name} seed {seed}: " + ", ".join(f"{k} {rr._cell(row.get(k))}" for k in (*OURS, *dict(ANCHORS))),
+              flush=True)
+    return {"set": name, "photos": len(files), "model": model, "splits": rows}
+
+
+def summary(res: dict) -> list[str]:
+    """Lines: every column's median (quartiles) over the splits; the flat default against each anchor."""
+    rows = res["splits"]
+    med = lambda k: np.array([np.nan if rr._median(r.get(k)) is None else rr._median(r.get(k)) for r in rows])  # noqa: E731
+    lines = [f"{res['set']} ({res['photos']} photos, {len(rows)} random splits, model {res['model']}):"]
+    for k, title in ((m, f"aicalib_tf {m}") for m in OURS):
+        v = med(k)
+        lines.append(f"  {title:22s} median {np.nanmedian(v):.3g} px (quartiles {np.nanpercentile(v, 25):.3g}-"
+                     f"{np.nanpercentile(v, 75):.3g})")
+    pred = np.array([r["predicted"]["median_covered"] for r in rows])
+    band = np.array([[r["predicted"]["p10_covered"], r["predicted"]["p90_covered"]] for r in rows])
+    flat = med("flat")
+    inside = np.mean((flat >= band[:, 0]) & (flat <= band[:, 1]))
+    lines.append(f"  predicted (flat)       mean {np.mean(pred):.3g} px, one split's 10-90% {np.median(band[:, 0]):.3g}-"
+                 f"{np.median(band[:, 1]):.3g}; measured inside it on {inside:.0%} of the splits")
+    best = np.full(len(rows), np.inf)
+    for k, title in ANCHORS:
+        v = med(k)
+        if np.all(np.isnan(v)):
+            continue
+        best = np.fmin(best, np.where(np.isnan(v), np.inf, v))
+        ok = ~np.isnan(v)
+        lines.append(f"  {title:22s} median {np.nanmedian(v):.3g} px (quartiles {np.nanpercentile(v, 25):.3g}-"
+                     f"{np.nanpercentile(v, 75):.3g}); flat ≤ it on {np.sum(flat[ok] <= v[ok])} of {ok.sum()}")
+    for m in OURS:
+        lines.append(f"  {m} ≤ the best anchor on {np.sum(med(m) <= best)} of {len(rows)} splits")
+    return lines
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sets", nargs="+", default=list(rr.SETS), choices=list(rr.SETS))
+    ap.add_argument("--splits", type=int, default=30, help="random half-splits per set (default: 30)")
+    ap.add_argument("--mrcal-venv", default="/work/scratch/mrcal-venv")
+    ap.add_argument("--skip-mrcal", action="store_true")
+    ap.add_argument("--data", default=str(rr.SHARED))
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args(argv)
+    venv = None if args.skip_mrcal else Path(args.mrcal_venv)
+    if venv is not None and not (venv / "bin" / "mrcal-calibrate-cameras").exists():
+        print(f"mrcal not found in {venv}: its column is skipped")
+        venv = None
+    results = []
+    with tempfile.TemporaryDirectory(prefix="real_split_noise_") as tmp:
+        for name, folder in rr.find_sets(args.sets, Path(args.data)):
+            results.append(run_set(name, folder, args.splits, venv, Path(tmp)))
+            if args.json:
+                Path(args.json).write_text(json.dumps(results, indent=1, default=float) + "\n")
+    print()
+    for res in results:
+        print("\n".join(summary(res)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
