@@ -65,13 +65,8 @@ class SolveOptions:
 def view_sigmas(views) -> list | None:
     """Per-view (N_v,) σ px for :func:`~aicalib_tf.calib.bundle.bundle_adjust`, or None when no view has
     any, by the rule every fit shares (:func:`aicalib_tf.calib.weights.fit_sigmas`): each view's corners
-    all take the median of its σ (views without their own take the median of the others').
-
-    A view's median, not each corner's own σ: on rendered calibration sequences with mixed blur and
-    noise (``benchmarks/corner_sigma.py --calibrate``, 4 cameras, 20 views) the corners' own σ made the
-    projection error over the boards' area 3.2 times that of equal weights (1.55 against 0.49 px; the
-    σ spread 40-fold inside a board, the weights with it), while each view's median gave 0.488 px. The
-    view's σ still says which views are blurred or noisy."""
+    all take the median of its σ (views without their own take the median of the others'); the module
+    :mod:`aicalib_tf.calib.weights` says why the view's median and not each corner's own σ."""
     return fit_sigmas([getattr(v, "sigmas", None) for v in views], [len(v.ids) for v in views])
 
 
