@@ -27,6 +27,7 @@ than 30%), as one line naming both files.
 from __future__ import annotations
 
 import dataclasses
+import os
 from pathlib import Path
 
 import numpy as np
@@ -107,6 +108,7 @@ def run_compare(cfg: CompareConfig) -> tuple[dict, str]:
 
     if cfg.cbmax is not None and not cfg.cbmax > 0:
         raise InputError(f"--cbmax must be > 0 px, got {cfg.cbmax}")
+    _check_outputs(cfg)
     cal_a, cal_b = load_calibration(cfg.a), load_calibration(cfg.b)
     try:
         result = compare_calibrations(cal_a, cal_b, grid=cfg.grid, rotation=cfg.rotation)
@@ -117,9 +119,36 @@ def run_compare(cfg: CompareConfig) -> tuple[dict, str]:
         atomic_write_bytes(Path(cfg.out), heat_map_png(result, cfg.a, cfg.b, cbmax=cfg.cbmax))
         lines.append(f"heat map: {cfg.out}")
     if cfg.json:
-        atomic_write_text(Path(cfg.json), dumps(_summary(result, cfg)) + "\n")
+        try:
+            atomic_write_text(Path(cfg.json), dumps(_summary(result, cfg)) + "\n")
+        except BaseException:  # both files or neither
+            if cfg.out:
+                Path(cfg.out).unlink(missing_ok=True)
+            raise
         lines.append(f"figures: {cfg.json}")
     return result, "\n".join(lines)
+
+
+_CALIBRATION_FILES = ("camera", "undistort_map", "camchain")  # a calibration folder's own files begin so
+
+
+def _check_outputs(cfg: CompareConfig) -> None:
+    """Refuse, with an InputError naming it, an output (--out, --json) that is a folder, that both
+    name, or that is a file of one of the compared calibrations (it would be overwritten)."""
+    from aicalib_tf.cli import InputError
+
+    inputs = set()
+    for src in (Path(cfg.a), Path(cfg.b)):
+        files = [src] if not src.is_dir() else [f for f in src.iterdir() if f.name.startswith(_CALIBRATION_FILES)]
+        inputs |= {os.path.realpath(f) for f in files}
+    outs = [(flag, name) for flag, name in (("--out", cfg.out), ("--json", cfg.json)) if name]
+    for flag, name in outs:
+        if Path(name).is_dir():
+            raise InputError(f"{flag} {name}: is a folder; give a file name")
+        if os.path.realpath(name) in inputs:
+            raise InputError(f"{flag} {name}: is a file of a compared calibration; it would be overwritten, choose another")
+    if len(outs) == 2 and os.path.realpath(outs[0][1]) == os.path.realpath(outs[1][1]):
+        raise InputError(f"--out and --json name the same file {outs[0][1]}")
 
 
 def _summary(result: dict, cfg: CompareConfig) -> dict:

@@ -63,6 +63,8 @@ def parse_robot_sigma(text: str) -> tuple[float, float]:
     tr *= {"cm": 10.0, "m": 1000.0, "um": 1e-3}.get(m.group(4) or "mm", 1.0)
     if not (rot > 0 and tr > 0):
         raise ValueError(f"--robot-sigma must be positive, got {text!r}")
+    if not (rot < 90 and tr < 1000):  # a robot reporting its pose worse than this has no pose to report
+        raise ValueError(f"--robot-sigma must be under 90deg,1m (a robot's pose noise), got {text!r}")
     return rot, tr
 
 

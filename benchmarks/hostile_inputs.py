@@ -227,7 +227,7 @@ def _pose_lines(n: int, fn) -> str:
     return "\n".join(rows) + "\n"
 
 
-def _handeye_cases(root: Path) -> list[tuple[str, str, list[str], list[Path]]]:
+def _handeye_cases(root: Path, cals: dict[str, Path]) -> list[tuple[str, str, list[str], list[Path]]]:
     rng = np.random.default_rng(0)
 
     def good(i):
@@ -272,6 +272,16 @@ def _handeye_cases(root: Path) -> list[tuple[str, str, list[str], list[Path]]]:
         out = root / f"he{i}"
         cases.append((name, "aicalib_tf.handeye", [str(p) for p in PHOTOS] + ["--poses", str(pf), "--out", str(out),
                                                                               *common], [out]))
+    pf = _write(root / "good.csv", posefiles["poses: one rotation axis"].replace("left01.jpg", "left01.jpg", 1))
+    dup = _write(root / "dup.csv", _pose_lines(13, good) + _pose_lines(2, good).split("\n", 1)[1])
+    other = _write(root / "other.csv", _pose_lines(13, good).replace("left", "right"))
+    extra = [(["--robot-sigma", v], pf) for v in ("nan", "-1deg,1mm", "0deg,0mm", "1e308deg,1mm", "abc")]
+    extra += [(["--intrinsics", str(cals[k] / "camera.json")], pf) for k in ("spline", "big", "flex")]
+    extra += [(["--intrinsics", str(root)], pf), ([], dup), ([], other)]
+    for i, (args, poses) in enumerate(extra):
+        out = root / f"hx{i}"
+        cases.append((f"handeye {' '.join(args)[:60]} {poses.name}", "aicalib_tf.handeye",
+                      [str(p) for p in PHOTOS] + ["--poses", str(poses), "--out", str(out), *common, *args], [out]))
     return cases
 
 
@@ -292,7 +302,9 @@ BOARD_SPECS = [
     "charuco:11x8,square=30mm,marker=22mm,dict=DICT_NOPE", "charuco:1x1,square=30mm,marker=22mm,dict=DICT_5X5_100",
     "charuco:11x8,square=1e308mm,marker=22mm,dict=DICT_5X5_100", "charuco:11x8,square=30mm,marker=22mm,first=1000",
     "charuco:11x8,square=30,marker=22,dict=DICT_5X5_100", "charuco:11x8,square=30mm,marker=0mm,dict=DICT_5X5_100",
-    "charuco:,,,", "charuco:11x8", "\u00e9\u00e9:1x1", "aprilgrid:6x6,tag=88mm,spacing=0.3," + "x=1," * 10000,
+    "charuco:,,,", "charuco:11x8", "charuco:5x4,square=30mm,marker=22mm,dict=DICT_5X5_100,square=40mm",
+    "charuco:5x4,square=30mm,marker=22mm,dict=DICT_5X5_100,legacy,legacy", "charuco:5x4,square=30mm,marker=22mm,dict=DICT_5X5_100,first=-3",
+    "charuco:5x4,square=30mm,marker=22mm,dict=DICT_4X4_50,first=45", "aprilgrid:3x3,tag=30mm,spacing=0.3,family=tag16h5,first=29", "\u00e9\u00e9:1x1", "aprilgrid:6x6,tag=88mm,spacing=0.3," + "x=1," * 10000,
 ]
 
 
@@ -399,7 +411,51 @@ def build_cases(root: Path) -> list[tuple[str, str, list[str], list[Path]]]:
         check(name, folder, *photos)
     check("a truncated video", a, _video(root, 0.5))
     check("an empty video", a, _write(root / "empty.avi", b""))
-    cases += _handeye_cases(root / "he")
+    for opt, values in (("--alpha", ("0", "1", "nan", "-1")), ("--every", ("0", "-1")), ("--max-frames", ("0",))):
+        for v in values:
+            check(f"{opt} {v}", a, *photos, opt, v)
+    check("calibration of another size", cals["big"], *photos)
+    n += 1
+    png = root / f"cmp{n}.png"
+    cases.append(("compare: --json in a missing folder", "aicalib_tf.compare",
+                  [str(a), str(b), "--out", str(png), "--json", str(root / "nope" / "x.json")], [png]))
+    png2 = root / f"cmp{n}b.png"
+    cases.append(("compare: --json a folder", "aicalib_tf.compare",
+                  [str(a), str(b), "--out", str(png2), "--json", str(root)], [png2]))
+    cases.append(("compare: --json over camera.json", "aicalib_tf.compare",
+                  [str(a), str(b), "--out", str(root / "cmpc.png"), "--json", str(a / "camera.json")], [root / "cmpc.png"]))
+    cases.append(("compare: --out and --json the same", "aicalib_tf.compare",
+                  [str(a), str(b), "--out", str(root / "same.x"), "--json", str(root / "same.x")], [root / "same.x"]))
+    cases.append(("compare: --out a folder", "aicalib_tf.compare",
+                  [str(a), str(b), "--out", str(root), "--json", str(root / "cmpx.json")], [root / "cmpx.json"]))
+    cases.append(("check: --out a folder", "aicalib_tf.check", [str(a), *map(str, photos), "--out", str(root),
+                                                                "--detector", "opencv", "--workers", "1"], []))
+    cases.append(("check: --out in a missing folder", "aicalib_tf.check",
+                  [str(a), *map(str, photos), "--out", str(root / "nope2" / "c.json"), "--detector", "opencv",
+                   "--workers", "1"], [root / "nope2" / "c.json"]))
+    cases.append(("calibrate: --out an existing file", "aicalib_tf.calibrate",
+                  [*map(str, PHOTOS), "--pattern", "9x6", "--detector", "opencv", "--out", str(PHOTOS[0].parent / "SHA256SUMS"),
+                   "--quiet", "--workers", "1", "--model", "plumb_bob"], []))
+    check("photos that are not there", a, root / "nothere" / "*.jpg")
+    check("a folder as a photo", a, root)
+    fs_bad = {"FileStorage matrix 1e9 rows": "%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n   rows: 1000000000\n"
+                                             "   cols: 1000000000\n   dt: d\n   data: [ 1. ]\n",
+              "FileStorage matrix of NaN": "%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\n"
+                                           "camera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n"
+                                           "   data: [ .nan, 0., 320., 0., .nan, 240., 0., 0., 1. ]\n",
+              "FileStorage deep": "%YAML:1.0\n---\n" + "".join("  " * i + f"k{i}:\n" for i in range(300)),
+              "FileStorage truncated": (a / "camera.yaml").read_text()[:200]}
+    for name, text in fs_bad.items():
+        compare(name, a, _write(root / "fs" / f"{len(cases)}.yaml", text))
+    cases += _handeye_cases(root / "he", cals)
+    good = "aprilgrid:3x3,tag=30mm,spacing=0.3"
+    for i, extra in enumerate((["--dpi", "0"], ["--dpi", "-1"], ["--dpi", "nan"], ["--dpi", "1e9"], ["--paper", "a9"],
+                               ["--paper", ""])):
+        out = root / "boards" / f"opt{i}.png"
+        cases.append((f"board: {' '.join(extra)}", "aicalib_tf.board", [good, "--out", str(out), *extra], [out]))
+    for name, out in (("--out .txt", root / "boards" / "b.txt"), ("--out a folder", root / "boards"),
+                      ("--out in a missing folder", root / "nope" / "b.png"), ("--out .pdf", root / "boards" / "ok.pdf")):
+        cases.append((f"board: {name}", "aicalib_tf.board", [good, "--out", str(out)], [out] if out.suffix else []))
     for i, spec in enumerate(BOARD_SPECS):
         out = root / "boards" / f"b{i}.png"
         cases.append((f"board: {spec[:60]}", "aicalib_tf.board", [spec, "--out", str(out)], [out]))

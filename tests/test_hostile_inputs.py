@@ -90,3 +90,34 @@ def test_calibrate_with_opencv_counts_a_1xn_photo_as_no_board(tmp_path, capsys):
                            "--workers", "1"]) == 2
     assert "no 9x6 board found" in _one_error(capsys)
     assert not out.exists()
+
+
+@pytest.fixture(scope="module")
+def two_cals(cal, tmp_path_factory):
+    root = tmp_path_factory.mktemp("two")
+    for name in ("a", "b"):
+        save_calibration(cal, root / name)
+    return root
+
+
+@pytest.mark.parametrize("out, js, words", [
+    ("d.png", ".", "--json {root}: is a folder"),
+    (".", "d.json", "--out {root}: is a folder"),
+    ("d.png", "a/camera.json", "is a file of a compared calibration"),
+    ("b/camera.yaml", "d.json", "is a file of a compared calibration"),
+    ("same", "same", "--out and --json name the same file"),
+])
+def test_compare_refuses_outputs_that_are_folders_or_its_inputs_before_writing(two_cals, capsys, out, js, words):
+    before = {p: p.read_bytes() for p in two_cals.rglob("*") if p.is_file()}
+    argv = [str(two_cals / "a"), str(two_cals / "b"), "--out", str(two_cals / out), "--json", str(two_cals / js)]
+    assert compare.main(argv) == 2
+    assert words.format(root=two_cals) in _one_error(capsys)
+    assert {p: p.read_bytes() for p in two_cals.rglob("*") if p.is_file()} == before  # nothing written or replaced
+
+
+@pytest.mark.parametrize("text", ["1e308deg,1mm", "1e400deg,1mm", "0.01deg,5m", "2rad,1mm"])
+def test_an_absurd_robot_sigma_is_refused(text):
+    from aicalib_tf.handeye import parse_robot_sigma
+
+    with pytest.raises(ValueError, match="--robot-sigma must be under 90deg,1m"):
+        parse_robot_sigma(text)
