@@ -262,6 +262,10 @@ def _handeye_cases(root: Path, cals: dict[str, Path]) -> list[tuple[str, str, li
     yaml_files = {
         "poses: YAML aliases": "%YAML:1.0\n---\na: &a [1, 2, 3]\nposes: *a\n",
         "poses: YAML not OpenCV": "poses:\n  - {image: left01.jpg, x: 1}\n  - !!python/object:os.system [ls]\n",
+        "poses: YAML 1000 brackets deep": "%YAML:1.0\n---\nposes: " + "[" * 1000 + "]" * 1000 + "\n",
+        "poses: YAML 100000 brackets deep": "%YAML:1.0\n---\nposes: " + "[" * 100000 + "]" * 100000 + "\n",
+        "poses: YAML 3000 blocks deep": "%YAML:1.0\n---\n" + "".join("  " * i + f"k{i}:\n" for i in range(3000)),
+        "poses: YAML !!binary": "%YAML:1.0\n---\nposes: !!binary |\n  AAAA\n",
     }
     cases = []
     common = ["--pattern", "9x6", "--square", "25mm", "--setup", "eye-in-hand", "--detector", "opencv", "--quiet"]

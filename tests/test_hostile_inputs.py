@@ -121,3 +121,17 @@ def test_an_absurd_robot_sigma_is_refused(text):
 
     with pytest.raises(ValueError, match="--robot-sigma must be under 90deg,1m"):
         parse_robot_sigma(text)
+
+
+@pytest.mark.parametrize("text", [
+    "%YAML:1.0\n---\nposes: " + "[" * 1000 + "]" * 1000 + "\n",  # was a RecursionError ("a bug in aicalib_tf")
+    "%YAML:1.0\n---\nposes: " + "[" * 100000 + "]" * 100000 + "\n",  # was a segmentation fault in OpenCV's parser
+    "%YAML:1.0\n---\n" + "".join("  " * i + f"k{i}:\n" for i in range(3000)),
+    "%YAML:1.0\n---\nposes: !!binary |\n  AAAA\n",
+])
+def test_a_deep_or_tagged_poses_yaml_is_one_line_naming_the_file(text):
+    from aicalib_tf.calib.handeye.poses import parse_poses
+    from aicalib_tf.cli import InputError
+
+    with pytest.raises(InputError, match=r"^poses\.yaml: (nested more than 64 levels|holds the YAML tag)"):
+        parse_poses(text, "poses.yaml", "yaml")

@@ -23,6 +23,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path, PurePath
 
@@ -149,6 +150,13 @@ def _node(n):
 
 
 def _yaml(text: str, source: str):
+    from aicalib_tf.calib.schema import MAX_DEPTH, yaml_depth
+
+    if yaml_depth(text) > MAX_DEPTH:  # OpenCV's parser (and _node) recurse: a deep file overflows the stack
+        raise InputError(f"{source}: nested more than {MAX_DEPTH} levels deep; not read (the limit guards the parser)")
+    tag = re.search(r"!!(?!opencv-matrix(?![\w-]))\S*", text)
+    if tag:  # OpenCV's base64 reader (!!binary) can loop forever on bad input
+        raise InputError(f"{source}: holds the YAML tag {tag[0][:40]!r}; only !!opencv-matrix is read")
     flags = cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY | cv2.FILE_STORAGE_FORMAT_YAML
     try:
         fs = cv2.FileStorage(text, flags)
