@@ -496,6 +496,12 @@ def build_cases(root: Path) -> list[tuple[str, str, list[str], list[Path]]]:
         cases.append((f"calibrate {name}", "aicalib_tf.calibrate", [*srcs, "--pattern", "9x6", "--square", "25mm",
                                                                     "--out", str(out), "--quiet", "--workers", "1",
                                                                     "--detector", "opencv", *extra], [out]))
+    for name, data in (("empty", b""), ("garbage", bytes(range(256)) * 20), ("truncated", None)):
+        model = root / f"{name}.tflite"
+        model.write_bytes(data if data is not None else (ROOT / "models" / "default.tflite").read_bytes()[:50000])
+        out = root / f"det_model_{name}"
+        cases.append((f"detect --model a {name} .tflite", "aicalib_tf.detect.__main__",
+                      [str(PHOTOS[0]), "--pattern", "9x6", "--out", str(out), "--model", str(model), "--quiet"], [out]))
     out = root / "cal_video"
     cases.append(("calibrate a truncated video", "aicalib_tf.calibrate",
                   [str(_video(root, 0.4)), "--pattern", "9x6", "--out", str(out), "--quiet", "--detector", "opencv"], [out]))

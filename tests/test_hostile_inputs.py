@@ -135,3 +135,13 @@ def test_a_deep_or_tagged_poses_yaml_is_one_line_naming_the_file(text):
 
     with pytest.raises(InputError, match=r"^poses\.yaml: (nested more than 64 levels|holds the YAML tag)"):
         parse_poses(text, "poses.yaml", "yaml")
+
+
+@pytest.mark.parametrize("content", [b"", b"\x00" * 64, b"TFL3" + bytes(range(256)) * 4])
+def test_a_broken_tflite_file_is_refused_naming_it(tmp_path, content):
+    from aicalib_tf.cnn.runtime import RuntimeModel
+
+    path = tmp_path / "broken.tflite"
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match=r"broken\.tflite: not a readable \.tflite model"):
+        RuntimeModel(path)

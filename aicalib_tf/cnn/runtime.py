@@ -62,7 +62,10 @@ class RuntimeModel:
         self.quick: RuntimeModel | None = None
         self.num_threads = num_threads or default_threads()
         self._new = lambda: Interpreter(model_path=str(path), num_threads=self.num_threads)
-        first = self._new()
+        try:
+            first = self._new()
+        except ValueError as exc:  # LiteRT's message names no file
+            raise ValueError(f"{path}: not a readable .tflite model ({exc})") from None
         self._lock = threading.Lock()  # an interpreter runs one call at a time
         inp = first.get_input_details()[0]
         out = first.get_output_details()[0]
