@@ -17,9 +17,10 @@ covariance; computed here to first order, the rotation fitted out, not through t
 which imports the fit). Over 30 random half-splits of each real set (each set's model fixed), the
 halves differed (median) by 0.26 px on OpenCV's 13 left photos with this rule and the held-out check
 (the held-out check alone 0.42, flat 0.24), 1.95 px on the bent udacity board (1.92; flat 4.19) and
-0.61 px over 20 splits of the 185° fisheye (held-out check alone 0.66 over 30; flat 0.48 over the 20). Δ / σ over those halves: 1.7
-(median) on the left photos, 5.9 on udacity, 4.2 on the fisheye. ``benchmarks/real_split_noise.py``
-(24 splits, ``flex="auto"`` with this rule): 0.30, 1.8 and 0.64 px (flat 0.27, 4.2 and 0.48).
+0.61 px over 20 splits of the 185° fisheye (held-out check alone 0.66 over 30; flat 0.48 over the
+20). Δ / σ over those halves: 1.7 (median) on the left photos, 5.9 on udacity, 4.2 on the fisheye.
+``benchmarks/real_split_noise.py`` (24 splits, ``flex="auto"`` with this rule): 0.30, 1.8 and 0.64 px
+(flat 0.27, 4.2 and 0.48).
 """
 
 from __future__ import annotations
