@@ -339,7 +339,7 @@ def choose_model(views, pattern_size: tuple[int, int], image_size: tuple[int, in
     usable, _ = _usable_views(views, pattern_size, 3, image_size)
     opts = SolveOptions(pattern_size, flex, reject_corners)
     return select_model(usable, 1.0, lambda vs, m, start: _fit_model(m, vs, 1.0, image_size, start, fix_k3, True, opts),
-                        tuple(models), circle=image_circle)[1]
+                        tuple(models), circle=image_circle, pattern_size=pattern_size)[1]
 
 
 def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 1.0,
@@ -373,7 +373,7 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
     if model == "auto":
         table, model, fit = select_model(
             usable, 1.0, lambda vs, m, start: _fit_model(m, vs, 1.0, image_size, start, fix_k3, True, opts),
-            circle=image_circle)
+            circle=image_circle, pattern_size=pattern_size)
     else:
         fit = _fit_model(model, usable, 1.0, image_size, None, fix_k3, False, opts)  # a unit square: tvecs scaled last
         model = fit.model  # a model that chose its layout (a spline) refits with that layout

@@ -20,30 +20,11 @@ import dataclasses
 
 import numpy as np
 
-from aicalib_tf.calib.bundle import CalibrationError, solve_pose
+from aicalib_tf.calib.bundle import CalibrationError
 from aicalib_tf.calib.flex_shift import shift_note
-from aicalib_tf.calib.select import MAX_FOLDS, MIN_CV_VIEWS
-from aicalib_tf.geometry.board_flex import flexed_points
-from aicalib_tf.geometry.lens import Lens
-from aicalib_tf.geometry.pattern import board_points
+from aicalib_tf.calib.select import MAX_FOLDS, MIN_CV_VIEWS, held_out_rms
 
 __all__ = ["held_out_gain", "flex_earned", "confirm_flex", "solve_fields"]
-
-
-def _score(fit, held, pattern_size, square_size: float) -> float:
-    """px: RMS over the held-out views' corners, each view posed with ``fit``'s intrinsics and flex."""
-    lens = Lens.from_intrinsics(fit.model, fit.intrinsics, (1, 1))
-    flex = getattr(fit, "flex", None)
-    sq, n = 0.0, 0
-    for v in held:
-        obj = board_points(v.ids, square_size)
-        if flex is not None:
-            obj = flexed_points(obj, pattern_size, np.asarray(flex) / square_size, square_size)
-        pose = solve_pose(lens, obj, v.corners)
-        if pose is None or not np.isfinite(pose[2]):
-            raise CalibrationError(f"held-out view {v.name} cannot be posed")
-        sq, n = sq + pose[2] ** 2 * len(v.ids), n + len(v.ids)
-    return float(np.sqrt(sq / n))
 
 
 def held_out_gain(views, fit, pattern_size, square_size: float = 1.0) -> np.ndarray:
@@ -58,7 +39,8 @@ def held_out_gain(views, fit, pattern_size, square_size: float = 1.0) -> np.ndar
         train = [v for i, v in enumerate(views) if i % k != f]
         held = [v for i, v in enumerate(views) if i % k == f]
         flexed, flat = fit(train, "auto"), fit(train, "off")
-        gains.append(_score(flat, held, pattern_size, square_size) - _score(flexed, held, pattern_size, square_size))
+        score = [held_out_rms(r, held, square_size, pattern_size) for r in (flat, flexed)]
+        gains.append(score[0] - score[1])
     return np.array(gains)
 
 

@@ -3,7 +3,8 @@
 For each model of :data:`~aicalib_tf.geometry.lens.MODELS`: fit all views (the in-sample RMS),
 then split the views into k = min(5, V) folds (view i in fold i mod k); for each fold, fit the
 other views (starting from the all-views fit), and with those intrinsics held fixed solve only
-each held-out view's pose and measure its reprojection error. A fold's score is the RMS over its
+each held-out view's pose (on the board as the fold solved it, flexed when it solved the board's
+flex) and measure its reprojection error. A fold's score is the RMS over its
 held-out corners, px; a model's ``cv_rms`` is the mean over folds and ``cv_se`` its standard error
 (sample standard deviation / √k). The choice is the simplest model whose ``cv_rms`` is within one
 standard error of the best, simplest by :data:`COMPLEXITY`. The standard error is that of the best
@@ -87,11 +88,13 @@ import numpy as np
 from aicalib_tf.calib.bundle import CalibrationError, solve_pose
 from aicalib_tf.calib.splined_fit import misfit_note
 from aicalib_tf.calib.starts import widest_angle
+from aicalib_tf.geometry.board_flex import flexed_points
 from aicalib_tf.geometry.image_circle import circle_fov_deg
 from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens, get_model
 from aicalib_tf.geometry.pattern import board_points
 
-__all__ = ["select_model", "cross_validate", "fold_scores", "choose", "undetermined_extras", "widest_ray_deg", "COMPLEXITY",
+__all__ = ["select_model", "cross_validate", "fold_scores", "held_out_rms",
+           "choose", "undetermined_extras", "widest_ray_deg", "COMPLEXITY",
            "RAY_MARGIN_DEG", "WIDE_REACH_DEG", "PINHOLE_MARGIN_SE", "PINHOLE_MARGIN_FRACTION", "pinhole_margin_note"]
 
 COMPLEXITY = tuple(sorted(MODELS, key=lambda m: get_model(m).RANK))  # simplest first (each model's RANK), see above
@@ -108,16 +111,39 @@ PINHOLE_MARGIN_FRACTION = 0.05  # ... and this fraction of the wide model's held
 
 
 
-def cross_validate(views, square_size: float, fit, model: str, full) -> tuple[float, float]:
+def cross_validate(views, square_size: float, fit, model: str, full, pattern_size=None) -> tuple[float, float]:
     """(cv_rms px, cv_se px) of one model: the mean of :func:`fold_scores` and its standard error."""
-    scores = fold_scores(views, square_size, fit, model, full)
+    scores = fold_scores(views, square_size, fit, model, full, pattern_size)
     return float(scores.mean()), float(scores.std(ddof=1) / np.sqrt(len(scores)))
 
 
-def fold_scores(views, square_size: float, fit, model: str, full) -> np.ndarray:
+def held_out_rms(fit, held, square_size: float, pattern_size=None) -> float:
+    """px: the RMS over the ``held`` views' corners, each view's pose solved with ``fit``'s intrinsics (a
+    BundleResult) on the board as ``fit`` solved it: flat, or flexed by its ``flex`` (in board units of
+    ``square_size`` per square; needs ``pattern_size``). A fold's flex is the board's, so a held-out view
+    posed on a flat board would charge the flexed fit with the flex it found. Raises CalibrationError when
+    a held-out view cannot be posed, ValueError for a flexed fit without ``pattern_size``."""
+    lens = Lens.from_intrinsics(fit.model, fit.intrinsics, (1, 1))
+    flex = getattr(fit, "flex", None)
+    if flex is not None and pattern_size is None:
+        raise ValueError("a fit with a board flex needs pattern_size to pose held-out views")
+    sq, n = 0.0, 0
+    for v in held:
+        obj = board_points(v.ids, square_size)
+        if flex is not None:
+            obj = flexed_points(obj, pattern_size, np.asarray(flex, np.float64) / square_size, square_size)
+        pose = solve_pose(lens, obj, v.corners)
+        if pose is None or not np.isfinite(pose[2]):
+            raise CalibrationError(f"{fit.model}: held-out view {v.name} cannot be posed with the fold's intrinsics")
+        sq, n = sq + pose[2] ** 2 * len(v.ids), n + len(v.ids)
+    return float(np.sqrt(sq / n))
+
+
+def fold_scores(views, square_size: float, fit, model: str, full, pattern_size=None) -> np.ndarray:
     """(k,) px: each fold's held-out RMS for one model; ``full`` is its all-views fit (a BundleResult), the folds' start.
 
-    views : list of View; fit(views, model, start) -> BundleResult. Raises CalibrationError when a
+    views : list of View; fit(views, model, start) -> BundleResult; pattern_size : (cols, rows), needed when
+    the fits solve the board's flex (:func:`held_out_rms`). Raises CalibrationError when a
     fold cannot be fitted, its fit does not converge within the evaluation cap (its parameters are
     then not the model's estimate from those views, so they say nothing about the model; the model
     has more parameters than the views determine), or a held-out view cannot be posed.
@@ -137,14 +163,7 @@ def fold_scores(views, square_size: float, fit, model: str, full) -> np.ndarray:
         if not fold.converged:
             raise CalibrationError(f"{model}: fold {f + 1} of {k} did not converge in {fold.nfev} evaluations "
                                    f"(its {fold.intrinsics.size} parameters are not determined by {len(train)} views)")
-        lens = Lens.from_intrinsics(model, fold.intrinsics, (1, 1))
-        sq, n = 0.0, 0
-        for v in held:
-            pose = solve_pose(lens, board_points(v.ids, square_size), v.corners)
-            if pose is None or not np.isfinite(pose[2]):
-                raise CalibrationError(f"{model}: held-out view {v.name} cannot be posed with the fold's intrinsics")
-            sq, n = sq + pose[2] ** 2 * len(v.ids), n + len(v.ids)
-        scores.append(np.sqrt(sq / n))
+        scores.append(held_out_rms(fold, held, square_size, pattern_size))
     return np.array(scores)
 
 
@@ -270,12 +289,14 @@ def _reach(fit, views, circle) -> tuple[float, str]:
     return widest, what
 
 
-def select_model(views, square_size: float, fit, models=MODELS, *, circle=None):
+def select_model(views, square_size: float, fit, models=MODELS, *, circle=None, pattern_size=None):
     """Cross-validate each model and choose one: returns (table, chosen model, its all-views fit).
 
     views : list of View (all usable). fit(views, model, start) -> BundleResult, start a Lens or
     None (from scratch). circle : the image circle (an
-    :class:`~aicalib_tf.geometry.image_circle.ImageCircle`) or None; its rim counts as reached. table : tuple of dicts {"model", "n_params", "rms" (in-sample px), "cv_rms",
+    :class:`~aicalib_tf.geometry.image_circle.ImageCircle`) or None; its rim counts as reached.
+    pattern_size : (cols, rows), needed when ``fit`` solves the board's flex (:func:`held_out_rms`).
+    table : tuple of dicts {"model", "n_params", "rms" (in-sample px), "cv_rms",
     "cv_se" (px), "chosen", "note", "determined", "corners"} in ``models`` order. The chosen model is the name its fit carries (a spline's names the
     layout its fit chose; its row has the bare name). Raises CalibrationError when no model can be fitted.
     """
@@ -308,7 +329,7 @@ def select_model(views, square_size: float, fit, models=MODELS, *, circle=None):
                 row["determined"] = False
                 row["note"] = f"{', '.join(vague)} not determined (within 2σ of a simpler model's value)"
             if len(views) >= MIN_CV_VIEWS:
-                folds = fold_scores(views, square_size, fit, model, fits[model])
+                folds = fold_scores(views, square_size, fit, model, fits[model], pattern_size)
                 row["cv_rms"], row["cv_se"] = float(folds.mean()), float(folds.std(ddof=1) / np.sqrt(len(folds)))
                 row["cv_folds"] = folds.tolist()
             else:

@@ -4,7 +4,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-_spec = importlib.util.spec_from_file_location("board_flex_bench", Path(__file__).parents[2] / "benchmarks" / "board_flex.py")
+_spec = importlib.util.spec_from_file_location(
+    "board_flex_bench", Path(__file__).parents[2] / "benchmarks" / "board_flex.py")
 bf = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(bf)
 

@@ -8,9 +8,11 @@ import numpy as np
 import pytest
 
 from aicalib_tf.calib.files import calibration_dict, calibration_from_dict, to_json
-from aicalib_tf.calib.fit import View, calibrate_camera
+from aicalib_tf.calib.fit import View, _fit_model, calibrate_camera
 from aicalib_tf.calib.flex import FLEX_SIGMA_MAX, flex_problem
 from aicalib_tf.calib.report import solve_lines
+from aicalib_tf.calib.robust import SolveOptions
+from aicalib_tf.calib.select import fold_scores
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.board_flex import flex_basis, flex_height, flexed_points
 from aicalib_tf.geometry.pattern import board_points
@@ -69,6 +71,19 @@ def test_a_flex_too_noisy_to_determine_is_left_off_in_the_fit_the_report_and_cam
     d = json.loads(to_json(cal))["board_flex"]
     assert d["wx"] is None and d["wy"] is None and d["note"] == cal.flex_note
     assert calibration_from_dict(json.loads(to_json(cal))).flex is None
+
+
+def test_held_out_views_are_posed_on_the_board_the_fold_solved():
+    # the model choice's folds: a held-out view posed on a flat board charged a flexed fit with its own flex
+    # (12 views, sag 0.02 squares: held-out RMS 1.29x the in-sample RMS, against 1.05x on the fold's board)
+    views = flexed_views(12, noise=0.1, flex=(0.012, 0.008), seed=8)
+    options = SolveOptions(PATTERN, "auto")
+    fit = lambda vs, m, start: _fit_model(m, vs, 1.0, SIZE, start, False, True, options)  # noqa: E731
+    full = fit(views, "plumb_bob", None)
+    scores = fold_scores(views, 1.0, fit, "plumb_bob", full, PATTERN)
+    assert full.flex is not None and scores.mean() < 1.15 * full.rms, (scores, full.rms)
+    with pytest.raises(ValueError, match="pattern_size"):
+        fold_scores(views, 1.0, fit, "plumb_bob", full)
 
 
 def test_displaced_corners_are_the_ones_rejected_and_the_fit_is_the_clean_one():
