@@ -12,6 +12,7 @@ for it here:
   RUN_DIR/backup when its commands are run again;
 - Ctrl-C reaches the training process itself (the terminal signals both): it ends the wait at
   once, or training with ``interrupted`` and exit 130, as in every command;
+- the training process dies with the command, however it ends (a SIGKILL included);
 - the training process's exit code is the command's; if it is killed by a signal while it waits
   for the cluster (the ``--connect-timeout`` deadline, whose line it has printed), the exit code is 2.
 """
@@ -83,7 +84,8 @@ def run_supervised(argv: list[str], stderr=None) -> int:
     old_term = signal.signal(signal.SIGTERM, on_term)
     try:
         children.append(subprocess.Popen([sys.executable, "-m", "aicalib_tf.train", *argv],
-                                         env={**os.environ, CHILD_ENV: str(write)}, pass_fds=(write,)))
+                                         env={**os.environ, CHILD_ENV: str(write)}, pass_fds=(write,),
+                                         preexec_fn=_die_with(os.getpid())))
         os.close(write)
         if terminated:
             children[0].kill()
@@ -108,6 +110,19 @@ def run_supervised(argv: list[str], stderr=None) -> int:
             print(f"error: the training process was ended by signal {-code}", file=err)
         return 2
     return code
+
+
+def _die_with(parent: int):
+    """In the child before exec: be killed (SIGKILL) when ``parent`` ends, however it ends (Linux's
+    PR_SET_PDEATHSIG; a SIGKILL of the command must not leave its training running)."""
+    def arm():
+        if sys.platform.startswith("linux"):
+            import ctypes
+
+            ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))  # 1: PR_SET_PDEATHSIG
+        if os.getppid() != parent:  # it ended before the line above
+            os._exit(EXIT_TERMINATED)
+    return arm
 
 
 def _connected(fd: int) -> bool:

@@ -33,6 +33,14 @@ def _listening(port) -> bool:
         return False
 
 
+def _alive(pid) -> bool:
+    """Whether ``pid`` runs (a zombie waiting for its new parent to reap it does not)."""
+    try:
+        return open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
 def _children(pid) -> list[int]:
     try:
         return [int(c) for c in open(f"/proc/{pid}/task/{pid}/children").read().split()]
@@ -70,8 +78,7 @@ def test_sigterm_while_waiting_for_an_absent_worker_ends_the_run_at_once(tmp_pat
     assert f"worker 1 at localhost:{absent}" in errors[0] and "Traceback" not in err
     assert not (tmp_path / "run").exists()
     time.sleep(0.2)
-    assert not any(os.path.exists(f"/proc/{pid}") and "Z" not in open(f"/proc/{pid}/stat").read().split()[2]
-                   for pid in trainer)
+    assert not any(_alive(pid) for pid in trainer)
 
 
 def test_a_bad_tf_config_is_refused_by_the_supervisor_in_one_line(tmp_path, monkeypatch, capsys):
@@ -82,3 +89,23 @@ def test_a_bad_tf_config_is_refused_by_the_supervisor_in_one_line(tmp_path, monk
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: TF_CONFIG: not a cluster")
     assert not (tmp_path / "r").exists()
+
+
+def test_a_sigkill_of_the_command_takes_its_training_process_with_it(tmp_path):
+    mine, absent = _free_ports(2)
+    env = dict(os.environ, TF_CPP_MIN_LOG_LEVEL="3",
+               TF_CONFIG=json.dumps({"cluster": {"worker": [f"localhost:{mine}", f"localhost:{absent}"]},
+                                     "task": {"type": "worker", "index": 0}}))
+    proc = subprocess.Popen([sys.executable, "-m", "aicalib_tf.train", "--strategy", "multiworker", "--connect-timeout",
+                             "120", "--out", str(tmp_path / "run"), "--quiet"], env=env, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 30
+    while not _children(proc.pid) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    trainer = _children(proc.pid)
+    proc.kill()
+    proc.wait()
+    assert trainer
+    deadline = time.monotonic() + 5
+    while any(_alive(pid) for pid in trainer) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(_alive(pid) for pid in trainer)
