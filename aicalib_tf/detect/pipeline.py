@@ -104,7 +104,6 @@ from aicalib_tf.detect.chessboard.grid import MIN_CORNERS, Grid, assemble_grids,
 from aicalib_tf.detect.corners.junctions import dedupe, nearest_spacing, proposer, typical_amplitude
 from aicalib_tf.detect.chessboard.lattice import drop_outliers
 from aicalib_tf.detect.chessboard.partial import partial_board, relative_board
-from aicalib_tf.detect.chessboard.rim import complete_rim
 from aicalib_tf.detect.pyramid import Frame, boards_coarse_to_fine, quick_scales, quick_shift, refine_full, scales, to_full
 from aicalib_tf.detect.corners.refine import Smoothed, refine_candidates
 from aicalib_tf.detect.chessboard.zoom import from_zoom, zoom_box, zoom_in
@@ -318,8 +317,9 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     if len(refined) == 0:
         return empty
     smooth = smoothed.sigma(RING_SIGMA)
-    ref_amp = typical_amplitude(smooth, refined, MIN_CORNERS) if len(refined) >= MIN_CORNERS else 0.0
-    propose = proposer(smoothed, smooth, ref_amp, weak=weak) if len(refined) >= MIN_CORNERS else None
+    propose = None
+    if len(refined) >= MIN_CORNERS:
+        propose = proposer(smoothed, smooth, typical_amplitude(smooth, refined, MIN_CORNERS), weak=weak)
     if pattern_size is None:
         grids = _own_grids(assemble_grids(refined, scores, gray=smooth, propose=propose))
         for grid in grids:
@@ -338,9 +338,7 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     limit = max(pattern_size) + 1
     grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit, stop=is_board)
     if board is None and not full_only:  # bent strongly (close to a fisheye): a full board or nothing
-        bent = assemble_grids(refined, scores, gray=smooth, propose=propose and propose.bent, limit=limit, stop=is_board,
-                              bend=True)
-        # no rim completion (_rim_board) here: on data_gen's occluded seed 21 #7 it put 4 corners under the occluder
+        assemble_grids(refined, scores, gray=smooth, propose=propose and propose.bent, limit=limit, stop=is_board, bend=True)
     if board is not None or full_only:  # full_only: the quick pass, a full board or nothing
         return Detection(*board, True, (w, h)) if board else replace(empty, reason=NO_MATCH if grids else NO_GRID)
     if not grids:  # no 3×3 block anywhere: strips 2 corners wide (between objects, say)
@@ -357,20 +355,6 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     else:
         det = replace(empty, reason=UNDECIDED if undecided else NO_MATCH)
     return look if look is not None and len(look.corners) > len(det.corners) else det
-
-
-def _rim_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int, int], smoothed: Smoothed,
-               smooth: np.ndarray, ref_amp: float):
-    """The first grid that is the full board once its outer ring's missing corners are placed
-    (:func:`aicalib_tf.detect.chessboard.rim.complete_rim`), as :func:`full_board` returns it, or None."""
-    cols, rows = pattern_size
-    for grid in grids:
-        for shape in dict.fromkeys(((cols, rows), (rows, cols))):
-            full = complete_rim(grid, shape, smoothed, smooth, ref_amp)
-            board = None if full is None else full_board(full, scores, pattern_size, smooth)
-            if board is not None:
-                return board
-    return None
 
 
 def _charuco_board(board):
