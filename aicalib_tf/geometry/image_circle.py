@@ -31,6 +31,7 @@ DARK_FRACTION = 0.25  # the threshold, from the black level towards the disk's m
 MIN_DARK_CORNERS = 3  # of the frame's 4 corners, how many must be black for a circle
 MAX_BLACK = 0.2  # the black level (1st percentile) is at most this share of the disk's median brightness
 MAX_RESIDUAL = 1.5  # px at the averaged size: the boundary's median distance from the fitted circle
+MIN_ON_CIRCLE = 0.5  # the least share of the boundary's points that must lie on the circle
 
 
 @dataclass(frozen=True)
@@ -103,17 +104,35 @@ def _fit_circle(pts: np.ndarray) -> tuple[float, float, float]:
     return float(cx), float(cy), float(np.sqrt(max(c + cx * cx + cy * cy, 0.0)))
 
 
-def _robust_circle(pts: np.ndarray) -> tuple[float, float, float, float] | None:
-    """(cx, cy, r, median |residual|) of three fits, each on the points the previous one left within
-    3 MADs (at least 1 px) of its circle; None with fewer than 20 points left."""
-    keep = np.ones(len(pts), bool)
+def _robust_circle(pts: np.ndarray, trials: int = 300) -> tuple[float, float, float, float] | None:
+    """(cx, cy, r, median |residual|) of the circle most of the (N, 2) boundary points ``pts`` agree on,
+    or None with fewer than 20 points.
+
+    A consensus start, then three least-squares fits, each on the points the previous circle left
+    within 3 MADs (at least 1 px): the start is the circle through three of the points (``trials``
+    draws from a fixed seed, and the least-squares circle of them all) that has the most points within
+    :data:`MAX_RESIDUAL` px. Dark things inside the disk that touch the dark outside (a chair's legs
+    at the rim) dent the boundary; a fit of all points follows the dents, the consensus does not.
+    The median is over the points the last fit kept; a boundary that agrees with no circle keeps few
+    of its points (:data:`MIN_ON_CIRCLE`, :func:`_no_circle`)."""
+    if len(pts) < 20:
+        return None
+    x, y = pts[:, 0], pts[:, 1]
+    cands = np.array([_fit_circle(pts)] + [_fit_circle(pts[t])
+                                           for t in np.random.default_rng(0).integers(0, len(pts), (trials, 3))])
+    with np.errstate(invalid="ignore"):
+        res = np.abs(np.hypot(x[None] - cands[:, :1], y[None] - cands[:, 1:2]) - cands[:, 2:])
+    cx, cy, r = cands[int(np.argmax(np.sum(res <= MAX_RESIDUAL, axis=1)))]
+    keep = np.abs(np.hypot(x - cx, y - cy) - r) <= max(1.0, 2 * MAX_RESIDUAL)
     for _ in range(3):
         if keep.sum() < 20:
             return None
         cx, cy, r = _fit_circle(pts[keep])
-        res = np.abs(np.hypot(pts[:, 0] - cx, pts[:, 1] - cy) - r)
+        res = np.abs(np.hypot(x - cx, y - cy) - r)
         mad = float(np.median(res[keep]))
         keep = res <= max(1.0, 3.0 * 1.4826 * mad)
+    if keep.mean() < MIN_ON_CIRCLE:
+        return cx, cy, r, float("inf")
     return cx, cy, r, float(np.median(res[keep]))
 
 
@@ -154,9 +173,11 @@ def estimate_image_circle(image, full_size=None) -> ImageCircle | None:
     The image is smoothed, thresholded a quarter of the way from its black level (1st percentile)
     to the median of its central half (a black level above a fifth of that median is no black ring:
     None), and the dark pixels connected to the frame's border form the outside. With at least three of the four frame corners outside, the boundary of the inside
-    (less the points on the frame's edge, where a cropped circle is cut) is fitted with a circle,
-    points more than 3 MADs off dropped; a boundary that is no circle (median residual above
-    1.5 px), a radius under a tenth of the frame or a flat image give None. The rim is then found to
+    (less the points on the frame's edge, where a cropped circle is cut) is fitted with the circle most
+    of its points agree on (:func:`_robust_circle`: dark things inside the disk that touch the rim
+    dent the boundary), points more than 3 MADs off dropped; a boundary that is no circle (less than
+    half of it on the circle, or a median residual above 1.5 px), a radius under a tenth of the
+    frame or a flat image give None. The rim is then found to
     a fraction of a pixel on radial lines of the unsmoothed image (:func:`_refine`) and fitted again.
 
     >>> yy, xx = np.mgrid[:120, :160]
@@ -207,7 +228,8 @@ def find_image_circle(image, full_size=None) -> tuple[ImageCircle | None, str]:
     if why:
         return None, "the frame's corners are dark but " + why
     fine = _refine(raw, (fit[0], fit[1], fit[2] + 0.5), black, bright)  # the contour runs through inside pixels' centres
-    fit = _robust_circle(fine) or fit
+    refined = _robust_circle(fine)
+    fit = refined if refined is not None and np.isfinite(refined[3]) else fit
     cx, cy, r = fit[0], fit[1], fit[2]
     W, H = (w, h) if full_size is None else (float(full_size[0]), float(full_size[1]))
     sx, sy = W / w, H / h
@@ -219,6 +241,9 @@ def _no_circle(fit, side: int) -> str:
     is no image circle ("" when it is one); side : the averaged image's longer side, px."""
     if fit is None:
         return "the bright area's boundary is too short to fit a circle to"
+    if not np.isfinite(fit[3]):
+        return (f"the bright area's boundary is no circle (less than {MIN_ON_CIRCLE:.0%} of it lies on any one "
+                f"circle in the photos' shrunk mean)")
     if fit[3] > MAX_RESIDUAL:
         return (f"the bright area's boundary is no circle (median distance {fit[3]:.1f} px from the best circle in "
                 f"the photos' shrunk mean, at most {MAX_RESIDUAL:g} px allowed)")

@@ -126,3 +126,20 @@ def test_doctests():
     from aicalib_tf.geometry import image_circle
 
     assert doctest.testmod(image_circle).failed == 0
+
+
+def test_circle_cut_by_the_frame_with_dark_things_reaching_into_it():
+    """A circle cut at top, bottom and right (as on a 185° lens on a 4:3 sensor) whose rim dark objects
+    touch from inside (a chair's legs): their dents in the dark area's boundary are left out."""
+    rng = np.random.default_rng(4)
+    size, centre, radius = (1032, 778), (546.0, 370.0), 544.0
+    img = _disk(size, centre, radius, rng)
+    yy, xx = np.mgrid[:size[1], :size[0]]
+    for a in np.radians([120.0, 130.0, 140.0, 150.0]):  # dark bars from the rim inwards, lower left
+        ux, uy = np.cos(a), np.sin(a)
+        along = (xx - centre[0]) * ux + (yy - centre[1]) * uy
+        across = np.abs(-(xx - centre[0]) * uy + (yy - centre[1]) * ux)
+        img[(along > radius - 90) & (across < 9)] = 0.02
+    c = estimate_image_circle(thumbnail(img), size)
+    assert c is not None
+    assert (c.cx, c.cy) == pytest.approx(centre, abs=1.0) and c.radius == pytest.approx(radius, abs=1.0)
