@@ -5,23 +5,16 @@ from __future__ import annotations
 
 import json
 import os
-import re
-import shutil
 import subprocess
-import sys
 import time
 import urllib.error
 import urllib.request
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
-CHROMIUM_FLAGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                  "--use-fake-ui-for-media-stream", "--use-fake-device-for-media-stream"]
-LIVE = [sys.executable, "-m", "aicalib_tf.live", "--pattern", "9x6", "--square", "25mm", "--port", "0",
-        "--max-views", "5", "--model", "plumb_bob"]
+from tests.live.conftest import LIVE, ROOT, get_json, route, start_live
+
+CHESSBOARD = ["--pattern", "9x6", "--square", "25mm", "--port", "0", "--max-views", "5", "--model", "plumb_bob"]
 
 
 @pytest.fixture(scope="module")
@@ -35,61 +28,9 @@ def video(tmp_path_factory):
     return out
 
 
-def _chromium() -> str | None:
-    return shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
-
-
-def _start(args, tmp_path) -> tuple[subprocess.Popen, str]:
-    proc = subprocess.Popen(LIVE + args, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env=dict(os.environ, PYTHONPATH=str(ROOT)))
-    for line in proc.stdout:
-        m = re.search(r"(http://\S+)", line)
-        if m:
-            return proc, m.group(1)
-    raise AssertionError(f"the server did not start (exit {proc.wait()})")
-
-
-def _route(url: str, path: str) -> str:
-    """The printed page address (``http://localhost:PORT/?token=...``) -> one of its routes, with the token."""
-    base, _, query = url.partition("?")
-    assert query.startswith("token="), url
-    return f"{base}{path}?{query}"
-
-
-def _get(url: str) -> dict:
-    with urllib.request.urlopen(url, timeout=10) as r:
-        return json.loads(r.read())
-
-
-def _wait_for(path: Path, seconds: float, procs) -> bool:
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        if path.exists():
-            return True
-        if any(p.poll() is not None for p in procs):
-            return False
-        time.sleep(0.5)
-    return False
-
-
-def test_browser_camera_page_ends_with_a_calibration_file(video, tmp_path):
-    browser = _chromium()
-    if browser is None:
-        if os.environ.get("CI"):
-            pytest.fail("Chromium is not installed: .ci/run installs it (apt-get install chromium)")
-        pytest.skip("no Chromium on this machine (apt-get install chromium)")
+def test_browser_camera_page_ends_with_a_calibration_file(video, tmp_path, browser_calibration):
     out = tmp_path / "calib"
-    server, url = _start(["--out", str(out)], tmp_path)
-    chrome = subprocess.Popen([browser, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'profile'}",
-                               f"--use-file-for-fake-video-capture={video / 'video.y4m'}", url + "&autostart=1&autosave=1"],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        saved = _wait_for(out / "camera.json", 240, [server, chrome])
-        state = _get(_route(url, "state"))
-    finally:
-        chrome.kill()
-        server.kill()
-    assert saved, f"no calibration saved; last state: {state}"
+    state = browser_calibration(CHESSBOARD + ["--out", str(out)], video / "video.y4m", out, 240)
     cal = json.loads((out / "camera.json").read_text())
     assert cal["meta"]["live"] is True and cal["meta"]["source"] == "browser camera"
     assert 400 < cal["camera_matrix"][0][0] < 700 and state["views"] >= 3
@@ -98,18 +39,18 @@ def test_browser_camera_page_ends_with_a_calibration_file(video, tmp_path):
 
 def test_server_side_video_source_and_save(video, tmp_path):
     out = tmp_path / "calib"
-    server, url = _start(["--out", str(out), "--source", str(video / "video.avi")], tmp_path)
+    server, url = start_live(CHESSBOARD + ["--out", str(out), "--source", str(video / "video.avi")])
     try:
         ws_free_state = {}
         end = time.monotonic() + 120
         while time.monotonic() < end:
-            ws_free_state = _get(_route(url, "state"))
+            ws_free_state = get_json(route(url, "state"))
             if ws_free_state.get("views", 0) >= 3 and (ws_free_state.get("done") or ws_free_state.get("frames", 0) > 40):
                 break
             time.sleep(1)
         with pytest.raises(urllib.error.HTTPError, match="403"):  # the token is required
             urllib.request.urlopen(urllib.request.Request(url.partition("?")[0] + "save", method="POST"), timeout=10)
-        req = urllib.request.Request(_route(url, "save"), method="POST")
+        req = urllib.request.Request(route(url, "save"), method="POST")
         with urllib.request.urlopen(req, timeout=120) as r:
             reply = json.loads(r.read())
     finally:
@@ -119,7 +60,7 @@ def test_server_side_video_source_and_save(video, tmp_path):
 
 
 def test_a_missing_source_is_one_error_line_and_exit_2(tmp_path):
-    proc = subprocess.run(LIVE + ["--source", str(tmp_path / "none.mp4")], cwd=ROOT, capture_output=True, text=True,
+    proc = subprocess.run(LIVE + CHESSBOARD + ["--source", str(tmp_path / "none.mp4")], cwd=ROOT, capture_output=True, text=True,
                           env=dict(os.environ, PYTHONPATH=str(ROOT)), timeout=120)
     lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("error:")]
     assert proc.returncode == 2 and len(lines) == 1 and "none.mp4" in lines[0], proc.stderr
