@@ -48,13 +48,21 @@ def _children(pid) -> list[int]:
         return []
 
 
-def test_sigterm_while_waiting_for_an_absent_worker_ends_the_run_at_once(tmp_path):
+def _wait_for_an_absent_worker(out, **popen) -> tuple[subprocess.Popen, int, int]:
+    """``python -m aicalib_tf.train --strategy multiworker --out OUT`` as worker 0 of a two-worker cluster
+    whose worker 1 never comes, so the run waits for it (up to 120 s): (the command, its port, the absent
+    worker's port). ``popen``: subprocess.Popen's keywords for the output (stderr=..., text=...)."""
     mine, absent = _free_ports(2)
     env = dict(os.environ, TF_CPP_MIN_LOG_LEVEL="3",
                TF_CONFIG=json.dumps({"cluster": {"worker": [f"localhost:{mine}", f"localhost:{absent}"]},
                                      "task": {"type": "worker", "index": 0}}))
     proc = subprocess.Popen([sys.executable, "-m", "aicalib_tf.train", "--strategy", "multiworker", "--connect-timeout",
-                             "120", "--out", str(tmp_path / "run"), "--quiet"], env=env, stderr=subprocess.PIPE, text=True)
+                             "120", "--out", str(out), "--quiet"], env=env, **popen)
+    return proc, mine, absent
+
+
+def test_sigterm_while_waiting_for_an_absent_worker_ends_the_run_at_once(tmp_path):
+    proc, mine, absent = _wait_for_an_absent_worker(tmp_path / "run", stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
     while not _listening(mine) and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.1)  # the training process's own server is up: it waits in TensorFlow for worker 1
@@ -92,12 +100,7 @@ def test_a_bad_tf_config_is_refused_by_the_supervisor_in_one_line(tmp_path, monk
 
 
 def test_a_sigkill_of_the_command_takes_its_training_process_with_it(tmp_path):
-    mine, absent = _free_ports(2)
-    env = dict(os.environ, TF_CPP_MIN_LOG_LEVEL="3",
-               TF_CONFIG=json.dumps({"cluster": {"worker": [f"localhost:{mine}", f"localhost:{absent}"]},
-                                     "task": {"type": "worker", "index": 0}}))
-    proc = subprocess.Popen([sys.executable, "-m", "aicalib_tf.train", "--strategy", "multiworker", "--connect-timeout",
-                             "120", "--out", str(tmp_path / "run"), "--quiet"], env=env, stderr=subprocess.DEVNULL)
+    proc, _, _ = _wait_for_an_absent_worker(tmp_path / "run", stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 30
     while not _children(proc.pid) and time.monotonic() < deadline:
         time.sleep(0.05)
