@@ -10,8 +10,9 @@ scored as there (rotation-fitted projection difference, median over the covered 
 
 - aicalib_tf, in process on the photos' detections (the calibrate command's CNN detector, each photo
   once), with the lens model ``auto`` chooses on all the photos held for every half:
-  flat (the default solve), ``flex="auto"`` (each half's held-out check keeps or drops the flex,
-  :mod:`aicalib_tf.calib.flex_check`) and the flex as solved in both halves (no held-out check);
+  flat (the default solve), ``flex="auto"`` (each half's test of the sag against its leave-one-view-out
+  noise keeps or drops the flex, :mod:`aicalib_tf.calib.flex_check`) and the flex as solved in both
+  halves (its σ rule only);
   and, for the flat halves, what their covariances predict for the difference
   (:func:`aicalib_tf.calib.quality.predicted_half_difference`: the mean and the 10-90% band of one draw);
 - OpenCV 5-coefficient, rational and fisheye on classic corners, and mrcal OPENCV8 (one solve a half,
@@ -80,7 +81,7 @@ def _ours(views, halves, cfg, size, circle, model) -> dict:
         cals = []
         for idx in halves:
             vs = [views[i] for i in idx if views[i] is not None]
-            if mode == "flex":  # the flex as the solve keeps it (its σ rule), no held-out check
+            if mode == "flex":  # the flex as the solve keeps it (its σ rule), no test against its noise
                 fit = F._fit_model(model, vs, 1.0, size, None, False, False, SolveOptions(pattern, "auto", True))
                 cals.append(F._calibration(fit, vs, pattern, square, size, {}, "", None, (), circle))
             else:
