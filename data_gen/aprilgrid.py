@@ -20,18 +20,20 @@ their lattice ids in :meth:`AprilGridTarget.corner_ids`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from aicalib_tf.geometry.aprilgrid import AprilGrid, tag_image
 from aicalib_tf.geometry.pose import project_points
 
+from .marker_print import MarkerPrint, sample_paper
+
 __all__ = ["AprilGridTarget", "sample_aprilgrid", "tag_truth"]
 
 
 @dataclass(frozen=True)
-class AprilGridTarget:
+class AprilGridTarget(MarkerPrint):
     """An AprilGrid as the renderer and the pose sampler see it.
 
     board : the description. margin : white paper beyond the corner squares, in tag sides.
@@ -40,19 +42,16 @@ class AprilGridTarget:
 
     board: AprilGrid
     margin: float = 0.25
-    black: float = 0.1
-    white: float = 0.85
-    _cuts: np.ndarray = field(init=False, repr=False, compare=False)
-    _lut: np.ndarray = field(init=False, repr=False, compare=False)
 
-    def __post_init__(self):
-        if self.margin < 0:
-            raise ValueError(f"margin must be >= 0, got {self.margin}")
-        if not (0.0 <= self.black < self.white <= 1.0):
-            raise ValueError(f"need 0 <= black < white <= 1, got black={self.black}, white={self.white}")
-        n = self.board.bits + 4  # bit cells across a tag, border included
-        object.__setattr__(self, "_cuts", self.tag_side * np.arange(n + 1) / n)  # n + 1 cuts in [0, t]
-        object.__setattr__(self, "_lut", self._colour_table())
+    @property
+    def period(self) -> float:
+        """The pitch P: the print repeats every tag."""
+        return self.pitch
+
+    def _cut_positions(self) -> np.ndarray:
+        """n + 1 cuts in [0, t], n = bits + 4 bit cells across a tag (its border included)."""
+        n = self.board.bits + 4
+        return self.tag_side * np.arange(n + 1) / n
 
     # --- sizes, board units ------------------------------------------------------------------
     @property
@@ -110,13 +109,9 @@ class AprilGridTarget:
                          (self.pattern_size[1] - 1) * self.square_size / 2.0, 0.0])
 
     # --- colours ----------------------------------------------------------------------------
-    @property
-    def _per_pitch(self) -> int:
-        return len(self._cuts) + 1  # cell 0 (never met), the tag's n bit cells, the gap
-
     def _colour_table(self) -> np.ndarray:
         """((rows + 1)·k, (cols + 1)·k) uint8, k cells per pitch per axis, pitch −1 first: 0 black, 1 white."""
-        k, n = self._per_pitch, self.board.bits + 4
+        k, n = self._per_period, self.board.bits + 4
         lut = np.ones(((self.rows + 1) * k, (self.cols + 1) * k), np.uint8)
         gap = np.arange(self.rows + 1) * k + k - 1, np.arange(self.cols + 1) * k + k - 1
         lut[np.ix_(*gap)] = 0  # the squares at every gap crossing
@@ -125,44 +120,21 @@ class AprilGridTarget:
             lut[r * k + 1: r * k + 1 + n, c * k + 1: c * k + 1 + n] = tag_image(self.board, int(tag_id), n) > 127
         return lut
 
-    def axis_cells(self, A: np.ndarray) -> np.ndarray:
-        """(...) float board coordinate (X or Y, NaN allowed) -> (...) float64 index of its 1-D cell:
-        the print is one colour between neighbouring cuts (pitch, bit and tag edges)."""
-        P = self.pitch
-        with np.errstate(invalid="ignore"):
-            sq = np.floor(A / P)
-            within = np.searchsorted(self._cuts, np.nan_to_num(A - sq * P, nan=0.0), side="right")
-        return np.where(np.isnan(A), -1e9, sq * self._per_pitch + within)
-
-    def classify(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
-        """Class of board-plane points: 0 black (corner square or tag bit), 1 white, 2 off the paper.
-
-        X, Y : (...) float arrays in board units (NaN = not on the plane). Returns (...) uint8.
-        """
+    def _masks(self, X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         x0, y0, x1, y1 = self.paper_bounds()
         p0, q0, p1, q1 = self.printed_bounds()
         with np.errstate(invalid="ignore"):
             on_paper = (X >= x0) & (X < x1) & (Y >= y0) & (Y < y1)
-            inside = on_paper & (X >= p0) & (X < p1) & (Y >= q0) & (Y < q1)
-        k = self._per_pitch
-        cx = (self.axis_cells(X[inside]) + k).astype(np.int64)  # pitch −1 is the table's first
-        cy = (self.axis_cells(Y[inside]) + k).astype(np.int64)
-        out = np.full(np.shape(X), 2, dtype=np.uint8)
-        out[on_paper] = 1
-        out[inside] = self._lut[cy, cx]
-        return out
+            return on_paper, on_paper & (X >= p0) & (X < p1) & (Y >= q0) & (Y < q1)
 
     def to_dict(self) -> dict:
         return {**self.board.to_dict(), "margin": self.margin, "black": self.black, "white": self.white}
 
 
 def sample_aprilgrid(rng: np.random.Generator, board: AprilGrid, *,
-                     margin_range: tuple[float, float] = (0.1, 0.6),
-                     black_range: tuple[float, float] = (0.04, 0.22),
-                     white_range: tuple[float, float] = (0.7, 0.95)) -> AprilGridTarget:
-    """Draw the paper (margin, grey levels) of an AprilGrid, as :func:`data_gen.board.sample_board`."""
-    return AprilGridTarget(board, margin=float(rng.uniform(*margin_range)), black=float(rng.uniform(*black_range)),
-                           white=float(rng.uniform(*white_range)))
+                     margin_range: tuple[float, float] = (0.1, 0.6), **ranges) -> AprilGridTarget:
+    """Draw the paper (margin, grey levels) of an AprilGrid (:func:`data_gen.marker_print.sample_paper`)."""
+    return sample_paper(AprilGridTarget, rng, board, margin_range, **ranges)
 
 
 def tag_truth(target: AprilGridTarget, rvec, tvec, camera) -> dict:
