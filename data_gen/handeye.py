@@ -52,7 +52,7 @@ _UNIT_M = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "in": 0.0254}
 
 @dataclass(frozen=True)
 class HandEyeSetConfig:
-    """One set's parameters. square : chessboard square, mm. board : a ChArUco description instead.
+    """One set's parameters. square : chessboard square, mm. board : a ChArUco board or an AprilGrid instead.
     distance : (min, max) metres. robot_noise : (σ_rot degrees, σ_t mm) per axis. swap : rows whose
     reported poses are exchanged in pairs. noise : read noise σ, grey levels."""
 
@@ -111,13 +111,12 @@ def make_camera(rng: np.random.Generator, lens: str, size) -> Camera:
 
 def _board(rng, cfg: HandEyeSetConfig):
     """(board for the renderer, in mm, square in metres)."""
-    if cfg.board:
-        from aicalib_tf.geometry.charuco import parse_board
+    if cfg.board:  # a ChArUco board or an AprilGrid, on paper drawn as data_gen's other renders draw it
+        from .targets import parse_marker_board, sample_target
 
-        from .charuco import sample_charuco
-
-        b = parse_board(cfg.board)
-        return sample_charuco(rng, b), b.square * _UNIT_M[b.unit]
+        b = parse_marker_board(cfg.board)
+        target = sample_target(rng, b)
+        return target, target.square_size * _UNIT_M[b.unit]
     return sample_board(rng, pattern_size=cfg.pattern, square_size=cfg.square, margin_range=(0.5, 1.0)), cfg.square * 1e-3
 
 
@@ -247,7 +246,8 @@ def build_parser():
     ap.add_argument("--size", default="1280x960", help="WIDTHxHEIGHT (default: %(default)s)")
     ap.add_argument("--pattern", default="9x6", help="inner corners COLSxROWS (default: %(default)s)")
     ap.add_argument("--square", type=float, default=40.0, help="square size, mm (default: %(default)s)")
-    ap.add_argument("--board", help="a ChArUco board instead: charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100")
+    ap.add_argument("--board", help="a marker board instead: charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100 or "
+                    "aprilgrid:6x6,tag=88mm,spacing=0.3 (or a Kalibr target.yaml)")
     ap.add_argument("--distance", default="0.3,0.7", help="camera to board, metres MIN,MAX (default: %(default)s)")
     ap.add_argument("--robot-noise", default="0.01,0.05", help="robot σ per axis: DEGREES,MM (default: %(default)s)")
     ap.add_argument("--swap", type=int, default=0, help="rows whose reported poses are exchanged in pairs (even)")

@@ -26,14 +26,16 @@ import numpy as np
 
 from aicalib_tf.geometry.camera import Camera
 
+from .aprilgrid import AprilGridTarget
 from .background import make_background
 from .board import Board, sample_board
 from .camera import sample_camera, sample_fisheye
-from .charuco import sample_charuco
+from .charuco import CharucoTarget
 from .degrade import apply_degradations
 from .pose import PoseConfig, corner_visibility, sample_pose
 from .render import lens_coverage, render_board
 from .sample import OUTSIDE_CIRCLE, Sample
+from .targets import marker_label, sample_target
 
 __all__ = ["RigTruth", "sample_rig", "rig_placement", "rig_frame_poses", "make_rig_sequence", "RIG_LENSES"]
 
@@ -43,12 +45,18 @@ _POSE = PoseConfig(tilt_max_deg=45.0, fill=(0.25, 0.6), framing="inside")
 
 @dataclass(frozen=True)
 class RigTruth:
-    """cameras : C :class:`Camera`. R : (C, 3, 3), T : (C, 3): X_k = R_k·X_0 + T_k (board units). board : the board."""
+    """cameras : C :class:`Camera`. R : (C, 3, 3), T : (C, 3): X_k = R_k·X_0 + T_k (board units).
+    board : the board (a chessboard :class:`Board`, a :class:`CharucoTarget` or an :class:`AprilGridTarget`)."""
 
     cameras: tuple
     R: np.ndarray
     T: np.ndarray
     board: Board
+
+    @property
+    def marker_board(self) -> bool:
+        """Whether the board is a marker board (its labels add its markers' or tags' truth)."""
+        return isinstance(self.board, (AprilGridTarget, CharucoTarget))
 
     def baseline(self, k: int = 1) -> float:
         """|T_k|, board units."""
@@ -81,25 +89,36 @@ def rig_placement(rng: np.random.Generator, count: int, baseline: float, vergenc
 
 
 def sample_rig(rng: np.random.Generator, lenses=("pinhole", "pinhole"), size=(1280, 960), *,
-               baseline=(50.0, 500.0), vergence_deg=(0.0, 10.0), pattern=(9, 6), charuco=None) -> RigTruth:
+               baseline=(50.0, 500.0), vergence_deg=(0.0, 10.0), pattern=(9, 6), board=None) -> RigTruth:
     """Draw a rig of len(lenses) cameras (module docstring); baseline in mm (the board's unit), degrees.
 
-    charuco : a :class:`~aicalib_tf.geometry.charuco.CharucoBoard` to show instead of a chessboard of
-    ``pattern``; its square is the board's own, and the baseline is drawn as the chessboard's square
-    would be: 8 squares (within ``baseline``'s range)."""
+    board : a marker board (a :class:`~aicalib_tf.geometry.charuco.CharucoBoard` or an
+    :class:`~aicalib_tf.geometry.aprilgrid.AprilGrid`, :mod:`data_gen.targets`) to show instead of a
+    chessboard of ``pattern``, on paper drawn as the single-camera renders draw it
+    (:func:`data_gen.targets.sample_target`). Its size is its own, and the baseline is drawn as the
+    chessboard's square would be, 8 squares (within ``baseline``'s range): a ChArUco board's square,
+    an AprilGrid's printed width over 10 (a 9x6 chessboard is 10 squares wide)."""
     C = len(lenses)
     if C < 2:
         raise ValueError(f"a rig has at least 2 cameras, got {C}")
     b = float(rng.uniform(*baseline))
     cams = tuple(_camera(rng, lens, size) for lens in lenses)
-    if charuco is None:  # (this order of draws keeps the chessboard rigs as they were)
+    if board is None:  # (this order of draws keeps the chessboard rigs as they were)
         R, T = rig_placement(rng, C, b, vergence_deg)
-        board = replace(sample_board(rng, pattern_size=pattern), square_size=float(np.clip(b / 8.0, 15.0, 60.0)))
+        target = replace(sample_board(rng, pattern_size=pattern), square_size=float(np.clip(b / 8.0, 15.0, 60.0)))
     else:
-        board = sample_charuco(rng, charuco)
-        b = float(np.clip(8.0 * board.square_size * rng.uniform(0.8, 1.25), *baseline))
+        target = sample_target(rng, board)
+        b = float(np.clip(8.0 * _square_of(target) * rng.uniform(0.8, 1.25), *baseline))
         R, T = rig_placement(rng, C, b, vergence_deg)
-    return RigTruth(cams, R, T, board)
+    return RigTruth(cams, R, T, target)
+
+
+def _square_of(target) -> float:
+    """The square of the chessboard a marker board stands in for (:func:`sample_rig`), board units."""
+    if isinstance(target, AprilGridTarget):
+        x0, _, x1, _ = target.printed_bounds()
+        return (x1 - x0) / 10.0
+    return target.square_size
 
 
 def _to_camera(truth: RigTruth, k: int, R0, t0) -> tuple[np.ndarray, np.ndarray]:
@@ -138,7 +157,8 @@ def _label(truth, k, rvec, tvec, seed, frame) -> dict:
             "square_size": truth.board.square_size, "K": cam.K.tolist(), "distortion_model": cam.model,
             "dist": cam.dist.tolist(), "rvec": np.asarray(rvec).tolist(), "tvec": np.asarray(tvec).tolist(),
             "corners": corners.tolist(), "visible": visible.tolist(), "has_board": True, "rig_id": seed,
-            "camera_index": k, "index": frame, "R_rig": truth.R[k].tolist(), "T_rig": truth.T[k].tolist()}
+            "camera_index": k, "index": frame, "R_rig": truth.R[k].tolist(), "T_rig": truth.T[k].tolist(),
+            **(marker_label(truth.board, rvec, tvec, cam) if truth.marker_board else {})}
 
 
 def make_rig_sequence(seed: int, pairs: int = 20, lenses=("pinhole", "pinhole"), size=(1280, 960), *,

@@ -26,7 +26,7 @@ from .occlude import draw_occluders, occluded, sample_occluders
 from .pose import corner_visibility, sample_pose
 from .presets import INT_PARAMS, Preset, Rule, get_preset
 from .render import lens_coverage, render_board
-from .targets import label_extras, parse_marker_board, sample_target
+from .targets import marker_label, parse_marker_board, sample_target
 
 __all__ = ["Sample", "Scene", "draw_scene", "make_sample", "make_sequence", "draw_steps", "scene_for"]
 
@@ -273,16 +273,8 @@ def _markers_label(sc: Scene) -> dict:
     """A ChArUco board's ``markers`` or an AprilGrid's ``tags`` (and its corners' lattice ``ids``):
     ids, corners (M, 4, 2) px, centres and visible (all four corners in frame, imaged and not
     hidden by an occluder)."""
-    from aicalib_tf.geometry.pose import in_frame
-
-    extras = label_extras(sc.board, sc.rvec, sc.tvec, sc.camera)
-    truth = extras["markers" if "markers" in extras else "tags"]
-    px = np.asarray(truth["corners"], dtype=np.float64).reshape(-1, 2)
-    seen = in_frame(px, sc.camera.image_size, border=0.5) & np.isfinite(px).all(axis=1)
-    if sc.occluders:
-        seen &= ~occluded(px, sc.occluders)
-    truth["visible"] = seen.reshape(-1, 4).all(axis=1).tolist()
-    return extras
+    hidden = (lambda px: occluded(px, sc.occluders)) if sc.occluders else None
+    return marker_label(sc.board, sc.rvec, sc.tvec, sc.camera, hidden)
 
 
 def make_sequence(

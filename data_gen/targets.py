@@ -13,11 +13,12 @@ import numpy as np
 from aicalib_tf.geometry.aprilgrid import AprilGrid, is_aprilgrid, load_board
 from aicalib_tf.geometry.charuco import CharucoBoard
 from aicalib_tf.geometry.charuco import parse_board as parse_charuco
+from aicalib_tf.geometry.pose import in_frame
 
 from .aprilgrid import AprilGridTarget, sample_aprilgrid, tag_truth
 from .charuco import CharucoTarget, marker_truth, sample_charuco
 
-__all__ = ["HELP", "parse_marker_board", "marker_target", "sample_target", "label_extras"]
+__all__ = ["HELP", "parse_marker_board", "marker_target", "sample_target", "label_extras", "marker_label"]
 
 HELP = ("a marker board instead of chessboards: charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100, "
         "aprilgrid:6x6,tag=88mm,spacing=0.3[,family=tag36h11][,first=0] or a Kalibr aprilgrid target.yaml")
@@ -53,3 +54,16 @@ def label_extras(target, rvec, tvec, camera) -> dict:
     if isinstance(target, AprilGridTarget):
         return {"ids": target.corner_ids().tolist(), "tags": tag_truth(target, rvec, tvec, camera)}
     return {}
+
+
+def marker_label(target, rvec, tvec, camera, hidden=None) -> dict:
+    """:func:`label_extras` with each marker's or tag's ``visible`` flag: all four corners in frame,
+    imaged by the lens and, with ``hidden`` ((N, 2) px -> (N,) bool, e.g. under an occluder), not hidden."""
+    extras = label_extras(target, rvec, tvec, camera)
+    truth = extras["markers" if "markers" in extras else "tags"]
+    px = np.asarray(truth["corners"], dtype=np.float64).reshape(-1, 2)
+    seen = in_frame(px, camera.image_size, border=0.5) & np.isfinite(px).all(axis=1)
+    if hidden is not None:
+        seen &= ~hidden(px)
+    truth["visible"] = seen.reshape(-1, 4).all(axis=1).tolist()
+    return extras

@@ -54,3 +54,23 @@ def test_a_circular_rig_lens_images_a_whole_circle_inside_the_frame_and_black_ou
     _, frames = make_rig_sequence(1, pairs=1, lenses=("circular", "pinhole"), size=(320, 240))
     img = frames[0][0].image.astype(float)
     assert img[:8, :8].mean() < 20 and img[100:140, 140:180].mean() > 40  # the corners are outside the circle
+
+
+@pytest.mark.parametrize("spec", ["aprilgrid:3x2,tag=60mm,spacing=0.3",
+                                  "charuco:5x4,square=40mm,marker=30mm,dict=DICT_4X4_50"])
+def test_a_rig_renders_any_marker_board_with_its_truth(spec):
+    """Rigs draw the marker boards the single-camera renders draw (data_gen.targets), labels included."""
+    from data_gen.targets import parse_marker_board
+
+    truth, frames = make_rig_sequence(6, pairs=1, lenses=("pinhole", "pinhole"), size=(320, 240),
+                                      board=parse_marker_board(spec))
+    assert truth.marker_board and 100 <= truth.baseline() <= 500
+    for s in frames[0]:
+        extra = s.label["tags"] if spec.startswith("aprilgrid") else s.label["markers"]
+        assert len(extra["visible"]) == len(extra["ids"]) and any(extra["visible"])
+        if spec.startswith("aprilgrid"):
+            assert np.array_equal(s.label["ids"], truth.board.corner_ids())
+        c = s.corners[s.visible][0]  # a tag corner (an X-junction) or an inner corner: dark and light meet there
+        x, y = int(round(c[0])), int(round(c[1]))
+        patch = s.image[max(y - 3, 0):y + 4, max(x - 3, 0):x + 4].astype(float)
+        assert patch.max() - patch.min() > 60

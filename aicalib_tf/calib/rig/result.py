@@ -113,7 +113,10 @@ def rig_result(fit: RigFit, obs, groups, g_rms, cals, names, pattern_size, squar
                rejected, meta) -> RigCalibration:
     """The :class:`RigCalibration` of a joint fit: groups are the board poses' names, g_rms their RMS (px),
     cals each camera's own calibration."""
-    cams = [camera_calibration(fit, obs, k, c) for k, c in enumerate(cals)]
+    # each camera's file names the marker board, as a single camera's does (check and handeye read it there)
+    board = {"board": meta["board"]} if meta.get("board") else {}
+    cams = [camera_calibration(fit, obs, k, dataclasses.replace(c, meta=dict(c.meta, **board)))
+            for k, c in enumerate(cals)]
     seen = [sorted({o.camera for o in obs if o.group == g}) for g in range(len(groups))]
     shared = [g for g in range(len(groups)) if len(seen[g]) > 1]
     R = np.stack([_R(e[:3]) for e in fit.extrinsics])

@@ -127,7 +127,7 @@ def test_a_charuco_rig_calibrates_from_views_that_each_camera_sees_in_part(tmp_p
     spec = "charuco:11x8,square=30mm,marker=22mm,dict=DICT_5X5_100"
     board = parse_board(spec)
     truth, frames = make_rig_sequence(4, pairs=8, lenses=("pinhole", "pinhole"), size=(640, 480),
-                                      baseline=(150.0, 300.0), charuco=board)
+                                      baseline=(150.0, 300.0), board=board)
     partial = 0
     for side, k in (("left", 0), ("right", 1)):
         (tmp_path / side).mkdir()
