@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from aicalib_tf.detect.corners.refine import Smoothed, refine_saddle, refine_windowed, window_radius
+from aicalib_tf.detect.corners.refine import SQUEEZED_WINDOW, Smoothed, refine_saddle, refine_windowed, window_radius
 from aicalib_tf.geometry.aprilgrid import BORDER_BITS, PRINT_ROTATION, AprilGrid, dictionary
 
 __all__ = ["AprilGridDetection", "detect_aprilgrid", "detect_corners_aprilgrid", "decode_tags", "clean_window_px", "predicted_corners",
@@ -150,6 +150,51 @@ def _pull_in(smoothed: Smoothed, quads: np.ndarray, predicted: np.ndarray, spaci
     return out, ok
 
 
+NEIGHBOURS_MIN = 6  # refined corners (of the tag and the tags next to it) a second-pass prediction needs
+NEIGHBOUR_REACH = 0.3  # clean squares (+ 0.5 px): how far the second pass's fit may end from that prediction
+
+
+def neighbour_predictions(cells: np.ndarray, lattice: np.ndarray, pts: np.ndarray, ok: np.ndarray,
+                          which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where a homography (least squares) through the placed corners (``ok``) of a corner's tag and
+    the tags next to it puts each corner ``which`` (M,) int: (M, 2) px and has (M,) bool, False where
+    fewer than ``NEIGHBOURS_MIN`` such corners, or only one row or column of them, are placed.
+    cells (K, 2) tag cells; lattice (4K, 2) corner ids; pts (4K, 2) px; ok (4K,) bool."""
+    tag_cell = np.repeat(np.asarray(cells), 4, axis=0)
+    out, has = np.zeros((len(which), 2)), np.zeros(len(which), bool)
+    for n, i in enumerate(which):
+        near = np.flatnonzero(ok & (np.max(np.abs(tag_cell - tag_cell[i]), axis=1) <= 1))
+        obj = lattice[near].astype(np.float64)
+        if len(near) < NEIGHBOURS_MIN or len(np.unique(obj[:, 0])) < 2 or len(np.unique(obj[:, 1])) < 2:
+            continue
+        H, _ = cv2.findHomography(obj, pts[near], 0)
+        if H is not None:
+            out[n] = cv2.perspectiveTransform(lattice[i].reshape(1, 1, 2).astype(np.float64), H).reshape(2)
+            has[n] = True
+    return out, has
+
+
+def _from_neighbours(smoothed: Smoothed, cells, lattice, pts: np.ndarray, ok: np.ndarray, spacing: np.ndarray):
+    """A second pass for the corners whose first fit failed (:func:`_pull_in` and
+    :func:`refine_windowed` started from OpenCV's quad, which on a steeply sheared corner lies
+    further out than the pull-in's reach): each starts where its placed neighbours put it
+    (:func:`neighbour_predictions`, a small fraction of a clean square off), the window sized from
+    the clean square, then, where that fails, ``SQUEEZED_WINDOW`` times narrower; the result must end
+    within ``NEIGHBOUR_REACH`` clean squares of the prediction. Returns pts (4K, 2) float64, ok (4K,)."""
+    redo = np.flatnonzero(~ok)
+    start, has = neighbour_predictions(cells, lattice, pts, ok, redo)
+    redo, start = redo[has], start[has]
+    pts, ok = pts.copy(), ok.copy()
+    reach = NEIGHBOUR_REACH * spacing[redo] + 0.5
+    for scale in (1.0, SQUEEZED_WINDOW):
+        todo = np.flatnonzero(~ok[redo])
+        if not len(todo):
+            break
+        got, good = refine_windowed(smoothed, start[todo], scale * spacing[redo[todo]], max_shift=reach[todo])
+        pts[redo[todo[good]]], ok[redo[todo[good]]] = got[good], True
+    return pts, ok
+
+
 def detect_aprilgrid(gray: np.ndarray, board: AprilGrid, refine: str = "saddle") -> AprilGridDetection:
     """The corners of ``board`` in ``gray`` (H, W) uint8 or float in [0, 1].
 
@@ -174,7 +219,7 @@ def detect_aprilgrid(gray: np.ndarray, board: AprilGrid, refine: str = "saddle")
         smoothed = Smoothed(u8.astype(np.float32) / 255.0)
         start, ok = _pull_in(smoothed, quads, predicted_corners(board, ids, quads, rot), clean)
         pts, fine = refine_windowed(smoothed, start, spacing, max_shift=0.25 * spacing + 1.0)
-        pts, ok = pts.astype(np.float64), ok & fine
+        pts, ok = _from_neighbours(smoothed, board.tag_cell(ids), lattice, pts.astype(np.float64), ok & fine, spacing)
         r = window_radius(spacing) + 1
         h, w = u8.shape[:2]
         ok &= (pts[:, 0] >= r) & (pts[:, 1] >= r) & (pts[:, 0] <= w - 1 - r) & (pts[:, 1] <= h - 1 - r)

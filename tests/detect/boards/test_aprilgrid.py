@@ -113,3 +113,28 @@ def test_tags_printed_another_way_round_keep_their_ids(monkeypatch):
     det = detect_aprilgrid(render(turned, rvec, tvec), BOARD)
     assert det.rotation == 1 and len(det.ids) == 144
     assert np.linalg.norm(det.corners - truth(det.ids, rvec, tvec), axis=1).max() < 0.15
+
+
+def test_a_steeply_sheared_corner_is_placed_from_its_placed_neighbours(monkeypatch):
+    """The grid's outer corner seen steeply sheared (a crop of a benchmark view, data_gen's exact
+    renderer): OpenCV's quad corner lies 5 px out along the diagonal, beyond the first fit's reach;
+    the second pass starts where the placed corners of the tag and its neighbours put it."""
+    import aicalib_tf.detect.boards.aprilgrid as aprilgrid
+    from aicalib_tf.geometry.camera import Camera
+    from aicalib_tf.geometry.pose import project_points
+    from data_gen.aprilgrid import AprilGridTarget
+    from data_gen.render import render_board
+
+    cam = Camera(np.array([[900.0, 0, -260.5], [0, 900.0, 89.5], [0, 0, 1]]), np.zeros(5), (240, 200))
+    rvec, tvec = np.array([-0.6546, -0.673, 0.0665]), np.array([345.52, -70.14, 1029.47])  # mm
+    target = AprilGridTarget(BOARD, margin=0.25, black=0.0, white=1.0)
+    img = render_board(cam, target, rvec, tvec, np.full((200, 240), 0.5, np.float32))
+    img = cv2.GaussianBlur(img, (0, 0), 0.7) + np.random.default_rng(0).normal(0, 2 / 255, img.shape).astype(np.float32)
+    img = np.clip(np.rint(img * 255), 0, 255).astype(np.uint8)
+    det = detect_aprilgrid(img, BOARD)
+    assert (0, 0) in set(map(tuple, det.ids.tolist()))
+    err = np.linalg.norm(det.corners - project_points(BOARD.object_points(det.ids), rvec, tvec, cam), axis=1)
+    assert err.max() < 0.1
+    monkeypatch.setattr(aprilgrid, "_from_neighbours", lambda smoothed, cells, lattice, pts, ok, spacing: (pts, ok))
+    first = detect_aprilgrid(img, BOARD)
+    assert (0, 0) not in set(map(tuple, first.ids.tolist())) and len(first.ids) == len(det.ids) - 1
