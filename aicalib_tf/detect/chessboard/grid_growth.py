@@ -28,7 +28,7 @@ from aicalib_tf.detect.chessboard.grid_kernels import grow_lines
 from aicalib_tf.detect.corners.junctions import SAME_CORNER
 from aicalib_tf.geometry.points import sq_distances
 
-__all__ = ["GrowingGrid", "build", "fill_holes", "grow", "TOLERANCE"]
+__all__ = ["GrowingGrid", "build", "fill_holes", "grow", "lines_ahead", "TOLERANCE"]
 
 TOLERANCE = 0.3  # of the local step: how far a predicted corner may be from the point it takes
 DOUBLE_STEP_REACH = 1.7  # tolerances from a prediction within which a skipped corner is taken instead
@@ -171,11 +171,25 @@ def _work_out_side(lat: GrowingGrid, axis: int, sign: int):
     """:func:`_side`, computed."""
     if lat.limit is not None and lat.extent(axis) >= lat.limit:
         return None
-    new = max(lat.coords[axis]) + 1 if sign > 0 else min(lat.coords[axis]) - 1
-    get = lat.at.get
-    b1, b2, b3 = new - sign, new - 2 * sign, new - 3 * sign
+    edge = max(lat.coords[axis]) if sign > 0 else min(lat.coords[axis])
+    ahead = lines_ahead(lat.at.get, axis, sign, edge, sorted(lat.coords[1 - axis]), lat.bend)
+    if ahead is None:
+        return None
+    cells, preds, d = ahead
+    return cells, preds, TOLERANCE * np.sqrt((d * d).sum(axis=1))
+
+
+def lines_ahead(get, axis: int, sign: int, edge: int, across, bend: bool = False):
+    """The next point of every grid line that ends at position ``edge`` along ``axis`` (going ``sign``).
+
+    ``get((i, j))`` gives a cell's point ((2,) px) or None; ``across``: the positions along the other
+    axis to look at, in order. A line needs its last two points; it goes on linearly, or quadratically
+    where three points are known (with ``bend``, by the steps' ratio: :func:`_turned`). Returns (cells
+    one step beyond, as (i, j); predictions (M, 2) px; last steps (M, 2) px) or None when no line ends there.
+    """
     cells, l1, l2, l3, quad = [], [], [], [], []
-    for o in sorted(lat.coords[1 - axis]):
+    b1, b2, b3, new = edge, edge - sign, edge - 2 * sign, edge + sign
+    for o in across:
         if axis == 0:
             q1, q2, q3 = get((b1, o)), get((b2, o)), get((b3, o))
         else:
@@ -184,17 +198,13 @@ def _work_out_side(lat: GrowingGrid, axis: int, sign: int):
             cells.append((new, o) if axis == 0 else (o, new))
             l1.append(q1)
             l2.append(q2)
-            l3.append(q1 if q3 is None else q3)
+            l3.append(q1 if q3 is None else q3)  # a stand-in: only quadratic rows read it
             quad.append(q3 is not None)
     if not cells:
         return None
     p1, p2, p3 = np.array(l1), np.array(l2), np.array(l3)
-    quad = np.array(quad)[:, None]
-    # quadratic where three points are known (with bend, the steps' ratio: _turned)
-    ahead = _turned(p1, p2, p3) if lat.bend else 3 * p1 - 3 * p2 + p3
-    preds = np.where(quad, ahead, 2 * p1 - p2)
-    d = p1 - p2
-    return cells, preds, TOLERANCE * np.sqrt((d * d).sum(axis=1))
+    ahead = _turned(p1, p2, p3) if bend else 3 * p1 - 3 * p2 + p3
+    return cells, np.where(np.array(quad)[:, None], ahead, 2 * p1 - p2), p1 - p2
 
 
 def _grow_side(lat: GrowingGrid, axis: int, sign: int, whole: bool = False, answer=None) -> bool:

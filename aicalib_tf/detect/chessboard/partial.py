@@ -19,6 +19,7 @@ import numpy as np
 from aicalib_tf.detect.chessboard import placement
 from aicalib_tf.detect.chessboard.board_order import handed, reading
 from aicalib_tf.detect.chessboard.grid import MIN_CORNERS, Grid
+from aicalib_tf.detect.chessboard.grid_growth import lines_ahead
 from aicalib_tf.detect.corners.junctions import nearest_spacing
 from aicalib_tf.detect.chessboard.lattice import (
     curved_residuals,
@@ -129,25 +130,15 @@ def _cut_side(cells: dict, axis: int, sign: int, limit: int):
         return None
     e = int(keys[:, axis].max() if sign > 0 else keys[:, axis].min())
 
-    def at(a, o):
-        v = cells.get((a, o) if axis == 0 else (o, a))
+    def point(key):
+        v = cells.get(key)
         return None if v is None else v[0]
 
-    new, p0, p1, p2, quad = [], [], [], [], []
-    for o in np.unique(keys[:, 1 - axis]).tolist():
-        a0, a1, a2 = at(e, o), at(e - sign, o), at(e - 2 * sign, o)
-        if a0 is None or a1 is None:
-            continue
-        new.append((e + sign, o) if axis == 0 else (o, e + sign))
-        p0.append(a0)
-        p1.append(a1)
-        p2.append(a1 if a2 is None else a2)
-        quad.append(a2 is not None)
-    if not new:
+    ahead = lines_ahead(point, axis, sign, e, np.unique(keys[:, 1 - axis]).tolist())
+    if ahead is None:
         return None
-    p0, p1, p2 = np.array(p0), np.array(p1), np.array(p2)
-    pred = np.where(np.array(quad)[:, None], 3 * p0 - 3 * p1 + p2, 2 * p0 - p1)
-    return new, pred, np.linalg.norm(p0 - p1, axis=1)
+    new, pred, last = ahead
+    return new, pred, np.linalg.norm(last, axis=1)
 
 
 def _fill_cells(cells: dict, propose, passes: int = 3) -> None:
