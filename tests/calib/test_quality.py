@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from aicalib_tf.calib import quality as Q
-from aicalib_tf.calib.coverage import rim_gaps, uncovered_regions
 from aicalib_tf.geometry import lens as L
 from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views
 
@@ -156,20 +155,6 @@ def test_uncertainty_is_nan_outside_the_image_circle_and_the_verdict_counts_the_
     views = synthetic_views(CIRCLE_LENS, 8, 0.0, seed=1, distance=(0.15, 0.3))
     text = Q.verdict(cal, views, sigma=sigma)
     assert "of the image circle" in text and verdict_share(text) > 0
-
-
-def test_regions_outside_the_image_circle_are_not_uncovered_and_its_rim_is_checked():
-    cal = _circular_cal()
-    central = [v for v in synthetic_views(CIRCLE_LENS, 30, 0.0, seed=4, distance=(0.2, 0.3))
-               if np.all(cal.image_circle.contains(v.corners, -0.3 * cal.image_circle.radius))]
-    assert central
-    assert set(uncovered_regions(central, SIZE)) >= {"top-left", "bottom-right"}
-    assert not {"top-left", "top-right", "bottom-left", "bottom-right"} & set(uncovered_regions(central, SIZE, cal.image_circle))
-    assert set(rim_gaps(central, SIZE, cal.image_circle)) == {"right", "bottom-right", "bottom", "bottom-left", "left",
-                                                               "top-left", "top", "top-right"}
-    from aicalib_tf.calib.fit import View
-    rim = View("rim", np.array([[319.5 + 150.0, 239.5]]), np.array([[0, 0]]))
-    assert "right" not in rim_gaps(central + [rim], SIZE, cal.image_circle)
 
 
 def test_verdict_says_when_the_halves_choose_different_model_families():
