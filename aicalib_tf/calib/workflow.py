@@ -23,6 +23,7 @@ from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.detect.registry import DETECTORS
 from aicalib_tf.calib.fit import Calibration, CalibrationError, View, calibrate_camera, choose_model, fit_views
 from aicalib_tf.calib.quality import assess
+from aicalib_tf.calib.run_options import RunOptions
 from aicalib_tf.geometry.image_circle import find_image_circle, thumbnail
 from aicalib_tf.geometry.lens import MODELS as LENS_MODELS
 
@@ -120,24 +121,15 @@ def _charuco_detector(name: str, board, model: str):
     return detect
 
 
-@dataclass(frozen=True)
-class CalibrateConfig:
-    """Everything one calibration run needs (the CLI's options)."""
+@dataclass(frozen=True, kw_only=True)
+class CalibrateConfig(RunOptions):
+    """Everything one calibration run of photos needs (the CLI's options): the shared
+    :class:`~aicalib_tf.calib.run_options.RunOptions` and the photos' own."""
 
     images: tuple[str, ...]
-    pattern: tuple[int, int]
-    square: float = 1.0
-    square_unit: str = ""
-    out: str = "calib"
-    detector: str = "cnn"
-    network: str = DETECTOR_NETWORK  # the cnn detector's network: default_int8, default, report or a .tflite/.keras path
-    model: str = "auto"  # the lens model: auto or a geometry.lens.MODELS name
     fix_k3: bool = False
     rational: bool = False
     resize_policy: str = "error"
-    quiet: bool = False
-    workers: int | None = None  # detection processes (None: aicalib_tf.detect.batch.worker_count's default)
-    board: str | None = None  # a ChArUco description (pattern and square then follow from it)
     flex: str = "off"  # the board's flex: "auto" solves it with the camera and keeps it when determined
 
 

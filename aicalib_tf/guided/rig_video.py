@@ -31,8 +31,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.calib.fit import CalibrationError, View
+from aicalib_tf.calib.run_options import RunOptions
 from aicalib_tf.guided.save import PARTIAL_HEAD
 from aicalib_tf.guided.session import GuidedCalibration, GuidedConfig, check_max_views
 from aicalib_tf.guided.workflow import board_name, board_target
@@ -43,28 +43,20 @@ SYNC_CHECK_EVERY = 30  # frames of camera 0 between two checks of the cameras' s
 _RECENT = 64  # frames each camera keeps back for the partners of the others' kept frames, at most
 
 
-@dataclass(frozen=True)
-class RigVideoConfig:
-    """A rig from videos or streams: ``cameras`` ((name, source), ...), the board, the loop's settings,
-    the pairing (``pair_by`` "time" or "index", ``sync_tolerance_s``) and the outputs."""
+@dataclass(frozen=True, kw_only=True)
+class RigVideoConfig(RunOptions):
+    """A rig from videos or streams: ``cameras`` ((name, source), ...), the shared
+    :class:`~aicalib_tf.calib.run_options.RunOptions` (the board, detector, lens model, outputs), the loop's
+    settings and the pairing (``pair_by`` "time" or "index", ``sync_tolerance_s``)."""
 
     cameras: tuple[tuple[str, str], ...]
-    pattern: tuple[int, int]
-    square: float = 1.0
-    square_unit: str = ""
     out: str = "rig"
-    detector: str = "cnn"
-    network: str = DETECTOR_NETWORK
-    model: str = "auto"
     target_px: float = 0.1
     max_views: int = 40
     max_examined: int = 300  # detections per camera at most (the motion gate picks which frames)
     sync_tolerance_s: float = 0.010
     pair_by: str = "time"
     save_partial: bool = False  # a reading stopped early (Ctrl-C, a stream that fails) still calibrates
-    quiet: bool = False
-    workers: int | None = None  # unused: frames come one at a time
-    board: str | None = None  # a ChArUco description (pattern and square then follow from it)
 
     def __post_init__(self):
         check_max_views(self.max_views)

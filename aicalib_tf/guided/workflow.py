@@ -18,34 +18,25 @@ import sys
 import time
 from dataclasses import dataclass
 
-from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.calib.fit import Calibration, CalibrationError
+from aicalib_tf.calib.run_options import RunOptions
 from aicalib_tf.guided.session import GuidedCalibration, GuidedConfig, check_max_views
 
 __all__ = ["GuidedRunConfig", "run_guided", "progress_line", "summary_lines", "guided_source", "parse_target",
            "board_target", "board_name"]
 
 
-@dataclass(frozen=True)
-class GuidedRunConfig:
-    """A guided run: ``source`` (a video path, image globs as one string, a camera index or a URL),
-    the board (a chessboard's pattern, or ``board``: a ChArUco description), the loop's settings (:class:`~aicalib_tf.guided.session.GuidedConfig`) and the outputs."""
+@dataclass(frozen=True, kw_only=True)
+class GuidedRunConfig(RunOptions):
+    """A guided run: ``source`` (a video path, image globs as one string, a camera index or a URL), the
+    shared :class:`~aicalib_tf.calib.run_options.RunOptions` (the board, detector, lens model, outputs) and
+    the loop's settings (:class:`~aicalib_tf.guided.session.GuidedConfig`)."""
 
     source: str
-    pattern: tuple[int, int]
-    square: float = 1.0
-    square_unit: str = ""
-    out: str = "calib"
-    detector: str = "cnn"
-    network: str = DETECTOR_NETWORK
-    model: str = "auto"
     target_px: float = 0.1
     max_views: int = 40
     save_partial: bool = False
-    quiet: bool = False
     examine_all: bool = False
-    workers: int | None = None  # unused: frames come one at a time
-    board: str | None = None  # a ChArUco description (pattern and square then follow from it)
 
     def __post_init__(self):
         check_max_views(self.max_views)

@@ -22,8 +22,7 @@ from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
-from aicalib_tf.cnn.spec import DETECTOR_NETWORK
-
+from aicalib_tf.calib.run_options import RunOptions
 
 __all__ = ["RigConfig", "Pairing", "parse_rig", "pair_images", "run_rig", "rig_models", "calibrate_views",
            "write_rig_files"]
@@ -106,21 +105,12 @@ def pair_images(files: dict[str, list[str]]) -> Pairing:
     return Pairing(frames, rule, {c: v for c, v in unpaired.items() if v})
 
 
-@dataclass(frozen=True)
-class RigConfig:
-    """Everything one rig run needs (the CLI's options)."""
+@dataclass(frozen=True, kw_only=True)
+class RigConfig(RunOptions):
+    """Everything one rig run needs (the CLI's options): the shared :class:`RunOptions` and the cameras."""
 
     cameras: tuple[tuple[str, str], ...]  # (name, glob)
-    pattern: tuple[int, int]
-    square: float = 1.0
-    square_unit: str = ""
     out: str = "rig"
-    detector: str = "cnn"
-    network: str = DETECTOR_NETWORK
-    model: str = "auto"  # one lens model (or auto) for every camera, or a comma list, one per camera
-    quiet: bool = False
-    workers: int | None = None  # detection processes (None: aicalib_tf.detect.batch's default)
-    board: str | None = None  # a ChArUco description (pattern and square then follow from it), or a chessboard
 
 
 def _detect_camera(cam, frames, cfg: RigConfig) -> tuple[dict, dict, dict, list]:
