@@ -80,6 +80,9 @@ otherwise partial boards are looked for at full size too, and the one with more 
 returned. Boards close to a fisheye: with no full board assembled, the candidates are assembled again
 with ``bend`` (:func:`aicalib_tf.detect.chessboard.grid.assemble_grids`); only a full board from it counts. There the
 network's weak points (``WEAK``) confirm saddles the ring test fails at the dark rim (``proposer``'s ``bent``).
+A grid of either assembly holding the pattern but up to 3 corners of its outer ring gets them placed
+(:func:`aicalib_tf.detect.chessboard.rim.rim_board`), kept only when every corner shows an X-junction like its
+neighbours' (an object in front of the board does not).
 
 Without ``pattern_size``, the largest grid with every corner found is returned, complete, its
 size taken as the pattern (columns counted along the grid direction nearer the image's x axis,
@@ -104,6 +107,7 @@ from aicalib_tf.detect.chessboard.grid import MIN_CORNERS, Grid, assemble_grids,
 from aicalib_tf.detect.corners.junctions import dedupe, nearest_spacing, proposer, typical_amplitude
 from aicalib_tf.detect.chessboard.lattice import drop_outliers
 from aicalib_tf.detect.chessboard.partial import partial_board, relative_board
+from aicalib_tf.detect.chessboard.rim import rim_board
 from aicalib_tf.detect.pyramid import Frame, boards_coarse_to_fine, quick_scales, quick_shift, refine_full, scales, to_full
 from aicalib_tf.detect.corners.refine import Smoothed, refine_candidates
 from aicalib_tf.detect.chessboard.zoom import from_zoom, zoom_box, zoom_in
@@ -317,9 +321,8 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     if len(refined) == 0:
         return empty
     smooth = smoothed.sigma(RING_SIGMA)
-    propose = None
-    if len(refined) >= MIN_CORNERS:
-        propose = proposer(smoothed, smooth, typical_amplitude(smooth, refined, MIN_CORNERS), weak=weak)
+    ref_amp = typical_amplitude(smooth, refined, MIN_CORNERS) if len(refined) >= MIN_CORNERS else 0.0
+    propose = proposer(smoothed, smooth, ref_amp, weak=weak) if len(refined) >= MIN_CORNERS else None
     if pattern_size is None:
         grids = _own_grids(assemble_grids(refined, scores, gray=smooth, propose=propose))
         for grid in grids:
@@ -338,7 +341,9 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
     limit = max(pattern_size) + 1
     grids = assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit, stop=is_board)
     if board is None and not full_only:  # bent strongly (close to a fisheye): a full board or nothing
-        assemble_grids(refined, scores, gray=smooth, propose=propose and propose.bent, limit=limit, stop=is_board, bend=True)
+        bent = assemble_grids(refined, scores, gray=smooth, propose=propose and propose.bent, limit=limit, stop=is_board,
+                              bend=True)
+        board = board or rim_board(grids + bent, scores, pattern_size, smoothed, smooth, ref_amp)
     if board is not None or full_only:  # full_only: the quick pass, a full board or nothing
         return Detection(*board, True, (w, h)) if board else replace(empty, reason=NO_MATCH if grids else NO_GRID)
     if not grids:  # no 3×3 block anywhere: strips 2 corners wide (between objects, say)

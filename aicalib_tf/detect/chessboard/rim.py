@@ -15,22 +15,33 @@ and kept only when the fit stays within a third of that step, the ring about it 
 of a typical corner's amplitude, and it is no other corner's point. A board's corner is predicted
 by its cell's parallelogram (its two neighbours on the ring and the diagonal one inside). A grid missing more than ``MAX_MISSING`` corners, or any inside its outer
 ring, is left as it is.
+
+A full board claims every corner in view. Where an object in front cuts the board, the grid may
+hold points on the object's edge and miss a corner beside it, which this completion would then
+place: the board is taken only when each of its corners, placed or not, shows an X-junction like
+its neighbours' on the grid (:func:`unlike_neighbours`: ring amplitude and lopsidedness against
+theirs, which the rim's darkening, blur and squeeze change slowly and an object's edge abruptly).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from aicalib_tf.detect.chessboard.board_order import full_board
 from aicalib_tf.detect.chessboard.grid import Grid
 from aicalib_tf.detect.corners.junctions import ring_symmetry
 from aicalib_tf.detect.corners.refine import Smoothed, refine_windowed, window_radius
 
-__all__ = ["complete_rim", "MAX_MISSING", "SHIFT"]
+__all__ = ["complete_rim", "rim_board", "unlike_neighbours", "MAX_MISSING", "SHIFT"]
 
 MAX_MISSING = 3  # most corners of the outer ring placed here
 SHIFT = 0.34  # of the smallest local step: the farthest the saddle fit may move a prediction
 RIM_GATE = 0.1  # of a typical corner's ring amplitude: the least a placed corner keeps (the light falls to black)
 RATIO = (0.3, 1.25)  # bounds of a line's step ratio used to extrapolate its next step
+AMP_RANGE = (0.45, 1.4)  # a corner's ring amplitude over its neighbours' median: the least and the most
+ODD_RATIO = 6.0  # a corner's ring asymmetry (of its amplitude) over its neighbours' median: the most ...
+ODD_FLOOR = 0.05  # ... that median taken as at least this (sharp, evenly lit corners leave almost none)
+_NEIGHBOURS = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)]
 
 
 def _along(cells: dict, i: int, j: int, di: int, dj: int):
@@ -101,6 +112,37 @@ def _place(cells: dict, pred: np.ndarray, step: float, smoothed: Smoothed, ring_
     return q[0].astype(np.float64)
 
 
+def unlike_neighbours(points: np.ndarray, ring_image: np.ndarray) -> np.ndarray:
+    """(a, b) bool: the corners of a full grid that show no X-junction like their neighbours'.
+
+    points : (a, b, 2) px, every position of the grid. ring_image : (H, W) float32, smoothed
+    (σ = 1 px). On a ring of 0.3 of each corner's smallest step to a neighbour along a grid line
+    (at least 1.5 px), :func:`aicalib_tf.detect.corners.junctions.ring_symmetry` gives its amplitude
+    and its asymmetry, read as a share of the amplitude. Vignetting, blur and the squeeze towards a
+    fisheye's rim change both slowly across the board, so each corner is compared with the median of
+    its (up to 8) neighbours on the grid: its amplitude must lie within ``AMP_RANGE`` of theirs and
+    its asymmetry share within ``ODD_RATIO`` times theirs (at least ``ODD_FLOOR``). A point where an
+    object in front cuts the board is a junction of three regions (object, dark and light square) or
+    the object's own edge: its ring is lopsided where its neighbours' are not, or much fainter or
+    stronger than theirs.
+    """
+    a, b = points.shape[:2]
+    big = np.full((a + 2, b + 2, 2), np.nan)
+    big[1:-1, 1:-1] = points
+    steps = np.stack([np.hypot(*(big[1 + di:a + 1 + di, 1 + dj:b + 1 + dj] - points).transpose(2, 0, 1))
+                      for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1))])
+    radius = np.maximum(1.5, 0.3 * np.nanmin(steps, axis=0)).ravel()
+    amp, asym = ring_symmetry(ring_image, points.reshape(-1, 2), radius)
+    odd = asym / np.maximum(amp, 1e-12)
+    out = []
+    for value in (amp, odd):
+        pad = np.full((a + 2, b + 2), np.nan)
+        pad[1:-1, 1:-1] = value.reshape(a, b)
+        out.append(np.nanmedian([pad[1 + di:a + 1 + di, 1 + dj:b + 1 + dj] for di, dj in _NEIGHBOURS], axis=0))
+    amp, odd = amp.reshape(a, b), odd.reshape(a, b)
+    return (amp < AMP_RANGE[0] * out[0]) | (amp > AMP_RANGE[1] * out[0]) | (odd > ODD_RATIO * np.maximum(out[1], ODD_FLOOR))
+
+
 def _as_grid(grid: Grid, cells: dict) -> Grid:
     """A grid of ``cells`` {(i, j): (2,) px}; ``grid``'s own points keep their index, the others get -1."""
     index = {(int(i), int(j)): int(k) for (i, j), k in zip(grid.ij, grid.index)}
@@ -119,7 +161,8 @@ def complete_rim(grid: Grid, shape: tuple[int, int], smoothed: Smoothed, ring_im
     (:func:`aicalib_tf.detect.corners.junctions.typical_amplitude`).
     Returns a grid with every position of ``shape`` filled (placed corners get index -1), or None
     when the grid's extent is not ``shape``, more than ``MAX_MISSING`` corners are missing, one is
-    inside the outer ring, or a corner's fit fails.
+    inside the outer ring, a corner's fit fails, or a corner of the full grid is
+    :func:`unlike_neighbours` (an object in front).
     """
     a, b = shape
     if grid.shape != (a, b) or len(grid) >= a * b or a * b - len(grid) > MAX_MISSING or min(a, b) < 4:
@@ -135,4 +178,24 @@ def complete_rim(grid: Grid, shape: tuple[int, int], smoothed: Smoothed, ring_im
         if q is None:
             return None
         placed[(i, j)] = q
-    return _as_grid(grid, {**cells, **placed})
+    full = {**cells, **placed}
+    if unlike_neighbours(np.array([[full[(i, j)] for j in range(b)] for i in range(a)]), ring_image).any():
+        return None  # an object in front: a full board would claim corners it hides
+    return _as_grid(grid, full)
+
+
+def rim_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int, int], smoothed: Smoothed,
+              ring_image: np.ndarray, ref_amp: float):
+    """The first of ``grids`` that is the full board once its outer ring's missing corners are placed
+    (:func:`complete_rim`), as :func:`aicalib_tf.detect.chessboard.board_order.full_board` returns it, or None.
+
+    scores : (N,) weights of the candidate points the grids' indices refer to (a placed corner gets 0).
+    """
+    cols, rows = pattern_size
+    for grid in grids:
+        for shape in dict.fromkeys(((cols, rows), (rows, cols))):
+            full = complete_rim(grid, shape, smoothed, ring_image, ref_amp)
+            board = None if full is None else full_board(full, scores, pattern_size, ring_image)
+            if board is not None:
+                return board
+    return None

@@ -1,14 +1,21 @@
 """A board's outer ring squeezed and darkened at a fisheye's rim: its last corners placed, or none."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from aicalib_tf.bench.conditions import PATTERN, select_conditions
 from aicalib_tf.detect.chessboard.grid import MIN_CORNERS, Grid
-from aicalib_tf.detect.chessboard.rim import complete_rim
+from aicalib_tf.detect.chessboard.rim import complete_rim, unlike_neighbours
 from aicalib_tf.detect.corners.junctions import typical_amplitude
 from aicalib_tf.detect.corners.refine import Smoothed
-from data_gen.sample import make_sample
+from data_gen.occlude import occluded
+from data_gen.sample import draw_scene, make_sample
+
+# bars laid across outer-ring corners of closeup-eq images (x, y px), with their grey level
+BAR_6 = (np.array([[273.8, 187.5], [281.2, 192.3], [254.1, 234.9], [246.6, 230.1]]), 0.77)  # over corner 0
+BAR_1 = (np.array([[257.8, 163.2], [260.4, 157.5], [293.0, 172.0], [290.5, 177.7]]), 0.45)  # over 49 and 50
 
 
 def _scene(name: str, index: int):
@@ -49,3 +56,51 @@ def test_no_corner_is_placed_where_the_image_has_none():
     assert complete_rim(_grid(truth, [20]), (6, 9), smoothed, smooth, ref) is None
     assert complete_rim(_grid(truth, [0, 1, 2, 3]), (6, 9), smoothed, smooth, ref) is None
     assert complete_rim(_grid(truth, [8]), (9, 6), smoothed, smooth, ref) is None
+
+
+def _covered(index: int, bar):
+    """closeup-eq image ``index`` rendered with ``bar`` (polygon, grey level) in front: (image, scene, hidden (54,) bool)."""
+    cond = select_conditions("closeup-eq")[0]
+    scene = draw_scene(cond.preset, cond.seed, index, size=cond.size, pattern=PATTERN)
+    poly, level = bar
+    return replace(scene, occluders=[poly], occluder_levels=[level]).render(), scene, occluded(scene.corners, [poly])
+
+
+@pytest.mark.parametrize("index, bar", [(6, BAR_6), (1, BAR_1)])
+def test_corners_under_an_object_are_unlike_their_neighbours(index, bar):
+    # on the true corners: the rim's darkening and squeeze flag none; a bar in front flags the corners it hides
+    img, scene, hidden = _covered(index, bar)
+    assert hidden.any()
+    for image, expect in ((scene.render(), np.zeros(54, bool)), (img, hidden)):
+        ring = Smoothed(image.astype(np.float32)).sigma(1.0)
+        flags = unlike_neighbours(scene.corners.reshape(6, 9, 2).astype(np.float64), ring)
+        assert np.array_equal(flags.ravel(), expect)
+
+
+@pytest.mark.parametrize("name, index", [("closeup-eq", 0), ("closeup-unified", 21)])
+def test_close_up_boards_missing_a_rim_corner_are_found(name, index):
+    # the grid holds every corner but one or two at the rim (network and ring test miss them there);
+    # closeup-unified 21 came out with a corner 3.6 px off when a board corner was predicted from
+    # corners placed before it: predictions use only the grid's own corners
+    from aicalib_tf import detect_corners
+    from aicalib_tf.bench.metrics import board_detection_outcome
+
+    cond = select_conditions(name)[0]
+    s = make_sample(cond.preset, cond.seed, index, size=cond.size, pattern=PATTERN)
+    det = detect_corners(s.image, PATTERN)
+    assert det.complete
+    outcome, err = board_detection_outcome(det.corners, s.corners, PATTERN)
+    assert outcome == "hit" and np.median(err) < 0.5
+
+
+def test_an_object_over_a_rim_corner_gives_no_full_board():
+    # closeup-eq 6 with a light bar across its first corner, squeezed at the rim: the grid holds a point
+    # on the bar's edge there, and completing the ring gave a full board with that corner 5.8 px off
+    from aicalib_tf import detect_corners
+    from aicalib_tf.bench.metrics import partial_board_stats
+
+    img, scene, hidden = _covered(6, BAR_6)
+    det = detect_corners(img, PATTERN)
+    assert not det.complete
+    if det.found:
+        assert partial_board_stats(det.corners, det.ids, scene.corners, scene.visible & ~hidden, PATTERN)["wrong_ids"] == 0
