@@ -11,7 +11,8 @@ corners of the tags seen whole (all four corners at least 3 px inside the image)
 wrong ids (a corner nearer another corner's true place than its own), corners over 2 px off, and the
 corner error of:
 
-* ours: OpenCV's aruco decodes the tags, the project's saddle fit places the corners
+* ours: OpenCV's aruco decodes the tags (those it missed beside placed ones again, seen square-on
+  through their neighbours' homography), the project's saddle fit places the corners
   (:func:`aicalib_tf.detect.boards.aprilgrid.detect_aprilgrid`);
 * OpenCV's aruco with CORNER_REFINE_SUBPIX, and with CORNER_REFINE_APRILTAG.
 

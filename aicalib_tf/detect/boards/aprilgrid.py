@@ -11,8 +11,15 @@ min(gap, two bits) on the board. OpenCV's quad corners lie up to that far off, p
 tag's diagonals where its contour runs into the corner squares, so a coarse saddle fit in a wide
 window starts where a homography over the tag and its neighbours puts the corner (else at the
 quad's corner), and :func:`aicalib_tf.detect.corners.refine.refine_windowed` finishes in a window inside the
-clean square. A corner whose fit fails, or whose window leaves the image, is dropped. Corner ids are
-lattice positions (the geometry module's docstring), so a partial view keeps its ids.
+clean square. Under a steep shear a quad's corner can lie beyond that fit's reach: a corner whose
+fit failed is fitted again from where the placed corners of its tag and the tags next to it put it
+(a least-squares homography, :func:`local_homography`). A tag OpenCV did not decode (steeply sheared,
+its contour merged with the corner squares) next to placed corners is seen square-on through that
+homography, its surroundings painted white (:func:`rectified_tag`), and decoded there by OpenCV
+again; where it reads the tag's own id, the tag's corners are fitted from the homography's
+prediction, round after round. A corner whose fits fail, or whose window leaves the image, is
+dropped. Corner ids are lattice positions (the geometry module's docstring), so a partial view keeps
+its ids.
 ``refine="opencv"`` returns OpenCV's own sub-pixel corners instead, for comparison.
 
 Coordinates are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0).
@@ -28,8 +35,9 @@ import numpy as np
 from aicalib_tf.detect.corners.refine import SQUEEZED_WINDOW, Smoothed, refine_saddle, refine_windowed, window_radius
 from aicalib_tf.geometry.aprilgrid import BORDER_BITS, PRINT_ROTATION, AprilGrid, dictionary
 
-__all__ = ["AprilGridDetection", "detect_aprilgrid", "detect_corners_aprilgrid", "decode_tags", "clean_window_px", "predicted_corners",
-           "make_detector", "REFINES"]
+__all__ = ["AprilGridDetection", "detect_aprilgrid", "detect_corners_aprilgrid", "decode_tags", "clean_window_px",
+           "predicted_corners", "local_homography", "neighbour_predictions", "rectified_tag", "make_detector",
+           "REFINES"]
 
 REFINES = ("saddle", "opencv", "none")
 _OPENCV_REFINE = {"saddle": "CORNER_REFINE_NONE", "none": "CORNER_REFINE_NONE", "opencv": "CORNER_REFINE_SUBPIX",
@@ -154,45 +162,118 @@ NEIGHBOURS_MIN = 6  # refined corners (of the tag and the tags next to it) a sec
 NEIGHBOUR_REACH = 0.3  # clean squares (+ 0.5 px): how far the second pass's fit may end from that prediction
 
 
+def local_homography(tag_cell: np.ndarray, lattice: np.ndarray, pts: np.ndarray, ok: np.ndarray, cell):
+    """(3, 3) lattice-to-image homography (least squares) through the placed corners (``ok``) of the
+    tags at most one cell from ``cell`` (col, row), or None where fewer than ``NEIGHBOURS_MIN``, or only
+    one row or column of them, are placed. tag_cell, lattice (N, 2) int per corner; pts (N, 2) px."""
+    near = np.flatnonzero(ok & (np.max(np.abs(tag_cell - np.asarray(cell)), axis=1) <= 1))
+    obj = lattice[near].astype(np.float64)
+    if len(near) < NEIGHBOURS_MIN or len(np.unique(obj[:, 0])) < 2 or len(np.unique(obj[:, 1])) < 2:
+        return None
+    H, _ = cv2.findHomography(obj, pts[near], 0)
+    return H
+
+
+def _apply(H: np.ndarray, lattice: np.ndarray) -> np.ndarray:
+    """(N, 2) px where the homography H puts lattice points (N, 2)."""
+    return cv2.perspectiveTransform(np.asarray(lattice, np.float64).reshape(-1, 1, 2), H).reshape(-1, 2)
+
+
 def neighbour_predictions(cells: np.ndarray, lattice: np.ndarray, pts: np.ndarray, ok: np.ndarray,
                           which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Where a homography (least squares) through the placed corners (``ok``) of a corner's tag and
-    the tags next to it puts each corner ``which`` (M,) int: (M, 2) px and has (M,) bool, False where
-    fewer than ``NEIGHBOURS_MIN`` such corners, or only one row or column of them, are placed.
+    """Where :func:`local_homography` about each corner's tag puts the corners ``which`` (M,) int:
+    (M, 2) px and has (M,) bool (False where it has no homography).
     cells (K, 2) tag cells; lattice (4K, 2) corner ids; pts (4K, 2) px; ok (4K,) bool."""
     tag_cell = np.repeat(np.asarray(cells), 4, axis=0)
     out, has = np.zeros((len(which), 2)), np.zeros(len(which), bool)
     for n, i in enumerate(which):
-        near = np.flatnonzero(ok & (np.max(np.abs(tag_cell - tag_cell[i]), axis=1) <= 1))
-        obj = lattice[near].astype(np.float64)
-        if len(near) < NEIGHBOURS_MIN or len(np.unique(obj[:, 0])) < 2 or len(np.unique(obj[:, 1])) < 2:
-            continue
-        H, _ = cv2.findHomography(obj, pts[near], 0)
+        H = local_homography(tag_cell, lattice, pts, ok, tag_cell[i])
         if H is not None:
-            out[n] = cv2.perspectiveTransform(lattice[i].reshape(1, 1, 2).astype(np.float64), H).reshape(2)
-            has[n] = True
+            out[n], has[n] = _apply(H, lattice[i : i + 1])[0], True
     return out, has
+
+
+def _fit_near(smoothed: Smoothed, start: np.ndarray, spacing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`refine_windowed` from ``start`` (N, 2) px, ending within ``NEIGHBOUR_REACH`` clean squares
+    (``spacing`` (N,) px) + 0.5 px of it: the window sized from the clean square, then, where that fails,
+    ``SQUEEZED_WINDOW`` times narrower. Returns (N, 2) float64 and ok (N,) bool."""
+    out, ok = np.asarray(start, np.float64).copy(), np.zeros(len(start), bool)
+    reach = NEIGHBOUR_REACH * spacing + 0.5
+    for scale in (1.0, SQUEEZED_WINDOW):
+        todo = np.flatnonzero(~ok)
+        if not len(todo):
+            break
+        got, good = refine_windowed(smoothed, out[todo], scale * spacing[todo], max_shift=reach[todo])
+        out[todo[good]], ok[todo[good]] = got[good], True
+    return out, ok
 
 
 def _from_neighbours(smoothed: Smoothed, cells, lattice, pts: np.ndarray, ok: np.ndarray, spacing: np.ndarray):
     """A second pass for the corners whose first fit failed (:func:`_pull_in` and
     :func:`refine_windowed` started from OpenCV's quad, which on a steeply sheared corner lies
     further out than the pull-in's reach): each starts where its placed neighbours put it
-    (:func:`neighbour_predictions`, a small fraction of a clean square off), the window sized from
-    the clean square, then, where that fails, ``SQUEEZED_WINDOW`` times narrower; the result must end
-    within ``NEIGHBOUR_REACH`` clean squares of the prediction. Returns pts (4K, 2) float64, ok (4K,)."""
+    (:func:`neighbour_predictions`, a small fraction of a clean square off) (:func:`_fit_near`).
+    Returns pts (4K, 2) float64, ok (4K,)."""
     redo = np.flatnonzero(~ok)
     start, has = neighbour_predictions(cells, lattice, pts, ok, redo)
     redo, start = redo[has], start[has]
     pts, ok = pts.copy(), ok.copy()
-    reach = NEIGHBOUR_REACH * spacing[redo] + 0.5
-    for scale in (1.0, SQUEEZED_WINDOW):
-        todo = np.flatnonzero(~ok[redo])
-        if not len(todo):
-            break
-        got, good = refine_windowed(smoothed, start[todo], scale * spacing[redo[todo]], max_shift=reach[todo])
-        pts[redo[todo[good]]], ok[redo[todo[good]]] = got[good], True
+    got, good = _fit_near(smoothed, start, spacing[redo])
+    pts[redo[good]], ok[redo[good]] = got[good], True
     return pts, ok
+
+
+RECTIFIED_CELL = 8  # px a bit cell in the square-on view of a tag handed back to OpenCV's decoder
+
+
+def rectified_tag(gray: np.ndarray, H: np.ndarray, board: AprilGrid, tag_id: int,
+                  cell_px: int = RECTIFIED_CELL) -> np.ndarray:
+    """(S, S) uint8: tag ``tag_id`` seen square-on through the lattice-to-image homography ``H``, ``cell_px``
+    px a bit cell, on white two cells wide: what lies around the tag (the corner squares touching it,
+    whose contours OpenCV merges with the tag's under a steep shear) is painted white."""
+    n = board.bits + 2 * BORDER_BITS
+    corners = board.tag_corner_ids(tag_id).astype(np.float64)
+    lo, side = corners.min(axis=0), corners.max(axis=0) - corners.min(axis=0)
+    m, size = 2 * cell_px, (n + 4) * cell_px
+    scale = side / (n * cell_px)  # lattice units a patch px; the tag spans patch px edges m - 0.5 .. m + n·cell - 0.5
+    to_lattice = np.array([[scale[0], 0, lo[0] - (m - 0.5) * scale[0]], [0, scale[1], lo[1] - (m - 0.5) * scale[1]],
+                           [0, 0, 1]])
+    out = cv2.warpPerspective(gray, H @ to_lattice, (size, size), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                              borderValue=255)
+    inner = out[m: m + n * cell_px, m: m + n * cell_px].copy()
+    out[:] = 255
+    out[m: m + n * cell_px, m: m + n * cell_px] = inner
+    return out
+
+
+def _grow(u8: np.ndarray, smoothed: Smoothed, board: AprilGrid, rotation: int, tags, lattice, pts, ok, spacing):
+    """Tags OpenCV did not decode in the image (steeply sheared ones, whose contours merge with the
+    corner squares) next to placed corners: each is seen square-on through the homography of its
+    neighbours' placed corners (:func:`local_homography`, :func:`rectified_tag`), and where OpenCV's
+    decoder reads its own id there, its corners are fitted from that homography's prediction
+    (:func:`_fit_near`). Round after round while one adds a tag. Returns tags, lattice, pts, ok, spacing
+    extended (the new tags' corners appended)."""
+    decoder, tried = _detector(board.family, "none"), set(np.asarray(tags).tolist())
+    while True:
+        tag_cell, new = board.tag_cell(board.tag_of(lattice)), []
+        for t in (int(k) for k in board.tag_ids() if int(k) not in tried):
+            H = local_homography(tag_cell, lattice, pts, ok, board.tag_cell(t))
+            if H is None:
+                continue
+            tried.add(t)
+            _, found, _ = decoder.detectMarkers(rectified_tag(u8, H, board, t))
+            if found is None or len(found) != 1 or int(np.ravel(found)[0]) != t:
+                continue
+            ids = board.tag_corner_ids(t, rotation)
+            start = _apply(H, ids)
+            clean = clean_window_px(board, start[None])[0]
+            got, good = _fit_near(smoothed, start, clean)
+            new.append((t, ids, got, good, clean))
+        if not new:
+            return tags, lattice, pts, ok, spacing
+        tags = np.r_[tags, [t for t, *_ in new]].astype(np.int64)
+        lattice, pts, ok, spacing = (np.concatenate([a, *(n[k] for n in new)]) for k, a in
+                                     ((1, lattice), (2, pts), (3, ok), (4, spacing)))
 
 
 def detect_aprilgrid(gray: np.ndarray, board: AprilGrid, refine: str = "saddle") -> AprilGridDetection:
@@ -220,6 +301,7 @@ def detect_aprilgrid(gray: np.ndarray, board: AprilGrid, refine: str = "saddle")
         start, ok = _pull_in(smoothed, quads, predicted_corners(board, ids, quads, rot), clean)
         pts, fine = refine_windowed(smoothed, start, spacing, max_shift=0.25 * spacing + 1.0)
         pts, ok = _from_neighbours(smoothed, board.tag_cell(ids), lattice, pts.astype(np.float64), ok & fine, spacing)
+        ids, lattice, pts, ok, spacing = _grow(u8, smoothed, board, rot, ids, lattice, pts, ok, spacing)
         r = window_radius(spacing) + 1
         h, w = u8.shape[:2]
         ok &= (pts[:, 0] >= r) & (pts[:, 1] >= r) & (pts[:, 0] <= w - 1 - r) & (pts[:, 1] <= h - 1 - r)

@@ -138,3 +138,31 @@ def test_a_steeply_sheared_corner_is_placed_from_its_placed_neighbours(monkeypat
     monkeypatch.setattr(aprilgrid, "_from_neighbours", lambda smoothed, cells, lattice, pts, ok, spacing: (pts, ok))
     first = detect_aprilgrid(img, BOARD)
     assert (0, 0) not in set(map(tuple, first.ids.tolist())) and len(first.ids) == len(det.ids) - 1
+
+
+def test_tags_opencv_missed_are_read_square_on_from_their_neighbours(layout, monkeypatch):
+    """Tags left out of OpenCV's decoding are seen square-on through their neighbours' homography and
+    decoded there; a tag whose code cannot be read (its bits painted out) gives no corner."""
+    import aicalib_tf.detect.boards.aprilgrid as aprilgrid
+
+    dropped, blank = [14, 21, 22], 8
+    page = layout.copy()
+    cell = Q * BOARD.fraction[1] // (BOARD.bits + 4)  # px a bit cell on the page
+    x0, y0 = BOARD.tag_corner_ids(blank).min(axis=0) * Q + MARGIN
+    page[y0 + 2 * cell: y0 + (BOARD.bits + 2) * cell, x0 + 2 * cell: x0 + (BOARD.bits + 2) * cell] = 255
+    rvec, tvec = pose([0.35, -0.25, 0.1], (640, 480), 110)
+    img = render(page, rvec, tvec)
+    decode = aprilgrid.decode_tags
+
+    def missing(gray, board, refine="none"):
+        ids, quads = decode(gray, board, refine)
+        keep = ~np.isin(ids, dropped)
+        return ids[keep], quads[keep]
+
+    monkeypatch.setattr(aprilgrid, "decode_tags", missing)
+    det = detect_aprilgrid(img, BOARD)
+    assert set(dropped) <= set(det.tags.tolist()) and blank not in det.tags
+    found = set(map(tuple, det.ids.tolist()))
+    assert all(tuple(i) in found for t in dropped for i in BOARD.tag_corner_ids(t).tolist())
+    assert len(det.ids) == 4 * 35 and not any(tuple(i) in found for i in BOARD.tag_corner_ids(blank).tolist())
+    assert np.linalg.norm(det.corners - truth(det.ids, rvec, tvec), axis=1).max() < 0.15
