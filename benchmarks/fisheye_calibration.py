@@ -47,14 +47,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from aicalib_tf.bench.conditions import CALIB_CAMERAS, CALIB_SEED, PATTERN, calibration_sequences  # noqa: E402
 from aicalib_tf.bench.detectors import make_detectors  # noqa: E402
 from aicalib_tf.bench.metrics import calibration_errors  # noqa: E402
+from aicalib_tf.bench.opencv_calib import fisheye_calibrate  # noqa: E402
 from aicalib_tf.geometry.pattern import board_points  # noqa: E402
 
 _CRIT = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-10)
-
-
-def _fisheye_flag(name: str) -> int:
-    """A cv2.fisheye flag: OpenCV 4 keeps them in cv2.fisheye, OpenCV 5 in cv2 (shared with calibrateCamera)."""
-    return getattr(cv2.fisheye, name, None) or getattr(cv2, name)
 
 
 def _opencv_pinhole(views, square, size):
@@ -67,17 +63,8 @@ def _opencv_pinhole(views, square, size):
 def _opencv_fisheye(views, square, size):
     obj = [board_points(i, square).reshape(1, -1, 3) for _, c, i in views]
     img = [c.astype(np.float64).reshape(1, -1, 2) for _, c, i in views]
-    flags = _fisheye_flag("CALIB_RECOMPUTE_EXTRINSIC") | _fisheye_flag("CALIB_FIX_SKEW")
-    try:
-        rms, K, D, _, _ = cv2.fisheye.calibrate(obj, img, size, None, None, flags=flags, criteria=_CRIT)
-        note = "no guess"
-    except cv2.error as exc:
-        w, h = size
-        f0 = min(w, h) / math.pi
-        K0 = np.array([[f0, 0.0, (w - 1) / 2.0], [0.0, f0, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
-        rms, K, D, _, _ = cv2.fisheye.calibrate(obj, img, size, K0, np.zeros(4), criteria=_CRIT,
-                                                flags=flags | _fisheye_flag("CALIB_USE_INTRINSIC_GUESS"))
-        note = f"needed K guess f0={f0:.0f} (no guess: {str(exc).strip().splitlines()[-1][:60]})"
+    rms, K, D, why = fisheye_calibrate(obj, img, size, _CRIT)
+    note = f"needed K guess f0={min(size) / math.pi:.0f} (no guess: {why[:60]})" if why else "no guess"
     return {"model": "equidistant", "K": K, "dist": D.ravel(), "rms": rms, "note": note}
 
 

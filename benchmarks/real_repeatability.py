@@ -228,23 +228,16 @@ def opencv_lens(kind: str, corners: list, pattern, size):
     import cv2
     import numpy as np
 
+    from aicalib_tf.bench.opencv_calib import fisheye_calibrate
     from aicalib_tf.geometry import lens as L
     from aicalib_tf.geometry.pattern import board_points, pattern_ids
 
     obj = board_points(pattern_ids(pattern), 1.0).astype(np.float32)
     objs, imgs = [obj] * len(corners), [c.astype(np.float32).reshape(-1, 1, 2) for c in corners]
     if kind == "equidistant":  # OpenCV's own start first; when it raises, a start from f = min(w, h) / π
-        flags = getattr(cv2, "CALIB_RECOMPUTE_EXTRINSIC", 2) | getattr(cv2, "CALIB_FIX_SKEW", 8)
-        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-10)
         o64 = [o.astype(np.float64).reshape(1, -1, 3) for o in objs]
         i64 = [c.astype(np.float64).reshape(1, -1, 2) for c in corners]
-        try:
-            rms, K, D, _, _ = cv2.fisheye.calibrate(o64, i64, size, None, None, flags=flags, criteria=crit)
-        except cv2.error:
-            f0 = min(size) / np.pi
-            K0 = np.array([[f0, 0, (size[0] - 1) / 2], [0, f0, (size[1] - 1) / 2], [0, 0, 1.0]])
-            rms, K, D, _, _ = cv2.fisheye.calibrate(o64, i64, size, K0, np.zeros(4), criteria=crit,
-                                                    flags=flags | cv2.CALIB_USE_INTRINSIC_GUESS)
+        rms, K, D, _ = fisheye_calibrate(o64, i64, size)
     else:
         flags = cv2.CALIB_RATIONAL_MODEL if kind == "rational_polynomial" else 0
         rms, K, D, _, _ = cv2.calibrateCamera(objs, imgs, size, None, None, flags=flags)

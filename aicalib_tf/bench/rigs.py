@@ -18,6 +18,7 @@ import time
 import cv2
 import numpy as np
 
+from aicalib_tf.bench.opencv_calib import fisheye_calibrate
 from aicalib_tf.calib.fit import View
 from aicalib_tf.calib.rig.fit import calibrate_rig
 from aicalib_tf.calib.rig.quality import MAX_FOLDS, assess_rig, epipolar_deltas
@@ -53,14 +54,7 @@ def _cv_camera(views, square, size, fisheye: bool) -> Lens:
                                             [i.reshape(-1, 1, 2).astype(np.float32) for i in img], size, None, None,
                                             criteria=_CRIT)
         return Lens("plumb_bob", K, D.ravel()[:5], size)
-    flags = cv2.CALIB_RECOMPUTE_EXTRINSIC | cv2.CALIB_FIX_SKEW
-    try:
-        _, K, D, _, _ = cv2.fisheye.calibrate(obj, img, size, None, None, flags=flags, criteria=_CRIT)
-    except cv2.error:
-        f0 = min(size) / np.pi
-        K0 = np.array([[f0, 0, (size[0] - 1) / 2], [0, f0, (size[1] - 1) / 2], [0, 0, 1.0]])
-        _, K, D, _, _ = cv2.fisheye.calibrate(obj, img, size, K0, np.zeros(4), criteria=_CRIT,
-                                              flags=flags | cv2.CALIB_USE_INTRINSIC_GUESS)
+    _, K, D, _ = fisheye_calibrate(obj, img, size, _CRIT)
     return Lens("equidistant", K, D.ravel(), size)
 
 
