@@ -68,11 +68,14 @@ class Condition:
     """What the check clip does to the corners, relative to the calibration clip.
 
     noise : corner σ px per axis. motion : extra σ px along one random direction per view (motion
-    blur). distance : scale of the calibration's distance range. square : the board's square
-    relative to the calibration's (the check still uses the calibration's square size)."""
+    blur). shared : RMS px of an error every corner of a view shares: a random quadratic field over
+    the board, per view (what blur and lighting leave, which the view's pose does not absorb).
+    distance : scale of the calibration's distance range. square : the board's square relative to
+    the calibration's (the check still uses the calibration's square size)."""
 
     noise: float = 0.15
     motion: float = 0.0
+    shared: float = 0.0
     distance: float = 1.0
     square: float = 1.0
 
@@ -82,6 +85,7 @@ CONDITIONS = {
     "noise x2": Condition(noise=0.3),
     "noise x4": Condition(noise=0.6),
     "motion blur": Condition(motion=0.5),
+    "shared in view": Condition(shared=0.1),
     "dark (noise x3)": Condition(noise=0.45),
     "bright (noise x0.7)": Condition(noise=0.1),
     "near (x0.6)": Condition(distance=0.6),
@@ -115,6 +119,10 @@ def synthetic(lens, n, cond: Condition, rng, names="v") -> list[View]:
         a = rng.uniform(0, np.pi)
         err = cond.noise * rng.standard_normal((k, 2)) + np.outer(cond.motion * rng.standard_normal(k),
                                                                   [np.cos(a), np.sin(a)])
+        if cond.shared:
+            u = (ids[ok] - [(cols - 1) / 2, (rows - 1) / 2]) / [(cols - 1) / 2, (rows - 1) / 2]
+            basis = np.stack([u[:, 0] ** 2 - 1 / 3, u[:, 0] * u[:, 1], u[:, 1] ** 2 - 1 / 3], 1) * 2.0
+            err = err + cond.shared * basis @ rng.standard_normal((3, 2)) / np.sqrt(2)
         out.append(View(f"{names}{len(out):02d}", uv[ok] + err, ids[ok]))
     return out
 
@@ -176,8 +184,33 @@ def _warp(gray, change, K, angle):
     return cv2.warpAffine(gray, M, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
-def rendered_trial(seed, size, detect, alpha) -> dict:
-    """{(condition, change): row} of one rendered trial (module docstring)."""
+def _save_views(path: Path, groups: dict) -> None:
+    """{group: [View]} into one .npz (corners, ids, per-view counts, names, relative flags)."""
+    arrays = {}
+    for g, vs in groups.items():
+        arrays[f"{g}/corners"] = np.concatenate([v.corners for v in vs]) if vs else np.zeros((0, 2))
+        arrays[f"{g}/ids"] = np.concatenate([v.ids for v in vs]) if vs else np.zeros((0, 2), np.int64)
+        arrays[f"{g}/counts"] = np.array([len(v.corners) for v in vs], np.int64)
+        arrays[f"{g}/names"] = np.array([v.name for v in vs], dtype="U16")
+        arrays[f"{g}/relative"] = np.array([v.relative for v in vs], bool)
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez(tmp, **arrays)
+    tmp.replace(path)
+
+
+def _load_views(path: Path) -> dict:
+    """The inverse of :func:`_save_views`."""
+    with np.load(path, allow_pickle=False) as z:
+        groups = {}
+        for g in sorted({k.rsplit("/", 1)[0] for k in z.files}):
+            cut = np.cumsum(z[f"{g}/counts"])[:-1]
+            groups[g] = [View(str(n), c, i, bool(r)) for n, c, i, r in zip(
+                z[f"{g}/names"], np.split(z[f"{g}/corners"], cut), np.split(z[f"{g}/ids"], cut), z[f"{g}/relative"])]
+    return groups
+
+
+def rendered_views(seed, size, detect) -> dict:
+    """{"cal": views, "condition|change": views} of one rendered trial (module docstring)."""
     from data_gen.video import VideoConfig, make_scene, render_frame
     from aicalib_tf.io import load_image
 
@@ -193,18 +226,36 @@ def rendered_trial(seed, size, detect, alpha) -> dict:
         return out
 
     cal_frames = [render_frame(scene, i)[0] for i in range(0, 600, 24)]
-    cal = calibrate_camera(views([_expose(g, "same", rng) for g in cal_frames], "c"), PATTERN, scene.board.square_size,
-                           size, model="plumb_bob")
+    out = {"cal": views([_expose(g, "same", rng) for g in cal_frames], "c")}
     K = scene.camera.K
-    out = {}
     for cond in RENDERED:
         sc = scene if cond in ("same", "dark", "bright") else replace(
             scene, cfg=replace(scene.cfg, noise=8.0) if cond == "noise8" else replace(scene.cfg, shutter=1 / 30))
         frames = [_expose(render_frame(sc, i)[0], cond, rng) for i in range(600, 1200, 40)]
         for change in CHANGES:
             angle = rng.uniform(0, 2 * np.pi)  # one direction for the whole clip
+            out[f"{cond}|{change}"] = views([_warp(g, change, K, angle) for g in frames], "v")
+    return out, scene.board.square_size
+
+
+def rendered_trial(seed, size, detect, alpha, cache: Path | None = None) -> dict:
+    """{(condition, change): row} of one rendered trial; with ``cache`` the detected corners are
+    stored there and reused (the check alone is measured again)."""
+    path = cache / f"rendered_{size[0]}x{size[1]}_{seed}.npz" if cache else None
+    if path is not None and path.exists():
+        groups = _load_views(path)
+        square = float(np.load(path.with_suffix(".square.npy")))
+    else:
+        groups, square = rendered_views(seed, size, detect)
+        if path is not None:
+            np.save(path.with_suffix(".square.npy"), np.float64(square))
+            _save_views(path, groups)
+    cal = calibrate_camera(groups["cal"], PATTERN, square, size, model="plumb_bob")
+    out = {}
+    for cond in RENDERED:
+        for change in CHANGES:
             try:
-                r = check_calibration(cal, views([_warp(g, change, K, angle) for g in frames], "v"), alpha=alpha)
+                r = check_calibration(cal, groups[f"{cond}|{change}"], alpha=alpha)
             except CalibrationError:
                 continue
             out[cond, change] = _row(r, alpha)
@@ -293,6 +344,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--photos", default=None, help="photos mode: a folder of real 9x6 photos of one camera")
     ap.add_argument("--splits", type=int, default=100)
+    ap.add_argument("--cache", default=None, help="rendered mode: a folder where the detected corners are kept and "
+                    "reused (the check alone is measured again)")
     args = ap.parse_args(argv)
     print("condition | change | trials | flagged | drift test | lens test | noise px | det fx% | det pp px | reachable, flagged")
     if args.mode == "photos":
@@ -305,7 +358,10 @@ def main(argv=None) -> int:
         detect = make_detector("cnn", PATTERN)
         t0 = time.perf_counter()
         label = lambda k: (f"rendered {args.size} {k[0]}", k[1])  # noqa: E731
-        rows = run(lambda t: rendered_trial(args.seed * 1000 + t, size, detect, args.alpha), args.trials,
+        cache = Path(args.cache) if args.cache else None
+        if cache:
+            cache.mkdir(parents=True, exist_ok=True)
+        rows = run(lambda t: rendered_trial(args.seed * 1000 + t, size, detect, args.alpha, cache), args.trials,
                    [(c, ch) for c in RENDERED for ch in CHANGES], label, every=5)
         _print({label(k): v for k, v in rows.items()})
         print(f"# {time.perf_counter() - t0:.0f} s")

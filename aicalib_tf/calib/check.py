@@ -16,12 +16,12 @@ Two tests at level α each, both scaled by σ̂ (never by the calibration's foot
   JᵀJ over the intrinsics with their poses eliminated (the Schur complement), P = S₄⁻¹ (its fx..cy
   block) or [S⁻¹]₄ (every intrinsic free), Σ the calibration's covariance, M = [−I, B] with
   B = −S₄⁻¹·S_fd saying how the held distortion's own error moves the fit (B = 0 when it is refitted).
-  T/4 against F(4, dof).
+  T/4 against F(4, ν).
 * **Lens** (structured residuals). The likelihood ratio of the held and the free fit: linearised,
   RSS_held − RSS_free = dᵀS·d for d = θ_free − θ₀, and (RSS_held − RSS_free)/(p·σ̂²) is the F test of
   the p freed intrinsics when θ₀ is exact (reported as ``lr_f``). With the calibration's own
   uncertainty the statistic is T = dᵀ(σ̂²S⁻¹ + Σ)⁻¹d/κ = dᵀS(σ̂²I + ΣS)⁻¹d/κ (no inverse of S:
-  directions the views do not determine drop out); T/p against F(p, dof). A changed distortion
+  directions the views do not determine drop out); T/p against F(p, ν). A changed distortion
   leaves a radial pattern that the free fit removes; blur and noise raise σ̂ and both sums alike.
 
 Both covariances assume a corner error of at least :data:`SYSTEMATIC_PX` per axis beyond the
@@ -33,11 +33,15 @@ truth, and unchanged cameras failed the lens test without it.
 κ >= 1 (:func:`_view_inflation`) is what the scatter between the new views asks for beyond the
 formal σ̂²·S⁻¹: about 1 for independent corner noise, a median of 5 on real photos, where the
 formal covariance alone failed unchanged subsets of OpenCV's left photos in 68% of splits
-(docs/benchmark.md, "Field check").
+(docs/benchmark.md, "Field check"). Errors shared within a view (motion blur along the view's
+motion, lighting) make the views, not the corners, the independent units: the share (κ − 1)/κ of
+C then rests on V − 1 degrees of freedom, and both tests use F with the Satterthwaite degrees of
+freedom of the two shares (:func:`_test_dof`) instead of the corners' 2N − 6V − p.
 
 Beside the verdict: the corner noise of both footages (the calibration's from its RMS,
 :func:`corner_noise`) and what the drift test detects 95% of the time: a relative change of fx and
-a principal-point shift in its worst direction (the noncentral χ²(4) at C). When the check footage
+a principal-point shift in its worst direction (the noncentral F(4, ν) at C, ν the test's degrees
+of freedom). When the check footage
 is much noisier than the calibration's, a note says so with those figures.
 
 The calibration must be one the check can use (:func:`check_fields`): focal lengths and principal
@@ -62,7 +66,7 @@ from aicalib_tf.calib.check_prior import PARAMS, calibration_covariance, check_f
 from aicalib_tf.calib.quality import lens_of
 from aicalib_tf.calib.robust import view_sigmas, with_floor
 from aicalib_tf.calib.weights import corner_weights
-from aicalib_tf.calib.significance import chi2_noncentrality, f_quantile, f_sf
+from aicalib_tf.calib.significance import f_noncentrality, f_quantile, f_sf
 from aicalib_tf.geometry.pattern import board_points
 
 __all__ = ["CheckResult", "check_calibration", "check_fields", "format_check", "corner_noise", "calibration_covariance",
@@ -90,7 +94,8 @@ class CheckResult:
     lens_chi2, lens_limit, lens_p, lens_dof : the lens test; lr_f : the held-vs-free F statistic
     as if the calibration were exact. detectable_fx, detectable_pp : the fx change (fraction of fx)
     and principal-point shift (px, worst direction) the drift test detects with probability
-    :data:`POWER`. inflation : κ >= 1. notes : caveats.
+    :data:`POWER`. inflation : κ >= 1. test_dof : ν, the denominator degrees of freedom of both
+    tests' F (:func:`_test_dof`). notes : caveats.
     """
 
     holds: bool
@@ -122,6 +127,7 @@ class CheckResult:
     alpha: float
     hold_distortion: bool = True
     inflation: float = 1.0
+    test_dof: float = math.inf
     notes: tuple = field(default=())
 
     @property
@@ -160,9 +166,9 @@ class CheckResult:
             "measured": per_param(self.measured), "measured_std": per_param(self.measured_std),
             "drift": per_param(self.drift), "drift_std": per_param(self.drift_std),
             "drift_test": {"chi2": num(self.drift_chi2), "limit": num(self.drift_limit), "p": num(self.drift_p),
-                           "dof": len(PARAMS)},
+                           "dof": len(PARAMS), "scale_dof": num(self.test_dof)},
             "lens_test": {"chi2": num(self.lens_chi2), "limit": num(self.lens_limit), "p": num(self.lens_p),
-                          "dof": int(self.lens_dof), "lr_f": num(self.lr_f)},
+                          "dof": int(self.lens_dof), "scale_dof": num(self.test_dof), "lr_f": num(self.lr_f)},
             "detectable": {"power": POWER, "fx_fraction": num(self.detectable_fx),
                            "principal_point_px": num(self.detectable_pp)},
         }
@@ -269,10 +275,19 @@ def _precision(S, A, sigma2, kappa) -> np.ndarray:
     return 0.5 * (P + P.T)
 
 
-def _smallest_changes(precision, alpha) -> tuple[float, float]:
+def _test_dof(dof: float, kappa: float, views: int) -> float:
+    """The degrees of freedom of C = κ·(formal): its share 1/κ rests on σ̂² (``dof``), the excess
+    (κ − 1)/κ on the scatter between the ``views`` (V − 1); Satterthwaite's 1 / Σ share²/dof."""
+    if not kappa > 1.0 or views < 2:
+        return dof
+    excess = (kappa - 1.0) / kappa
+    return 1.0 / ((1.0 - excess) ** 2 / dof + excess ** 2 / (views - 1))
+
+
+def _smallest_changes(precision, alpha, dof=math.inf) -> tuple[float, float]:
     """(fx change in px, principal-point shift in px in its worst direction) that the drift test
-    (χ²(4) at ``alpha``, inverse covariance ``precision`` (4, 4)) detects with probability :data:`POWER`."""
-    lam = chi2_noncentrality(len(PARAMS), alpha, POWER)
+    (F(4, ``dof``) at ``alpha``, inverse covariance ``precision`` (4, 4)) detects with probability :data:`POWER`."""
+    lam = f_noncentrality(len(PARAMS), dof, alpha, POWER)
     fx = math.sqrt(lam / precision[0, 0]) if precision[0, 0] > 0 else math.inf
     w = float(np.linalg.eigvalsh(precision[2:4, 2:4])[0])
     return fx, (math.sqrt(lam / w) if w > 0 else math.inf)
@@ -357,10 +372,10 @@ def check_calibration(cal, views, *, alpha: float = ALPHA, hold_distortion: bool
     C = kappa * (cnew + carried)
     precision = np.linalg.pinv(C, hermitian=True)  # the inverse when C is regular (it is, with 3+ views)
     calibrated = lens.intrinsics()[:4]
-    drift = measured - calibrated
-    chi2 = float(drift @ precision @ drift)
+    chi2 = float((drift := measured - calibrated) @ precision @ drift)
     T, lens_dof, lr_f = _lens_test(lens, free, fit, S, cov, sigma2, kappa, measured2)
-    small_fx, small_pp = _smallest_changes(0.5 * (precision + precision.T), alpha)
+    nu = _test_dof(dof, kappa, len(obj))  # the views, not the corners, are the units when κ > 1
+    small_fx, small_pp = _smallest_changes(0.5 * (precision + precision.T), alpha, nu)
     noise = math.sqrt(measured2)
     notes = [note] if note else []
     if free is None:
@@ -370,17 +385,17 @@ def check_calibration(cal, views, *, alpha: float = ALPHA, hold_distortion: bool
                      f"{noise:.3f} against {cal_noise:.3f} px per axis); it still detects fx changed by "
                      f"{100 * small_fx / calibrated[0]:.2f}% or the principal point moved {small_pp:.1f} px "
                      f"({100 * POWER:g}% of the time)")
-    p_drift = f_sf(chi2 / 4, 4, dof)
-    p_lens = f_sf(T / lens_dof, lens_dof, dof) if free is not None else 1.0
+    p_drift = f_sf(chi2 / 4, 4, nu)
+    p_lens = f_sf(T / lens_dof, lens_dof, nu) if free is not None else 1.0
     return CheckResult(
         holds=bool(p_drift >= alpha and p_lens >= alpha), model=lens.model, views=tuple(names[k] for k in kept),
         per_view_rms=fit.per_view_rms, skipped=skipped, rms=fit.rms, free_rms=free.rms if free else fit.rms,
         noise_px=noise, noise_dof=dof, calibration_noise_px=cal_noise, calibrated=calibrated,
         calibrated_std=file_std, measured=measured, measured_std=np.sqrt(kappa * np.diag(cnew)),
-        drift=drift, drift_std=np.sqrt(np.diag(C)), drift_chi2=chi2, drift_limit=4 * f_quantile(1 - alpha, 4, dof),
-        drift_p=p_drift, lens_chi2=T, lens_limit=lens_dof * f_quantile(1 - alpha, lens_dof, dof), lens_p=p_lens,
+        drift=drift, drift_std=np.sqrt(np.diag(C)), drift_chi2=chi2, drift_limit=4 * f_quantile(1 - alpha, 4, nu),
+        drift_p=p_drift, lens_chi2=T, lens_limit=lens_dof * f_quantile(1 - alpha, lens_dof, nu), lens_p=p_lens,
         lens_dof=lens_dof, lr_f=lr_f, detectable_fx=small_fx / calibrated[0], detectable_pp=small_pp,
-        alpha=float(alpha), hold_distortion=hold_distortion, inflation=kappa, notes=tuple(notes))
+        alpha=float(alpha), hold_distortion=hold_distortion, inflation=kappa, test_dof=nu, notes=tuple(notes))
 
 
 def format_check(result: CheckResult, *, source: str = "", total: int | None = None) -> str:
@@ -412,7 +427,8 @@ def format_check(result: CheckResult, *, source: str = "", total: int | None = N
     lines.append(f"  detects ({100 * POWER:g}% of the time): fx changed by {100 * result.detectable_fx:.2f}%, the "
                  f"principal point moved {result.detectable_pp:.1f} px")
     if result.inflation > 1.05:
-        lines.append(f"  (σ × {np.sqrt(result.inflation):.2f}: the new views scatter more than independent corner noise)")
+        lines.append(f"  (σ × {np.sqrt(result.inflation):.2f}: the new views scatter more than independent corner noise; "
+                     f"the tests take it from {len(result.views)} views, F with {result.test_dof:.0f} degrees of freedom)")
     lines += [f"  note: {n}" for n in result.notes]
     lines += [f"  why: {f}" for f in result.failures]
     return "\n".join(lines)

@@ -4,7 +4,8 @@
 Wilson–Hilferty cube-root normal approximation (within 0.1% of the quantile for k > 400). t: the
 Cornish–Fisher expansion of the quantile (within 1% for nu >= 4). F: the regularised incomplete
 beta function by its continued fraction (modified Lentz), to 1e-12 relative. The noncentral χ²
-tail is the Poisson mixture of central ones; :func:`chi2_noncentrality` inverts it for a power.
+tail is the Poisson mixture of central ones, the noncentral F's that of central F's;
+:func:`chi2_noncentrality` and :func:`f_noncentrality` invert them for a power.
 """
 
 from __future__ import annotations
@@ -12,7 +13,8 @@ from __future__ import annotations
 import math
 from statistics import NormalDist
 
-__all__ = ["chi2_sf", "chi2_quantile", "t_quantile", "t_sf", "f_sf", "f_quantile", "ncx2_sf", "chi2_noncentrality"]
+__all__ = ["chi2_sf", "chi2_quantile", "t_quantile", "t_sf", "f_sf", "f_quantile", "ncx2_sf", "chi2_noncentrality",
+           "ncf_sf", "f_noncentrality"]
 
 
 def chi2_sf(x: float, k: float) -> float:
@@ -154,4 +156,41 @@ def chi2_noncentrality(k: int, alpha: float, power: float) -> float:
     while hi - lo > 1e-6 * hi:
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if ncx2_sf(q, k, mid) < power else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def ncf_sf(x: float, d1: float, d2: float, lam: float) -> float:
+    """P(F'(d1, d2, λ) > x), the noncentral F (numerator χ²(d1, λ)/d1 over χ²(d2)/d2): the Poisson(λ/2)
+    mixture Σ_j w_j·P(F(d1 + 2j, d2) > x·d1/(d1 + 2j)); d2 infinite: :func:`ncx2_sf` at x·d1.
+
+    >>> round(ncf_sf(3.0, 4, 1e9, 10.0), 6) == round(ncx2_sf(12.0, 4, 10.0), 6)
+    True
+    """
+    if not math.isfinite(d2):
+        return ncx2_sf(x * d1, int(d1), lam)
+    if lam <= 0:
+        return f_sf(x, d1, d2)
+    half, total, weight = lam / 2.0, 0.0, 0.0
+    top = int(half + 12.0 * math.sqrt(half) + 30)
+    for j in range(top + 1):
+        w = math.exp(-half + j * math.log(half) - math.lgamma(j + 1))
+        total += w * f_sf(x * d1 / (d1 + 2 * j), d1 + 2 * j, d2)
+        weight += w
+    return float(min(1.0, total + max(0.0, 1.0 - weight)))
+
+
+def f_noncentrality(d1: int, d2: float, alpha: float, power: float) -> float:
+    """The noncentrality λ at which the F(d1, d2) test (statistic χ²/d1 over an estimated scale of d2
+    degrees of freedom) at level ``alpha`` rejects with probability ``power``; d2 infinite:
+    :func:`chi2_noncentrality`. Fewer degrees of freedom in the scale need a larger λ.
+    """
+    if not math.isfinite(d2):
+        return chi2_noncentrality(d1, alpha, power)
+    q = f_quantile(1 - alpha, d1, d2)
+    lo, hi = 0.0, 10.0
+    while ncf_sf(q, d1, d2, hi) < power:
+        hi *= 2
+    while hi - lo > 1e-6 * hi:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if ncf_sf(q, d1, d2, mid) < power else (lo, mid)
     return 0.5 * (lo + hi)

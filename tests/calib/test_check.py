@@ -22,8 +22,10 @@ from aicalib_tf.calib.significance import (
     chi2_noncentrality,
     chi2_quantile,
     chi2_sf,
+    f_noncentrality,
     f_quantile,
     f_sf,
+    ncf_sf,
     ncx2_sf,
     t_quantile,
     t_sf,
@@ -192,6 +194,49 @@ def test_f_and_noncentral_chi_square():
     assert ncx2_sf(13.28, 4, 20) == pytest.approx(0.8855065062, rel=1e-8)  # scipy.stats.ncx2.sf
     assert ncx2_sf(20.0, 9, 5) == pytest.approx(0.1591234853, rel=1e-8)
     assert chi2_noncentrality(4, 0.01, 0.95) == pytest.approx(24.3291, rel=1e-4)
+
+
+def test_noncentral_f():
+    assert ncf_sf(3.0, 4, 20, 10.0) == pytest.approx(0.5723611414, rel=1e-8)  # scipy.stats.ncf.sf
+    assert ncf_sf(5.0, 4, 2000, 30.0) == pytest.approx(0.9043908704, rel=1e-8)
+    assert ncf_sf(3.0, 4, 20, 0.0) == pytest.approx(f_sf(3.0, 4, 20))
+    assert f_noncentrality(4, 20, 0.01, 0.95) == pytest.approx(34.2557, rel=1e-4)  # ncf.sf(f.ppf(.99, 4, 20), ...) = .95
+    assert f_noncentrality(4, math.inf, 0.01, 0.95) == chi2_noncentrality(4, 0.01, 0.95)
+    assert f_noncentrality(4, 14, 0.01, 0.95) > f_noncentrality(4, 50, 0.01, 0.95) > chi2_noncentrality(4, 0.01, 0.95)
+
+
+def _shared_in_view(views, rms, seed=5):
+    """The views with an error every corner of a view shares: a random quadratic field over the board
+    (``rms`` px per axis), which the view's pose does not absorb."""
+    rng = np.random.default_rng(seed)
+    half = (np.array(PATTERN) - 1) / 2
+    out = []
+    for v in views:
+        u = (v.ids - half) / half
+        basis = np.stack([u[:, 0] ** 2 - 1 / 3, u[:, 0] * u[:, 1], u[:, 1] ** 2 - 1 / 3], 1) * 2.0
+        out.append(View(v.name, v.corners + rms * basis @ rng.standard_normal((3, 2)) / np.sqrt(2), v.ids))
+    return out
+
+
+def test_errors_shared_within_views_make_the_views_the_units():
+    """With errors shared within each view the scatter between views sets the scale (κ > 1) and both
+    tests take it with about V − 1 degrees of freedom, not the corners' 2N − 6V − p: wider limits and
+    a larger smallest detectable change than the corner count would claim. Independent noise keeps
+    (nearly) the corners' degrees of freedom."""
+    views = synthetic_views(PINHOLE, 20, 0.15, seed=3, distance=DISTANCE["plumb_bob"])
+    cal = calibrate_camera(views, PATTERN, SQUARE, PINHOLE.image_size, model="plumb_bob")
+    iid = check_calibration(cal, _new_views(PINHOLE))
+    shared = check_calibration(cal, _shared_in_view(_new_views(PINHOLE, noise=0.1), 0.1))
+    assert iid.holds and shared.holds, format_check(shared)
+    assert iid.inflation < 1.3 and iid.test_dof > 0.4 * iid.noise_dof
+    assert shared.inflation > 3 and shared.test_dof < 30 < shared.noise_dof / 10
+    assert shared.drift_limit > 1.3 * 4 * f_quantile(0.99, 4, shared.noise_dof)
+    assert shared.to_dict()["drift_test"]["scale_dof"] == pytest.approx(shared.test_dof)
+    assert f"from 15 views, F with {shared.test_dof:.0f} degrees of freedom" in format_check(shared)
+    k = shared.detectable_pp * 1.1  # just beyond what the check claims it detects: flagged
+    moved = check_calibration(cal, _shared_in_view(_new_views(_moved(PINHOLE, dcx=k * 0.6, dcy=k * 0.8), noise=0.1),
+                                                   0.1))
+    assert not moved.holds and moved.drift_p < moved.alpha
 
 
 def test_chi_square_and_t_tails():
