@@ -41,6 +41,10 @@ def test_the_same_photos_hold(calibration, tmp_path, capsys):
     d = json.loads((tmp_path / "check.json").read_text())
     assert d["holds"] is True and len(d["views"]) == 13 and abs(d["drift"]["fx"]) < 0.3 * d["drift_std"]["fx"]
     assert d["written_by"] == "aicalib_tf.check" and d["noise"]["check_px"] > 0
+    # real photos scatter more than independent corner noise: the 13 views, not the corners, set the tests' scale
+    nu = d["drift_test"]["scale_dof"]
+    assert d["inflation"] > 2 and nu < 40 and d["lens_test"]["scale_dof"] == nu
+    assert f"from 13 views, F with {nu:.0f} degrees of freedom" in out
 
 
 def test_photos_shifted_by_8px_do_not_hold(calibration, tmp_path, capsys):
