@@ -16,8 +16,8 @@ fit failed is fitted again from where the placed corners of its tag and the tags
 (a least-squares homography, :func:`local_homography`). A tag OpenCV did not decode (steeply sheared,
 its contour merged with the corner squares) next to placed corners is seen square-on through that
 homography, its surroundings painted white (:func:`rectified_tag`), and decoded there by OpenCV
-again; where it reads the tag's own id, the tag's corners are fitted from the homography's
-prediction, round after round. A corner whose fits fail, or whose window leaves the image, is
+again; where it reads the tag's own id, the quad it finds, brought back to the image, is placed as a
+decoded tag's, round after round. A corner whose fits fail, or whose window leaves the image, is
 dropped. Corner ids are lattice positions (the geometry module's docstring), so a partial view keeps
 its ids.
 ``refine="opencv"`` returns OpenCV's own sub-pixel corners instead, for comparison.
@@ -162,13 +162,14 @@ NEIGHBOURS_MIN = 6  # refined corners (of the tag and the tags next to it) a sec
 NEIGHBOUR_REACH = 0.3  # clean squares (+ 0.5 px): how far the second pass's fit may end from that prediction
 
 
-def local_homography(tag_cell: np.ndarray, lattice: np.ndarray, pts: np.ndarray, ok: np.ndarray, cell):
+def local_homography(tag_cell: np.ndarray, lattice: np.ndarray, pts: np.ndarray, ok: np.ndarray, cell,
+                     least: int = NEIGHBOURS_MIN):
     """(3, 3) lattice-to-image homography (least squares) through the placed corners (``ok``) of the
-    tags at most one cell from ``cell`` (col, row), or None where fewer than ``NEIGHBOURS_MIN``, or only
-    one row or column of them, are placed. tag_cell, lattice (N, 2) int per corner; pts (N, 2) px."""
+    tags at most one cell from ``cell`` (col, row), or None where fewer than ``least``, or only one row
+    or column of them, are placed. tag_cell, lattice (N, 2) int per corner; pts (N, 2) px."""
     near = np.flatnonzero(ok & (np.max(np.abs(tag_cell - np.asarray(cell)), axis=1) <= 1))
     obj = lattice[near].astype(np.float64)
-    if len(near) < NEIGHBOURS_MIN or len(np.unique(obj[:, 0])) < 2 or len(np.unique(obj[:, 1])) < 2:
+    if len(near) < least or len(np.unique(obj[:, 0])) < 2 or len(np.unique(obj[:, 1])) < 2:
         return None
     H, _ = cv2.findHomography(obj, pts[near], 0)
     return H
@@ -223,52 +224,68 @@ def _from_neighbours(smoothed: Smoothed, cells, lattice, pts: np.ndarray, ok: np
     return pts, ok
 
 
+GROW_FROM = 4  # placed corners (one whole tag) from which a tag beside them is looked for
 RECTIFIED_CELL = 8  # px a bit cell in the square-on view of a tag handed back to OpenCV's decoder
 
 
 def rectified_tag(gray: np.ndarray, H: np.ndarray, board: AprilGrid, tag_id: int,
-                  cell_px: int = RECTIFIED_CELL) -> np.ndarray:
-    """(S, S) uint8: tag ``tag_id`` seen square-on through the lattice-to-image homography ``H``, ``cell_px``
-    px a bit cell, on white two cells wide: what lies around the tag (the corner squares touching it,
-    whose contours OpenCV merges with the tag's under a steep shear) is painted white."""
+                  cell_px: int = RECTIFIED_CELL) -> tuple[np.ndarray, np.ndarray]:
+    """Tag ``tag_id`` seen square-on through the lattice-to-image homography ``H``: ((S, S) uint8,
+    ``cell_px`` px a bit cell, on white two cells wide, and the (3, 3) homography from its px to the
+    image's). What lies around the tag (the corner squares touching it, whose contours OpenCV merges
+    with the tag's under a steep shear) is painted white."""
     n = board.bits + 2 * BORDER_BITS
     corners = board.tag_corner_ids(tag_id).astype(np.float64)
     lo, side = corners.min(axis=0), corners.max(axis=0) - corners.min(axis=0)
     m, size = 2 * cell_px, (n + 4) * cell_px
     scale = side / (n * cell_px)  # lattice units a patch px; the tag spans patch px edges m - 0.5 .. m + n·cell - 0.5
-    to_lattice = np.array([[scale[0], 0, lo[0] - (m - 0.5) * scale[0]], [0, scale[1], lo[1] - (m - 0.5) * scale[1]],
-                           [0, 0, 1]])
-    out = cv2.warpPerspective(gray, H @ to_lattice, (size, size), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+    to_image = H @ np.array([[scale[0], 0, lo[0] - (m - 0.5) * scale[0]], [0, scale[1], lo[1] - (m - 0.5) * scale[1]],
+                             [0, 0, 1]])
+    out = cv2.warpPerspective(gray, to_image, (size, size), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                               borderValue=255)
     inner = out[m: m + n * cell_px, m: m + n * cell_px].copy()
     out[:] = 255
     out[m: m + n * cell_px, m: m + n * cell_px] = inner
-    return out
+    return out, to_image
+
+
+def _read_square_on(u8: np.ndarray, decoder, board: AprilGrid, H: np.ndarray, tag_id: int, ids: np.ndarray):
+    """The image quad (4, 2) px of tag ``tag_id`` (its corners' lattice ids ``ids`` (4, 2), in that order),
+    where OpenCV's decoder reads that id in its square-on view (:func:`rectified_tag`); else None. Its
+    quad's corners, brought back to the image, are matched to the nearest of the corners ``H`` predicts:
+    they hold where the prediction, extrapolated from the neighbours, drifts (a lens's distortion)."""
+    patch, to_image = rectified_tag(u8, H, board, tag_id)
+    found, got, _ = decoder.detectMarkers(patch)
+    if got is None or len(got) != 1 or int(np.ravel(got)[0]) != tag_id:
+        return None
+    quad = _apply(to_image, np.asarray(found[0], np.float64).reshape(4, 2))
+    nearest = np.argmin(np.linalg.norm(_apply(H, ids)[:, None] - quad[None], axis=2), axis=1)
+    return quad[nearest] if len(set(nearest.tolist())) == 4 else None
 
 
 def _grow(u8: np.ndarray, smoothed: Smoothed, board: AprilGrid, rotation: int, tags, lattice, pts, ok, spacing):
     """Tags OpenCV did not decode in the image (steeply sheared ones, whose contours merge with the
-    corner squares) next to placed corners: each is seen square-on through the homography of its
-    neighbours' placed corners (:func:`local_homography`, :func:`rectified_tag`), and where OpenCV's
-    decoder reads its own id there, its corners are fitted from that homography's prediction
-    (:func:`_fit_near`). Round after round while one adds a tag. Returns tags, lattice, pts, ok, spacing
-    extended (the new tags' corners appended)."""
+    corner squares) beside placed corners: each is seen square-on through the homography of the placed
+    corners of the tags next to it (:func:`local_homography`, one whole tag at least), and where OpenCV's
+    decoder reads its own id there (:func:`_read_square_on`), its corners are placed as a decoded tag's
+    (:func:`_pull_in` from that quad, :func:`refine_windowed`). Round after round while one adds a tag.
+    Returns tags, lattice, pts, ok, spacing, the new tags' corners appended."""
     decoder, tried = _detector(board.family, "none"), set(np.asarray(tags).tolist())
     while True:
         tag_cell, new = board.tag_cell(board.tag_of(lattice)), []
         for t in (int(k) for k in board.tag_ids() if int(k) not in tried):
-            H = local_homography(tag_cell, lattice, pts, ok, board.tag_cell(t))
+            H = local_homography(tag_cell, lattice, pts, ok, board.tag_cell(t), least=GROW_FROM)
             if H is None:
                 continue
             tried.add(t)
-            _, found, _ = decoder.detectMarkers(rectified_tag(u8, H, board, t))
-            if found is None or len(found) != 1 or int(np.ravel(found)[0]) != t:
-                continue
             ids = board.tag_corner_ids(t, rotation)
-            start = _apply(H, ids)
-            clean = clean_window_px(board, start[None])[0]
-            got, good = _fit_near(smoothed, start, clean)
-            new.append((t, ids, got, good, clean))
+            quad = _read_square_on(u8, decoder, board, H, t, ids)
+            if quad is None:
+                continue
+            clean = clean_window_px(board, quad[None])
+            start, good = _pull_in(smoothed, quad[None], quad[None], clean)
+            got, fine = refine_windowed(smoothed, start, clean[0], max_shift=0.25 * clean[0] + 1.0)
+            new.append((t, ids, got.astype(np.float64), good & fine, clean[0]))
         if not new:
             return tags, lattice, pts, ok, spacing
         tags = np.r_[tags, [t for t, *_ in new]].astype(np.int64)
@@ -302,6 +319,7 @@ def detect_aprilgrid(gray: np.ndarray, board: AprilGrid, refine: str = "saddle")
         pts, fine = refine_windowed(smoothed, start, spacing, max_shift=0.25 * spacing + 1.0)
         pts, ok = _from_neighbours(smoothed, board.tag_cell(ids), lattice, pts.astype(np.float64), ok & fine, spacing)
         ids, lattice, pts, ok, spacing = _grow(u8, smoothed, board, rot, ids, lattice, pts, ok, spacing)
+        pts, ok = _from_neighbours(smoothed, board.tag_cell(ids), lattice, pts, ok, spacing)  # the new tags too
         r = window_radius(spacing) + 1
         h, w = u8.shape[:2]
         ok &= (pts[:, 0] >= r) & (pts[:, 1] >= r) & (pts[:, 0] <= w - 1 - r) & (pts[:, 1] <= h - 1 - r)
