@@ -270,14 +270,16 @@ def _grow(u8: np.ndarray, smoothed: Smoothed, board: AprilGrid, rotation: int, t
     decoder reads its own id there (:func:`_read_square_on`), its corners are placed as a decoded tag's
     (:func:`_pull_in` from that quad, :func:`refine_windowed`). Round after round while one adds a tag.
     Returns tags, lattice, pts, ok, spacing, the new tags' corners appended."""
-    decoder, tried = _detector(board.family, "none"), set(np.asarray(tags).tolist())
+    decoder, have = _detector(board.family, "none"), set(np.asarray(tags).tolist())
+    tried = {}  # tag -> placed corners about it when last looked for: looked for again once there are more
     while True:
         tag_cell, new = board.tag_cell(board.tag_of(lattice)), []
-        for t in (int(k) for k in board.tag_ids() if int(k) not in tried):
+        for t in (int(k) for k in board.tag_ids() if int(k) not in have):
+            near = int(np.sum(ok & (np.max(np.abs(tag_cell - board.tag_cell(t)), axis=1) <= 1)))
             H = local_homography(tag_cell, lattice, pts, ok, board.tag_cell(t), least=GROW_FROM)
-            if H is None:
+            if H is None or tried.get(t, -1) >= near:
                 continue
-            tried.add(t)
+            tried[t] = near
             ids = board.tag_corner_ids(t, rotation)
             quad = _read_square_on(u8, decoder, board, H, t, ids)
             if quad is None:
@@ -286,6 +288,7 @@ def _grow(u8: np.ndarray, smoothed: Smoothed, board: AprilGrid, rotation: int, t
             start, good = _pull_in(smoothed, quad[None], quad[None], clean)
             got, fine = refine_windowed(smoothed, start, clean[0], max_shift=0.25 * clean[0] + 1.0)
             new.append((t, ids, got.astype(np.float64), good & fine, clean[0]))
+            have.add(t)
         if not new:
             return tags, lattice, pts, ok, spacing
         tags = np.r_[tags, [t for t, *_ in new]].astype(np.int64)
