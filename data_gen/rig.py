@@ -7,8 +7,11 @@ degree about the other axes, as a real mount is. Camera k maps camera 0's frame 
 X_k = R_k·X_0 + T_k with T_k = −R_k·c_k (OpenCV's stereo convention). Lenses are drawn per camera
 (:func:`data_gen.camera.sample_camera` for "pinhole", :func:`data_gen.camera.sample_fisheye` for
 "fisheye", full-frame 150–175°, and for "circular", 180–195° with the whole image circle inside the
-frame, its outside black). The board's square grows with the baseline (the board a user
-would pick), so every camera sees it from a distance where it fills a good part of the image.
+frame, its outside black). The board is a chessboard whose square grows with the baseline (the
+board a user would pick), or a marker board (a ChArUco board or a Kalibr AprilGrid, drawn as the
+single-camera renders draw it, :mod:`data_gen.targets`) whose size sets the baseline, so every
+camera sees it from a distance where it fills a good part of the image. A marker board's labels add
+its markers' or tags' truth (:func:`data_gen.targets.marker_label`).
 
 Each frame draws the board's pose for one camera (in turn, so every camera's image gets covered),
 then keeps it only if every camera sees at least ``min_visible`` of the inner corners: boards may be
