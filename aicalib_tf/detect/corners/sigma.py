@@ -17,14 +17,28 @@ about the corner, r the refinement's radius for the distance to the nearest othe
 * ``curvature``: √|det| of the quadratic's Hessian, grey per px² (over the contrast: how sharp the saddle is);
 * ``bend``: |c(i−1) − 2c(i) + c(i+1)| along the board's rows and columns by id, px
   (:func:`aicalib_tf.detect.corners.sigma_kernels.lattice_bend`), over the corner spacing;
+* ``smoothed odd``: ``odd`` of the window smoothed by [1 2 1]/4 along x and y, over ``odd``: the share of
+  the asymmetry at the low frequencies the saddle fit sees (about 0.4 for white noise; near 1 for a
+  smooth asymmetry such as an object's edge or JPEG blocks);
+* the board's ``flat noise``: σ in the flat middles of its squares, from the second differences of
+  the pixels there (:func:`aicalib_tf.detect.corners.sigma_kernels.flat_noise`, with the rounding
+  noise of 8-bit grey levels as its floor). Against the window's noise it tells white sensor noise
+  (window/flat about e^−0.95) from noise that lives at the edges only: JPEG's ringing and blocks
+  (compression flattens the squares' middles), render aliasing (noise-free images);
+* the board's JPEG ``blockiness``: the mean step across 8-px block borders over the mean step
+  elsewhere in the board's box (:func:`aicalib_tf.detect.corners.sigma_kernels.blockiness`; 1 for
+  an image never compressed);
 * the network's ``score``.
 
 The model has two parts (``COLUMNS``). The board's: medians over its corners of these features (the
 noise is one per image, so the board's median ``odd_median`` is its estimate), their spread (90th
 percentile over median) and a few hinges (the detector's own error floor on clean images, heavy blur,
-impulsive noise, strongly bent lines). Each corner's: its excess over the board's median of each
-feature. log σ = c₀ + Σ cₖ xₖ, x the columns of :func:`design` clipped to [``LOW``, ``HIGH``], the
-range they took in fitting; σ px is one standard deviation per axis (isotropic).
+impulsive noise, strongly bent lines), the flat noise over the contrast, window over flat
+noise, blockiness and the median smoothed/raw asymmetry. Each corner's: its excess over the board's
+median of each feature, and a hinge on its own asymmetry (a window with more than noise in it, such
+as an object's edge, pulls the saddle in proportion). log σ = c₀ + Σ cₖ xₖ, x the columns of :func:`design` clipped to [``LOW``, ``HIGH``], the
+range they took in fitting (0.1th to 99.9th percentiles); σ px is one standard deviation per axis
+(isotropic).
 
 ``COEFFS``, ``LOW`` and ``HIGH`` were fitted on rendered boards with exact truth (data_gen renders of
 the benchmark's sweeps and named conditions with other seeds than the benchmark's): the corner's
@@ -51,18 +65,22 @@ __all__ = ["COLUMNS", "BOARD_COLUMNS", "COEFFS", "LOW", "HIGH", "design", "sigma
 
 COLUMNS = ("noise/contrast", "residual/contrast", "impulsive noise", "bend/spacing", "score", "(noise/contrast)²",
            "curvature/contrast", "spacing", "bend hinge²", "noise/contrast p90 excess", "bend p90 excess",
-           "impulsive × noise hinge", "own impulsiveness", "noise floor hinge", "blur hinge",  # the board's
+           "impulsive × noise hinge", "own impulsiveness", "noise floor hinge", "blur hinge", "flat noise/contrast",
+           "window/flat noise", "JPEG blockiness", "smoothed/raw asymmetry",  # the board's
            "Δ noise/contrast", "Δ own asymmetry", "Δ residual/contrast", "Δ own impulsiveness", "Δ bend/spacing",
-           "Δ score", "Δ curvature/contrast", "Δ bend hinge²")  # each corner's excess over the board's median
+           "Δ score", "Δ curvature/contrast", "Δ bend hinge²", "Δ smoothed/raw asymmetry",
+           "Δ own asymmetry hinge")  # each corner's excess over the board's median
 BOARD_COLUMNS = _BOARD_COLUMNS
 # log σ = COEFFS[0] + Σ COEFFS[1 + k] · clip(design[:, k], LOW[k], HIGH[k]); refit: python benchmarks/corner_sigma.py --fit
-COEFFS = np.array([-0.898, 0.809, -0.211, -0.395, 0.093, 0.373, -0.029, -0.673, -0.288, -0.033, 2.774, 0.005, 3.566,
-                   -0.756, -0.128, -1.208, 1.432, 0.518, -0.242, 0.378, 0.024, -0.236, -0.801,
-                   0.292])
-LOW = np.array([-4.835, -2.288, 0.266, -5.062, -0.293, 1.355, -1.845, 1.929, 0.000, 0.014, 0.058, 0.000, -0.160,
-                0.000, 0.000, -0.187, -0.901, -0.340, -0.446, -2.252, -0.605, -0.130, -0.491])
-HIGH = np.array([-1.164, -0.349, 1.187, -1.545, -0.014, 23.373, -1.437, 3.917, 2.118, 0.387, 0.679, 0.339, 0.066,
-                 1.335, 0.788, 0.242, 0.722, 0.316, 0.702, 0.704, 0.136, 0.099, 0.669])
+COEFFS = np.array([0.907, 0.664, 0.368, 0.286, 0.010, 0.475, 0.034, -0.401, -0.187, 0.048, -0.019, 0.091, 0.691, 0.089,
+                   -0.242, -0.436, 0.394, 0.270, 0.446, 1.722, 0.872, 0.426, -0.040, 0.375, 0.031, -0.058, -0.382,
+                   0.138, 0.417, 1.054])
+LOW = np.array([-5.009, -2.331, 0.201, -5.891, -0.625, 1.069, -1.899, 1.622, 0.000, 0.012, 0.033, 0.000, -0.215, 0.000,
+                0.000, -5.474, -2.043, -0.406, -1.282, -0.424, -1.581, -0.577, -0.733, -3.436, -2.944, -0.545, -1.569,
+                -0.861, 0.000])
+HIGH = np.array([-1.034, -0.231, 1.360, -0.912, -0.008, 25.089, -1.018, 4.582, 4.358, 0.815, 0.837, 0.584, 0.086, 1.509,
+                 0.831, 0.000, 3.460, 1.110, -0.301, 0.616, 1.430, 0.492, 1.202, 1.043, 0.290, 0.679, 1.631, 0.695,
+                 0.930])
 MIN_SCORE = 0.05  # a corner the network missed (score 0) counts as this weak
 _TINY = 1e-6  # grey levels (px for the bend): keeps the logarithms finite in a flat window
 _MAX_RADIUS = 3  # px: the refinement's window radius, at most this (a 7×7 window: the measures' cost)
@@ -81,8 +99,9 @@ def _operators() -> tuple[np.ndarray, np.ndarray]:
     return fits, weights
 
 
-def design(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray) -> np.ndarray:
-    """The model's columns (N, 23) (``COLUMNS``) of one board's corners, unclipped (module docstring).
+def design(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray,
+           origin: tuple[int, int] = (0, 0)) -> np.ndarray:
+    """The model's columns (N, 29) (``COLUMNS``) of one board's corners, unclipped (module docstring).
 
     gray : (H, W) float32 grey in [0, 1] or uint8, unsmoothed (every column is a ratio of grey levels
     or of px, or a log spacing in px, so either scale gives the same). corners : (N, 2) (x, y) px.
@@ -90,6 +109,8 @@ def design(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray, scores: np.nd
     Columns 0..``BOARD_COLUMNS`` − 1 are the board's (the same for all its corners), the rest each
     corner's excess over the board's median of its feature; a corner with no row or column through it
     takes the board's median bend (:func:`aicalib_tf.detect.corners.sigma_kernels.design_columns`).
+    origin : (x, y) px of gray's pixel (0, 0) in the whole image (where its JPEG blocks start) when
+    gray is a part of it.
     """
     from aicalib_tf.detect.corners.junctions import nearest_spacing
 
@@ -102,17 +123,18 @@ def design(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray, scores: np.nd
     img = gray if gray.dtype == np.uint8 and gray.ndim == 2 else np.asarray(gray, np.float32)
     return board_columns(np.ascontiguousarray(img), pts, np.asarray(ids, np.int64).reshape(-1, 2), spacing, radius,
                          np.asarray(scores, np.float64).reshape(-1), fits, weights, MIN_SCORE,
-                         _TINY * (255.0 if img.dtype == np.uint8 else 1.0))
+                         _TINY * (255.0 if img.dtype == np.uint8 else 1.0), 1.0 if img.dtype == np.uint8 else 1.0 / 255.0,
+                         int(origin[0]), int(origin[1]))
 
 
 def sigma_from_design(x: np.ndarray, coeffs: np.ndarray = COEFFS, low: np.ndarray = LOW, high: np.ndarray = HIGH) -> np.ndarray:
-    """σ (N,) float32 px of design columns x (N, 23) under the model (``coeffs`` (24,), clip bounds (23,) each)."""
+    """σ (N,) float32 px of design columns x (N, 29) under the model (``coeffs`` (30,), clip bounds (29,) each)."""
     x = np.clip(np.asarray(x, np.float64).reshape(-1, len(COLUMNS)), low, high)
     return np.exp(coeffs[0] + x @ np.asarray(coeffs[1:], np.float64)).astype(np.float32)
 
 
 def board_design(image, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """:func:`design` (N, 23) of a board in ``image``, converting no more of it than needed.
+    """:func:`design` (N, 29) of a board in ``image``, converting no more of it than needed.
 
     image : a :class:`~aicalib_tf.detect.pyramid.Frame` (a grey uint8 frame is read as it is, any other
     through its float grey), or ``region(x0, y0, x1, y1) -> (y1 − y0, x1 − x0) float32`` grey of the
@@ -130,7 +152,7 @@ def board_design(image, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray
     x0, y0 = (max(int(np.floor(v)) - pad, 0) for v in pts.min(axis=0))
     x1 = min(int(np.ceil(pts[:, 0].max())) + pad + 1, size[0])
     y1 = min(int(np.ceil(pts[:, 1].max())) + pad + 1, size[1])
-    return design(region(x0, y0, x1, y1), pts - np.array([x0, y0], np.float64), ids, scores)
+    return design(region(x0, y0, x1, y1), pts - np.array([x0, y0], np.float64), ids, scores, (x0, y0))
 
 
 def board_sigmas(image, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray, size: tuple[int, int]) -> np.ndarray:

@@ -1,8 +1,9 @@
 """The per-corner σ model's window measurements, compiled (numba): the maths is :mod:`aicalib_tf.detect.corners.sigma`'s.
 
 One pass over each corner's window: its bilinear samples, their point-symmetric and
-antisymmetric parts, the saddle fit's quadratic and what it leaves; and the bend of the board's
-lattice at the corner from its neighbours by id. As array code these took about a third of a
+antisymmetric parts (also after a [1 2 1]² smoothing), the saddle fit's quadratic and what it
+leaves; the bend of the board's lattice at the corner from its neighbours by id; the noise in the
+flat middles of the board's squares; and the JPEG blockiness over the board's box. As array code these took about a third of a
 640×480 detection's time; here a few microseconds per board.
 """
 
@@ -15,16 +16,22 @@ import numpy as np
 from aicalib_tf.kernels import helper, kernel
 
 
-__all__ = ["window_measures", "lattice_bend", "corner_features", "design_columns", "board_columns", "BOARD_COLUMNS",
-           "CORNER_COLUMNS"]
+__all__ = ["window_measures", "lattice_bend", "flat_noise", "blockiness", "corner_features", "design_columns",
+           "board_columns", "BOARD_COLUMNS", "CORNER_COLUMNS"]
 
 BEND_KNOT = -3.0  # log(bend / spacing) above which lines bend enough to bias the saddle (hinge squared)
 IMPULSE_KNOT = 0.8  # log(RMS / median antisymmetric part) above which the board's noise is impulsive (counted as much
 # as the noise stands above NOISE_KNOT: an almost noise-free image's few grey-level steps look impulsive too)
 NOISE_KNOT = -3.5  # log(noise / contrast) below which the detector's own error floor takes over
 RESIDUAL_KNOT = -1.5  # log(residual / contrast) below which the junction is blurred smooth
-BOARD_COLUMNS = 15  # design columns 0..14: the board's; the next CORNER_COLUMNS: each corner's excess over them
-CORNER_COLUMNS = 8
+ASYM_KNOT = 0.5  # log(own / board's median antisymmetric part) above which a corner's window holds more than noise
+# (an object's edge, a shadow): its saddle is pulled in proportion to that asymmetry (hinge)
+WHITE_ODD = -0.95  # log(median |antisymmetric part| / noise σ) of white noise in the bilinear window: the flat
+# noise taken where a board has no square with all four corners
+BLOCK = 8  # px, the JPEG block: blockiness compares the steps across its borders with the others
+BLOCK_SAMPLES = 20000  # about this many steps each way at most (every k-th row of a larger box)
+BOARD_COLUMNS = 19  # design columns 0..18: the board's; the next CORNER_COLUMNS: each corner's excess over them
+CORNER_COLUMNS = 10
 
 
 @helper
@@ -49,23 +56,28 @@ def _sample_window(img, x, y, r, out):
 
 @helper
 def window_measures(img, pts, radius, fits, weights):
-    """Per point (P, 5) float64: odd, odd_median, even, residual, curvature (:mod:`~aicalib_tf.detect.corners.sigma`).
+    """Per point (P, 6) float64: odd, odd_median, even, residual, curvature, smoothed odd
+    (:mod:`~aicalib_tf.detect.corners.sigma`).
 
     img (H, W) float32 or uint8 (the measures used are ratios: the grey scale does not matter), pts
     (P, 2) float64 px, radius (P,) int64 window radii in 1 .. R, fits
     (R + 1, 6, (2R+1)²) each radius' quadratic fit operator (its first (2r+1)² columns used),
-    weights (R + 1, (2R+1)²) each radius' window weights, summing to 1.
+    weights (R + 1, (2R+1)²) each radius' window weights, summing to 1. The smoothed odd is the odd
+    measure of the window smoothed by [1 2 1]/4 along x and y (from samples one px further out): the
+    part of the asymmetry at the low frequencies the saddle fit of the smoothed image sees.
     """
     n = pts.shape[0]
-    out = np.zeros((n, 5))
+    out = np.zeros((n, 6))
     big = fits.shape[2]
-    vals = np.empty(big)
-    anti = np.empty(big)
+    rmax = (int(math.sqrt(big)) - 1) // 2
+    wide = np.empty((2 * rmax + 3) ** 2)
+    vals, smooth, anti = np.empty(big), np.empty(big), np.empty(big)
     for p in range(n):
         r = radius[p]
         side = 2 * r + 1
         m = side * side
-        _sample_window(img, pts[p, 0], pts[p, 1], r, vals)
+        _sample_window(img, pts[p, 0], pts[p, 1], r + 1, wide)
+        _inner_and_smoothed(wide, side, vals, smooth)
         a = b = c = d = e = f = 0.0
         for k in range(m):
             v = vals[k]
@@ -78,7 +90,7 @@ def window_measures(img, pts, radius, fits, weights):
         mean = 0.0
         for k in range(m):
             mean += weights[r, k] * 0.5 * (vals[k] + vals[m - 1 - k])
-        odd2 = even2 = left2 = 0.0
+        odd2 = even2 = left2 = smooth2 = 0.0
         half = 0
         for k in range(m):
             w = weights[r, k]
@@ -87,9 +99,11 @@ def window_measures(img, pts, radius, fits, weights):
             dx = float(k % side - r)
             dy = float(k // side - r)
             q = vals[k] - (a * dx * dx + b * dx * dy + c * dy * dy + d * dx + e * dy + f)
+            os = 0.5 * (smooth[k] - smooth[m - 1 - k])
             odd2 += w * o * o
             even2 += w * s * s
             left2 += w * q * q
+            smooth2 += w * os * os
             if k < m // 2:  # |o| is the same at d and −d: one half of the window holds every value
                 anti[half] = abs(o)
                 half += 1
@@ -98,7 +112,119 @@ def window_measures(img, pts, radius, fits, weights):
         out[p, 2] = math.sqrt(even2)
         out[p, 3] = math.sqrt(left2)
         out[p, 4] = 0.5 * math.sqrt(abs(4.0 * a * c - b * b))  # √|det| of the fitted quadratic's Hessian
+        out[p, 5] = math.sqrt(smooth2)
     return out
+
+
+@helper
+def _inner_and_smoothed(wide, side, vals, smooth):
+    """From a (side + 2)² row-major window: its inner side² samples into vals and, into smooth, the
+    inner samples smoothed by [1 2 1]/4 along x then y."""
+    ws = side + 2
+    for j in range(side):
+        for i in range(side):
+            acc = 0.0
+            for dj in range(3):
+                kj = 2.0 if dj == 1 else 1.0
+                row = (j + dj) * ws + i
+                acc += kj * (wide[row] + 2.0 * wide[row + 1] + wide[row + 2])
+            vals[j * side + i] = wide[(j + 1) * ws + i + 1]
+            smooth[j * side + i] = acc / 16.0
+
+
+@helper
+def flat_noise(img, pts, ids, step):
+    """The board's noise σ (grey levels of img) in the flat middles of its squares; −1 where no square has all
+    four corners.
+
+    For every square with its four corners found (ids (c, r), (c+1, r), (c, r+1), (c+1, r+1)), the 5×5
+    pixels about the mean of the four (unresampled: interpolation would smooth the noise) through the
+    3×3 mask [1 −2 1]⊗[1 −2 1] (blind to a level or a linear shading; its output is 6 σ for white
+    noise σ): the mean square of its 9 outputs / 36. σ² is the median of these over the squares
+    plus step² / 12, the rounding noise of grey levels ``step`` apart (1 for uint8).
+    """
+    n = pts.shape[0]
+    h, w = img.shape
+    if n == 0:
+        return -1.0
+    c0, r0 = ids[0, 0], ids[0, 1]
+    cols = rows = 0
+    for p in range(n):
+        c0, r0 = min(c0, ids[p, 0]), min(r0, ids[p, 1])
+    for p in range(n):
+        cols = max(cols, ids[p, 0] - c0 + 1)
+        rows = max(rows, ids[p, 1] - r0 + 1)
+    where = np.full((rows + 1, cols + 1), -1, np.int64)
+    for p in range(n):
+        where[ids[p, 1] - r0, ids[p, 0] - c0] = p
+    ms = np.empty(n)
+    k = 0
+    for p in range(n):
+        i, j = ids[p, 0] - c0, ids[p, 1] - r0
+        q1, q2, q3 = where[j, i + 1], where[j + 1, i], where[j + 1, i + 1]
+        if q1 < 0 or q2 < 0 or q3 < 0:
+            continue
+        x = int(math.floor(0.25 * (pts[p, 0] + pts[q1, 0] + pts[q2, 0] + pts[q3, 0]) + 0.5))
+        y = int(math.floor(0.25 * (pts[p, 1] + pts[q1, 1] + pts[q2, 1] + pts[q3, 1]) + 0.5))
+        if x < 2 or y < 2 or x > w - 3 or y > h - 3:
+            continue
+        total = 0.0
+        for yy in range(y - 1, y + 2):
+            for xx in range(x - 1, x + 2):
+                v = 0.0
+                for dj in range(-1, 2):
+                    kj = -2.0 if dj == 0 else 1.0
+                    for di in range(-1, 2):
+                        ki = -2.0 if di == 0 else 1.0
+                        v += kj * ki * float(img[yy + dj, xx + di])
+                total += v * v
+        ms[k] = total / (9.0 * 36.0)
+        k += 1
+    if k == 0:
+        return -1.0
+    return math.sqrt(np.median(ms[:k]) + step * step / 12.0)
+
+
+@helper
+def blockiness(img, pts, ox, oy, tiny):
+    """(mean |step| across JPEG block borders + tiny) / (mean |step| elsewhere + tiny) in the box of the points.
+
+    Steps are differences of neighbouring pixels along x and along y; a border lies between pixels
+    x and x + 1 where (ox + x) % BLOCK == BLOCK − 1 (ox, oy: img's origin in the whole image, where
+    the blocks start), the same along y. On every k-th row of the box (k odd, so that the rows visit
+    every phase of the blocks; about ``BLOCK_SAMPLES`` steps each way): its steps along x and those to
+    the next row. 1 for an image never JPEG-compressed (or resampled since), growing with the blocks'
+    visible steps.
+    """
+    h, w = img.shape
+    x0, y0 = max(int(math.floor(np.min(pts[:, 0]))), 0), max(int(math.floor(np.min(pts[:, 1]))), 0)
+    x1, y1 = min(int(math.ceil(np.max(pts[:, 0]))), w - 1), min(int(math.ceil(np.max(pts[:, 1]))), h - 1)
+    if x1 - x0 < BLOCK or y1 - y0 < BLOCK:
+        return 1.0
+    stride = max(1, ((x1 - x0) * (y1 - y0)) // BLOCK_SAMPLES) | 1
+    on = off = 0.0
+    n_on = n_off = 0
+    for y in range(y0, y1, stride):
+        row_on = (oy + y) % BLOCK == BLOCK - 1
+        for x in range(x0, x1):
+            here = float(img[y, x])
+            d = abs(float(img[y, x + 1]) - here)
+            v = abs(float(img[y + 1, x]) - here)
+            if (ox + x) % BLOCK == BLOCK - 1:
+                on += d
+                n_on += 1
+            else:
+                off += d
+                n_off += 1
+            if row_on:
+                on += v
+                n_on += 1
+            else:
+                off += v
+                n_off += 1
+    if n_on == 0 or n_off == 0:
+        return 1.0
+    return (on / n_on + tiny) / (off / n_off + tiny)
 
 
 @helper
@@ -159,11 +285,12 @@ def _board_median_fill(bend, tiny):
 
 @helper
 def corner_features(measures, bend, spacing, scores, min_score, tiny):
-    """(P, 8) per-corner features and the board's impulsiveness (:func:`aicalib_tf.detect.corners.sigma.design`):
+    """(P, 10) per-corner features and the board's impulsiveness (:func:`aicalib_tf.detect.corners.sigma.design`):
     noise/contrast, own excess asymmetry, residual/contrast, own impulsiveness, bend/spacing, score,
-    curvature/contrast, the bend's excess over ``BEND_KNOT`` squared; all logarithms."""
+    curvature/contrast, the bend's excess over ``BEND_KNOT`` squared, smoothed/raw asymmetry, the own
+    excess asymmetry's excess over ``ASYM_KNOT``; all logarithms."""
     n = measures.shape[0]
-    f = np.zeros((n, 8))
+    f = np.zeros((n, CORNER_COLUMNS))
     log_odd, log_med = np.empty(n), np.empty(n)
     for p in range(n):
         log_odd[p] = math.log(max(measures[p, 0], tiny))
@@ -181,31 +308,37 @@ def corner_features(measures, bend, spacing, scores, min_score, tiny):
         f[p, 5] = math.log(max(scores[p], min_score))
         f[p, 6] = math.log(max(measures[p, 4], tiny)) - even
         f[p, 7] = max(f[p, 4] - BEND_KNOT, 0.0) ** 2
+        f[p, 8] = math.log(max(measures[p, 5], tiny)) - log_odd[p]
+        f[p, 9] = max(f[p, 1] - ASYM_KNOT, 0.0)
     return f, impulsive
 
 
 @helper
-def design_columns(measures, bend, spacing, scores, min_score, tiny):
-    """The σ model's columns (P, 23) of one board (:func:`aicalib_tf.detect.corners.sigma.design`).
+def design_columns(measures, bend, spacing, scores, min_score, tiny, flat, block):
+    """The σ model's columns (P, 29) of one board (:func:`aicalib_tf.detect.corners.sigma.design`).
 
-    measures (P, 5) :func:`window_measures`, bend (P,) :func:`lattice_bend` px (−1: none), spacing (P,)
-    px, scores (P,). Values are floored at ``tiny`` and scores at ``min_score`` before the logarithms.
-    Columns 0–14 are the board's (the same for all its corners), 15–22 each corner's excess over the
-    board's median of its feature.
+    measures (P, 6) :func:`window_measures`, bend (P,) :func:`lattice_bend` px (−1: none), spacing (P,)
+    px, scores (P,), flat :func:`flat_noise` (−1: none; the window's noise over ``WHITE_ODD`` then),
+    block :func:`blockiness`. Values are floored at ``tiny`` and scores at ``min_score`` before the
+    logarithms. Columns 0–18 are the board's (the same for all its corners), 19–28 each corner's
+    excess over the board's median of its feature.
     """
     n = measures.shape[0]
     out = np.zeros((n, BOARD_COLUMNS + CORNER_COLUMNS))
     if n == 0:
         return out
     f, impulsive = corner_features(measures, bend, spacing, scores, min_score, tiny)
-    med = np.empty(8)
-    for k in range(8):
+    med = np.empty(CORNER_COLUMNS)
+    for k in range(CORNER_COLUMNS):
         med[k] = np.median(f[:, k])
+    noise = np.median(np.log(np.maximum(measures[:, 1], tiny)))
+    log_flat = math.log(max(flat, tiny)) if flat > 0 else noise - WHITE_ODD
     q9_noise = np.percentile(f[:, 0], 90.0) - med[0]
     q9_bend = np.percentile(f[:, 4], 90.0) - med[4]
     board = np.array([med[0], med[2], impulsive, med[4], med[5], med[0] * med[0], med[6], np.median(np.log(np.maximum(spacing, tiny))),
                       max(med[4] - BEND_KNOT, 0.0) ** 2, q9_noise, q9_bend, max(impulsive - IMPULSE_KNOT, 0.0) * max(med[0] - NOISE_KNOT, 0.0), med[3],
-                      max(NOISE_KNOT - med[0], 0.0), max(RESIDUAL_KNOT - med[2], 0.0)])
+                      max(NOISE_KNOT - med[0], 0.0), max(RESIDUAL_KNOT - med[2], 0.0),
+                      log_flat - noise + med[0], noise - log_flat, math.log(max(block, tiny)), med[8]])
     for p in range(n):
         out[p, :BOARD_COLUMNS] = board
         for k in range(CORNER_COLUMNS):
@@ -213,10 +346,12 @@ def design_columns(measures, bend, spacing, scores, min_score, tiny):
     return out
 
 
-@kernel("f4[:, ::1], f8[:, ::1], i8[:, ::1], f8[::1], i8[::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8, f8",
-        "u1[:, ::1], f8[:, ::1], i8[:, ::1], f8[::1], i8[::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8, f8")
-def board_columns(img, pts, ids, spacing, radius, scores, fits, weights, min_score, tiny):
-    """The σ model's columns (P, 23) of one board in one call: :func:`window_measures`, :func:`lattice_bend`
-    and :func:`design_columns` of its points (ids shifted to start at 0)."""
+@kernel("f4[:, ::1], f8[:, ::1], i8[:, ::1], f8[::1], i8[::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8, f8, f8, i8, i8",
+        "u1[:, ::1], f8[:, ::1], i8[:, ::1], f8[::1], i8[::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8, f8, f8, i8, i8")
+def board_columns(img, pts, ids, spacing, radius, scores, fits, weights, min_score, tiny, step, ox, oy):
+    """The σ model's columns (P, 29) of one board in one call: :func:`window_measures`, :func:`lattice_bend`,
+    :func:`flat_noise`, :func:`blockiness` and :func:`design_columns` of its points (ids shifted to start
+    at 0). step: the grey levels' step in img's units (1 for uint8); ox, oy: img's origin in the whole
+    image, px (the JPEG blocks start at the whole image's)."""
     return design_columns(window_measures(img, pts, radius, fits, weights), lattice_bend(pts, ids), spacing, scores,
-                          min_score, tiny)
+                          min_score, tiny, flat_noise(img, pts, ids, step), blockiness(img, pts, ox, oy, tiny))

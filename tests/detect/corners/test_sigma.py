@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from aicalib_tf.detect.corners import sigma as cs
-from aicalib_tf.detect.corners.sigma_kernels import design_columns, lattice_bend, window_measures
+from aicalib_tf.detect.corners.sigma_kernels import blockiness, design_columns, flat_noise, lattice_bend, window_measures
 from aicalib_tf.detect.pipeline import Detection, detect_corners
 from aicalib_tf.detect.warm import synthetic_board
 
@@ -35,7 +35,32 @@ def test_sigma_grows_with_noise_and_with_lower_contrast(board):
     noisy = detect_corners(_noisy(board, 30.0), PATTERN).sigmas
     faint = detect_corners(_noisy(board, 1.0, contrast=0.2), PATTERN).sigmas
     assert np.median(noisy) > 4 * np.median(clean)
-    assert np.median(faint) > 2 * np.median(clean)
+    assert np.median(faint) > 1.5 * np.median(clean)
+
+
+def _true_corners(square: int = 30, angle: float = 7.0, size=(640, 480)) -> np.ndarray:
+    """synthetic_board's inner corners (cols·rows, 2) px, row by row: the paper's corners mapped as it maps them."""
+    import cv2
+
+    cols, rows = PATTERN
+    width, height = (cols + 3) * square, (rows + 3) * square
+    M = cv2.getRotationMatrix2D((width / 2, height / 2), angle, 1.0)
+    M[:, 2] += (size[0] / 2 - width / 2, size[1] / 2 - height / 2)
+    paper = np.array([((c + 2) * square - 0.5, (r + 2) * square - 0.5) for r in range(rows) for c in range(cols)])
+    return paper @ M[:, :2].T + M[:, 2]
+
+
+@pytest.mark.parametrize("noise, contrast", [(1.0, 1.0), (30.0, 1.0), (1.0, 0.2)])
+def test_sigma_predicts_the_measured_error_on_a_board_of_known_corners(board, noise, contrast):
+    truth = _true_corners()
+    err, sig = [], []
+    for seed in range(4):
+        det = detect_corners(_noisy(board, noise, seed=seed, contrast=contrast), PATTERN)
+        d = det.corners[:, None, :] - truth[None]
+        err.append(d[np.arange(len(d)), np.argmin(np.einsum("nmk,nmk->nm", d, d), axis=1)])
+        sig.append(det.sigmas)
+    ratio = np.sqrt(np.mean(np.concatenate(err) ** 2)) / np.sqrt(np.mean(np.concatenate(sig) ** 2))
+    assert 0.7 < ratio < 1.45  # RMS error per axis over RMS σ
 
 
 def test_a_board_found_nowhere_keeps_no_sigmas():
@@ -58,8 +83,8 @@ def test_window_measures_of_a_point_symmetric_junction_have_no_odd_part():
     fits, weights = cs._operators()
     img = _junction()
     got = window_measures(img, np.array([[20.0, 20.0]]), np.array([3]), fits, weights)[0]
-    odd, odd_median, even, residual, curvature = got
-    assert odd < 1e-6 and odd_median < 1e-6
+    odd, odd_median, even, residual, curvature, smoothed = got
+    assert odd < 1e-6 and odd_median < 1e-6 and smoothed < 1e-6
     assert 0.2 < even < 0.35 and residual > 0 and curvature > 0
     stronger = window_measures(0.5 + 1.5 * (img - 0.5), np.array([[20.0, 20.0]]), np.array([3]), fits, weights)[0]
     np.testing.assert_allclose(stronger[[2, 3, 4]], 1.5 * got[[2, 3, 4]], rtol=1e-6)  # contrast, residual, curvature: grey levels
@@ -79,8 +104,9 @@ def test_lattice_bend_is_zero_on_a_straight_lattice_and_the_second_difference_ot
 
 
 def test_design_columns_take_the_boards_medians_and_the_usual_bend_where_a_corner_has_none():
-    measures = np.array([[0.02, 0.01, 0.2, 0.05, 0.1], [0.02, 0.04, 0.2, 0.05, 0.1], [0.08, 0.01, 0.1, 0.05, 0.2]])
-    x = design_columns(measures, np.array([0.1, -1.0, 0.3]), np.full(3, 10.0), np.array([1.0, 0.0, 0.5]), 0.05, 1e-6)
+    measures = np.array([[0.02, 0.01, 0.2, 0.05, 0.1, 0.01], [0.02, 0.04, 0.2, 0.05, 0.1, 0.01],
+                         [0.08, 0.01, 0.1, 0.05, 0.2, 0.04]])
+    x = design_columns(measures, np.array([0.1, -1.0, 0.3]), np.full(3, 10.0), np.array([1.0, 0.0, 0.5]), 0.05, 1e-6, 0.004, 1.5)
     nb = cs.BOARD_COLUMNS
     assert x.shape == (3, len(cs.COLUMNS)) and np.all(x[:, :nb] == x[0, :nb])  # the board's columns: one row
     noise = np.log(0.01)  # the median odd_median
@@ -95,6 +121,15 @@ def test_design_columns_take_the_boards_medians_and_the_usual_bend_where_a_corne
     np.testing.assert_allclose(x[:, nb + 5], np.log([1.0, 0.05, 0.5]) - np.log(0.5))
     np.testing.assert_allclose(x[0, 5], x[0, 0] ** 2)
     np.testing.assert_allclose(x[:, nb + 6], np.log([0.5, 0.5, 2.0]) - np.log(0.5))  # curvature over contrast
+    np.testing.assert_allclose(x[0, 15], np.log(0.004) - np.median(np.log([0.2, 0.2, 0.1])))  # flat noise / contrast
+    np.testing.assert_allclose(x[0, 16], noise - np.log(0.004))  # the window's noise over the flat noise
+    np.testing.assert_allclose(x[0, 17], np.log(1.5))  # blockiness
+    smooth = np.log([0.01, 0.01, 0.04]) - np.log([0.02, 0.02, 0.08])  # smoothed over raw asymmetry
+    np.testing.assert_allclose(x[0, 18], np.median(smooth))
+    np.testing.assert_allclose(x[:, nb + 8], smooth - np.median(smooth))
+    np.testing.assert_allclose(x[:, nb + 9], [0.0, np.log(4.0) - 0.5, 0.0])  # own asymmetry beyond e^0.5 the board's
+    no_square = design_columns(measures, np.array([0.1, -1.0, 0.3]), np.full(3, 10.0), np.ones(3), 0.05, 1e-6, -1.0, 1.0)
+    np.testing.assert_allclose(no_square[0, 16], -0.95)  # no flat noise measured: the window's, as white noise
 
 
 def test_sigma_inside_a_board_spreads_less_than_between_noise_levels(board):
@@ -129,3 +164,64 @@ def test_a_uint8_frame_and_its_float_grey_give_the_same_columns(board):
     grey = board.astype(np.float32) / 255.0
     np.testing.assert_allclose(cs.design(board, det.corners, det.ids, det.scores),
                                cs.design(grey, det.corners, det.ids, det.scores), atol=1e-4)
+
+
+def _grid(cols: int = 5, rows: int = 4, square: float = 16.0, origin=(20.3, 18.6)):
+    """A straight lattice of points (cols·rows, 2) px and their ids (col, row)."""
+    ids = np.array([(c, r) for r in range(rows) for c in range(cols)], np.int64)
+    return origin + ids.astype(np.float64) * square, ids
+
+
+def test_flat_noise_reads_the_noise_in_the_squares_middles_blind_to_shading():
+    rng = np.random.default_rng(3)
+    pts, ids = _grid()
+    y, x = np.mgrid[0:120, 0:140].astype(np.float64)
+    shaded = 60.0 + 0.4 * x + 0.2 * y  # a linear shading: no second difference
+    img = (shaded + rng.normal(0.0, 4.0, shaded.shape)).astype(np.float32)
+    got = flat_noise(img, pts, ids, 1.0)
+    assert got == pytest.approx(np.sqrt(16.0 + 1 / 12), rel=0.15)  # σ 4, and 8-bit rounding's floor
+    assert flat_noise(shaded.astype(np.float32), pts, ids, 1.0) == pytest.approx(np.sqrt(1 / 12), rel=1e-3)
+    line = ids[:, 1] == 0  # one row of corners: no square has all four
+    assert flat_noise(img, pts[line], ids[line], 1.0) == -1.0
+
+
+def test_blockiness_finds_jpeg_blocks_where_the_image_has_them():
+    import cv2
+
+    board = synthetic_board(PATTERN, square=30, angle=7.0)
+    noisy = _noisy(board, 3.0)
+    det = detect_corners(noisy, PATTERN)
+    pts = det.corners.astype(np.float64)
+    jpeg = cv2.imdecode(cv2.imencode(".jpg", noisy, [cv2.IMWRITE_JPEG_QUALITY, 10])[1], cv2.IMREAD_GRAYSCALE)
+    plain = blockiness(noisy, pts, 0, 0, 1e-3)
+    blocky = blockiness(jpeg, pts, 0, 0, 1e-3)
+    assert 0.9 < plain < 1.1 and blocky > 1.3
+    # a part of the image cut 3 px in: the blocks start 3 px earlier in its own pixels; with its origin given, the same
+    part = np.ascontiguousarray(jpeg[3:, 3:])
+    assert blockiness(part, pts - 3.0, 3, 3, 1e-3) == pytest.approx(blocky)
+    assert blockiness(part, pts - 3.0, 0, 0, 1e-3) < 0.9 * blocky
+
+
+def test_the_smoothed_asymmetry_is_small_for_white_noise_and_near_whole_for_a_smooth_slope():
+    fits, weights = cs._operators()
+    rng = np.random.default_rng(5)
+    pts = np.array([[10.0 + 9 * i, 12.0 + 9 * j] for i in range(8) for j in range(8)])
+    noise = rng.normal(0.5, 0.05, (90, 90)).astype(np.float32)
+    got = window_measures(noise, pts, np.full(len(pts), 3), fits, weights)
+    ratio = np.median(got[:, 5] / got[:, 0])
+    assert 0.25 < ratio < 0.5  # white noise: [1 2 1]² keeps about 0.4 of its asymmetry
+    y, x = np.mgrid[0:90, 0:90].astype(np.float64)
+    slope = (0.5 + 0.01 * x + 0.004 * y).astype(np.float32)  # odd about every point: a smooth asymmetry
+    got = window_measures(slope, pts, np.full(len(pts), 3), fits, weights)
+    np.testing.assert_allclose(got[:, 5] / got[:, 0], 1.0, rtol=1e-6)
+
+
+def test_sigma_grows_with_jpeg_compression_of_the_same_board(board):
+    import cv2
+
+    noisy = _noisy(board, 2.0)
+    sig = {}
+    for q in (95, 8):
+        img = cv2.imdecode(cv2.imencode(".jpg", noisy, [cv2.IMWRITE_JPEG_QUALITY, q])[1], cv2.IMREAD_GRAYSCALE)
+        sig[q] = np.median(detect_corners(img, PATTERN).sigmas)
+    assert sig[8] > 2 * sig[95]
