@@ -12,12 +12,16 @@ pipeline (:func:`aicalib_tf.detect_corners` with the 9×6 pattern) is scored as 
 - **candidates**: the share with a refined candidate within 1.5 px;
 - **grid**: the most true corners one assembled grid holds (straight seeds, then bent ones), a
   grid point counting when it is within 2 px of a true corner;
+- **rim**: whether a grid within the rim completion's reach (the pattern's extent, every point
+  on a true corner, up to ``rim.MAX_MISSING`` corners missing, all on the outer ring) is made a
+  full board by :func:`aicalib_tf.detect.chessboard.rim.rim_board` (placement and occlusion test);
 - **order**: whether the board order accepts a grid that holds every true corner.
 
 The stage blamed is the first that falls short: map (under 80% of the corners), candidates (under
-80%, or a fifth fewer than the map had), grid (no grid with every corner), order (a grid with every
-corner refused), else ``pipeline`` (the full-size stages find it: a scale, the quick pass or the
-zoom loses it). Prints one line per miss with these figures and the counts per condition and stage.
+80%, or a fifth fewer than the map had), grid (no grid with every corner, nor one within the rim
+completion's reach), rim (such a grid, not completed), order (a grid with every corner refused),
+else ``pipeline`` (the full-size stages find it: a scale, the quick pass or the zoom loses it).
+Prints one line per miss with these figures and the counts per condition and stage.
 """
 
 from __future__ import annotations
@@ -30,8 +34,9 @@ import numpy as np
 
 from aicalib_tf.bench.conditions import PATTERN, condition_samples, select_conditions
 from aicalib_tf.bench.metrics import board_detection_outcome
+from aicalib_tf.detect.chessboard.rim import MAX_MISSING, rim_board
 
-STAGES = ("map", "candidates", "grid", "order", "pipeline")
+STAGES = ("map", "candidates", "grid", "rim", "order", "pipeline")
 
 
 def _recall(truth: np.ndarray, pts: np.ndarray, tol: float) -> np.ndarray:
@@ -46,7 +51,8 @@ def trace(gray: np.ndarray, truth: np.ndarray, model, pattern=PATTERN, threshold
     """The full-size stages on ``gray`` (H, W) float32 against ``truth`` (cols·rows, 2) px.
 
     Returns {"map", "candidates"}: shares of true corners found; "grid": most true corners in one
-    grid; "grid_shape"; "accepted": a grid with every corner passes the board order; "stage".
+    grid; "grid_shape"; "rim_reach": a grid within the rim completion's reach; "rim": the rim
+    completion makes a full board; "accepted": a grid with every corner passes the board order; "stage".
     """
     from aicalib_tf.cnn.inference import weak_corner_points
     from aicalib_tf.detect import pipeline as pl
@@ -58,11 +64,12 @@ def trace(gray: np.ndarray, truth: np.ndarray, model, pattern=PATTERN, threshold
     refined, scores, weak = pl.refined_points(model, gray, threshold, smoothed=smoothed, min_points=pl.MIN_CORNERS,
                                               weak=pl.WEAK)
     out = {"map": float(_recall(truth, net, 3.0).mean()), "candidates": float(_recall(truth, refined, 1.5).mean()),
-           "grid": 0, "grid_shape": None, "accepted": False}
+           "grid": 0, "grid_shape": None, "rim_reach": False, "rim": False, "accepted": False}
     grids = []
     if len(refined) >= pl.MIN_CORNERS:
         smooth = smoothed.sigma(pl.RING_SIGMA)
-        propose = pl.proposer(smoothed, smooth, pl.typical_amplitude(smooth, refined, pl.MIN_CORNERS), weak=weak)
+        ref_amp = pl.typical_amplitude(smooth, refined, pl.MIN_CORNERS)
+        propose = pl.proposer(smoothed, smooth, ref_amp, weak=weak)
         limit = max(pattern) + 1
         grids = pl.assemble_grids(refined, scores, gray=smooth, propose=propose, limit=limit)
         grids += pl.assemble_grids(refined, scores, gray=smooth, propose=propose.bent, limit=limit, bend=True)
@@ -73,8 +80,20 @@ def trace(gray: np.ndarray, truth: np.ndarray, model, pattern=PATTERN, threshold
                 out["grid"], out["grid_shape"] = held, list(g.shape)
             if held == n and len(g) == n and pl.full_board(g, scores, pattern, smooth) is not None:
                 out["accepted"] = True
+            out["rim_reach"] |= on and _in_rim_reach(g, pattern)
+        out["rim"] = rim_board(grids, scores, pattern, smoothed, smooth, ref_amp) is not None
     out["stage"] = _blame(out, n)
     return out
+
+
+def _in_rim_reach(grid, pattern) -> bool:
+    """Whether ``grid`` has the pattern's extent (either way round) and misses 1 to ``MAX_MISSING``
+    positions, all on its outer ring: a grid the rim completion is asked to complete."""
+    a, b = grid.shape
+    if sorted((a, b)) != sorted(pattern) or not 0 < a * b - len(grid) <= MAX_MISSING:
+        return False
+    have = {(int(i), int(j)) for i, j in grid.ij}
+    return all(i in (0, a - 1) or j in (0, b - 1) for i in range(a) for j in range(b) if (i, j) not in have)
 
 
 def _blame(t: dict, n: int) -> str:
@@ -82,9 +101,9 @@ def _blame(t: dict, n: int) -> str:
         return "map"
     if t["candidates"] < 0.8 or t["candidates"] < t["map"] - 0.2:
         return "candidates"
-    if t["grid"] < n:
-        return "grid"
-    if not t["accepted"]:
+    if t["grid"] < n and not t["rim"]:
+        return "rim" if t["rim_reach"] else "grid"
+    if t["grid"] == n and not t["accepted"]:
         return "order"
     return "pipeline"
 
@@ -106,7 +125,7 @@ def run_condition(cond, count: int, model, show: bool) -> Counter:
         lab = s.label
         if show:
             print(f"  {cond.name} #{index}: {outcome}, {t['stage']}: map {t['map']:.2f} cand {t['candidates']:.2f} "
-                  f"grid {t['grid']}/{len(s.corners)} {t['grid_shape']} accepted {t['accepted']} | "
+                  f"grid {t['grid']}/{len(s.corners)} {t['grid_shape']} rim {t['rim_reach']}/{t['rim']} accepted {t['accepted']} | "
                   f"{lab['distortion_model']} {2 * (lab['max_theta_deg'] or 0):.0f}° reason {det.reason!r}", flush=True)
     return counts
 
