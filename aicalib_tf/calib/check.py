@@ -427,8 +427,9 @@ def format_check(result: CheckResult, *, source: str = "", total: int | None = N
     lines.append(f"  detects ({100 * POWER:g}% of the time): fx changed by {100 * result.detectable_fx:.2f}%, the "
                  f"principal point moved {result.detectable_pp:.1f} px")
     if result.inflation > 1.05:
-        lines.append(f"  (σ × {np.sqrt(result.inflation):.2f}: the new views scatter more than independent corner noise; "
-                     f"the tests take it from {len(result.views)} views, F with {result.test_dof:.0f} degrees of freedom)")
+        lines.append(f"  (σ × {np.sqrt(result.inflation):.2f}: the new views scatter more than independent corner "
+                     f"noise; the tests take it from {len(result.views)} views, F with {result.test_dof:.0f} "
+                     "degrees of freedom)")
     lines += [f"  note: {n}" for n in result.notes]
     lines += [f"  why: {f}" for f in result.failures]
     return "\n".join(lines)
