@@ -7,8 +7,8 @@ Three modes:
   views with Gaussian corner noise 0.15 px per axis (a 9x6 board, square 40 mm, at 0.4-0.8 m; the
   lens model forced to the truth's), then checks 15 new views under every condition of
   :data:`CONDITIONS` (what light, blur, distance and board size do to the corners: more noise,
-  noise stretched along a per-view motion direction, boards nearer or farther, a board printed at
-  another size with the same pattern), each seen by the same camera (``same``: a flag is a false
+  noise stretched along a per-view motion direction, an error field every corner of a view shares,
+  boards nearer or farther, a board printed at another size with the same pattern), each seen by the same camera (``same``: a flag is a false
   alarm), by fx × 1.01 (``fx+1%``) and with the principal point moved 3 px in a random direction
   (``pp 3px``).
 * ``--mode rendered``: the whole pipeline. ``data_gen.video`` renders a hand-held clip of a new
@@ -29,7 +29,7 @@ detects 95% of the time (``det fx%``, ``det pp``); ``reachable``: in how many tr
 the change (1% of fx, 3 px) was within what it detects, and the fraction flagged among those.
 
     .venv/bin/python benchmarks/field_check.py --trials 60
-    .venv/bin/python benchmarks/field_check.py --mode rendered --trials 40
+    .venv/bin/python benchmarks/field_check.py --mode rendered --trials 40 --cache /tmp/field_check_corners
     .venv/bin/python benchmarks/field_check.py --mode photos --photos tests/data/opencv_left --splits 100
 """
 
@@ -345,7 +345,7 @@ def main(argv=None) -> int:
     ap.add_argument("--photos", default=None, help="photos mode: a folder of real 9x6 photos of one camera")
     ap.add_argument("--splits", type=int, default=100)
     ap.add_argument("--cache", default=None, help="rendered mode: a folder where the detected corners are kept and "
-                    "reused (the check alone is measured again)")
+                    "reused (the check alone is measured again; empty it when the detector changes)")
     args = ap.parse_args(argv)
     print("condition | change | trials | flagged | drift test | lens test | noise px | det fx% | det pp px | reachable, flagged")
     if args.mode == "photos":
