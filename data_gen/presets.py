@@ -294,6 +294,60 @@ _add(Preset(
 ))
 
 
+_RIM_LAWS = (  # domain randomisation of the light and blur laws across the field
+    Rule.of("circle_falloff", 0.3, strength=(0.5, 1.0), power=(1.5, 5.0)),
+    Rule.of("rim_vignetting", 0.45, law=("cos4", "poly", "hard"), strength=(0.4, 1.0), edge=(0.5, 0.95)),
+    Rule.of("field_blur", 0.7, sigma_centre=(0.4, 1.2), sigma_rim=(0.8, 4.0), power=(0.8, 3.0)),
+)
+_add(Preset(
+    name="train_fisheye",
+    description="Training mix of equidistant fisheyes only (120–210°, most of them circular): boards from far to "
+                "close-up, 30–95% of the image circle and up to its rim, tilts to 65°; vignetting, rim "
+                "fall-off and field blur under randomised laws, low contrast, noise, JPEG.",
+    lens="fisheye",
+    fisheye_fov_deg=(120.0, 210.0),
+    fisheye_circular_from_deg=150.0,
+    cols_range=(3, 14),
+    rows_range=(3, 10),
+    pose=PoseConfig(tilt_max_deg=65.0, circle_fill=(0.3, 0.95), max_view_angle_deg=88.0),
+    clutter=(0.0, 2.0),
+    margin_range=(0.05, 1.0),
+    paper_black=(0.04, 0.4),
+    paper_white=(0.55, 0.95),
+    rules=_RIM_LAWS + (
+        Rule.of("gaussian_blur", 0.3, sigma=(0.4, 1.5)),
+        Rule.of("contrast", 0.3, factor=(0.3, 0.9)),
+        Rule.of("shot_noise", 0.2, photons=(100.0, 2000.0)),
+        Rule.of("gaussian_noise", 0.9, sigma=(1.0, 25.0)),
+        Rule.of("jpeg", 0.15, quality=(20, 80)),
+    ),
+))
+_add(Preset(
+    name="train_steep",
+    description="Training mix of steeply tilted boards (up to 80°, squares foreshortened to a few px) through "
+                "pinhole lenses with every distortion, partly out of frame at times; the train preset's "
+                "degradations plus randomised vignetting and field-blur laws.",
+    hfov_deg=(40.0, 120.0),
+    distortion=("none", "mild", "mild", "strong", "pincushion"),
+    cols_range=(3, 16),
+    rows_range=(3, 12),
+    pose=PoseConfig(tilt_max_deg=80.0, fill=(0.3, 0.95), max_view_angle_deg=88.0),
+    partial_probability=0.2,
+    clutter=(0.0, 3.0),
+    margin_range=(0.05, 1.0),
+    rules=(
+        Rule.of("rim_vignetting", 0.2, law=("cos4", "poly"), strength=(0.3, 0.9), edge=(0.7, 1.0)),
+        Rule.of("field_blur", 0.2, sigma_centre=(0.4, 1.0), sigma_rim=(0.8, 2.5), power=(1.0, 2.0)),
+        Rule.of("contrast", 0.2, factor=(0.2, 0.8)),
+        Rule.of("gaussian_blur", sigma=(0.4, 2.0)),
+        Rule.of("motion_blur", 0.1, length=(2.0, 6.0)),
+        Rule.of("shot_noise", 0.2, photons=(100.0, 2000.0)),
+        Rule.of("gaussian_noise", 0.8, sigma=(1.0, 30.0)),
+        Rule.of("jpeg", 0.15, quality=(20, 80)),
+    ),
+))
+
+
 def get_preset(name: str | Preset, **overrides) -> Preset:
     """Look up a preset by name (or pass one through), optionally with fields replaced."""
     if isinstance(name, Preset):
