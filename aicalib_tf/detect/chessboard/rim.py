@@ -92,24 +92,44 @@ def _place(cells: dict, pred: np.ndarray, step: float, smoothed: Smoothed, ring_
            ref_amp: float):
     """(2,) px: the corner the saddle fit finds at ``pred`` with the smallest local ``step`` px, or None.
 
-    Windows from the step's down to 2 px until the fit holds within ``SHIFT``·step; kept when its ring
+    Windows from the step's down to 2 px until the fit holds within ``SHIFT``·step; where none does
+    from ``pred``, the fit starts again from 16 points about it (``_starts``); kept when its ring
     (0.3 step) keeps ``RIM_GATE``·``ref_amp`` and no point of ``cells`` is within half a step."""
     h, w = ring_image.shape
     if not (step >= 2.0 and 1 <= pred[0] <= w - 2 and 1 <= pred[1] <= h - 2):
         return None
-    for radius in range(int(window_radius(np.array([step]))[0]), 1, -1):  # the squeezed direction may be
-        # narrower than the smallest step says: ever smaller windows (2 px the least)
-        q, ok = refine_windowed(smoothed, pred[None], np.array([radius / 0.45]),
-                                max_shift=np.array([SHIFT * step]), restarts=False)
-        if ok[0]:
-            break
-    else:
+    q = _saddle(smoothed, pred[None], pred, step)
+    q = _saddle(smoothed, _starts(pred, step), pred, step) if q is None else q
+    if q is None:
         return None
-    amp, _ = ring_symmetry(ring_image, q.astype(np.float64), np.array([max(1.5, 0.3 * step)]))
+    amp, _ = ring_symmetry(ring_image, q[None].astype(np.float64), np.array([max(1.5, 0.3 * step)]))
     others = np.array(list(cells.values()))
-    if amp[0] < RIM_GATE * ref_amp or np.min(np.hypot(*(others - q[0]).T)) < 0.5 * step:
+    if amp[0] < RIM_GATE * ref_amp or np.min(np.hypot(*(others - q).T)) < 0.5 * step:
         return None
-    return q[0].astype(np.float64)
+    return q.astype(np.float64)
+
+
+def _saddle(smoothed: Smoothed, starts: np.ndarray, pred: np.ndarray, step: float):
+    """(2,) px: the saddle fit from ``starts`` (M, 2) px that ends nearest ``pred`` within ``SHIFT``·step,
+    in the largest window (from the step's down to 2 px: the squeezed direction may be narrower
+    than the smallest step says) where any does; or None."""
+    for radius in range(int(window_radius(np.array([step]))[0]), 1, -1):
+        q, ok = refine_windowed(smoothed, starts, np.full(len(starts), radius / 0.45), restarts=False)
+        d = np.hypot(*(q - pred).T)
+        ok &= d <= SHIFT * step
+        if ok.any():
+            return q[np.flatnonzero(ok)[np.argmin(d[ok])]]
+    return None
+
+
+def _starts(pred: np.ndarray, step: float) -> np.ndarray:
+    """(16, 2) px: points 1 and 2 window radii from ``pred`` in 8 directions. A rim corner where the
+    lines' steps shrink faster than their last ratio says lies up to about a fifth of a step from
+    the prediction, beyond the reach of a fit window that fits its squares."""
+    r = float(window_radius(np.array([step]))[0])
+    ang = np.arange(8) * np.pi / 4
+    ring = np.stack([np.cos(ang), np.sin(ang)], 1)
+    return np.concatenate([pred + r * ring, pred + 2 * r * ring])
 
 
 def unlike_neighbours(points: np.ndarray, ring_image: np.ndarray) -> np.ndarray:
