@@ -10,11 +10,12 @@ outer ring, and is no full board.
 :func:`complete_rim` places those few corners where the grid's lines lead: each is extrapolated
 from the two or three corners inwards of it along every grid line through it (by the ratio of the
 lines' last steps, as squares shrink towards the rim), refined by the saddle fit in a window that
-fits the corner's smallest step (windows down to 2 px where that fit fails: the squeezed direction),
-and kept only when the fit stays within a third of that step, the ring about it keeps ``RIM_GATE``
-of a typical corner's amplitude, and it is no other corner's point. A board's corner is predicted
-by its cell's parallelogram (its two neighbours on the ring and the diagonal one inside). A grid missing more than ``MAX_MISSING`` corners, or any inside its outer
-ring, is left as it is.
+fits the corner's smallest step (windows down to 2 px where that fit fails: the squeezed direction;
+started again from points about the prediction where no window holds at it), and kept only when
+the fit stays within a third of that step, the ring about it keeps ``RIM_GATE`` of a typical
+corner's amplitude, and it is no other corner's point. A board's corner is predicted by its cell's
+parallelogram (its two neighbours on the ring and the diagonal one inside). A grid missing more
+than ``MAX_MISSING`` corners, or any inside its outer ring, is left as it is.
 
 A full board claims every corner in view. Where an object in front cuts the board, the grid may
 hold points on the object's edge and miss a corner beside it, which this completion would then
