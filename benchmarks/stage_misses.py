@@ -59,7 +59,8 @@ def trace(gray: np.ndarray, truth: np.ndarray, model, pattern=PATTERN, threshold
 
     n = len(truth)
     strong, _, lower = weak_corner_points(model, gray, threshold, pl.WEAK * threshold)
-    net = np.concatenate([strong.reshape(-1, 2), np.asarray(lower()[0]).reshape(-1, 2)])
+    weaker = lower()  # the points under the threshold, or nothing when the map has none
+    net = np.concatenate([strong.reshape(-1, 2)] + ([np.asarray(weaker[0]).reshape(-1, 2)] if len(weaker) else []))
     smoothed = pl.Smoothed(gray, None)
     refined, scores, weak = pl.refined_points(model, gray, threshold, smoothed=smoothed, min_points=pl.MIN_CORNERS,
                                               weak=pl.WEAK)
