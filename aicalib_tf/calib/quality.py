@@ -31,6 +31,7 @@ teardown took 0.4 s of a 3.3 s ``calibrate``).
 from __future__ import annotations
 
 import inspect
+import math
 
 import cv2
 import numpy as np
@@ -38,6 +39,7 @@ import numpy as np
 from aicalib_tf.calib.coverage import covered_mask, in_circle, rim_gaps, uncovered_regions
 from aicalib_tf.calib.diff import grid_points, projection_diff, rotation_compensated_diff, split_views
 from aicalib_tf.geometry import lens as L
+from aicalib_tf.geometry.image_circle import boards_reach_deg, circle_fov_deg
 from aicalib_tf.geometry.pattern import board_points
 
 __all__ = ["lens_of", "grid_points", "projection_uncertainty", "verdict",
@@ -356,7 +358,8 @@ def assess(cal, views, *, fit=None, split="evenodd", grid=(32, 24), choose=None)
     Returns {"sigma_px": {"median_covered", "max_covered", "median_all", "max_all"} (or None
     without a covariance), "covered_fraction", "uncovered": [region names], "half": {"split",
     "median_covered", "mean_covered", "median_all", "mean_all", "predicted_median_covered"} or
-    None, "verdict": str}. Grids and arrays are left out so the dict is JSON-able.
+    None, "verdict": str, "boards_reach_deg", "circle_fov_deg" (:func:`field_of_view_fields`)}. Grids
+    and arrays are left out so the dict is JSON-able.
     """
     used = [v for v in views if v.name in set(cal.views)] or list(views)
     circle = getattr(cal, "image_circle", None)
@@ -389,7 +392,17 @@ def assess(cal, views, *, fit=None, split="evenodd", grid=(32, 24), choose=None)
             half["predicted_median_covered"] = None
     return {"sigma_px": sig, "covered_fraction": float(np.mean(covered[inside])) if inside.any() else 0.0,
             "uncovered": uncovered_regions(used, cal.image_size, circle), "half": half,
-            "verdict": verdict(cal, used, sigma=sigma, half=half, grid=grid)}
+            "verdict": verdict(cal, used, sigma=sigma, half=half, grid=grid), **field_of_view_fields(cal, used)}
+
+
+def field_of_view_fields(cal, views) -> dict:
+    """{"boards_reach_deg": the largest off-axis angle of the ``views``' corners through the model, or None,
+    "circle_fov_deg": the image circle's diameter in degrees continued past that reach
+    (:func:`~aicalib_tf.geometry.image_circle.circle_fov_deg`), or None without an image circle}."""
+    lens, circle = lens_of(cal), getattr(cal, "image_circle", None)
+    reach = boards_reach_deg(lens, np.concatenate([v.corners for v in views])) if views else math.nan
+    fov = circle_fov_deg(lens, circle, reach) if circle is not None else None
+    return {"boards_reach_deg": reach if math.isfinite(reach) else None, "circle_fov_deg": fov}
 
 
 def _half_choice(choose, views, models) -> str | None:

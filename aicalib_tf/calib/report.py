@@ -44,16 +44,27 @@ def field_of_view(cal: Calibration) -> tuple[float, float]:
     return fov["horizontal"], fov["vertical"]
 
 
-def fov_line(cal: Calibration) -> str:
+def fov_line(cal: Calibration, views: list[View] | None = None) -> str:
     """The report's field-of-view line: the image circle's diameter in degrees when the calibration
-    has one, then horizontal x vertical (marked when an edge lies beyond the model's range)."""
+    has one, then horizontal x vertical (marked when an edge lies beyond the model's range).
+
+    The circle's diameter is continued past the boards' reach with the model's slope there
+    (:func:`~aicalib_tf.geometry.image_circle.circle_fov_deg`) and marked as extrapolated when the rim lies
+    beyond it; the reach is ``cal.quality``'s ``boards_reach_deg``, else that of ``views``' corners.
+    """
     lens, circle = Q.lens_of(cal), getattr(cal, "image_circle", None)
     fov = lens.field_of_view(circle)
     text = f"field of view {fov['horizontal']:.1f}° x {fov['vertical']:.1f}° (horizontal x vertical)"
     if fov["beyond_model"]:
         text += f"; the frame's edges lie beyond the model's range (counted at its widest, {np.degrees(lens.max_angle()):.0f}°)"
     if circle is not None:
-        text = (f"field of view {circle_fov_deg(lens, circle):.1f}° across the image circle (centre {circle.cx:.1f}, "
+        reach = (getattr(cal, "quality", None) or {}).get("boards_reach_deg")
+        if reach is None and views:
+            reach = Q.field_of_view_fields(cal, views)["boards_reach_deg"]
+        across = circle_fov_deg(lens, circle, reach)
+        beyond = (f" (beyond the boards' {2 * reach:.0f}°: extrapolated)"
+                  if reach is not None and np.isfinite(reach) and across > 2 * reach + 0.05 else "")
+        text = (f"field of view {across:.1f}° across the image circle{beyond} (centre {circle.cx:.1f}, "
                 f"{circle.cy:.1f}, radius {circle.radius:.1f} px); " + text.removeprefix("field of view "))
     return text
 
@@ -144,7 +155,7 @@ def format_report(cal: Calibration, views: list[View], *, skipped: dict | None =
     lines.append(f"cx = {cal.cx:.2f} ± {s.get('cx', 0):.2f}   cy = {cal.cy:.2f} ± {s.get('cy', 0):.2f}   (px)")
     names = L.COEFF_NAMES[Q.lens_of(cal).model]
     lines.append("dist: " + "  ".join(f"{n} = {v:+.5f} ± {s.get(n, 0):.5f}" for n, v in zip(names, cal.dist)))
-    lines.append(fov_line(cal))
+    lines.append(fov_line(cal, views))
     for w in calibration_warnings(cal, views):
         lines.append(f"warning: {w}")
     quality = getattr(cal, "quality", None) or Q.assess(cal, views)

@@ -186,6 +186,21 @@ def test_report_of_a_circular_fisheye_gives_the_circles_field_of_view_and_no_cor
     assert any("image corners" in w for w in no_circle)
 
 
+def test_fov_line_says_when_the_image_circles_rim_lies_beyond_the_boards_reach():
+    from aicalib_tf.calib.report import fov_line
+
+    views = synthetic_views(CIRCLE_LENS, 6, 0.0, seed=1, distance=(0.15, 0.3))
+    angles = lambda v: np.degrees(np.arccos(CIRCLE_LENS.unproject(v.corners)[:, 2]))  # noqa: E731
+    near = [type(v)(v.name, v.corners[angles(v) <= 70], v.ids[angles(v) <= 70]) for v in views]
+    cal = _circular_cal()
+    fields = Q.field_of_view_fields(cal, near)
+    assert 60 < fields["boards_reach_deg"] <= 70 and fields["circle_fov_deg"] == pytest.approx(185.0, abs=1e-6)
+    line = fov_line(cal, near)
+    assert f"185.0° across the image circle (beyond the boards' {2 * fields['boards_reach_deg']:.0f}°: extrapolated)" in line
+    cal.quality = {"boards_reach_deg": 95.0}  # the reach camera.json carries is the one used; the rim within it
+    assert "185.0° across the image circle (centre" in fov_line(cal, near)
+
+
 def test_assess_lets_each_half_choose_between_the_chosen_model_and_the_other_familys_best():
     import dataclasses
 
