@@ -1,0 +1,89 @@
+"""The field of view across a circular fisheye's image circle when the rim lies beyond the boards'
+reach: the fitted model's own extrapolation against the first-order continuation past the reach
+(:func:`aicalib_tf.geometry.image_circle.circle_fov_deg`), on corner-level synthetic truth.
+
+    .venv/bin/python benchmarks/circle_fov.py [--families equidistant ds eucm] [--fit equidistant|same]
+        [--seeds 4] [--noise 0.3]
+
+Per true lens family (equidistant k = 0; ds xi -0.2, alpha 0.6; eucm alpha 0.6, beta 1.1), field of
+view 180, 190, 200° on 1280x960 px with its image circle (radius 470 px, centred), boards (9x6,
+:func:`tests.calib.synthetic.synthetic_views`) whose corners are kept only up to 70, 80 or 88°
+off-axis (true rays), 20 views, corner noise --noise px. One fit (:func:`aicalib_tf.calib.fit.fit_views`,
+model --fit; ``same``: the true family); the reach is :func:`boards_reach_deg` through the fit. Prints
+each run and, per family and reach, the |error| mean/max (degrees) of the circle's field of view
+through the model alone and with the continuation.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from aicalib_tf.calib.fit import View, fit_views  # noqa: E402
+from aicalib_tf.geometry import lens as L  # noqa: E402
+from aicalib_tf.geometry.image_circle import ImageCircle, boards_reach_deg, circle_fov_deg  # noqa: E402
+from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views  # noqa: E402
+
+SIZE = (1280, 960)
+CIRCLE = ImageCircle(640.0, 480.0, 470.0)
+COEFFS = {"equidistant": [0.0, 0.0, 0.0, 0.0], "ds": [-0.2, 0.6], "eucm": [0.6, 1.1]}
+
+
+def true_lens(family: str, fov_deg: float) -> L.Lens:
+    """The ``family`` lens whose ray fov/2 off-axis lands on the circle's rim."""
+    t = math.radians(fov_deg / 2)
+    unit = L.Lens(family, np.eye(3), COEFFS[family], SIZE)
+    f = CIRCLE.radius / unit.project(np.array([[math.sin(t), 0.0, math.cos(t)]]))[0, 0]
+    return L.Lens(family, [[f, 0, CIRCLE.cx], [0, f, CIRCLE.cy], [0, 0, 1]], COEFFS[family], SIZE)
+
+
+def off_axis_deg(lens: L.Lens, uv: np.ndarray) -> np.ndarray:
+    """(N,) degrees off-axis of the rays of pixels ``uv``."""
+    r = lens.unproject(uv)
+    return np.degrees(np.arctan2(np.hypot(r[:, 0], r[:, 1]), r[:, 2]))
+
+
+def run(family: str, fov: float, reach: float, model: str, seed: int, noise: float) -> tuple[float, float, float]:
+    """(model's own error, continued error, reach through the fit) in degrees for one trial."""
+    truth, rng = true_lens(family, fov), np.random.default_rng(seed)
+    views = []
+    for v in synthetic_views(truth, n=60, noise=0.0, seed=rng, distance=(0.25, 0.5)):
+        ok = off_axis_deg(truth, v.corners) <= reach
+        if ok.sum() >= 20 and len(views) < 20:
+            views.append(View(v.name, v.corners[ok] + noise * rng.standard_normal((int(ok.sum()), 2)), v.ids[ok]))
+    cal = fit_views(views, PATTERN, SQUARE, SIZE, family if model == "same" else model)
+    fit = L.Lens(cal.model, cal.K, cal.dist, SIZE)
+    got = boards_reach_deg(fit, np.concatenate([v.corners for v in views]))
+    true = circle_fov_deg(truth, CIRCLE)
+    return circle_fov_deg(fit, CIRCLE) - true, circle_fov_deg(fit, CIRCLE, got) - true, got
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--families", nargs="+", default=["equidistant", "ds", "eucm"], choices=sorted(COEFFS))
+    ap.add_argument("--fit", default="equidistant", help="the fitted model, or 'same' (the true family)")
+    ap.add_argument("--seeds", type=int, default=4)
+    ap.add_argument("--noise", type=float, default=0.3)
+    args = ap.parse_args(argv)
+    for family in args.families:
+        for reach in (70.0, 80.0, 88.0):
+            rows = []
+            for fov in (180.0, 190.0, 200.0):
+                for seed in range(args.seeds):
+                    rows.append(run(family, fov, reach, args.fit, seed, args.noise))
+                    print(f"{family} fov {fov:.0f} reach {reach:.0f} seed {seed}: model {rows[-1][0]:+.1f} "
+                          f"continued {rows[-1][1]:+.1f} (reach through the fit {rows[-1][2]:.1f})", flush=True)
+            e = np.abs(np.array(rows)[:, :2])
+            print(f"== {family} reach {reach:.0f} (fit {args.fit}, {len(rows)} runs): |error| mean/max model "
+                  f"{e[:, 0].mean():.1f}/{e[:, 0].max():.1f}, continued {e[:, 1].mean():.1f}/{e[:, 1].max():.1f} deg")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
