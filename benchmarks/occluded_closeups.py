@@ -9,10 +9,12 @@ time): a blob (star-convex polygon) or a bar (4 × 0.7 of its radius), radius 0.
 corner's nearest step, grey 0.05–0.95, as data_gen's occluders but sized to the rim's corners.
 The corners under it or within 2 px of its outline are hidden (``data_gen.occlude.occluded``).
 
-Each render goes through :func:`aicalib_tf.detect_corners` twice: as shipped, and with the rim
-completion (:func:`aicalib_tf.detect.chessboard.rim.rim_board`) switched off. Printed per run: full
-boards, full boards with a wrong id (a corner over 2 px from its true place), full boards that
-claim a hidden corner within 2 px of it, and each scene where the two runs differ.
+Each render goes through :func:`aicalib_tf.detect_corners` three times: as shipped, with the
+object test (:func:`aicalib_tf.detect.chessboard.occlusion.object_in_front`) switched off, and with
+the rim completion (:func:`aicalib_tf.detect.chessboard.rim.rim_board`) switched off. Printed per
+run: full boards, full boards with a wrong id (a corner over 2 px from its true place; also by the
+render's object number, 0 … per − 1, so that object 2 can be held out of tuning), full boards that
+claim a hidden corner within 2 px of it, and each scene where the runs differ.
 """
 
 from __future__ import annotations
@@ -83,27 +85,34 @@ def main(argv=None) -> int:
     from aicalib_tf import detect_corners
     from aicalib_tf.detect import pipeline
 
-    shipped = pipeline.rim_board
-    runs = {"shipped": shipped, "rim off": lambda *a, **k: None}
-    counts = {name: {"full": 0, "full, wrong": 0, "full, hidden": 0} for name in runs}
+    def never(*_a, **_k):
+        return None  # no rim board; no object in front (falsy)
+
+    runs = {"shipped": {}, "object test off": {"object_in_front": never, "object_in_front_at": never},
+            "rim off": {"rim_board": never}}
+    shipped = {name: getattr(pipeline, name) for name in ("rim_board", "object_in_front", "object_in_front_at")}
+    counts = {name: {"full": 0, "full, wrong": 0, "full, hidden": 0, "wrong by object": [0] * args.per} for name in runs}
     total = 0
     for key, img, truth, visible in scenes(select_conditions(args.condition)[0], args.count, args.per):
         got = {}
-        for name, rim in runs.items():
-            pipeline.rim_board = rim  # the search looks the stage up in its module at each call
+        for name, patch in runs.items():
+            for attr, value in patch.items():  # the search looks its stages up in its module at each call
+                setattr(pipeline, attr, value)
             try:
                 got[name] = outcome(detect_corners(img, PATTERN), truth, visible)
             finally:
-                pipeline.rim_board = shipped
+                for attr, value in shipped.items():
+                    setattr(pipeline, attr, value)
             if got[name].startswith("full"):
                 counts[name]["full"] += 1
                 counts[name][got[name]] += got[name] != "full"
+                counts[name]["wrong by object"][key[1]] += got[name] == "full, wrong"
         total += 1
         if len(set(got.values())) > 1:
             print(f"  {args.condition} #{key[0]} object {key[1]} ({int((~visible).sum())} hidden): {got}", flush=True)
     for name, c in counts.items():
-        print(f"{name}: {total} renders, {c['full']} full boards, {c['full, wrong']} with a wrong id, "
-              f"{c['full, hidden']} claiming a hidden corner")
+        print(f"{name}: {total} renders, {c['full']} full boards, {c['full, wrong']} with a wrong id "
+              f"(objects 0, 1, ...: {c['wrong by object']}), {c['full, hidden']} claiming a hidden corner")
     return 0
 
 

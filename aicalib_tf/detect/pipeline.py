@@ -82,7 +82,9 @@ with ``bend`` (:func:`aicalib_tf.detect.chessboard.grid.assemble_grids`); only a
 network's weak points (``WEAK``) confirm saddles the ring test fails at the dark rim (``proposer``'s ``bent``).
 A grid of either assembly holding the pattern but up to 3 corners of its outer ring gets them placed
 (:func:`aicalib_tf.detect.chessboard.rim.rim_board`), kept only when every corner shows an X-junction like its
-neighbours' (an object in front of the board does not).
+neighbours' (an object in front of the board does not). Any full board with a corner on an object's edge
+(:func:`aicalib_tf.detect.chessboard.occlusion.object_in_front`: sectors out of the board's alternation
+and a ring unlike its neighbours') is passed over, on its scale and again at full size.
 
 Without ``pattern_size``, the largest grid with every corner found is returned, complete, its
 size taken as the pattern (columns counted along the grid direction nearer the image's x axis,
@@ -106,6 +108,7 @@ from aicalib_tf.detect.corners.sigma import with_sigmas
 from aicalib_tf.detect.chessboard.grid import MIN_CORNERS, Grid, assemble_grids, full_subgrid
 from aicalib_tf.detect.corners.junctions import dedupe, nearest_spacing, proposer, typical_amplitude
 from aicalib_tf.detect.chessboard.lattice import drop_outliers
+from aicalib_tf.detect.chessboard.occlusion import object_in_front, object_in_front_at
 from aicalib_tf.detect.chessboard.partial import partial_board, relative_board
 from aicalib_tf.detect.chessboard.rim import rim_board
 from aicalib_tf.detect.pyramid import Frame, boards_coarse_to_fine, quick_scales, quick_shift, refine_full, scales, to_full
@@ -238,6 +241,8 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
                 reason = reason if f in quick else max(reason, NO_MATCH, key=REASONS.index)
                 continue
             det = replace(det, corners=corners, image_size=(w, h))
+            if det.complete and pattern_size is not None and object_in_front_at(frame.region, (w, h), corners, pattern_size):
+                continue  # at full size, a corner on an object's edge: the finer scales
         if det.complete and pattern_size is not None:
             return with_sigmas(det, frame)
         if f in quick:  # a quick pass counts only with a complete board
@@ -300,6 +305,13 @@ def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed:
     return out if weak is None else (*out, lower)
 
 
+def _clear_full_board(grid: Grid, scores: np.ndarray, pattern_size: tuple[int, int], smooth: np.ndarray):
+    """:func:`full_board`'s board, or None where one of its corners is an object's edge
+    (:func:`aicalib_tf.detect.chessboard.occlusion.object_in_front`): the assembly then goes on."""
+    board = full_board(grid, scores, pattern_size, smooth)
+    return None if board is None or object_in_front(board[0], pattern_size, smooth) else board
+
+
 def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, threshold: float,
                second_look=None, partial_above: int = 0, relative: bool = False, full_only: bool = False) -> Detection:
     """:func:`detect_corners` on one scale: gray (H, W) float32, pattern already checked.
@@ -334,7 +346,7 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
 
     def is_board(grid: Grid) -> bool:  # the first grid assembled that is the full board ends the assembly
         nonlocal board
-        board = full_board(grid, scores, pattern_size, smooth)
+        board = _clear_full_board(grid, scores, pattern_size, smooth)
         return board is not None
 
     # grow one step past the pattern so that a bigger board shows itself and is rejected
