@@ -48,9 +48,9 @@ def fov_line(cal: Calibration, views: list[View] | None = None) -> str:
     """The report's field-of-view line: the image circle's diameter in degrees when the calibration
     has one, then horizontal x vertical (marked when an edge lies beyond the model's range).
 
-    The circle's diameter is continued past the boards' reach with the model's slope there
-    (:func:`~aicalib_tf.geometry.image_circle.circle_fov_deg`) and marked as extrapolated when the rim lies
-    beyond it; the reach is ``cal.quality``'s ``boards_reach_deg``, else that of ``views``' corners.
+    The circle's diameter comes from the model (:func:`~aicalib_tf.geometry.image_circle.circle_fov_deg`)
+    and is marked as extrapolated when the rim lies beyond the boards' reach: ``cal.quality``'s
+    ``boards_reach_deg``, else that of ``views``' corners.
     """
     lens, circle = Q.lens_of(cal), getattr(cal, "image_circle", None)
     fov = lens.field_of_view(circle)
@@ -61,7 +61,7 @@ def fov_line(cal: Calibration, views: list[View] | None = None) -> str:
         reach = (getattr(cal, "quality", None) or {}).get("boards_reach_deg")
         if reach is None and views:
             reach = Q.field_of_view_fields(cal, views)["boards_reach_deg"]
-        across = circle_fov_deg(lens, circle, reach)
+        across = circle_fov_deg(lens, circle)
         beyond = (f" (beyond the boards' {2 * reach:.0f}°: extrapolated)"
                   if reach is not None and np.isfinite(reach) and across > 2 * reach + 0.05 else "")
         text = (f"field of view {across:.1f}° across the image circle{beyond} (centre {circle.cx:.1f}, "

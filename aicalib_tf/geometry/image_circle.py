@@ -308,7 +308,8 @@ def circle_fov_deg(lens, circle: ImageCircle, reach_deg: float | None = None) ->
 
     reach_deg : how far the boards reach off-axis (:func:`boards_reach_deg`); a rim point beyond it
     gets r(θ) continued with the model's slope at reach (first order) instead of the model's own
-    extrapolation (a polynomial's can bend far off past its data). None or NaN: the model throughout.
+    extrapolation. None or NaN (the report's choice): the model throughout. ``benchmarks/circle_fov.py``
+    compares the two: the continuation is better only where the true r(θ) is linear past the reach.
     """
     theta = _rim_angles_deg(lens, circle)
     theta = np.where(np.isfinite(theta), theta, math.degrees(lens.max_angle()))

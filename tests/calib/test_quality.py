@@ -218,3 +218,22 @@ def test_assess_lets_each_half_choose_between_the_chosen_model_and_the_other_fam
     assert asked == [("plumb_bob", "equidistant")] * 2 and q["half"]["models"] == ["plumb_bob", "equidistant"]
     assert "different lens-model families (plumb_bob and equidistant)" in q["verdict"]
     assert "models" not in Q.assess(cal, views, fit=FIT)["half"]
+
+
+def test_the_circles_field_of_view_is_the_models_own_past_the_boards_reach():
+    """A lens whose r(θ) steepens past the boards (k1 > 0) keeps the model's figure (its true field of view),
+    not the slope continuation, which reads it wider."""
+    import dataclasses
+
+    from aicalib_tf.geometry.image_circle import circle_fov_deg
+
+    cal = _circular_cal()
+    steep = L.Lens("equidistant", CIRCLE_LENS.K, [0.02, 0.002, 0.0, 0.0], SIZE)
+    cal.dist = steep.dist
+    views = synthetic_views(steep, 6, 0.0, seed=1, distance=(0.15, 0.3))
+    angles = lambda v: np.degrees(np.arccos(steep.unproject(v.corners)[:, 2]))  # noqa: E731
+    near = [dataclasses.replace(v, corners=v.corners[angles(v) <= 70], ids=v.ids[angles(v) <= 70]) for v in views]
+    fields = Q.field_of_view_fields(cal, near)
+    own = circle_fov_deg(steep, cal.image_circle)
+    assert fields["circle_fov_deg"] == pytest.approx(own, abs=1e-9)
+    assert circle_fov_deg(steep, cal.image_circle, fields["boards_reach_deg"]) > own + 1.0
