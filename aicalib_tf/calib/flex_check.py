@@ -20,9 +20,9 @@ Measured (``benchmarks/board_flex.py``, 20 views, 10 sequences a sag): every fle
 kept at noise 0.1 px and 29 of 30 at 0.2 px (the one left flat has |s| = 2.3σ_s), none of a flat
 board's. Over 24 random half-splits of the real sets (``benchmarks/real_split_noise.py``) it keeps 7 of
 48 halves' flexes on OpenCV's left photos, 7 of 48 on the 185° fisheye and 42 of 48 on the bent udacity
-board; the halves differ (median) by 0.31, 0.48 and 2.2 px (flat boards 0.27, 0.48 and 4.2; the
-projection-shift rule this replaced 0.30, 0.64 and 1.8: on udacity's halves of 9 views the sag is
-−0.03 to −0.10 squares, and a few halves' own views leave it within 2.3 standard errors).
+board; the halves differ (median) by 0.31, 0.48 and 2.2 px (flat boards 0.27, 0.48 and 4.2; on
+udacity's halves of 9 views the sag is −0.03 to −0.10 squares, and a few halves' own views leave it
+within 2.3 standard errors, so one half keeps the flex and the other does not).
 """
 
 from __future__ import annotations

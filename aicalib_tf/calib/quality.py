@@ -397,8 +397,8 @@ def assess(cal, views, *, fit=None, split="evenodd", grid=(32, 24), choose=None)
 
 def field_of_view_fields(cal, views) -> dict:
     """{"boards_reach_deg": the largest off-axis angle of the ``views``' corners through the model, or None,
-    "circle_fov_deg": the image circle's diameter in degrees through the model, extrapolated past that reach
-    (:func:`~aicalib_tf.geometry.image_circle.circle_fov_deg`), or None without an image circle}."""
+    "circle_fov_deg": the image circle's diameter in degrees through the model (its own extrapolation past
+    that reach; :func:`~aicalib_tf.geometry.image_circle.circle_fov_deg`), or None without an image circle}."""
     lens, circle = lens_of(cal), getattr(cal, "image_circle", None)
     reach = boards_reach_deg(lens, np.concatenate([v.corners for v in views])) if views else math.nan
     fov = circle_fov_deg(lens, circle) if circle is not None else None

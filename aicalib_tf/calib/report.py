@@ -62,7 +62,7 @@ def fov_line(cal: Calibration, views: list[View] | None = None) -> str:
         if reach is None and views:
             reach = Q.field_of_view_fields(cal, views)["boards_reach_deg"]
         across = circle_fov_deg(lens, circle)
-        beyond = (f" (beyond the boards' {2 * reach:.0f}°: extrapolated)"
+        beyond = (f" (beyond the boards' reach, {reach:.0f}° off-axis: extrapolated)"
                   if reach is not None and np.isfinite(reach) and across > 2 * reach + 0.05 else "")
         text = (f"field of view {across:.1f}° across the image circle{beyond} (centre {circle.cx:.1f}, "
                 f"{circle.cy:.1f}, radius {circle.radius:.1f} px); " + text.removeprefix("field of view "))

@@ -8,8 +8,9 @@ there and no uncertainty or undistortion means anything there.
 * :func:`estimate_image_circle`: the circle from the mean of the photos (a dark ring around a
   bright disk), or None for photos that fill the frame; :func:`find_image_circle` also says why
   none was found where the frame's corners are dark (the calibration then uses the full frame).
-* :func:`circle_fov_deg`: the circle's diameter in degrees, through a lens model; beyond the boards'
-  reach (:func:`boards_reach_deg`) continued with the model's slope there.
+* :func:`circle_fov_deg`: the circle's diameter in degrees, through a lens model (optionally continued
+  past the boards' reach, :func:`boards_reach_deg`, with the model's slope there: a comparison that
+  ``benchmarks/circle_fov.py`` measures; the report prints the model's own figure).
 * :func:`circle_problem`: whether a lens model and a circle agree (a sentence when they do not).
 
 Pure numpy/OpenCV.
@@ -32,6 +33,7 @@ DARK_FRACTION = 0.25  # the threshold, from the black level towards the disk's m
 MIN_DARK_CORNERS = 3  # of the frame's 4 corners, how many must be black for a circle
 MAX_BLACK = 0.2  # the black level (1st percentile) is at most this share of the disk's median brightness
 MAX_RESIDUAL = 1.5  # px at the averaged size: the boundary's median distance from the fitted circle
+CONSENSUS_TRIALS = 300  # three-point circles drawn (fixed seed) for the consensus start
 MIN_ON_CIRCLE = 0.5  # the least share of the boundary's points that must lie on the circle
 EXTEND_STEP_DEG = 2.0  # degrees below the boards' reach over which the rim's first-order extension takes its slope
 
@@ -106,12 +108,12 @@ def _fit_circle(pts: np.ndarray) -> tuple[float, float, float]:
     return float(cx), float(cy), float(np.sqrt(max(c + cx * cx + cy * cy, 0.0)))
 
 
-def _robust_circle(pts: np.ndarray, trials: int = 300) -> tuple[float, float, float, float] | None:
+def _robust_circle(pts: np.ndarray) -> tuple[float, float, float, float] | None:
     """(cx, cy, r, median |residual|) of the circle most of the (N, 2) boundary points ``pts`` agree on,
     or None with fewer than 20 points.
 
     A consensus start, then three least-squares fits, each on the points the previous circle left
-    within 3 MADs (at least 1 px): the start is the circle through three of the points (``trials``
+    within 3 MADs (at least 1 px): the start is the circle through three of the points (``CONSENSUS_TRIALS``
     draws from a fixed seed, and the least-squares circle of them all) that has the most points within
     :data:`MAX_RESIDUAL` px. Dark things inside the disk that touch the dark outside (a chair's legs
     at the rim) dent the boundary; a fit of all points follows the dents, the consensus does not.
@@ -121,11 +123,11 @@ def _robust_circle(pts: np.ndarray, trials: int = 300) -> tuple[float, float, fl
         return None
     x, y = pts[:, 0], pts[:, 1]
     cands = np.array([_fit_circle(pts)] + [_fit_circle(pts[t])
-                                           for t in np.random.default_rng(0).integers(0, len(pts), (trials, 3))])
+                                           for t in np.random.default_rng(0).integers(0, len(pts), (CONSENSUS_TRIALS, 3))])
     with np.errstate(invalid="ignore"):
         res = np.abs(np.hypot(x[None] - cands[:, :1], y[None] - cands[:, 1:2]) - cands[:, 2:])
     cx, cy, r = cands[int(np.argmax(np.sum(res <= MAX_RESIDUAL, axis=1)))]
-    keep = np.abs(np.hypot(x - cx, y - cy) - r) <= max(1.0, 2 * MAX_RESIDUAL)
+    keep = np.abs(np.hypot(x - cx, y - cy) - r) <= 2 * MAX_RESIDUAL
     for _ in range(3):
         if keep.sum() < 20:
             return None

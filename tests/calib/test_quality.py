@@ -196,7 +196,7 @@ def test_fov_line_says_when_the_image_circles_rim_lies_beyond_the_boards_reach()
     fields = Q.field_of_view_fields(cal, near)
     assert 60 < fields["boards_reach_deg"] <= 70 and fields["circle_fov_deg"] == pytest.approx(185.0, abs=1e-6)
     line = fov_line(cal, near)
-    assert f"185.0° across the image circle (beyond the boards' {2 * fields['boards_reach_deg']:.0f}°: extrapolated)" in line
+    assert f"185.0° across the image circle (beyond the boards' reach, {fields['boards_reach_deg']:.0f}° off-axis: extrapolated)" in line
     cal.quality = {"boards_reach_deg": 95.0}  # the reach camera.json carries is the one used; the rim within it
     assert "185.0° across the image circle (centre" in fov_line(cal, near)
 

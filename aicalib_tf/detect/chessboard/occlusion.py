@@ -33,6 +33,7 @@ LEAST_SHARE = 0.3  # a corner's least sector contrast over its neighbours' media
 ARC = np.deg2rad(np.array([-20.0, -10.0, 0.0, 10.0, 20.0]))  # sample directions about each bisector
 RADIUS = 0.3  # of the corner's smallest step: the arc's radius (at least 1.5 px)
 FLOOR = 0.05  # of the board's bright level: added before the log (dark rims near black, noise)
+CROP_SIGMA = 1.0  # px: the Gaussian that smooths an unsmoothed image's board crop before the test
 _NEIGHBOURS = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)]
 
 
@@ -107,14 +108,13 @@ def object_in_front(corners: np.ndarray, pattern_size: tuple[int, int], ring_ima
     return bool(flagged.any() and (flagged & unlike_neighbours(points, ring_image)).any())
 
 
-def object_in_front_at(region, size: tuple[int, int], corners: np.ndarray, pattern_size: tuple[int, int],
-                       sigma: float = 1.0) -> bool:
+def object_in_front_at(region, size: tuple[int, int], corners: np.ndarray, pattern_size: tuple[int, int]) -> bool:
     """:func:`object_in_front` on an unsmoothed image, read about the board only.
 
     region : ``region(x0, y0, x1, y1)`` -> (y1 − y0, x1 − x0) float32 grey of pixels x0 … x1 − 1,
     y0 … y1 − 1 (:meth:`aicalib_tf.detect.pyramid.Frame.region`). size : (W, H) px. corners :
     (cols·rows, 2) px, OpenCV order. The board's bounding box and a margin of 8 px are smoothed
-    (Gaussian ``sigma`` px).
+    (Gaussian ``CROP_SIGMA`` px).
     """
     pts = np.asarray(corners, np.float64).reshape(-1, 2)
     w, h = size
@@ -122,5 +122,5 @@ def object_in_front_at(region, size: tuple[int, int], corners: np.ndarray, patte
     x1, y1 = min(w, int(np.ceil(pts[:, 0].max())) + 9), min(h, int(np.ceil(pts[:, 1].max())) + 9)
     if x1 - x0 < 2 or y1 - y0 < 2:
         return False
-    crop = cv2.GaussianBlur(np.asarray(region(x0, y0, x1, y1), np.float32), (0, 0), sigma)
+    crop = cv2.GaussianBlur(np.asarray(region(x0, y0, x1, y1), np.float32), (0, 0), CROP_SIGMA)
     return object_in_front(pts - [x0, y0], pattern_size, crop)

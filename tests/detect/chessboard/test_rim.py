@@ -80,8 +80,8 @@ def test_corners_under_an_object_are_unlike_their_neighbours(index, bar):
 @pytest.mark.parametrize("name, index", [("closeup-eq", 0), ("closeup-eq", 22), ("closeup-unified", 21)])
 def test_close_up_boards_missing_a_rim_corner_are_found(name, index):
     # the grid holds every corner but one or two at the rim (network and ring test miss them there);
-    # closeup-unified 21 came out with a corner 3.6 px off when a board corner was predicted from
-    # corners placed before it: predictions use only the grid's own corners. closeup-eq 22: a rim
+    # closeup-unified 21: a board corner predicted from corners placed before it lands 3.6 px off, so
+    # predictions use only the grid's own corners. closeup-eq 22: a rim
     # corner 5.8 px from where the lines lead (step 37 px), beyond the 5 px fit window: fits started
     # about the prediction reach it
     from aicalib_tf import detect_corners
