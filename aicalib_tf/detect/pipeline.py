@@ -254,6 +254,9 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
         if best is None or (best.relative and not det.relative and det.found) or (
                 det.relative <= best.relative and len(det.corners) > len(best.corners)):
             best = det  # a board with fixed ids beats one with relative ids
+    if best is None:  # every scale's board was refused on the full image (a corner off its place or on an edge)
+        best, reason = Detection(np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
+                                 pattern_size, False, (w, h)), max(reason, NO_MATCH, key=REASONS.index)
     return with_sigmas(replace(best, image_size=(w, h), reason="" if best.found else reason), frame)
 
 

@@ -102,3 +102,14 @@ def test_the_network_in_windows_gives_the_single_runs_map(monkeypatch, board, dt
     assert len(inference._windows(744)) > 1
     tiled = inference.corner_map(net, img)
     assert tiled.shape == whole.shape and np.array_equal(tiled, whole)
+
+
+def test_a_photo_whose_every_board_is_refused_on_the_full_image_says_none_was_found(board, monkeypatch):
+    """On 8000x6000 every searched scale is reduced; when the full-image check refuses each scale's board the
+    answer is no board with a reason, never an error."""
+    from aicalib_tf.detect import pipeline
+
+    monkeypatch.setattr(pipeline, "object_in_front_at", lambda *args: True)
+    img, _ = _upscaled(*board, (8000, 6000))
+    det = pipeline.detect_corners(img, (9, 6))
+    assert not det.found and det.image_size == (8000, 6000) and det.reason == pipeline.NO_MATCH

@@ -113,13 +113,18 @@ def object_in_front_at(region, size: tuple[int, int], corners: np.ndarray, patte
 
     region : ``region(x0, y0, x1, y1)`` -> (y1 − y0, x1 − x0) float32 grey of pixels x0 … x1 − 1,
     y0 … y1 − 1 (:meth:`aicalib_tf.detect.pyramid.Frame.region`). size : (W, H) px. corners :
-    (cols·rows, 2) px, OpenCV order. The board's bounding box and a margin of 8 px are smoothed
-    (Gaussian ``CROP_SIGMA`` px).
+    (cols·rows, 2) px, OpenCV order. The board's bounding box is read with a margin that holds every
+    ring (``RADIUS`` of the board's largest step, plus 8 px for the smoothing) and smoothed (Gaussian
+    ``CROP_SIGMA`` px).
     """
     pts = np.asarray(corners, np.float64).reshape(-1, 2)
     w, h = size
-    x0, y0 = (max(0, int(np.floor(v)) - 8) for v in pts.min(axis=0))
-    x1, y1 = min(w, int(np.ceil(pts[:, 0].max())) + 9), min(h, int(np.ceil(pts[:, 1].max())) + 9)
+    cols, rows = (int(v) for v in pattern_size)
+    grid = pts.reshape(rows, cols, 2)
+    step = max(np.linalg.norm(np.diff(grid, axis=a), axis=-1).max(initial=0.0) for a in (0, 1))
+    pad = 8 + int(np.ceil(RADIUS * step))
+    x0, y0 = (max(0, int(np.floor(v)) - pad) for v in pts.min(axis=0))
+    x1, y1 = min(w, int(np.ceil(pts[:, 0].max())) + pad + 1), min(h, int(np.ceil(pts[:, 1].max())) + pad + 1)
     if x1 - x0 < 2 or y1 - y0 < 2:
         return False
     crop = cv2.GaussianBlur(np.asarray(region(x0, y0, x1, y1), np.float32), (0, 0), CROP_SIGMA)
