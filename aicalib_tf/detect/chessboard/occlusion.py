@@ -25,7 +25,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from aicalib_tf.detect.chessboard.rim import unlike_neighbours
+from aicalib_tf.detect.chessboard.rim import grid_directions, neighbour_median, unlike_neighbours
 
 __all__ = ["sector_contrast", "occluded_corners", "object_in_front", "LEAST_SHARE", "ARC"]
 
@@ -34,19 +34,6 @@ ARC = np.deg2rad(np.array([-20.0, -10.0, 0.0, 10.0, 20.0]))  # sample directions
 RADIUS = 0.3  # of the corner's smallest step: the arc's radius (at least 1.5 px)
 FLOOR = 0.05  # of the board's bright level: added before the log (dark rims near black, noise)
 CROP_SIGMA = 1.0  # px: the Gaussian that smooths an unsmoothed image's board crop before the test
-_NEIGHBOURS = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)]
-
-
-def _directions(points: np.ndarray) -> np.ndarray:
-    """(4, a, b, 2) px: each corner's step to its neighbour along +i, +j, -i, -j (mirrored at the edge)."""
-    a, b = points.shape[:2]
-    big = np.full((a + 2, b + 2, 2), np.nan)
-    big[1:-1, 1:-1] = points
-    out = np.stack([big[1 + di:a + 1 + di, 1 + dj:b + 1 + dj] - points
-                    for di, dj in ((1, 0), (0, 1), (-1, 0), (0, -1))])
-    for k in range(4):
-        out[k] = np.where(np.isnan(out[k]), -out[(k + 2) % 4], out[k])
-    return out
 
 
 def sector_contrast(points: np.ndarray, ring_image: np.ndarray) -> np.ndarray:
@@ -59,7 +46,7 @@ def sector_contrast(points: np.ndarray, ring_image: np.ndarray) -> np.ndarray:
     parity positive; a value near 0 or below means two adjacent sectors of one colour.
     """
     a, b = points.shape[:2]
-    d = _directions(points)  # (4, a, b, 2)
+    d = grid_directions(points)  # (4, a, b, 2)
     length = np.hypot(d[..., 0], d[..., 1])
     unit = d / np.maximum(length, 1e-9)[..., None]
     radius = np.maximum(1.5, RADIUS * length.min(axis=0))  # (a, b)
@@ -87,10 +74,7 @@ def occluded_corners(points: np.ndarray, ring_image: np.ndarray) -> np.ndarray:
     m = sector_contrast(points, ring_image)
     if m.min() >= LEAST_SHARE * m.max():  # no neighbours' median can reach it: the usual, clean board
         return np.zeros((a, b), bool)
-    pad = np.full((a + 2, b + 2), np.nan)
-    pad[1:-1, 1:-1] = m
-    near = np.nanmedian([pad[1 + di:a + 1 + di, 1 + dj:b + 1 + dj] for di, dj in _NEIGHBOURS], axis=0)
-    return m < LEAST_SHARE * np.maximum(near, 1e-6)
+    return m < LEAST_SHARE * np.maximum(neighbour_median(m), 1e-6)
 
 
 def object_in_front(corners: np.ndarray, pattern_size: tuple[int, int], ring_image: np.ndarray) -> bool:

@@ -33,7 +33,8 @@ from aicalib_tf.detect.chessboard.grid import Grid
 from aicalib_tf.detect.corners.junctions import ring_symmetry
 from aicalib_tf.detect.corners.refine import Smoothed, refine_windowed, window_radius
 
-__all__ = ["complete_rim", "rim_board", "unlike_neighbours", "MAX_MISSING", "SHIFT"]
+__all__ = ["complete_rim", "rim_board", "unlike_neighbours", "grid_directions", "neighbour_median", "MAX_MISSING",
+           "SHIFT"]
 
 MAX_MISSING = 3  # most corners of the outer ring placed here
 SHIFT = 0.34  # of the smallest local step: the farthest the saddle fit may move a prediction
@@ -133,6 +134,27 @@ def _starts(pred: np.ndarray, step: float) -> np.ndarray:
     return np.concatenate([pred + r * ring, pred + 2 * r * ring])
 
 
+def grid_directions(points: np.ndarray) -> np.ndarray:
+    """(4, a, b, 2) px: each corner's step to its neighbour along +i, +j, -i, -j of a full grid ``points``
+    (a, b, 2), a ≥ 2 and b ≥ 2; at the grid's edge the missing step is the opposite one mirrored."""
+    a, b = points.shape[:2]
+    big = np.full((a + 2, b + 2, 2), np.nan)
+    big[1:-1, 1:-1] = points
+    out = np.stack([big[1 + di:a + 1 + di, 1 + dj:b + 1 + dj] - points
+                    for di, dj in ((1, 0), (0, 1), (-1, 0), (0, -1))])
+    for k in range(4):
+        out[k] = np.where(np.isnan(out[k]), -out[(k + 2) % 4], out[k])
+    return out
+
+
+def neighbour_median(values: np.ndarray) -> np.ndarray:
+    """(a, b): the median of each grid position's (up to 8) neighbours' ``values`` (a, b)."""
+    a, b = values.shape
+    pad = np.full((a + 2, b + 2), np.nan)
+    pad[1:-1, 1:-1] = values
+    return np.nanmedian([pad[1 + di:a + 1 + di, 1 + dj:b + 1 + dj] for di, dj in _NEIGHBOURS], axis=0)
+
+
 def unlike_neighbours(points: np.ndarray, ring_image: np.ndarray) -> np.ndarray:
     """(a, b) bool: the corners of a full grid that show no X-junction like their neighbours'.
 
@@ -148,20 +170,12 @@ def unlike_neighbours(points: np.ndarray, ring_image: np.ndarray) -> np.ndarray:
     stronger than theirs.
     """
     a, b = points.shape[:2]
-    big = np.full((a + 2, b + 2, 2), np.nan)
-    big[1:-1, 1:-1] = points
-    steps = np.stack([np.hypot(*(big[1 + di:a + 1 + di, 1 + dj:b + 1 + dj] - points).transpose(2, 0, 1))
-                      for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1))])
-    radius = np.maximum(1.5, 0.3 * np.nanmin(steps, axis=0)).ravel()
+    d = grid_directions(points)
+    radius = np.maximum(1.5, 0.3 * np.hypot(d[..., 0], d[..., 1]).min(axis=0)).ravel()
     amp, asym = ring_symmetry(ring_image, points.reshape(-1, 2), radius)
-    odd = asym / np.maximum(amp, 1e-12)
-    out = []
-    for value in (amp, odd):
-        pad = np.full((a + 2, b + 2), np.nan)
-        pad[1:-1, 1:-1] = value.reshape(a, b)
-        out.append(np.nanmedian([pad[1 + di:a + 1 + di, 1 + dj:b + 1 + dj] for di, dj in _NEIGHBOURS], axis=0))
-    amp, odd = amp.reshape(a, b), odd.reshape(a, b)
-    return (amp < AMP_RANGE[0] * out[0]) | (amp > AMP_RANGE[1] * out[0]) | (odd > ODD_RATIO * np.maximum(out[1], ODD_FLOOR))
+    amp, odd = amp.reshape(a, b), (asym / np.maximum(amp, 1e-12)).reshape(a, b)
+    near_amp, near_odd = neighbour_median(amp), neighbour_median(odd)
+    return (amp < AMP_RANGE[0] * near_amp) | (amp > AMP_RANGE[1] * near_amp) | (odd > ODD_RATIO * np.maximum(near_odd, ODD_FLOOR))
 
 
 def _as_grid(grid: Grid, cells: dict) -> Grid:
