@@ -8,9 +8,8 @@ there and no uncertainty or undistortion means anything there.
 * :func:`estimate_image_circle`: the circle from the mean of the photos (a dark ring around a
   bright disk), or None for photos that fill the frame; :func:`find_image_circle` also says why
   none was found where the frame's corners are dark (the calibration then uses the full frame).
-* :func:`circle_fov_deg`: the circle's diameter in degrees, through a lens model (optionally continued
-  past the boards' reach, :func:`boards_reach_deg`, with the model's slope there: a comparison that
-  ``benchmarks/circle_fov.py`` measures; the report prints the model's own figure).
+* :func:`circle_fov_deg`: the circle's diameter in degrees, through a lens model (past the boards'
+  reach, :func:`boards_reach_deg`, the model's own extrapolation).
 * :func:`circle_problem`: whether a lens model and a circle agree (a sentence when they do not).
 
 Pure numpy/OpenCV.
@@ -26,7 +25,7 @@ import numpy as np
 
 __all__ = ["ImageCircle", "boards_reach_deg", "circle_fov_deg", "circle_problem", "circle_tuple", "estimate_image_circle", "find_image_circle",
            "into_circle",
-           "rim_points", "thumbnail"]
+           "rim_angles_deg", "rim_points", "thumbnail"]
 
 THUMB_SIDE = 640  # px: the longest side the photos are averaged at (the circle is scaled back)
 DARK_FRACTION = 0.25  # the threshold, from the black level towards the disk's median brightness
@@ -35,7 +34,6 @@ MAX_BLACK = 0.2  # the black level (1st percentile) is at most this share of the
 MAX_RESIDUAL = 1.5  # px at the averaged size: the boundary's median distance from the fitted circle
 CONSENSUS_TRIALS = 300  # three-point circles drawn (fixed seed) for the consensus start
 MIN_ON_CIRCLE = 0.5  # the least share of the boundary's points that must lie on the circle
-EXTEND_STEP_DEG = 2.0  # degrees below the boards' reach over which the rim's first-order extension takes its slope
 
 
 @dataclass(frozen=True)
@@ -262,7 +260,7 @@ def rim_points(circle: ImageCircle, n: int = 72) -> np.ndarray:
     return np.stack([circle.cx + circle.radius * np.cos(a), circle.cy + circle.radius * np.sin(a)], axis=1)
 
 
-def _rim_angles_deg(lens, circle: ImageCircle, n: int = 72) -> np.ndarray:
+def rim_angles_deg(lens, circle: ImageCircle, n: int = 72) -> np.ndarray:
     """(n,) degrees off-axis of the rays ``lens`` gives the rim (NaN where it has none)."""
     rays = lens.unproject(rim_points(circle, n))
     return np.degrees(np.arctan2(np.hypot(rays[:, 0], rays[:, 1]), rays[:, 2]))
@@ -279,45 +277,15 @@ def boards_reach_deg(lens, corners) -> float:
     return float(np.nanmax(theta)) if np.isfinite(theta).any() else math.nan
 
 
-def _slope_extended_deg(lens, circle: ImageCircle, reach_deg: float, n: int = 72) -> np.ndarray:
-    """(n,) degrees off-axis of the rim points, r(θ) continued beyond ``reach_deg`` with its slope there.
-
-    r is the rim point's distance from the principal point in normalized units ((x − cx)/fx, (y − cy)/fy);
-    along each rim point's azimuth the model gives r(reach) and the slope over the 2° below reach (inside
-    the boards' data); a rim point further out is at reach + (r − r(reach)) / slope. NaN where the rim
-    point is within reach along its azimuth, or the slope is not positive."""
-    K = lens.K
-    u = (rim_points(circle, n) - K[:2, 2]) / [K[0, 0], K[1, 1]]
-    r, phi = np.hypot(u[:, 0], u[:, 1]), np.arctan2(u[:, 1], u[:, 0])
-
-    def r_at(deg: float) -> np.ndarray:
-        t = math.radians(deg)
-        rays = np.stack([math.sin(t) * np.cos(phi), math.sin(t) * np.sin(phi), np.full_like(phi, math.cos(t))], 1)
-        q = (lens.project(rays) - K[:2, 2]) / [K[0, 0], K[1, 1]]
-        return np.hypot(q[:, 0], q[:, 1])
-
-    r0 = r_at(reach_deg)
-    slope = (r0 - r_at(reach_deg - EXTEND_STEP_DEG)) / EXTEND_STEP_DEG
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ok = np.isfinite(r0) & (slope > 0) & (r > r0)
-        return np.where(ok, reach_deg + (r - r0) / np.where(ok, slope, 1.0), np.nan)
-
-
-def circle_fov_deg(lens, circle: ImageCircle, reach_deg: float | None = None) -> float:
+def circle_fov_deg(lens, circle: ImageCircle) -> float:
     """Degrees: the image circle's diameter through ``lens`` (a :class:`~aicalib_tf.geometry.lens.Lens`),
     the mean over diameters of the two rim rays' off-axis angles; never NaN: a rim point the model
-    gives no ray counts with the widest angle the model images.
-
-    reach_deg : how far the boards reach off-axis (:func:`boards_reach_deg`); a rim point beyond it
-    gets r(θ) continued with the model's slope at reach (first order) instead of the model's own
-    extrapolation. None or NaN (the report's choice): the model throughout. ``benchmarks/circle_fov.py``
-    compares the two: the continuation is better only where the true r(θ) is linear past the reach.
+    gives no ray counts with the widest angle the model images. Past the boards' reach
+    (:func:`boards_reach_deg`) this is the model's own extrapolation; ``benchmarks/circle_fov.py``
+    measures it against a first-order continuation, which is better only where the true r(θ) is linear.
     """
-    theta = _rim_angles_deg(lens, circle)
+    theta = rim_angles_deg(lens, circle)
     theta = np.where(np.isfinite(theta), theta, math.degrees(lens.max_angle()))
-    if reach_deg is not None and math.isfinite(reach_deg) and reach_deg > EXTEND_STEP_DEG:
-        ext = _slope_extended_deg(lens, circle, float(reach_deg), len(theta))
-        theta = np.where(np.isfinite(ext), ext, theta)
     half = len(theta) // 2
     return float(np.mean(theta[:half] + theta[half:2 * half]))
 
@@ -330,7 +298,7 @@ def circle_problem(lens, circle: ImageCircle, corners=None, tolerance_px: float 
     * detected ``corners`` ((N, 2) px) lie more than ``tolerance_px`` outside the circle: the
       circle is wrong (or the corners are).
     """
-    theta = _rim_angles_deg(lens, circle)
+    theta = rim_angles_deg(lens, circle)
     bad = ~np.isfinite(theta)
     if bad.any():
         return (f"the image circle (radius {circle.radius:.0f} px) reaches beyond the rays the {lens.model} model "

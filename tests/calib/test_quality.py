@@ -221,8 +221,8 @@ def test_assess_lets_each_half_choose_between_the_chosen_model_and_the_other_fam
 
 
 def test_the_circles_field_of_view_is_the_models_own_past_the_boards_reach():
-    """A lens whose r(θ) steepens past the boards (k1 > 0) keeps the model's figure (its true field of view),
-    not the slope continuation, which reads it wider."""
+    """Boards up to 70° off-axis of a lens whose r(θ) steepens past them (k1 > 0): the field of view across the
+    circle is the model's own (the lens's true figure), with the boards' reach beside it."""
     import dataclasses
 
     from aicalib_tf.geometry.image_circle import circle_fov_deg
@@ -236,4 +236,4 @@ def test_the_circles_field_of_view_is_the_models_own_past_the_boards_reach():
     fields = Q.field_of_view_fields(cal, near)
     own = circle_fov_deg(steep, cal.image_circle)
     assert fields["circle_fov_deg"] == pytest.approx(own, abs=1e-9)
-    assert circle_fov_deg(steep, cal.image_circle, fields["boards_reach_deg"]) > own + 1.0
+    assert 60 < fields["boards_reach_deg"] <= 70.5 and own / 2 > fields["boards_reach_deg"] + 10  # rim past the boards
