@@ -25,6 +25,7 @@ reported robot poses, each view's T_camera_board, the swapped rows, the noise).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 from dataclasses import dataclass
@@ -109,14 +110,22 @@ def make_camera(rng: np.random.Generator, lens: str, size) -> Camera:
     return Camera(K, dist, (int(w), int(h)))
 
 
+def _in_mm(board):
+    """The marker board ``board`` with its lengths in mm (the renderer's and the poses' unit); a unitless
+    board's lengths are read as mm."""
+    scale = _UNIT_M.get(board.unit, 1e-3) / 1e-3
+    sizes = {"square": board.square, "marker": board.marker} if hasattr(board, "marker") else {"tag": board.tag}
+    return dataclasses.replace(board, unit="mm", **{k: v * scale for k, v in sizes.items()})
+
+
 def _board(rng, cfg: HandEyeSetConfig):
     """(board for the renderer, in mm, square in metres)."""
     if cfg.board:  # a ChArUco board or an AprilGrid, on paper drawn as data_gen's other renders draw it
         from .targets import parse_marker_board, sample_target
 
-        b = parse_marker_board(cfg.board)
+        b = _in_mm(parse_marker_board(cfg.board))
         target = sample_target(rng, b)
-        return target, target.square_size * _UNIT_M[b.unit]
+        return target, target.square_size * 1e-3
     return sample_board(rng, pattern_size=cfg.pattern, square_size=cfg.square, margin_range=(0.5, 1.0)), cfg.square * 1e-3
 
 

@@ -56,3 +56,11 @@ def test_the_command_line_writes_images_poses_and_truth(tmp_path):
 def test_bad_arguments_exit_2(tmp_path, capsys):
     assert main(["--out", str(tmp_path), "--swap", "3"]) == 2
     assert "swap" in capsys.readouterr().err
+
+
+def test_a_marker_board_in_metres_renders_at_the_same_size_as_in_mm():
+    mm = sample_handeye(HandEyeSetConfig(views=3, seed=4, board="charuco:7x5,square=40mm,marker=30mm,dict=DICT_5X5_100"))
+    m = sample_handeye(HandEyeSetConfig(views=3, seed=4, board="charuco:7x5,square=0.04m,marker=0.03m,dict=DICT_5X5_100"))
+    assert m.square_m == pytest.approx(0.04) and mm.square_m == pytest.approx(0.04)
+    assert np.allclose(m.board.object_points(), mm.board.object_points())  # both in the renderer's mm
+    assert np.allclose(m.C, mm.C)
