@@ -33,7 +33,8 @@ import numpy as np
 from aicalib_tf.calib.bundle import BundleResult, CalibrationError, bundle_adjust
 from aicalib_tf.calib.flex import FLEX_MODES, basis_of_views, flex_problem
 from aicalib_tf.calib.view_checks import MIN_VIEW_CORNERS
-from aicalib_tf.calib.weights import fit_sigmas
+from aicalib_tf.calib.weights import fit_sigmas, total_sigmas
+from aicalib_tf.geometry.board_flex import flexed_points
 
 __all__ = ["SolveOptions", "solve", "view_sigmas", "with_floor", "flag_corners", "CORNER_K", "CORNER_FLOOR_PX", "MAX_ROUNDS",
            "MAX_CORNER_FRACTION"]
@@ -51,15 +52,20 @@ class SolveOptions:
 
     pattern_size : (cols, rows) inner corners, needed to solve the flex (None: flat board).
     flex : "auto" (solve it, keep it when determined) or "off". reject_corners : reject single corners.
+    flex_value : with flex "off", the board held flexed by this (w_x, w_y) squares instead of flat
+    (the estimate of :mod:`aicalib_tf.calib.flex_check`; needs ``pattern_size``), or None.
     """
 
     pattern_size: tuple[int, int] | None = None
     flex: str = "auto"
     reject_corners: bool = True
+    flex_value: tuple[float, float] | None = None
 
     def __post_init__(self):
         if self.flex not in FLEX_MODES:
             raise ValueError(f"flex must be one of {', '.join(FLEX_MODES)}, got {self.flex!r}")
+        if self.flex_value is not None and (self.flex != "off" or self.pattern_size is None):
+            raise ValueError("flex_value holds the board's flex: it needs flex='off' and a pattern_size")
 
 
 def view_sigmas(views) -> list | None:
@@ -71,15 +77,13 @@ def view_sigmas(views) -> list | None:
 
 
 def with_floor(sigmas, fit: BundleResult) -> list:
-    """Per-view σ' = √(σ² + τ²), px: τ² = max(0, s² − mean σ²) with s² the fit's residual variance per axis
-    (Σ|r|² / 2N): the error the detector's σ do not explain (lens-model misfit, print, focus), shared by all
-    corners. Without it a corner whose σ is ten times below the residuals' scale gets a hundred times the
-    weight of its neighbours for an error it does not have (module docstring)."""
-    res = np.concatenate(fit.residuals)
-    sig = np.concatenate([np.asarray(v, np.float64) for v in sigmas])
-    fin = np.isfinite(res).all(axis=1)
-    tau2 = max(float(np.sum(res[fin] ** 2) / (2 * max(fin.sum(), 1))) - float(np.mean(sig * sig)), 0.0)
-    return [np.sqrt(np.asarray(v, np.float64) ** 2 + tau2) for v in sigmas]
+    """Per-view σ' px with the error the detector's σ do not explain (lens-model misfit, print, focus) added
+    from ``fit``'s residuals, by the rule every fit shares (:func:`aicalib_tf.calib.weights.total_sigmas`;
+    the fit's parameters: its intrinsics, when it has them, and 6 a view). Without it a corner whose σ is ten
+    times below the residuals' scale gets a hundred times the weight of its neighbours for an error it does
+    not have (module docstring)."""
+    n_params = np.size(getattr(fit, "intrinsics", ())) + 6 * len(fit.residuals)
+    return total_sigmas(sigmas, fit.residuals, n_params)
 
 
 def flag_corners(fit: BundleResult, sigmas) -> np.ndarray:
@@ -125,6 +129,8 @@ def solve(model: str, views, obj, px, intrinsics, poses, *, free, rank_strict: b
     :func:`~aicalib_tf.calib.bundle.bundle_adjust` does.
     """
     options = options or SolveOptions()
+    if options.flex_value is not None:  # the board held flexed: its points moved, nothing more solved
+        obj = [flexed_points(o, options.pattern_size, options.flex_value, unit) for o in obj]
     sigmas = view_sigmas(views)
     basis, why = (None, "") if options.flex == "off" else basis_of_views(views, options.pattern_size)
     fit = None

@@ -26,9 +26,10 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["WEIGHTING", "WEIGHTINGS", "CLIP", "fit_sigmas", "corner_weights"]
+__all__ = ["WEIGHTING", "WEIGHTINGS", "CLIP", "OUTLIER_K", "fit_sigmas", "corner_weights", "variance_components",
+           "total_sigmas"]
 
-WEIGHTINGS = ("view", "clipped", "corner")
+WEIGHTINGS = ("view", "clipped", "corner", "components")
 WEIGHTING = "view"  # the rule every fit uses (benchmarks/corner_sigma.py --calibrate compares the others)
 CLIP = (0.5, 2.0)  # "clipped": a corner's σ within these multiples of its view's median σ
 
@@ -81,3 +82,69 @@ def corner_weights(sigmas, inliers, n: int) -> np.ndarray | None:
             raise ValueError(f"inliers must hold {n} values, one per corner, got {keep.size}")
         w = np.where(keep, w, 0.0)
     return w
+
+
+OUTLIER_K = 4.5  # a corner whose |r|² exceeds OUTLIER_K² · its σ_total² is left out of the components' estimate
+_ROUNDS = 30
+
+
+def variance_components(sigmas, residuals, n_params: int = 0, *, scale: bool = True) -> tuple[float, float]:
+    """(a, τ²) that best explain a fit's residuals as σ_total² = a·σ² + τ² per axis, px².
+
+    sigmas : per view (N_v,) px, the σ the corners entered the fit with; residuals : per view (N_v, 2) px
+    (rows with a non-finite value are left out). n_params : the fit's parameters p; each residual's
+    variance is taken as (1 − p / 2N) of its corner's (the mean leverage: REML's correction for what the
+    fit absorbed). scale : fit a (else a = 1). Restricted maximum likelihood of the Gaussian model by
+    Fisher scoring: y = |r|² / 2(1 − p/2N) has mean a·σ² + τ² and variance (a·σ² + τ²)², so each round is the
+    least-squares fit of y on [σ², 1] weighted by 1 / (a·σ² + τ²)²; corners beyond ``OUTLIER_K`` σ_total are
+    left out of the next round. a >= 0 and τ² >= 0; when every corner has one σ, a and τ² are not separable
+    and a = 1 (only their sum matters to the fit's weights).
+    """
+    x = np.concatenate([np.asarray(v, np.float64).ravel() for v in sigmas]) ** 2
+    r = np.concatenate([np.asarray(v, np.float64).reshape(-1, 2) for v in residuals])
+    ok = np.isfinite(r).all(axis=1) & np.isfinite(x)
+    x, y = x[ok], np.sum(r[ok] ** 2, axis=1) / 2.0
+    if y.size == 0:
+        return 1.0, 0.0
+    y = y / max(1.0 - n_params / (2.0 * y.size), 0.05)
+    scale = scale and float(np.ptp(x)) > 0.05 * float(np.median(x))
+    a, t = 1.0, max(float(np.mean(y) - np.mean(x)), 0.0)
+    floor = 1e-6 * float(np.median(x))  # a least τ² keeps every σ_total > 0
+    keep = np.ones(y.size, bool)
+    for _ in range(_ROUNDS):
+        v = a * x + max(t, floor)
+        w = keep / v ** 2
+        if scale:
+            A = np.array([[w @ (x * x), w @ x], [w @ x, w.sum()]])
+            b = np.array([w @ (x * y), w @ y])
+            a_new, t_new = np.linalg.solve(A, b) if np.linalg.det(A) > 1e-12 * A[0, 0] * A[1, 1] else (a, t)
+            if t_new < 0:
+                a_new, t_new = min((w @ (x * y)) / (w @ (x * x)), 1.0), 0.0
+            elif a_new < 0:
+                a_new, t_new = 0.0, (w @ y) / w.sum()
+        if not scale or a_new > 1.0:
+            a_new, t_new = 1.0, max(float(w @ (y - x)) / float(w.sum()), 0.0)
+        keep = y <= OUTLIER_K ** 2 * (a_new * x + max(t_new, floor))
+        done = abs(a_new - a) <= 1e-4 * max(a, 1e-9) and abs(t_new - t) <= 1e-4 * max(t, floor)
+        a, t = float(a_new), float(t_new)
+        if done:
+            break
+    return a, t
+
+
+def total_sigmas(sigmas, residuals, n_params: int = 0, rule: str | None = None) -> list:
+    """Per view (N_v,) σ_total px that a fit's corners are weighed with after a first fit weighted by ``sigmas``.
+
+    ``"components"``: σ_total² = a·σ² + τ² of :func:`variance_components` on the first fit's residuals.
+    The other rules: σ² + τ² with τ² = max(0, s² − mean σ²), s² the residuals' variance per axis (Σ|r|² / 2N).
+    """
+    rule = WEIGHTING if rule is None else rule
+    sig = [np.asarray(v, np.float64) for v in sigmas]
+    if rule == "components":
+        a, t2 = variance_components(sig, residuals, n_params)
+        return [np.sqrt(a * v * v + t2) for v in sig]
+    res = np.concatenate([np.asarray(v, np.float64).reshape(-1, 2) for v in residuals])
+    fin = np.isfinite(res).all(axis=1)
+    s2 = float(np.sum(res[fin] ** 2) / (2 * max(fin.sum(), 1)))
+    t2 = max(s2 - float(np.mean(np.concatenate(sig) ** 2)), 0.0)
+    return [np.sqrt(v * v + t2) for v in sig]
