@@ -82,7 +82,10 @@ with ``bend`` (:func:`aicalib_tf.detect.chessboard.grid.assemble_grids`); only a
 network's weak points (``WEAK``) confirm saddles the ring test fails at the dark rim (``proposer``'s ``bent``).
 A grid of either assembly holding the pattern but up to 3 corners of its outer ring gets them placed
 (:func:`aicalib_tf.detect.chessboard.rim.rim_board`), kept only when every corner shows an X-junction like its
-neighbours' (an object in front of the board does not). Any full board with a corner on an object's edge
+neighbours' (an object in front of the board does not). Steeply tilted boards (55–80° from facing the
+camera; their lines meet at 8–20°, sharper than the network's junctions): with no full board at full size, a
+sheared partial board's lattice, else a sliver of coherent texture, is warped to square axes and searched again
+(:mod:`aicalib_tf.detect.chessboard.unshear`); only a complete board counts, mapped back and refined on the image. Any full board with a corner on an object's edge
 (:func:`aicalib_tf.detect.chessboard.occlusion.object_in_front`: sectors out of the board's alternation
 and a ring unlike its neighbours') is passed over, on its scale and again at full size.
 
@@ -113,6 +116,7 @@ from aicalib_tf.detect.chessboard.partial import partial_board, relative_board
 from aicalib_tf.detect.chessboard.rim import rim_board
 from aicalib_tf.detect.pyramid import Frame, boards_coarse_to_fine, quick_scales, quick_shift, refine_full, scales, to_full
 from aicalib_tf.detect.corners.refine import Smoothed, refine_candidates
+from aicalib_tf.detect.chessboard.unshear import second_look as unshear_look
 from aicalib_tf.detect.chessboard.zoom import from_zoom, zoom_box, zoom_in
 from aicalib_tf.io import read_image
 
@@ -165,6 +169,7 @@ REASONS = (NO_CANDIDATES, NO_GRID, NO_MATCH, UNDECIDED)  # from the least to the
 _DEFAULT_MODEL = None
 MAX_CANDIDATES = 3000  # a 20x15 board has 300 corners; more candidates are clutter
 WEAK = 0.5  # of the threshold: network points this weak confirm a corner where the bent grid predicts one
+UNSHEAR_SHIFT = 1.0  # px: an unsheared board's corner moved further by its refinement on the image keeps its mapped place
 RING_SIGMA = 1.0  # px: the smoothing of the ring tests' image; a quick pass refines its windows on it too
 
 
@@ -235,6 +240,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
         look = bind(_zoomed, frame.gray, pattern_size, model, threshold) if f == 1 and pattern_size is not None else None
         net = (getattr(model, "quick", None) or model) if f in quick else model  # the quick passes' own network
         det = _detect_at(frame.reduced(f), pattern_size, net, threshold, second_look=look, relative=relative, full_only=f in quick)
+        det = _unsheared(frame.gray, pattern_size, model, threshold, det) if look and not (det.complete or relative) else det
         if det.found and f > 1:
             corners, ok = refine_full(frame, to_full(det.corners, f), max_shift=quick_shift(f) if f in quick else 2.0)
             if not ok.all():  # a corner left at its coarse place may be px off: try the finer scales
@@ -279,6 +285,21 @@ def _zoomed(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: f
     if not det.found:
         return None
     return replace(det, corners=from_zoom(det.corners, box), image_size=(w, h))
+
+
+def _unsheared(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: float, seen: Detection) -> Detection:
+    """The search again on a steeply tilted board's region, warped to square axes (:mod:`aicalib_tf.detect.chessboard.unshear`),
+    when the full-size search ``seen`` found no full board: a complete board, its corners mapped back and refined on gray
+    (H, W) float32 where they can be, else ``seen``."""
+    got = unshear_look(gray, pattern_size, lambda img: _detect_at(img, pattern_size, model, threshold, relative=True),
+                       seen.ids if seen.found else None, seen.corners if seen.found else None)
+    if got is None:
+        return seen
+    corners, ok = refine_full(gray, got[0], max_shift=UNSHEAR_SHIFT)
+    corners = np.where(ok[:, None], corners, got[0])
+    if sum(pattern_size) % 2 == 0:  # the geometric rule is the image's, not the warp's (colours: the warp's)
+        corners = order_full_board(corners, pattern_size, gray)
+    return replace(got[1], corners=corners.astype(np.float32), image_size=gray.shape[::-1])
 
 
 def refined_points(model, gray: np.ndarray, threshold: float = 0.5, *, smoothed: Smoothed | None = None,

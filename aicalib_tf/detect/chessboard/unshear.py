@@ -1,0 +1,255 @@
+"""A second look at a steeply tilted board: its region warped so that its lines cross at right angles.
+
+Tilted 55–80° from facing the camera, a board's two line directions meet at 8–20° in the image
+and its squares become slivers; the corner network misses X-junctions that sharp (every junction
+it finds crosses at 18° or more). An affine map that makes the board's axes perpendicular with
+equal steps turns those slivers back into squares of the network's range. So when the full-size
+search gives no complete board, the board's two axes are estimated from what the search did find,
+the region is warped (``cv2.warpAffine``, bilinear) and searched again, and a complete board found
+there is mapped back (:func:`aicalib_tf.detect.pipeline.detect_corners`). Two kinds of evidence:
+
+* a partial board (corners with ids): the affine lattice of its ids (:func:`lattice_axes`), used
+  when its axes meet at under ``MAX_ANGLE`` or its steps differ by more than ``MAX_STEP_RATIO``;
+* a sliver of texture (:func:`texture_quads`): the network may find no corner at all on the board,
+  but its many nearly parallel edges stand out. The image's gradient energy, smoothed, has a
+  connected region whose edges are nearly all of one orientation (coherence at least
+  ``MIN_COHERENCE``) and which is at least ``MIN_ELONGATION`` times longer than wide: a board seen
+  edge-on. Its outline, a parallelogram, is mapped onto a square.
+
+Coordinates are (x, y) px, OpenCV's convention: the centre of pixel (0, 0) is at (0.0, 0.0), and
+``cv2.warpAffine`` samples the image at M⁻¹ (x', y') for the pixel centre (x', y') of the warped
+image, so points map back by M's inverse alone (no half-pixel term).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+__all__ = ["MAX_ANGLE", "MAX_STEP_RATIO", "lattice_axes", "is_sheared", "lattice_map", "texture_quads", "quad_map",
+           "warp", "from_warp", "candidate_maps", "second_look"]
+
+MAX_ANGLE = 30.0  # degrees: a partial board whose axes meet at less than this is looked at again, unsheared
+MAX_STEP_RATIO = 2.5  # ... and so is one whose steps along its two axes differ more than this
+STEP = 12.0  # px: a square's side in the warped image (an upsampled board is blurred across: larger is worse)
+SIDE = 120.0  # px: the side of the square a texture sliver's outline is mapped onto (10×7 squares: 12×17 px)
+PAD = 0.4  # of the board's warped extent: margin around it (the outer squares and paper)
+ENERGY_SIGMA = 5.0  # px: smoothing of the gradient energy and orientation (a few stripes of a sliver board)
+ENERGY_SHARE = 0.25  # of the largest smoothed energy: the region of a texture sliver
+MIN_COHERENCE = 0.7  # energy-weighted orientation coherence of a sliver (0: no orientation, 1: all parallel)
+MIN_ELONGATION = 3.0  # length / width of a sliver (from its second moments)
+MAX_SLIVERS = 2  # texture slivers looked at again
+CANDIDATE_REGIONS = 4  # high-energy regions, by summed energy, that may be one
+MIN_LENGTH = 40.0  # px: a shorter sliver holds no board the network could read once unsheared
+MIN_LATTICE = 9  # corners of a partial board that a lattice is fitted to
+ROUNDS = 2  # searches per warp: the outline's, then the lattice of what it found
+MAX_PIXELS = 250_000  # the warped region's most pixels
+ANALYSIS_SIDE = 800  # px: the texture is analysed on the image reduced to this longer side at most
+
+
+def lattice_axes(ids: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares affine lattice of a partial board: points ≈ origin + col·u + row·v.
+
+    ids : (K, 2) int (col, row), K ≥ 3 not on one line. points : (K, 2) px.
+    Returns origin, u, v: (2,) float64 px each.
+    """
+    ij = np.asarray(ids, np.float64).reshape(-1, 2)
+    a = np.column_stack([np.ones(len(ij)), ij])
+    sol, *_ = np.linalg.lstsq(a, np.asarray(points, np.float64).reshape(-1, 2), rcond=None)
+    return sol[0], sol[1], sol[2]
+
+
+def is_sheared(u: np.ndarray, v: np.ndarray) -> bool:
+    """Whether lattice steps u, v (2,) px meet at under ``MAX_ANGLE`` or differ in length by more than ``MAX_STEP_RATIO``."""
+    nu, nv = float(np.linalg.norm(u)), float(np.linalg.norm(v))
+    if min(nu, nv) <= 0:
+        return False
+    sine = abs(float(u[0] * v[1] - u[1] * v[0])) / (nu * nv)
+    return sine < np.sin(np.radians(MAX_ANGLE)) or max(nu, nv) > MAX_STEP_RATIO * min(nu, nv)
+
+
+def lattice_map(ids: np.ndarray, points: np.ndarray, pattern_size: tuple[int, int], placed: bool = True,
+                step: float = STEP) -> tuple[np.ndarray, tuple[int, int]] | None:
+    """The projective map that makes a grid's lattice square, steps of ``step`` px along x and y.
+
+    ids : (K, 2) int (col, row), K ≥ 6, not on one line; points : (K, 2) px. The lattice is the
+    least-squares homography ids -> points. placed : the ids are the pattern's, so the warped image
+    holds ids −1 … cols and −1 … rows (the board's outer squares); otherwise they are relative to
+    the grid, and it holds the grid and as many steps beyond it on each side as the pattern could
+    reach (the grid may be any part of the board). ``PAD`` of that extent is added around. The
+    board's handedness is kept (a lattice mirrored on the image is warped with its rows running up).
+    Returns H (3, 3) float64, image -> warped px, and the warped image's (width, height), or None.
+    """
+    ij = np.asarray(ids, np.float64).reshape(-1, 2)
+    lat, _ = cv2.findHomography(ij, np.asarray(points, np.float64).reshape(-1, 2), 0)
+    if lat is None or not np.all(np.isfinite(lat)):
+        return None
+    if placed:
+        lo, hi = np.array([-1.0, -1.0]), np.array(pattern_size, np.float64)
+    else:
+        reach = np.maximum(max(pattern_size) - (ij.max(axis=0) - ij.min(axis=0) + 1), 0) + 1
+        lo, hi = ij.min(axis=0) - reach, ij.max(axis=0) + reach
+    ext = (hi - lo) * step
+    pad = PAD * ext.max()
+    _, u, v = lattice_axes(ij, points)
+    flip = float(u[0] * v[1] - u[1] * v[0]) < 0
+    to_warp = np.array([[step, 0, pad - lo[0] * step],
+                        [0, -step, pad + hi[1] * step] if flip else [0, step, pad - lo[1] * step], [0, 0, 1]])
+    try:
+        h = to_warp @ np.linalg.inv(lat)
+    except np.linalg.LinAlgError:
+        return None
+    return h / h[2, 2], (int(np.ceil(ext[0] + 2 * pad)), int(np.ceil(ext[1] + 2 * pad)))
+
+
+def _structure(gray: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Smoothed gradient energy and orientation coherence of gray (H, W) float32: (H, W) float32 each."""
+    b = cv2.GaussianBlur(gray, (0, 0), 1.0)
+    gx = cv2.Sobel(b, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(b, cv2.CV_32F, 0, 1, ksize=3)
+    jxx = cv2.GaussianBlur(gx * gx, (0, 0), ENERGY_SIGMA)
+    jyy = cv2.GaussianBlur(gy * gy, (0, 0), ENERGY_SIGMA)
+    jxy = cv2.GaussianBlur(gx * gy, (0, 0), ENERGY_SIGMA)
+    energy = jxx + jyy
+    return energy, np.sqrt((jxx - jyy) ** 2 + 4 * jxy**2) / np.maximum(energy, 1e-12)
+
+
+def _outline(xy: np.ndarray) -> np.ndarray | None:
+    """A parallelogram-like outline of a sliver's pixels xy (N, 2): its hull's two farthest points and the
+    points farthest from the line through them on either side, (4, 2) float64 in turn around it, or None."""
+    hull = cv2.convexHull(xy.astype(np.float32)).reshape(-1, 2).astype(np.float64)
+    if len(hull) < 4:
+        return None
+    d = np.linalg.norm(hull[:, None] - hull[None], axis=2)
+    a, c = np.unravel_index(int(np.argmax(d)), d.shape)
+    axis = (hull[c] - hull[a]) / d[a, c]
+    side = (hull - hull[a]) @ np.array([-axis[1], axis[0]])
+    if side.max() < 1.0 or side.min() > -1.0:
+        return None
+    return np.stack([hull[a], hull[int(np.argmax(side))], hull[c], hull[int(np.argmin(side))]])
+
+
+def _sliver(xy: np.ndarray, energy: np.ndarray, coherence: np.ndarray, scale: float) -> np.ndarray | None:
+    """A region's outline when it is a sliver of coherent texture (:func:`texture_quads`), else None.
+
+    xy : (N, 2) int pixel positions of the region; energy, coherence : (N,) their values. scale : image px per px of xy.
+    """
+    if len(xy) < 3 or float(energy @ coherence) / float(energy.sum()) < MIN_COHERENCE:
+        return None
+    lam = np.linalg.eigvalsh(np.cov(xy.T.astype(np.float64)))
+    if lam[0] <= 0 or lam[1] < MIN_ELONGATION**2 * lam[0] or 4 * np.sqrt(lam[1]) * scale < MIN_LENGTH:
+        return None
+    quad = _outline(xy)
+    return None if quad is None else (quad + 0.5) * scale - 0.5
+
+
+def texture_quads(gray: np.ndarray, most: int = MAX_SLIVERS) -> list[np.ndarray]:
+    """Outlines of boards seen nearly edge-on: [(4, 2) float64 px in turn around it], at most ``most``.
+
+    gray : (H, W) float32. The regions where the smoothed gradient energy is at least ``ENERGY_SHARE``
+    of its largest value are taken by their summed energy, the largest ``CANDIDATE_REGIONS`` only;
+    a board's has coherent edges (``MIN_COHERENCE``), is ``MIN_ELONGATION`` times longer than wide
+    and ``MIN_LENGTH`` px long (a small patterned object beside it may hold the largest value).
+    """
+    h, w = gray.shape
+    f = max(1.0, max(w, h) / ANALYSIS_SIDE)
+    small = gray if f == 1.0 else cv2.resize(gray, (round(w / f), round(h / f)), interpolation=cv2.INTER_AREA)
+    energy, coherence = _structure(np.asarray(small, np.float32))
+    top = float(energy.max())
+    if not top > 0:
+        return []
+    n, labels = cv2.connectedComponents((energy >= ENERGY_SHARE * top).astype(np.uint8), connectivity=8)
+    sums = np.bincount(labels.ravel(), weights=energy.ravel(), minlength=n)
+    sums[0] = 0.0  # the background
+    out = []
+    for lab in np.argsort(sums)[::-1][:min(CANDIDATE_REGIONS, n - 1)]:
+        yx = np.argwhere(labels == lab)
+        e, c = energy[yx[:, 0], yx[:, 1]], coherence[yx[:, 0], yx[:, 1]]
+        quad = _sliver(yx[:, ::-1], e, c, f)
+        if quad is not None:
+            out.append(quad)
+        if len(out) >= most:
+            break
+    return out
+
+
+def quad_map(quad: np.ndarray, side: float = SIDE) -> tuple[np.ndarray, tuple[int, int]]:
+    """The affine map (least squares) of an outline (4, 2) px onto a square of ``side`` px with ``PAD`` around.
+
+    The outline's turn is kept (a square in the same sense), so a board's handedness is too.
+    Returns M (3, 3) float64 (an affine map), image -> warped px, and the warped image's (width, height).
+    """
+    q = np.asarray(quad, np.float64).reshape(4, 2)
+    pad = PAD * side
+    sq = np.array([[0, 0], [side, 0], [side, side], [0, side]], np.float64) + pad
+    d1, d2, d3 = q[1] - q[0], q[2] - q[0], q[3] - q[0]
+    turn = d1[0] * d2[1] - d1[1] * d2[0] + d2[0] * d3[1] - d2[1] * d3[0]
+    if turn < 0:  # counter-clockwise on screen: keep it so in the warped image
+        sq = sq[[0, 3, 2, 1]]
+    sol, *_ = np.linalg.lstsq(np.column_stack([q, np.ones(4)]), sq, rcond=None)
+    size = int(np.ceil(side + 2 * pad))
+    return np.vstack([sol.T, [0.0, 0.0, 1.0]]), (size, size)
+
+
+def warp(gray: np.ndarray, m: np.ndarray, size: tuple[int, int]) -> np.ndarray | None:
+    """gray (H, W) float32 warped by M (3, 3) into ``size`` (width, height): float32, or None when larger
+    than ``MAX_PIXELS`` or degenerate. Outside the image: the border pixels repeated."""
+    if size[0] * size[1] > MAX_PIXELS or min(size) < 8 or not np.all(np.isfinite(m)):
+        return None
+    g = np.asarray(gray, np.float32)
+    if np.allclose(m[2], [0.0, 0.0, 1.0]):
+        return cv2.warpAffine(g, m[:2], size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return cv2.warpPerspective(g, m, size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
+def from_warp(points: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """Points (N, 2) px on a :func:`warp` image -> the same places on the image: (N, 2) float32."""
+    p = np.asarray(points, np.float64).reshape(-1, 1, 2)
+    if len(p) == 0:
+        return np.zeros((0, 2), np.float32)
+    return cv2.perspectiveTransform(p, np.linalg.inv(np.asarray(m, np.float64))).reshape(-1, 2).astype(np.float32)
+
+
+def candidate_maps(gray: np.ndarray, pattern_size: tuple[int, int], ids: np.ndarray | None = None,
+                   corners: np.ndarray | None = None) -> list[tuple[np.ndarray, tuple[int, int]]]:
+    """The warps worth a second look, most trusted first: [(M (3, 3), (width, height))].
+
+    gray : (H, W) float32. ids (K, 2) int and corners (K, 2) px: a partial board the search found
+    (or None): its lattice when sheared (:func:`is_sheared`), else a texture sliver's outline (:func:`texture_quads`).
+    """
+    if _spans(ids):
+        _, u, v = lattice_axes(ids, corners)
+        got = lattice_map(ids, corners, pattern_size) if is_sheared(u, v) else None
+        return [] if got is None else [got]
+    return [quad_map(q) for q in texture_quads(gray)]
+
+
+def _spans(ids) -> bool:
+    """Whether ids (K, 2) (or None) hold at least ``MIN_LATTICE`` corners spanning 2 steps or more both ways."""
+    return ids is not None and len(ids) >= MIN_LATTICE and min(np.ptp(np.asarray(ids), axis=0)) >= 2
+
+
+def second_look(gray: np.ndarray, pattern_size: tuple[int, int], search, ids: np.ndarray | None = None,
+                corners: np.ndarray | None = None):
+    """The first complete board found on the warps of :func:`candidate_maps`, or None.
+
+    search : ``search(warped (h, w) float32) -> detection`` with ``complete``, ``found``, ``ids``
+    (K, 2) and ``corners`` (K, 2) px. A warp whose search finds only part of the board is fitted
+    again to that part's lattice (:func:`lattice_map`, with room for the whole pattern on every side) and searched
+    once more (the search is sensitive to the crop: a tight one around the board did worse):
+    the outline's affine map leaves the board's perspective, the lattice's homography does not.
+    Returns (corners (N, 2) float32 px on gray, in the warped detection's order; that detection).
+    """
+    for m, size in candidate_maps(gray, pattern_size, ids, corners):
+        for _ in range(ROUNDS):
+            img = warp(gray, m, size)
+            det = search(img) if img is not None else None
+            if det is None or det.complete or not _spans(det.ids):
+                break
+            got = lattice_map(det.ids, from_warp(det.corners, m), pattern_size, placed=False)
+            if got is None:
+                break
+            m, size = got
+        if det is not None and det.complete:
+            return from_warp(det.corners, m), det
+    return None

@@ -1,0 +1,100 @@
+"""The second look at steeply tilted boards (aicalib_tf.detect.chessboard.unshear and its use in detect_corners)."""
+
+import cv2
+import numpy as np
+import pytest
+
+from aicalib_tf.detect.chessboard.unshear import (STEP, from_warp, is_sheared, lattice_map, quad_map, texture_quads,
+                                                  warp)
+
+
+def _sliver_lattice(shape=(9, 6), origin=(100.0, 300.0)):
+    """A steep-tilt-like lattice: ids (K, 2) and points (K, 2) px, steps 20 and 15 px meeting at 10°."""
+    c, r = np.meshgrid(np.arange(shape[0]), np.arange(shape[1]))
+    ids = np.stack([c.ravel(), r.ravel()], 1)
+    u = 20.0 * np.array([np.cos(np.radians(-5)), np.sin(np.radians(-5))])
+    v = 15.0 * np.array([np.cos(np.radians(5)), np.sin(np.radians(5))])
+    return ids, np.asarray(origin) + ids[:, :1] * u + ids[:, 1:] * v, u, v
+
+
+def test_from_warp_maps_warped_pixel_centres_back_to_the_image():
+    # on a linear ramp bilinear sampling is exact, so each warped pixel's value is the image x (or y)
+    # of the place it came from: the pixel-centre convention needs no half-pixel term
+    h, w = 120, 160
+    ramp_x = np.tile(np.arange(w, dtype=np.float32), (h, 1))
+    ramp_y = np.tile(np.arange(h, dtype=np.float32)[:, None], (1, w))
+    affine = np.array([[2.0, 0.7, -30.0], [-0.4, 3.0, -50.0], [0.0, 0.0, 1.0]])
+    persp = affine @ np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [4e-4, 1e-3, 1.0]])
+    for m in (affine, persp):
+        wx, wy = warp(ramp_x, m, (200, 150)), warp(ramp_y, m, (200, 150))
+        ys, xs = np.mgrid[0:150:7, 0:200:7]
+        back = from_warp(np.stack([xs.ravel(), ys.ravel()], 1), m)
+        inside = np.all((back > 1) & (back < [w - 2, h - 2]), axis=1)
+        assert inside.sum() > 50
+        assert np.abs(back[inside, 0] - wx[ys, xs].ravel()[inside]).max() < 2e-3
+        assert np.abs(back[inside, 1] - wy[ys, xs].ravel()[inside]).max() < 2e-3
+
+
+def test_a_sharp_or_uneven_lattice_is_sheared_and_warped_square_with_its_handedness():
+    ids, pts, u, v = _sliver_lattice()
+    assert is_sheared(u, v) and is_sheared(np.array([20.0, 0]), np.array([0, 5.0]))
+    assert not is_sheared(np.array([20.0, 0]), np.array([3.0, 15.0]))  # 79°, steps 20 and 15
+    for mirror in (False, True):
+        p = pts * [1, -1] + [0, 600] if mirror else pts  # a lattice mirrored on the image
+        m, size = lattice_map(ids, p, (9, 6))
+        q = from_warp(np.zeros((0, 2)), m)
+        assert q.shape == (0, 2)
+        warped = cv2.perspectiveTransform(p.reshape(-1, 1, 2), m).reshape(-1, 2)
+        g = warped.reshape(6, 9, 2)
+        np.testing.assert_allclose(np.diff(g, axis=1), np.broadcast_to([STEP, 0], (6, 8, 2)), atol=1e-4)
+        np.testing.assert_allclose(np.abs(np.diff(g, axis=0)), np.broadcast_to([0, STEP], (5, 9, 2)), atol=1e-4)
+        assert np.linalg.det(m[:2, :2]) > 0  # no mirror: the board's handedness is kept
+        assert np.all((warped > 0) & (warped < size))
+
+
+def test_an_outline_maps_onto_a_square_in_the_same_sense():
+    quad = np.array([[100.0, 300.0], [220.0, 270.0], [400.0, 250.0], [280.0, 282.0]])
+    for q in (quad, quad[::-1]):
+        m, size = quad_map(q, side=100.0)
+        assert np.linalg.det(m[:2, :2]) > 0 and size[0] == size[1] > 100
+
+
+def _sliver_board(h=480, w=640) -> tuple[np.ndarray, np.ndarray]:
+    """A 9×6 board drawn through a sharp affine map (squares become slivers meeting at 10°): the
+    image (h, w) float32 and the board's centre there (2,) px."""
+    board = np.full((7 * 20 + 40, 10 * 20 + 40), 0.9, np.float32)
+    for r in range(7):
+        for c in range(10):
+            if (r + c) % 2 == 0:
+                board[20 + 20 * r:40 + 20 * r, 20 + 20 * c:40 + 20 * c] = 0.1
+    _, _, u, v = _sliver_lattice()
+    a = np.array([[u[0] / 20, v[0] / 20, 150.0], [u[1] / 20, v[1] / 20, 200.0]])
+    centre = a[:, :2] @ [board.shape[1] / 2 - 0.5, board.shape[0] / 2 - 0.5] + a[:, 2]
+    return cv2.warpAffine(board, a, (w, h), borderValue=0.5), centre
+
+
+def test_texture_slivers_are_found_and_frontal_textures_are_not():
+    image, centre = _sliver_board()
+    quads = texture_quads(image)
+    assert len(quads) == 1
+    assert np.linalg.norm(quads[0].mean(axis=0) - centre) < 15
+    frontal = np.full((480, 640), 0.5, np.float32)
+    frontal[100:300, 100:400] = np.kron((np.indices((10, 15)).sum(0) % 2), np.ones((20, 20))) * 0.8 + 0.1
+    assert texture_quads(frontal) == []
+    rng = np.random.default_rng(3)
+    assert texture_quads(cv2.GaussianBlur(rng.random((480, 640), dtype=np.float32), (0, 0), 2.0)) == []
+
+
+@pytest.mark.parametrize("index", [43, 59])  # no grid at all / a partial board of 50 corners at first
+def test_a_steeply_tilted_board_is_found_by_its_second_look(monkeypatch, index):
+    from aicalib_tf.bench.conditions import PATTERN, generalize_conditions
+    from aicalib_tf.bench.metrics import board_detection_outcome
+    from aicalib_tf.detect import pipeline
+    from data_gen import make_sample
+
+    cond = {c.name: c for c in generalize_conditions()}["tilt-steep"]
+    s = make_sample(cond.preset, cond.seed, index, size=cond.size, pattern=PATTERN)
+    det = pipeline.detect_corners(s.image, PATTERN)
+    assert det.complete and board_detection_outcome(det.corners, s.corners, PATTERN)[0] == "hit"
+    monkeypatch.setattr(pipeline, "_unsheared", lambda *a: a[-1])
+    assert not pipeline.detect_corners(s.image, PATTERN).complete
