@@ -1,7 +1,7 @@
 """How noisy one split's halves difference is: many random half-splits of each real set, every tool.
 
     .venv/bin/python benchmarks/real_split_noise.py [--sets opencv_left ...] [--splits 30] [--skip-mrcal]
-        [--json noise.json]
+        [--json noise.json] [--weighting view]
 
 ``benchmarks/real_repeatability.py`` scores two fixed splits of each set (even/odd, first/second). One
 split is one draw: here each set's photos (as that benchmark reads them) are split at random into
@@ -37,6 +37,8 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import real_repeatability as rr  # noqa: E402
+
+from aicalib_tf.calib import weights  # noqa: E402
 
 OURS = ("flat", "auto", "flex")
 ANCHORS = (("cv_plumb_bob", "OpenCV 5-coef"), ("cv_rational", "OpenCV rational"), ("cv_fisheye", "OpenCV fisheye"),
@@ -163,7 +165,10 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-mrcal", action="store_true")
     ap.add_argument("--data", default=str(rr.SHARED))
     ap.add_argument("--json", default=None)
+    ap.add_argument("--weighting", choices=weights.WEIGHTINGS, default=weights.WEIGHTING,
+                    help=f"the corners' weighting rule in every aicalib_tf fit (default: {weights.WEIGHTING}; aicalib_tf.calib.weights)")
     args = ap.parse_args(argv)
+    weights.WEIGHTING = args.weighting
     venv = None if args.skip_mrcal else Path(args.mrcal_venv)
     if venv is not None and not (venv / "bin" / "mrcal-calibrate-cameras").exists():
         print(f"mrcal not found in {venv}: its column is skipped")

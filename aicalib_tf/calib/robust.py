@@ -1,11 +1,12 @@
 """One calibration solve with per-corner weights, single-corner outlier rejection and the board flex.
 
-Weights: a view's ``sigmas`` (one σ per corner, px) weight its corners by 1/σ', σ the median of the
-view's own (:func:`view_sigmas` says why not each corner's; :func:`~aicalib_tf.calib.bundle.corner_weights`);
-views without them take the median σ of those that have them (all equal when none has). σ' = √(σ² + τ²) adds the error the σ's leave unexplained
-(:func:`with_floor`, from a first fit with the σ alone): on OpenCV's 13 left-camera photos the detector's
-σ have median 0.024 px (5-95%: 0.006-0.066) while the fit's residuals are 0.16 px RMS; weighted by 1/σ
-the fit moved fx by 0.86 px (2.3σ) and rejected 26 corners, with σ' it stays within 0.1σ of the equal-weight fit.
+Weights: a view's ``sigmas`` (one σ per corner, px) weight its corners by 1/σ' (:func:`view_sigmas`,
+:func:`~aicalib_tf.calib.bundle.corner_weights`); views without them take the median σ of those that
+have them (all equal when none has). σ' adds to the detector's σ the error it leaves unexplained, shared
+by all corners (:func:`with_floor`, from a first fit with the σ alone; the rule and its figures:
+:mod:`aicalib_tf.calib.weights`): on OpenCV's 13 left-camera photos the detector's σ have median 0.029 px
+while the fit's residuals are 0.12 px per axis, so σ' is nearly equal for all corners; weighted by 1/σ
+alone the fit moved fx by 0.86 px (2.3σ) and rejected 26 corners.
 
 Corner outliers: after each fit every corner's normalised residual e = |r|·σ_ref/σ (px) is compared
 with T = max(:data:`CORNER_K` · ŝ, :data:`CORNER_FLOOR_PX`), ŝ = median(e) / √(2 ln 2) over the
@@ -70,9 +71,8 @@ class SolveOptions:
 
 def view_sigmas(views) -> list | None:
     """Per-view (N_v,) σ px for :func:`~aicalib_tf.calib.bundle.bundle_adjust`, or None when no view has
-    any, by the rule every fit shares (:func:`aicalib_tf.calib.weights.fit_sigmas`): each view's corners
-    all take the median of its σ (views without their own take the median of the others'); the module
-    :mod:`aicalib_tf.calib.weights` says why the view's median and not each corner's own σ."""
+    any, by the rule every fit shares (:func:`aicalib_tf.calib.weights.fit_sigmas`; views without their own
+    take the median of the others')."""
     return fit_sigmas([getattr(v, "sigmas", None) for v in views], [len(v.ids) for v in views])
 
 

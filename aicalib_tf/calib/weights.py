@@ -1,20 +1,45 @@
 """Per-corner weights of a calibration fit: which σ each corner enters a fit with, and the weights σ_ref / σ.
 
-Every fit (one camera, a rig's joint fit, the field check, the live page's calibrations) takes its
-corners' σ from :func:`fit_sigmas`, so all of them weigh corners by one rule, ``WEIGHTING``:
+Every fit (one camera, a rig's joint fit, the hand-eye poses, the field check, the live page's
+calibrations) takes its corners' σ from :func:`fit_sigmas` and, after a first fit weighted by them,
+adds the error they leave unexplained with :func:`total_sigmas` (through
+:func:`aicalib_tf.calib.robust.with_floor`), so all of them weigh corners by one rule, ``WEIGHTING``:
 
-* ``"view"`` (the default): each corner takes the median σ of its view. The detector's σ says well
-  which views are blurred or noisy (a fit of views 20 times noisier than the others comes 4–30
-  times nearer the truth weighted so: the rig, field check and hand-eye tests), while inside one
-  view it spreads only 0.8–1.2 times its median. On rendered calibration sequences with mixed blur
-  and noise (``python benchmarks/corner_sigma.py --calibrate --repeats 4``, 16 calibrations) the
-  projection error over the boards was 0.526 px with equal weights, 0.593 with the view's median
-  and 0.642 with each corner's own σ (0.644 clipped); each corner's own σ against the view's
-  median +0.049 ± 0.043 px, better in 6 of 16: not better, though σ follows the corners' errors
-  (docs/benchmark.md, "Per-corner σ"); that error is mostly the principal point's (0.52-0.63 px),
-  whatever the weighting;
-* ``"clipped"``: each corner's own σ, held within ``CLIP`` times its view's median;
-* ``"corner"``: each corner's own σ.
+* ``"components"`` (the default): each corner's own σ_i and, after the first fit, σ_total,i² =
+  a·σ_i² + τ² per axis: τ the share of the residuals the detector does not explain (the board's print
+  and flatness, the lens model's misfit, rendering), a <= 1 the detector's share's scale, both by
+  restricted maximum likelihood on the first fit's residuals (:func:`variance_components`). Where τ ≫ σ
+  the weights become equal; where the detector's noise dominates (blurred or noisy views) they follow
+  σ. a is held at most 1: the residuals cannot tell the detector's noise from a lens-model misfit that
+  grows where σ does (far, oblique corners), which on real photos fitted a = 3-47; held so, an error
+  in a only moves the weights towards equal.
+* ``"view-components"``: the same with each view's median σ.
+* ``"view"``: each corner takes the median σ of its view; ``"clipped"``: each corner's own σ, held
+  within ``CLIP`` times its view's median; ``"corner"``: each corner's own σ. These three add
+  τ² = max(0, s² − mean σ²), s² the residuals' variance per axis (Σ|r|² / 2N): a moment that finds no
+  τ when the detector over-states its noisiest corners, whose excess then cancels the clean corners'
+  shortfall.
+
+Measured. On rendered sequences with mixed blur and noise the detector's σ of the cleanest views
+(median 0.014 px) lie below their true errors (0.039 px per axis) and those of the noisiest above
+(0.20 against 0.16 px): the true errors give a = 0.56, τ = 0.038 px, and the residuals alone give
+a = 0.4-0.75, τ = 0.030-0.040 px for each calibration, where the moment above finds τ ≈ 0.
+Calibrating them (``python benchmarks/corner_sigma.py --calibrate --repeats 4``, 16 calibrations),
+the projection error over the boards: equal weights 0.532 px, ``"view"`` 0.585, ``"corner"`` 0.640,
+``"clipped"`` 0.642, ``"components"`` 0.392, ``"view-components"`` 0.372; ``"components"`` against
+equal −0.139 ± 0.062 px (better in 12 of 16), against ``"view"`` −0.193 ± 0.087 (12 of 16); with
+``--repeats 12`` (48): equal 0.545, view 0.578, components 0.392, view-components 0.385 (these two
+differ by 0.007 ± 0.010: inside a view σ spreads only 0.8–1.2 times its median). On real photos τ
+dominates (0.12 px on OpenCV's left camera, σ median 0.029 px; 0.28 px on a 185° fisheye; 0.64 px on
+a bent board) and the weights are nearly equal: over the same 24 random half-splits of each set
+(``benchmarks/real_split_noise.py --weighting``, flat fits) the halves differ by a median 0.273 px
+against 0.265 with ``"view"`` (opencv_left), 4.20 against 4.17 (udacity_lane_cal) and 0.478 against
+0.476 (ocam_fisheye); split by split the median change is −0.006, +0.001 and +0.001 px, ties. The
+covariance's predicted band (:func:`aicalib_tf.calib.quality.predicted_half_difference`) does not
+change either (σ̂² of the weighted fit carries τ already): it misses udacity's and ocam's splits for
+errors shared within a view, not for the weights.
+Views with σ 20 times those of the others (rig, field check and hand-eye tests) come 4–30 times nearer
+the truth weighted.
 
 Views without σ (an OpenCV detector's) take the median of the others' (all equal when none has).
 :func:`corner_weights` turns the σ into weights σ_ref / σ with σ_ref the median σ, so the weighted
@@ -29,8 +54,8 @@ import numpy as np
 __all__ = ["WEIGHTING", "WEIGHTINGS", "CLIP", "OUTLIER_K", "fit_sigmas", "corner_weights", "variance_components",
            "total_sigmas"]
 
-WEIGHTINGS = ("view", "clipped", "corner", "components")
-WEIGHTING = "view"  # the rule every fit uses (benchmarks/corner_sigma.py --calibrate compares the others)
+WEIGHTINGS = ("view", "clipped", "corner", "components", "view-components")
+WEIGHTING = "components"  # the rule every fit uses (benchmarks/corner_sigma.py --calibrate compares the others)
 CLIP = (0.5, 2.0)  # "clipped": a corner's σ within these multiples of its view's median σ
 
 
@@ -55,7 +80,7 @@ def fit_sigmas(given, counts, rule: str | None = None) -> list | None:
     fill = float(np.median([m for m in medians if m is not None]))
     out = []
     for g, m, n in zip(given, medians, counts):
-        if g is None or rule == "view":
+        if g is None or rule in ("view", "view-components"):
             out.append(np.full(int(n), fill if m is None else m))
         elif rule == "clipped":
             out.append(np.clip(g, CLIP[0] * m, CLIP[1] * m))
@@ -140,7 +165,7 @@ def total_sigmas(sigmas, residuals, n_params: int = 0, rule: str | None = None) 
     """
     rule = WEIGHTING if rule is None else rule
     sig = [np.asarray(v, np.float64) for v in sigmas]
-    if rule == "components":
+    if rule in ("components", "view-components"):
         a, t2 = variance_components(sig, residuals, n_params)
         return [np.sqrt(a * v * v + t2) for v in sig]
     res = np.concatenate([np.asarray(v, np.float64).reshape(-1, 2) for v in residuals])

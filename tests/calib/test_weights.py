@@ -25,10 +25,11 @@ def test_the_clipped_rule_holds_each_corner_within_its_views_median_and_the_corn
 
 def test_the_shipped_rule_is_the_default(monkeypatch):
     given = [np.array([0.1, 0.3, 0.5])]
-    assert weights.WEIGHTING == "view"
-    np.testing.assert_array_equal(fit_sigmas(given, [3])[0], np.full(3, 0.3))
-    monkeypatch.setattr(weights, "WEIGHTING", "corner")
+    assert weights.WEIGHTING == "components"
     np.testing.assert_array_equal(fit_sigmas(given, [3])[0], given[0])
+    for rule in ("view", "view-components"):
+        monkeypatch.setattr(weights, "WEIGHTING", rule)
+        np.testing.assert_array_equal(fit_sigmas(given, [3])[0], np.full(3, 0.3))
 
 
 @pytest.mark.parametrize("given, counts, why", [([np.array([0.1, 0.2])], [3], "3 finite values"),
@@ -107,8 +108,9 @@ def test_components_weigh_views_by_their_true_noise_when_the_detector_misses_a_s
 
     # clean views: σ 0.01 px said, 0.1 px true (an error the detector does not see); noisy ones 0.5 said, 0.3 true
     fit, sig = _fit_with(lambda k: 0.3 if k % 2 else 0.1, lambda k: 0.5 if k % 2 else 0.01)
-    monkeypatch.setattr(weights, "WEIGHTING", "components")
-    assert 2.2 < _ratio(with_floor(sig, fit)) < 3.8  # true 3
+    for rule in ("components", "view-components"):
+        monkeypatch.setattr(weights, "WEIGHTING", rule)
+        assert 2.2 < _ratio(with_floor(sig, fit)) < 3.8  # true 3
     monkeypatch.setattr(weights, "WEIGHTING", "view")
     assert _ratio(with_floor(sig, fit)) > 20  # the residuals' variance minus the mean σ²: no floor at all
 
