@@ -24,8 +24,9 @@ as seeds held out.
 ``--calibrate`` degrades the calibration sequences' views (:func:`aicalib_tf.bench.conditions.calibration_sequences`,
 cameras 0–3) one by one with a blur and a noise drawn from ``MIXED`` (seeded per view), detects them
 and calibrates each camera with its corners weighted by each rule of ``WEIGHTINGS`` (all equal; each
-view's median σ; each corner's σ clipped to 0.5-2x the view's median; each corner's own σ:
-:mod:`aicalib_tf.calib.weights`), with the lens model the truth has (plumb_bob); it prints the
+view's median σ; each corner's σ clipped to 0.5-2x the view's median; each corner's own σ; each
+corner's σ, or its view's median, with the error the detector does not explain estimated from a first
+fit: :mod:`aicalib_tf.calib.weights`), with the lens model the truth has (plumb_bob); it prints the
 rotation-free errors against the true camera: fx %, the principal point and the mean projection
 error over the area the boards covered.
 """
