@@ -302,10 +302,12 @@ def fit_views(views, pattern_size: tuple[int, int], square_size: float, image_si
 
 
 def _flex_refit(fit: BundleResult, image_size, fix_k3, opts: SolveOptions):
-    """(views, flex mode) -> a fit of ``fit``'s model from its intrinsics: the refits of :func:`confirm_flex`."""
+    """(views, flex mode) -> a fit of ``fit``'s model from its intrinsics: the refits of :func:`confirm_flex`
+    (mode "auto", "off", or a (w_x, w_y) squares the board is held at)."""
     start = Lens.from_intrinsics(fit.model, fit.intrinsics, image_size)
+    held = lambda m: dataclasses.replace(opts, flex="off", flex_value=tuple(m))  # noqa: E731
     return lambda vs, mode: _fit_model(fit.model, vs, 1.0, image_size, start, fix_k3, False,
-                                       dataclasses.replace(opts, flex=mode))
+                                       dataclasses.replace(opts, flex=mode) if isinstance(mode, str) else held(mode))
 
 
 def _resolve_model(model: str, rational: bool) -> str:

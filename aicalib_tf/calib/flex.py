@@ -7,11 +7,12 @@ One flex is shared by every view (one physical board); the bundle solves (w_x, w
 (:mod:`aicalib_tf.calib.bundle`). Here w is in squares; ``sag`` is the centre's offset against the
 corners of the grid, w_x + w_y, reported in squares and in the board's unit.
 
-Rule (``flex="auto"``): the flex is solved, and kept when the views determine it: both standard
+Rule (``flex="auto"``): the flex is solved, and used when the views determine it: both standard
 deviations at most :data:`FLEX_SIGMA_MAX` squares (a quarter of :data:`FLEX_TYPICAL`, the sag of a
 printed board on a rigid backing that a flex must resolve: mrcal measures about 0.014 squares on a
-GoPro set) and |w| within :data:`FLEX_PLAUSIBLE`; then its sag must stand above the noise of its own
-estimate, measured by leaving each view out (:mod:`aicalib_tf.calib.flex_check`). Otherwise the board is
+GoPro set) and |w| within :data:`FLEX_PLAUSIBLE`; then its sag is moved towards 0 by part of the noise
+of its own estimate, measured by leaving each view out, and the camera refitted with the board held
+there (:mod:`aicalib_tf.calib.flex_check`). Otherwise, or when nothing of the sag is left, the board is
 taken as flat and refitted, and the note says why. Views whose ids are relative (a board larger than the frame) do not know where
 their corners lie on the board, so a set holding one is fitted flat.
 """

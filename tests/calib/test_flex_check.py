@@ -1,12 +1,14 @@
-"""calib.flex_check: a solved flex is kept when its sag stands above the noise of its own estimate,
-that noise measured by leaving each view out (errors that follow a view included)."""
+"""calib.flex_check: a solved flex's sag is shrunk towards 0 by its standard error (firm shrinkage), that
+error measured by leaving each view out (errors that follow a view included), and the board held there."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from aicalib_tf.calib.fit import View, _fit_model, calibrate_camera
-from aicalib_tf.calib.flex_check import sag_evidence
+from aicalib_tf.calib.flex_check import sag_estimate
+from aicalib_tf.calib.significance import t_quantile
 from aicalib_tf.calib.robust import SolveOptions
 from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views
 from tests.calib.test_flex import PINHOLE, SIZE
@@ -33,32 +35,75 @@ def test_a_small_flex_in_noisy_corners_is_kept_and_fx_unbiased():
     assert abs(cal.fx - 500.0) < abs(flat.fx - 500.0) and abs(cal.fx - 500.0) < 1.5 * cal.std["fx"]
 
 
-def test_a_flex_that_only_the_fits_own_sigma_believes_is_dropped_and_said_so():
+def _calibrate_and_spy(views, monkeypatch):
+    """(calibrate_camera's flex="auto" Calibration, the (sag, SE) its estimate started from)."""
+    from aicalib_tf.calib import flex_check
+
+    seen, inner = {}, flex_check.sag_estimate
+
+    def spy(sag, sigma, loo=None):
+        out = inner(sag, sigma, loo)
+        seen.update(sag=sag, se=out[1])
+        return out
+
+    monkeypatch.setattr(flex_check, "sag_estimate", spy)
+    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="auto")
+    return cal, seen["sag"], seen["se"]
+
+
+def test_a_sag_a_95pc_test_would_drop_is_kept_near_its_truth(monkeypatch):
+    # sag 0.005 squares, 10 views at 0.3 px: 2.2 standard errors, under the 95% test's 2.26 (9 dof)
+    views = synthetic_views(PINHOLE, 10, 0.3, seed=np.random.default_rng([9, 47]), flex=(0.003, 0.002))
+    cal, sag, se = _calibrate_and_spy(views, monkeypatch)
+    assert abs(sag) < t_quantile(0.975, 9) * se
+    assert cal.flex is not None and cal.flex_note == ""
+    assert abs(float(np.sum(cal.flex)) - 0.005) <= 0.001 and np.sum(cal.flex) < sag
+    c = cal.flex_covariance  # the sag's σ is its leave-one-view-out standard error
+    assert np.sqrt(c[0, 0] + c[1, 1] + 2 * c[0, 1]) == pytest.approx(se, rel=1e-6)
+
+
+def test_a_flat_boards_sag_stays_near_zero(monkeypatch):
+    views = synthetic_views(PINHOLE, 10, 0.3, seed=np.random.default_rng([0, 47]))
+    cal, sag, _ = _calibrate_and_spy(views, monkeypatch)
+    got = 0.0 if cal.flex is None else float(np.sum(cal.flex))
+    assert abs(got) <= 0.0005 < abs(sag)
+
+
+def test_a_flex_that_only_the_fits_own_sigma_believes_is_reported_with_the_views_spread(monkeypatch):
     views = _wobbly_board(12, seed=1)
     fit = _fit_model("plumb_bob", views, 1.0, SIZE, None, options=SolveOptions(PATTERN, "auto"))
     c = fit.flex_covariance
-    assert fit.flex is not None and abs(np.sum(fit.flex)) > 5 * np.sqrt(c[0, 0] + c[1, 1] + 2 * c[0, 1])
-    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="auto")
-    assert cal.flex is None
-    assert cal.flex_note.startswith("not used: the sag") and "leaving each of the 12 views out" in cal.flex_note
+    sigma = np.sqrt(c[0, 0] + c[1, 1] + 2 * c[0, 1])
+    assert fit.flex is not None and abs(np.sum(fit.flex)) > 5 * sigma
+    cal, sag, se = _calibrate_and_spy(views, monkeypatch)
+    assert se > 3 * sigma  # the bends that follow each view: several times the fit's own σ
+    got = 0.0 if cal.flex is None else float(np.sum(cal.flex))
+    t = abs(sag) / se
+    assert got == pytest.approx(0.0 if t <= 0.5 else sag * min(1.0, 4 * (1 - 0.5 / t) / 3.5), abs=1e-12)
 
 
-def test_the_evidence_rule_on_given_numbers():
-    assert sag_evidence(0.003, 0.001, None)[0] and not sag_evidence(0.0019, 0.001, None)[0]  # no jackknife: 1.96σ
+def test_the_estimate_on_given_numbers():
+    assert sag_estimate(0.003, 0.001, None)[:2] == (pytest.approx(0.003 * 4 * (1 - 0.5 / 3) / 3.5), 0.001)
+    assert sag_estimate(-0.0005, 0.001, None)[0] == 0.0  # t 0.5: flat
+    assert sag_estimate(-0.0041, 0.001, None)[0] == -0.0041  # t 4.1: as solved
     loo = 0.006 + 0.001 * np.array([-1.0, 1.0, -1.0, 1.0, -1.0, 1.0])  # σ_J = √(5/6 · 6e-6) = 0.00224
-    keep, why = sag_evidence(0.006, 0.0005, loo)
-    assert keep and why == ""  # |t| 2.68 > 2.57 (5 degrees of freedom)
-    keep, why = sag_evidence(0.005, 0.0005, loo)
-    assert not keep and "± 0.0022, from leaving each of the 6 views out; |t| 2.2 < 2.57" in why
-    keep, why = sag_evidence(0.004, 0.003, np.full(6, 0.004))  # no spread: the fit's own σ is the floor
-    assert not keep and "the fit's own σ" in why
-    assert sag_evidence(-0.02, 0.001, np.full(6, -0.02))[0]
+    est, se, how = sag_estimate(-0.006, 0.0005, loo)
+    assert se == pytest.approx(0.002236, abs=1e-6) and how == "from leaving each of the 6 views out"
+    assert est == pytest.approx(-se * 4 * (0.006 / se - 0.5) / 3.5)
+    assert sag_estimate(0.004, 0.003, np.full(6, 0.004))[1:] == (0.003, "the fit's own σ")  # no spread: σ_s
+    ests = [sag_estimate(s, 0.001, None)[0] for s in np.linspace(0.0, 0.006, 61)]
+    assert np.all(np.diff(ests) >= 0) and np.max(np.diff(ests)) < 0.0002  # continuous: no jump at a threshold
 
 
-def test_a_flat_boards_flex_is_left_off():
-    views = synthetic_views(PINHOLE, 12, 0.2, seed=5)
-    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="auto")
-    assert cal.flex is None and cal.flex_note.startswith("not")
+def test_a_board_held_at_the_solved_flex_refits_to_the_same_camera():
+    views = synthetic_views(PINHOLE, 8, 0.1, seed=3, flex=(0.01, 0.01))
+    free = _fit_model("plumb_bob", views, 1.0, SIZE, None, options=SolveOptions(PATTERN, "auto"))
+    held = _fit_model("plumb_bob", views, 1.0, SIZE, None,
+                      options=SolveOptions(PATTERN, "off", flex_value=tuple(free.flex)))
+    assert held.flex is None
+    np.testing.assert_allclose(held.intrinsics, free.intrinsics, rtol=1e-5, atol=1e-4)
+    with pytest.raises(ValueError, match="flex_value"):
+        SolveOptions(PATTERN, "auto", flex_value=(0.01, 0.0))
 
 
 def test_doctests():
