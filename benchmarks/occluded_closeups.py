@@ -1,20 +1,22 @@
 """Close-up fisheye boards with an object over their outer ring: full boards and wrong ones, rim completion on and off.
 
-    python benchmarks/occluded_closeups.py [--count 40] [--per 3] [--condition closeup-eq]
+    python benchmarks/occluded_closeups.py [--count 40] [--per 3] [--condition closeup-eq] [--seed S]
 
 Each image of the evaluate condition (``aicalib_tf.bench.conditions``, default ``closeup-eq``) is
 drawn again (``data_gen.sample.draw_scene``) with one object in front of it, centred within 0.3
 of a square of a visible outer-ring corner (drawn at random, ``--per`` objects per image, one at a
-time): a blob (star-convex polygon) or a bar (4 × 0.7 of its radius), radius 0.4–1.6 of the
-corner's nearest step, grey 0.05–0.95, as data_gen's occluders but sized to the rim's corners.
-The corners under it or within 2 px of its outline are hidden (``data_gen.occlude.occluded``).
+time; ``--seed`` draws other scenes and objects, the condition's seed replaced): a blob
+(star-convex polygon) or a bar (4 × 0.7 of its radius), radius 0.4–1.6 of the corner's nearest
+step, grey 0.05–0.95, as data_gen's occluders but sized to the rim's corners. The corners under it or within 2 px of its outline are hidden (``data_gen.occlude.occluded``).
 
-Each render goes through :func:`aicalib_tf.detect_corners` three times: as shipped, with the
-object test (:func:`aicalib_tf.detect.chessboard.occlusion.object_in_front`) switched off, and with
-the rim completion (:func:`aicalib_tf.detect.chessboard.rim.rim_board`) switched off. Printed per
-run: full boards, full boards with a wrong id (a corner over 2 px from its true place; also by the
-render's object number, 0 … per − 1, so that object 2 can be held out of tuning), full boards that
-claim a hidden corner within 2 px of it, and each scene where the runs differ.
+Each render goes through :func:`aicalib_tf.detect_corners` four times: as shipped, with the
+object test (:func:`aicalib_tf.detect.chessboard.occlusion.object_in_front`) switched off, with
+the interpolation test (:func:`aicalib_tf.detect.chessboard.smooth_grid.without_off_grid`) switched
+off, and with the rim completion (:func:`aicalib_tf.detect.chessboard.rim.rim_board`) switched off.
+Printed per run: full boards, full boards with a wrong id (a corner over 2 px from its true place;
+also by the render's object number, 0 … per − 1, so that object 2 can be held out of tuning), full
+boards that claim a hidden corner within 2 px of it, partial boards and those with a wrong id, and
+each scene where the runs differ.
 """
 
 from __future__ import annotations
@@ -50,11 +52,14 @@ def occluder(rng: np.random.Generator, centre: np.ndarray, step: float) -> np.nd
     return cv2.boxPoints(box).astype(np.float64)
 
 
-def scenes(cond, count: int, per: int):
-    """Yield ((index, k), image (H, W) uint8, true corners (N, 2) px, visible (N,) bool)."""
+def scenes(cond, count: int, per: int, seed: int | None = None):
+    """Yield ((index, k), image (H, W) uint8, true corners (N, 2) px, visible (N,) bool).
+
+    seed : None draws the objects as the condition's own renders do; a seed draws them anew (with
+    ``cond``'s seed replaced by it, so the scenes too)."""
     for index, _ in condition_samples(cond, count):
         scene = draw_scene(cond.preset, cond.seed, index, size=cond.size, pattern=PATTERN)
-        rng = np.random.default_rng([index, 99])
+        rng = np.random.default_rng([index, 99] if seed is None else [index, 99, seed])
         ring = [k for k in outer_ring(*PATTERN) if scene.visible[k]]
         for k in range(per):
             corner = ring[int(rng.integers(len(ring)))]
@@ -67,12 +72,13 @@ def scenes(cond, count: int, per: int):
 
 
 def outcome(det, truth: np.ndarray, visible: np.ndarray) -> str:
-    """'full', 'full, wrong', 'full, hidden' (a hidden corner claimed within 2 px), 'partial' or 'none'."""
+    """'full', 'full, wrong', 'full, hidden' (a hidden corner claimed within 2 px), 'partial',
+    'partial, wrong' or 'none'."""
     if not det.found:
         return "none"
-    if not det.complete:
-        return "partial"
     st = partial_board_stats(det.corners, det.ids, truth, visible, PATTERN)
+    if not det.complete:
+        return "partial, wrong" if st["wrong_ids"] else "partial"
     return "full, wrong" if st["wrong_ids"] else ("full, hidden" if st["hidden_found"] else "full")
 
 
@@ -81,6 +87,7 @@ def main(argv=None) -> int:
     ap.add_argument("--condition", default="closeup-eq", help="an evaluate condition name")
     ap.add_argument("--count", type=int, default=40, help="images of the condition")
     ap.add_argument("--per", type=int, default=3, help="objects per image, one per render")
+    ap.add_argument("--seed", type=int, default=None, help="data_gen seed in place of the condition's (other scenes)")
     args = ap.parse_args(argv)
     from aicalib_tf import detect_corners
     from aicalib_tf.detect import pipeline
@@ -88,12 +95,18 @@ def main(argv=None) -> int:
     def never(*_a, **_k):
         return None  # no rim board; no object in front (falsy)
 
+    def as_it_is(det, _reason):
+        return det  # no corner off the grid
+
     runs = {"shipped": {}, "object test off": {"object_in_front": never, "object_in_front_at": never},
-            "rim off": {"rim_board": never}}
-    shipped = {name: getattr(pipeline, name) for name in ("rim_board", "object_in_front", "object_in_front_at")}
-    counts = {name: {"full": 0, "full, wrong": 0, "full, hidden": 0, "wrong by object": [0] * args.per} for name in runs}
+            "interpolation test off": {"without_off_grid": as_it_is}, "rim off": {"rim_board": never}}
+    shipped = {name: getattr(pipeline, name) for patch in runs.values() for name in patch}
+    counts = {name: {"full": 0, "full, wrong": 0, "full, hidden": 0, "partial": 0, "partial, wrong": 0,
+                     "wrong by object": [0] * args.per} for name in runs}
     total = 0
-    for key, img, truth, visible in scenes(select_conditions(args.condition)[0], args.count, args.per):
+    cond = select_conditions(args.condition)[0]
+    cond = cond if args.seed is None else replace(cond, seed=args.seed)
+    for key, img, truth, visible in scenes(cond, args.count, args.per, args.seed):
         got = {}
         for name, patch in runs.items():
             for attr, value in patch.items():  # the search looks its stages up in its module at each call
@@ -107,12 +120,16 @@ def main(argv=None) -> int:
                 counts[name]["full"] += 1
                 counts[name][got[name]] += got[name] != "full"
                 counts[name]["wrong by object"][key[1]] += got[name] == "full, wrong"
+            if got[name].startswith("partial"):
+                counts[name]["partial"] += 1
+                counts[name]["partial, wrong"] += got[name] != "partial"
         total += 1
         if len(set(got.values())) > 1:
             print(f"  {args.condition} #{key[0]} object {key[1]} ({int((~visible).sum())} hidden): {got}", flush=True)
     for name, c in counts.items():
         print(f"{name}: {total} renders, {c['full']} full boards, {c['full, wrong']} with a wrong id "
-              f"(objects 0, 1, ...: {c['wrong by object']}), {c['full, hidden']} claiming a hidden corner")
+              f"(objects 0, 1, ...: {c['wrong by object']}), {c['full, hidden']} claiming a hidden corner; "
+              f"{c['partial']} partial boards, {c['partial, wrong']} with a wrong id")
     return 0
 
 

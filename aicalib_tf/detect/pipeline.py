@@ -87,7 +87,10 @@ camera; their lines meet at 8–20°, sharper than the network's junctions): wit
 sheared partial board's lattice, else a sliver of coherent texture, is warped to square axes and searched again
 (:mod:`aicalib_tf.detect.chessboard.unshear`); only a complete board counts, mapped back and refined on the image. Any full board with a corner on an object's edge
 (:func:`aicalib_tf.detect.chessboard.occlusion.object_in_front`: sectors out of the board's alternation
-and a ring unlike its neighbours') is passed over, on its scale and again at full size.
+and a ring unlike its neighbours') is passed over, on its scale and again at full size. A full board's corners
+off the smooth grid of their neighbours (:func:`aicalib_tf.detect.chessboard.smooth_grid.without_off_grid`: over
+1.5 px and 0.1 of a step from their lines' cubic interpolation, a point on an object's edge) are left out: it
+comes back a partial board.
 
 Without ``pattern_size``, the largest grid with every corner found is returned, complete, its
 size taken as the pattern (columns counted along the grid direction nearer the image's x axis,
@@ -114,6 +117,7 @@ from aicalib_tf.detect.chessboard.lattice import drop_outliers
 from aicalib_tf.detect.chessboard.occlusion import object_in_front, object_in_front_at
 from aicalib_tf.detect.chessboard.partial import partial_board, relative_board
 from aicalib_tf.detect.chessboard.rim import rim_board
+from aicalib_tf.detect.chessboard.smooth_grid import without_off_grid
 from aicalib_tf.detect.pyramid import Frame, boards_coarse_to_fine, quick_scales, quick_shift, refine_full, scales, to_full
 from aicalib_tf.detect.corners.refine import Smoothed, refine_candidates
 from aicalib_tf.detect.chessboard.unshear import second_look as unshear_look
@@ -249,8 +253,8 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
             det = replace(det, corners=corners, image_size=(w, h))
             if det.complete and pattern_size is not None and object_in_front_at(frame.region, (w, h), corners, pattern_size):
                 continue  # at full size, a corner on an object's edge: the finer scales
-        if det.complete and pattern_size is not None:
-            return with_sigmas(det, frame)
+        if det.complete and pattern_size is not None:  # less its corners off the grid of their neighbours
+            return without_off_grid(with_sigmas(det, frame), NO_MATCH)
         if f in quick:  # a quick pass counts only with a complete board
             continue
         if not det.found:

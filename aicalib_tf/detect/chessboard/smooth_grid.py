@@ -1,0 +1,148 @@
+"""Corners of a full board off the smooth grid of their neighbours: the interpolation test.
+
+Any lens maps the board's plane smoothly, so along each of its lines a board's corners follow a
+smooth curve: a corner is interpolated from four others on its line (two on each side, or one on
+one side and three on the other: a cubic in the id, ``STENCILS``). On the true corners of
+close-ups near a fisheye's image circle the interpolation misses by under 0.06 of the corner's
+smallest step (the lens's own bend, squares up to 60 px), elsewhere by far less. A point on an
+object's edge taken for a hidden corner, or a corner pulled by that edge, lies 2–5 px off those
+curves while its four squares may still alternate as a corner's do.
+
+Every interpolation (a row of ``C``: −1 at its target corner, the stencil's weights at the four it
+is interpolated from) leaves a residual r = C·p (px). One corner k off by e moves every residual
+by C[:, k]·e: its own interpolations by −e, those it serves in by its weight times e. Weighting
+each residual by its expected spread (the corners' σ of :mod:`aicalib_tf.detect.corners.sigma`,
+with ``MODEL_SHARE`` of the step for the lens's bend), the offset that best explains them is
+ê_k = C_k·r / C_k·C_k (weighted), and its significance z_k = |C_k·r| / √(C_k·C_k). The corner of
+the largest z is off the grid when z ≥ ``Z_MIN``, |ê| ≥ ``MIN_PX`` and |ê| ≥ ``MIN_SHARE`` of its
+smallest step; it is set aside (its interpolations with it) and the test repeated. A neighbour of
+an off corner, interpolated through it, is not taken for it: the off corner explains every
+residual it touches, the neighbour only its own. A board corner, never interpolated, is not tested.
+
+:func:`without_off_grid` turns a full board with such corners into a partial board without them
+(at most ``MAX_OFF``; a board with more is no board).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from functools import lru_cache
+
+import numpy as np
+
+__all__ = ["STENCILS", "interpolations", "off_grid", "without_off_grid", "Z_MIN", "MIN_PX", "MIN_SHARE", "MAX_OFF"]
+
+# along a line, offsets from the target and weights: exact for a cubic in the id
+STENCILS = (
+    ((-2, -1, 1, 2), (-1 / 6, 4 / 6, 4 / 6, -1 / 6)),  # centred: 2 corners on each side
+    ((-1, 1, 2, 3), (0.25, 1.5, -1.0, 0.25)),  # second corner of a line
+    ((1, -1, -2, -3), (0.25, 1.5, -1.0, 0.25)),  # second-last
+)
+# where a neighbour of the target on its line is set aside: four others within 4 of it, one at least
+# on each side (and their mirror images); used for a target that has none of ``STENCILS`` left
+_GAPPED = ((-3, -2, -1, 2), (-2, -1, 2, 3), (-1, 2, 3, 4), (-3, -2, 1, 2), (-3, -1, 1, 2), (-2, -1, 1, 3))
+GAPPED = _GAPPED + tuple(tuple(-o for o in offs) for offs in _GAPPED)
+MODEL_SHARE = 0.01  # of the target's smallest step: an interpolation's expected miss from the lens's bend
+SIGMA_FLOOR = 0.05  # px: the least σ a corner is taken to have
+Z_MIN = 5.0  # an off corner's offset over its standard error: the least
+MIN_PX = 1.5  # px: the least offset taken as off the grid (a wrong corner is over 2 px off)
+MIN_SHARE = 0.1  # of the corner's smallest step: the least offset (the lens's bend misses by up to 0.06)
+MAX_OFF = 3  # corners off the grid a board may lose; with more it is no board
+
+
+def cubic_weights(offs) -> tuple[float, ...]:
+    """The weights that interpolate a cubic at 0 from its values at the four ``offs``."""
+    return tuple(float(np.prod([-b / (a - b) for b in offs if b != a])) for a in offs)
+
+
+def interpolations(rows: int, cols: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every interpolation of a full rows × cols grid along its lines.
+
+    Returns C (S, rows·cols) float64, each row −1 at its target and the weights at its four
+    corners (row-major positions); target (S,) int, each row's target position; and gapped (S,)
+    bool, the rows of ``GAPPED`` offsets (the others are ``STENCILS``').
+    """
+    forms = [(offs, wts, False) for offs, wts in STENCILS] + [(offs, cubic_weights(offs), True) for offs in GAPPED]
+    out, target, gapped = [], [], []
+    for r in range(rows):
+        for c in range(cols):
+            for dr, dc in ((0, 1), (1, 0)):
+                for offs, wts, gap in forms:
+                    cells = [(r + o * dr, c + o * dc) for o in offs]
+                    if all(0 <= a < rows and 0 <= b < cols for a, b in cells):
+                        row = np.zeros(rows * cols)
+                        row[r * cols + c] = -1.0
+                        for (a, b), w in zip(cells, wts):
+                            row[a * cols + b] = w
+                        out.append(row)
+                        target.append(r * cols + c)
+                        gapped.append(gap)
+    return np.array(out).reshape(-1, rows * cols), np.array(target, int), np.array(gapped, bool)
+
+
+@lru_cache(maxsize=8)
+def _interpolations(rows: int, cols: int):
+    return interpolations(rows, cols)
+
+
+def smallest_steps(points: np.ndarray) -> np.ndarray:
+    """(rows·cols,) px: each corner's distance to its nearest neighbour along a grid line; points (rows, cols, 2)."""
+    rows, cols = points.shape[:2]
+    step = np.full((rows, cols), np.inf)
+    across = np.hypot(*np.moveaxis(np.diff(points, axis=0), -1, 0))  # (rows - 1, cols)
+    along = np.hypot(*np.moveaxis(np.diff(points, axis=1), -1, 0))  # (rows, cols - 1)
+    step[:-1] = np.minimum(step[:-1], across)
+    step[1:] = np.minimum(step[1:], across)
+    step[:, :-1] = np.minimum(step[:, :-1], along)
+    step[:, 1:] = np.minimum(step[:, 1:], along)
+    return step.ravel()
+
+
+def off_grid(points: np.ndarray, sigmas: np.ndarray | None) -> np.ndarray:
+    """(rows, cols) bool: the corners of a full grid off the smooth grid of their neighbours, worst first.
+
+    points : (rows, cols, 2) px, every position filled. sigmas : (rows, cols) px, each corner's σ
+    (None: ``SIGMA_FLOOR``). At most ``MAX_OFF`` + 1 are flagged (the search stops there).
+    """
+    rows, cols = points.shape[:2]
+    flat = np.asarray(points, np.float64).reshape(-1, 2)
+    sig = np.full(len(flat), SIGMA_FLOOR) if sigmas is None else np.maximum(np.ravel(sigmas), SIGMA_FLOOR)
+    steps = smallest_steps(np.asarray(points, np.float64))
+    c_all, target, gapped = _interpolations(rows, cols)
+    off = np.zeros(len(flat), bool)
+    while off.sum() <= MAX_OFF:
+        keep = ~(c_all[:, off] != 0).any(axis=1)
+        plain = np.isin(np.arange(len(flat)), target[keep & ~gapped])
+        keep &= ~gapped | ~plain[target]  # a gapped interpolation only where no other is left
+        c, tgt = c_all[keep], target[keep]
+        if len(c) == 0:
+            break
+        spread = np.sqrt((c ** 2) @ sig ** 2 + (MODEL_SHARE * steps[tgt]) ** 2)
+        cw = c / spread[:, None]
+        served = cw.T @ ((c @ flat) / spread[:, None])  # (N, 2): C_k·r, weighted
+        norm = (cw ** 2).sum(axis=0)  # C_k·C_k, weighted
+        z = np.zeros(len(flat))
+        tested = np.isin(np.arange(len(flat)), tgt) & (norm > 0)
+        z[tested] = np.hypot(*served[tested].T) / np.sqrt(norm[tested])
+        k = int(np.argmax(z))
+        offset = float(np.hypot(*served[k])) / norm[k] if tested[k] else 0.0
+        if z[k] < Z_MIN or offset < max(MIN_PX, MIN_SHARE * steps[k]):
+            break
+        off[k] = True
+    return off.reshape(rows, cols)
+
+
+def without_off_grid(det, refused: str):
+    """A complete detection (:class:`~aicalib_tf.detect.pipeline.Detection`, its corners in OpenCV order)
+    without its corners :func:`off_grid`: as it is when none is, a partial board (complete False)
+    without them when at most ``MAX_OFF`` are, and no board (no corners, reason ``refused``) with more."""
+    if not det.complete or det.pattern_size is None:
+        return det
+    cols, rows = det.pattern_size
+    sig = None if det.sigmas is None else np.asarray(det.sigmas).reshape(rows, cols)
+    off = off_grid(np.asarray(det.corners, np.float64).reshape(rows, cols, 2), sig).ravel()
+    if not off.any():
+        return det
+    keep = ~off if off.sum() <= MAX_OFF else np.zeros(len(off), bool)
+    return replace(det, corners=det.corners[keep], ids=det.ids[keep], scores=det.scores[keep], complete=False,
+                   sigmas=None if det.sigmas is None else det.sigmas[keep], reason="" if keep.any() else refused)

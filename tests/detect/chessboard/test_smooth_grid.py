@@ -1,0 +1,93 @@
+"""The interpolation test: a full board's corners off the smooth grid of their neighbours."""
+
+from dataclasses import replace
+
+import numpy as np
+
+from aicalib_tf.detect.chessboard.smooth_grid import STENCILS, cubic_weights, off_grid, without_off_grid
+from aicalib_tf.detect.pipeline import Detection
+
+COLS, ROWS = 9, 6
+
+
+def _fisheye_board(rng: np.random.Generator) -> np.ndarray:
+    """(ROWS, COLS, 2) px: a board's corners through an equidistant fisheye (f 150 px), towards its rim
+    (up to 82° off-axis, squares of up to 10° of field)."""
+    square = rng.uniform(20.0, 40.0)
+    x, y = np.meshgrid((np.arange(COLS) - 4.0) * square, (np.arange(ROWS) - 2.5) * square)
+    board = np.stack([x, y, np.zeros_like(x)], -1)
+    tilt, spin = np.deg2rad(rng.uniform(0, 50)), rng.uniform(0, 2 * np.pi)
+    axis = np.array([np.cos(spin), np.sin(spin), 0.0])
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    rot = np.eye(3) + np.sin(tilt) * k + (1 - np.cos(tilt)) * k @ k
+    off_axis, towards = np.deg2rad(rng.uniform(0, 60)), rng.uniform(0, 2 * np.pi)
+    centre = rng.uniform(250, 500) * np.array([np.sin(off_axis) * np.cos(towards), np.sin(off_axis) * np.sin(towards),
+                                               np.cos(off_axis)])
+    p = board @ rot.T + centre
+    theta = np.arctan2(np.hypot(p[..., 0], p[..., 1]), p[..., 2])
+    phi = np.arctan2(p[..., 1], p[..., 0])
+    return np.stack([320 + 150 * theta * np.cos(phi), 240 + 150 * theta * np.sin(phi)], -1)
+
+
+def test_the_stencils_interpolate_a_cubic():
+    for offs, wts in STENCILS:
+        np.testing.assert_allclose(cubic_weights(offs), wts, atol=1e-12)
+        for power in range(4):
+            assert abs(sum(w * o ** power for o, w in zip(offs, wts)) - (1.0 if power == 0 else 0.0)) < 1e-12
+
+
+def test_bent_boards_keep_every_corner():
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        pts = _fisheye_board(rng) + rng.normal(0, 0.1, (ROWS, COLS, 2))
+        assert not off_grid(pts, np.full((ROWS, COLS), 0.1)).any()
+
+
+def test_a_ring_corner_off_its_line_is_found():
+    rng = np.random.default_rng(5)
+    for _ in range(10):
+        pts = _fisheye_board(rng) + rng.normal(0, 0.1, (ROWS, COLS, 2))
+        moved = pts.copy()
+        moved[0, 3] += 2.5 * np.array([np.cos(a := rng.uniform(0, 2 * np.pi)), np.sin(a)])  # a point on an object's edge
+        assert np.argwhere(off_grid(moved, np.full((ROWS, COLS), 0.1))).tolist() == [[0, 3]]
+
+
+def test_two_neighbours_off_are_both_found():
+    rng = np.random.default_rng(7)
+    pts = _fisheye_board(rng) + rng.normal(0, 0.1, (ROWS, COLS, 2))
+    pts[0, 4] += [3.0, 1.0]
+    pts[0, 5] += [-1.5, 2.5]
+    assert sorted(map(tuple, np.argwhere(off_grid(pts, np.full((ROWS, COLS), 0.1))).tolist())) == [(0, 4), (0, 5)]
+
+
+def test_a_full_board_loses_its_off_corner():
+    rng = np.random.default_rng(11)
+    pts = _fisheye_board(rng).reshape(-1, 2).astype(np.float32)
+    ids = np.array([(k % COLS, k // COLS) for k in range(COLS * ROWS)], np.int32)
+    det = Detection(pts, ids, np.ones(len(pts), np.float32), (COLS, ROWS), True, (640, 480),
+                    sigmas=np.full(len(pts), 0.1, np.float32))
+    assert without_off_grid(det, "refused") is det
+    moved = pts.copy()
+    moved[2 * COLS] += [3.0, -2.0]  # corner (0, 2), on the outer ring
+    got = without_off_grid(replace(det, corners=moved), "refused")
+    assert not got.complete and len(got.corners) == COLS * ROWS - 1 and got.reason == ""
+    assert [0, 2] not in got.ids.tolist() and len(got.sigmas) == len(got.ids)
+    np.testing.assert_array_equal(got.corners, np.delete(moved, 2 * COLS, axis=0))
+
+
+def test_an_object_over_a_close_ups_rim_makes_no_wrong_board():
+    """closeup-eq image 18 with occluded_closeups.py's object 1 (a blob at the ring's corner (6, 0)): the
+    search assembles a full board whose corner (6, 0) lies 3.7 px off, on the blob's edge."""
+    from aicalib_tf import detect_corners
+    from aicalib_tf.bench.conditions import PATTERN, select_conditions
+    from data_gen.sample import draw_scene
+
+    cond = select_conditions("closeup-eq")[0]
+    scene = draw_scene(cond.preset, cond.seed, 18, size=cond.size, pattern=PATTERN)
+    blob = np.array([[451.13, 245.1], [448.65, 245.49], [444.88, 247.56], [444.17, 247.6], [440.87, 243.58],
+                     [441.14, 240.09], [444.53, 240.08], [446.27, 238.71], [448.89, 238.99], [448.68, 241.36]])
+    img = replace(scene, occluders=[blob], occluder_levels=[0.306]).render()
+    det = detect_corners(img, PATTERN)
+    assert det.found
+    truth = scene.corners[det.ids[:, 1] * PATTERN[0] + det.ids[:, 0]]
+    assert np.hypot(*(det.corners - truth).T).max() <= 2.0
