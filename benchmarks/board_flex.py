@@ -14,8 +14,9 @@ images through the project's CNN detector (its corners' σ as weights, as ``cali
 :func:`~aicalib_tf.calib.fit.calibrate_camera` with model choice (``auto``); the truth is the label's
 flex and K. Camera k renders the same poses and noise at every sag, so the sags' rows share their draws.
 
-Per sag: how many fits kept the flex (its σ rule, :mod:`aicalib_tf.calib.flex`, and the sag's test
-against its leave-one-view-out noise, :mod:`aicalib_tf.calib.flex_check`; a dropped flex counts as sag 0), the worst |sag error| and whether every sequence met the target (within
+Per sag: how many fits kept a flex (its σ rule, :mod:`aicalib_tf.calib.flex`, and the sag's shrinkage
+by its leave-one-view-out noise, :mod:`aicalib_tf.calib.flex_check`; a flat result counts as sag 0),
+the worst |sag error| and whether every sequence met the target (within
 10% or 0.002 squares), and the focal-length bias: the mean fx error over the sequences with its standard
 error, against the median σ_fx of one fit (target: |bias| < σ_fx). One sequence's fx error is one draw
 of about σ_fx, not a bias, so a bias needs several sequences (:func:`fx_bias`).

@@ -10,8 +10,8 @@ scored as there (rotation-fitted projection difference, median over the covered 
 
 - aicalib_tf, in process on the photos' detections (the calibrate command's CNN detector, each photo
   once), with the lens model ``auto`` chooses on all the photos held for every half:
-  flat (the default solve), ``flex="auto"`` (each half's test of the sag against its leave-one-view-out
-  noise keeps or drops the flex, :mod:`aicalib_tf.calib.flex_check`) and the flex as solved in both
+  flat (the default solve), ``flex="auto"`` (each half's sag shrunk towards flat by its leave-one-view-out
+  noise, :mod:`aicalib_tf.calib.flex_check`) and the flex as solved in both
   halves (its σ rule only);
   and, for the flat halves, what their covariances predict for the difference
   (:func:`aicalib_tf.calib.quality.predicted_half_difference`: the mean and the 10-90% band of one draw);

@@ -13,8 +13,8 @@ worst view goes at a time. At most a third of the views are rejected, never belo
 
 The fit is one least-squares bundle over all views (:mod:`aicalib_tf.calib.bundle`). Inside each
 solve (:mod:`aicalib_tf.calib.robust`) single outlying corners are rejected, corners are weighted by
-their views' ``sigmas``, and with ``flex="auto"`` the board's flex is solved and kept when the views
-determine it (:mod:`aicalib_tf.calib.flex`). Starts: the
+their views' ``sigmas``, and with ``flex="auto"`` the board's flex is solved and used, shrunk towards
+flat by the noise of its estimate (:mod:`aicalib_tf.calib.flex`). Starts: the
 pinhole models from OpenCV's multi-start plumb_bob fit; the fisheye models (equidistant, ds, eucm) from a grid of focal lengths
 (:func:`~aicalib_tf.calib.starts.fisheye_start`), so fisheye lenses need no guess. ``model="auto"``
 picks the model by cross-validation over views (:mod:`aicalib_tf.calib.select`).
@@ -360,9 +360,9 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
     reject_outliers : drop views by the rule in the module docstring and refit.
     image_circle : a circular fisheye's image circle (:func:`~aicalib_tf.geometry.image_circle.estimate_image_circle`),
     kept in the Calibration; under ``auto`` a pinhole model is not eligible when the circle's rim lies
-    at or near 90° off-axis. flex : "auto" solves the board's flex with the camera and keeps it when the
-    views determine it, "off" (default) takes the board as flat (:mod:`aicalib_tf.calib.flex`; on real
-    photos the halves of a set fit different flexes: docs/benchmark.md). reject_corners :
+    at or near 90° off-axis. flex : "auto" solves the board's flex with the camera and uses it shrunk
+    towards flat by the noise of its estimate, "off" (default) takes the board as flat
+    (:mod:`aicalib_tf.calib.flex`; its cost and gain on real photos: docs/benchmark.md). reject_corners :
     reject single outlying corners inside every solve (:mod:`aicalib_tf.calib.robust`); a view's
     ``sigmas`` weight its corners.
     Raises :class:`CalibrationError` with fewer than ``min_views`` usable views or when the model
