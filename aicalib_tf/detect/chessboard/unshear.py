@@ -34,7 +34,7 @@ MAX_STEP_RATIO = 2.5  # ... and so is one whose steps along its two axes differ 
 STEP = 12.0  # px: a square's side in the warped image (an upsampled board is blurred across: larger is worse)
 SIDE = 120.0  # px: the side of the square a texture sliver's outline is mapped onto (10×7 squares: 12×17 px)
 PAD = 0.4  # of the board's warped extent: margin around it (the outer squares and paper)
-ENERGY_SIGMA = 5.0  # px: smoothing of the gradient energy and orientation (a few stripes of a sliver board)
+ENERGY_SIGMA = 5.0  # px of the image: smoothing of the gradient energy and orientation (a few stripes of a sliver board)
 ENERGY_SHARE = 0.25  # of the largest smoothed energy: the region of a texture sliver
 MIN_COHERENCE = 0.7  # energy-weighted orientation coherence of a sliver (0: no orientation, 1: all parallel)
 MIN_ELONGATION = 3.0  # length / width of a sliver (from its second moments)
@@ -44,7 +44,8 @@ MIN_LENGTH = 40.0  # px: a shorter sliver holds no board the network could read 
 MIN_LATTICE = 9  # corners of a partial board that a lattice is fitted to
 ROUNDS = 2  # searches per warp: the outline's, then the lattice of what it found
 MAX_PIXELS = 250_000  # the warped region's most pixels
-ANALYSIS_SIDE = 800  # px: the texture is analysed on the image reduced to this longer side at most
+GRADIENT_SIDE = 800  # px: the texture's gradients are taken on the image reduced to this longer side at most
+ANALYSIS_SIDE = 320  # px: ... and smoothed and searched for slivers on blocks of them, this longer side at most
 
 
 def lattice_axes(ids: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -102,14 +103,16 @@ def lattice_map(ids: np.ndarray, points: np.ndarray, pattern_size: tuple[int, in
     return h / h[2, 2], (int(np.ceil(ext[0] + 2 * pad)), int(np.ceil(ext[1] + 2 * pad)))
 
 
-def _structure(gray: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Smoothed gradient energy and orientation coherence of gray (H, W) float32: (H, W) float32 each."""
+def _structure(gray: np.ndarray, sigma: float, step: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gradient energy and orientation coherence of gray (H, W) float32, smoothed over ``sigma`` px of
+    gray: (H // step, W // step) float32 each. The gradients are gray's own (a sliver board's stripes
+    are 2–4 px apart); their products are averaged over step × step blocks before the smoothing."""
     b = cv2.GaussianBlur(gray, (0, 0), 1.0)
     gx = cv2.Sobel(b, cv2.CV_32F, 1, 0, ksize=3)
     gy = cv2.Sobel(b, cv2.CV_32F, 0, 1, ksize=3)
-    jxx = cv2.GaussianBlur(gx * gx, (0, 0), ENERGY_SIGMA)
-    jyy = cv2.GaussianBlur(gy * gy, (0, 0), ENERGY_SIGMA)
-    jxy = cv2.GaussianBlur(gx * gy, (0, 0), ENERGY_SIGMA)
+    h, w = (gray.shape[0] // step, gray.shape[1] // step)
+    jxx, jyy, jxy = (cv2.GaussianBlur(cv2.resize(p, (w, h), interpolation=cv2.INTER_AREA) if step > 1 else p,
+                                      (0, 0), sigma / step) for p in (gx * gx, gy * gy, gx * gy))
     energy = jxx + jyy
     return energy, np.sqrt((jxx - jyy) ** 2 + 4 * jxy**2) / np.maximum(energy, 1e-12)
 
@@ -152,9 +155,11 @@ def texture_quads(gray: np.ndarray, most: int = MAX_SLIVERS) -> list[np.ndarray]
     and ``MIN_LENGTH`` px long (a small patterned object beside it may hold the largest value).
     """
     h, w = gray.shape
-    f = max(1.0, max(w, h) / ANALYSIS_SIDE)
+    f = max(1.0, max(w, h) / GRADIENT_SIDE)
     small = gray if f == 1.0 else cv2.resize(gray, (round(w / f), round(h / f)), interpolation=cv2.INTER_AREA)
-    energy, coherence = _structure(np.asarray(small, np.float32))
+    step = max(1, int(max(small.shape) // ANALYSIS_SIDE))
+    energy, coherence = _structure(np.asarray(small, np.float32), ENERGY_SIGMA / f, step)
+    f *= step  # image px per px of the energy
     top = float(energy.max())
     if not top > 0:
         return []
