@@ -32,12 +32,13 @@ equal −0.139 ± 0.062 px (better in 12 of 16), against ``"view"`` −0.193 ± 
 differ by 0.007 ± 0.010: inside a view σ spreads only 0.8–1.2 times its median). On real photos τ
 dominates (0.12 px on OpenCV's left camera, σ median 0.029 px; 0.28 px on a 185° fisheye; 0.64 px on
 a bent board) and the weights are nearly equal: over the same 24 random half-splits of each set
-(``benchmarks/real_split_noise.py --weighting``, flat fits) the halves differ by a median 0.273 px
-against 0.265 with ``"view"`` (opencv_left), 4.20 against 4.17 (udacity_lane_cal) and 0.478 against
-0.476 (ocam_fisheye); split by split the median change is −0.006, +0.001 and +0.001 px, ties. The
-covariance's predicted band (:func:`aicalib_tf.calib.quality.predicted_half_difference`) does not
-change either (σ̂² of the weighted fit carries τ already): it misses udacity's and ocam's splits for
-errors shared within a view, not for the weights.
+(``benchmarks/real_split_noise.py --splits 24 --weighting``, flat fits) the halves differ by a median
+0.273 px against 0.265 with ``"view"`` (opencv_left), 4.20 against 4.17 (udacity_lane_cal) and 0.497
+against 0.495 (ocam_fisheye); split by split the median change is −0.006 (lower on 14 of 24), +0.001
+and +0.000 px: ties. The covariance's predicted 10–90% band
+(:func:`aicalib_tf.calib.quality.predicted_half_difference`) holds 83% of opencv_left's splits (79%
+with ``"view"``), 25% of udacity's and 21% of ocam's (unchanged): σ̂² of the weighted fit carries τ
+already; those misses come from errors shared within a view, not from the weights.
 Views with σ 20 times those of the others (rig, field check and hand-eye tests) come 4–30 times nearer
 the truth weighted.
 
