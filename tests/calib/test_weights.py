@@ -77,6 +77,8 @@ def test_variance_components_correct_for_the_parameters_the_fit_absorbed():
     _, t2 = weights.variance_components(sig, shrunk, n_params=4000, scale=False)
     assert np.sqrt(t2) == pytest.approx(0.1, rel=0.1)
     assert weights.variance_components([np.full(3, 0.1)], [np.full((3, 2), np.nan)]) == (1.0, 0.0)
+    exact = weights.total_sigmas([np.array([0.1, 0.2, 0.4])], [np.zeros((3, 2))], 0, "components")[0]
+    assert np.all(exact > 0) and np.ptp(exact) < 1e-3 * exact[0]  # residuals of 0: nothing to tell the corners apart
 
 
 def _fit_with(noise, said, seed=4):
