@@ -17,7 +17,9 @@ with ``MODEL_SHARE`` of the step for the lens's bend), the offset that best expl
 the largest z is off the grid when z ≥ ``Z_MIN``, |ê| ≥ ``MIN_PX`` and |ê| ≥ ``MIN_SHARE`` of its
 smallest step; it is set aside (its interpolations with it) and the test repeated. A neighbour of
 an off corner, interpolated through it, is not taken for it: the off corner explains every
-residual it touches, the neighbour only its own. A board corner, never interpolated, is not tested.
+residual it touches, the neighbour only its own. A board corner, never interpolated, is not tested:
+beside a corner set aside (an object there), it and any other corner left with no interpolation are
+set aside too.
 
 :func:`without_off_grid` turns a full board with such corners into a partial board without them
 (at most ``MAX_OFF``; a board with more is no board).
@@ -38,9 +40,10 @@ STENCILS = (
     ((-1, 1, 2, 3), (0.25, 1.5, -1.0, 0.25)),  # second corner of a line
     ((1, -1, -2, -3), (0.25, 1.5, -1.0, 0.25)),  # second-last
 )
-# where a neighbour of the target on its line is set aside: four others within 4 of it, one at least
+# where a neighbour or two of the target on its line are set aside: four others within 4 of it, one at least
 # on each side (and their mirror images); used for a target that has none of ``STENCILS`` left
-_GAPPED = ((-3, -2, -1, 2), (-2, -1, 2, 3), (-1, 2, 3, 4), (-3, -2, 1, 2), (-3, -1, 1, 2), (-2, -1, 1, 3))
+_GAPPED = ((-3, -2, -1, 2), (-2, -1, 2, 3), (-1, 2, 3, 4), (-3, -2, 1, 2), (-3, -1, 1, 2), (-2, -1, 1, 3),
+           (-3, 1, 2, 3), (-4, -3, 1, 2))
 GAPPED = _GAPPED + tuple(tuple(-o for o in offs) for offs in _GAPPED)
 MODEL_SHARE = 0.01  # of the target's smallest step: an interpolation's expected miss from the lens's bend
 SIGMA_FLOOR = 0.05  # px: the least σ a corner is taken to have
@@ -99,10 +102,11 @@ def smallest_steps(points: np.ndarray) -> np.ndarray:
 
 
 def off_grid(points: np.ndarray, sigmas: np.ndarray | None) -> np.ndarray:
-    """(rows, cols) bool: the corners of a full grid off the smooth grid of their neighbours, worst first.
+    """(rows, cols) bool: the corners of a full grid off the smooth grid of their neighbours, and
+    those beside them (of their 8 neighbours on the grid) that no interpolation is left to test.
 
     points : (rows, cols, 2) px, every position filled. sigmas : (rows, cols) px, each corner's σ
-    (None: ``SIGMA_FLOOR``). At most ``MAX_OFF`` + 1 are flagged (the search stops there).
+    (None: ``SIGMA_FLOOR``). At most ``MAX_OFF`` + 1 are found off (the search stops there).
     """
     rows, cols = points.shape[:2]
     flat = np.asarray(points, np.float64).reshape(-1, 2)
@@ -110,11 +114,13 @@ def off_grid(points: np.ndarray, sigmas: np.ndarray | None) -> np.ndarray:
     steps = smallest_steps(np.asarray(points, np.float64))
     c_all, target, gapped = _interpolations(rows, cols)
     off = np.zeros(len(flat), bool)
+    tested = np.zeros(len(flat), bool)
     while off.sum() <= MAX_OFF:
         keep = ~(c_all[:, off] != 0).any(axis=1)
         plain = np.isin(np.arange(len(flat)), target[keep & ~gapped])
         keep &= ~gapped | ~plain[target]  # a gapped interpolation only where no other is left
         c, tgt = c_all[keep], target[keep]
+        tested = np.isin(np.arange(len(flat)), tgt)
         if len(c) == 0:
             break
         spread = np.sqrt((c ** 2) @ sig ** 2 + (MODEL_SHARE * steps[tgt]) ** 2)
@@ -122,14 +128,17 @@ def off_grid(points: np.ndarray, sigmas: np.ndarray | None) -> np.ndarray:
         served = cw.T @ ((c @ flat) / spread[:, None])  # (N, 2): C_k·r, weighted
         norm = (cw ** 2).sum(axis=0)  # C_k·C_k, weighted
         z = np.zeros(len(flat))
-        tested = np.isin(np.arange(len(flat)), tgt) & (norm > 0)
+        tested &= norm > 0
         z[tested] = np.hypot(*served[tested].T) / np.sqrt(norm[tested])
         k = int(np.argmax(z))
         offset = float(np.hypot(*served[k])) / norm[k] if tested[k] else 0.0
         if z[k] < Z_MIN or offset < max(MIN_PX, MIN_SHARE * steps[k]):
             break
         off[k] = True
-    return off.reshape(rows, cols)
+    off = off.reshape(rows, cols)
+    near = np.pad(off, 1)
+    near = np.any([near[1 + di:rows + 1 + di, 1 + dj:cols + 1 + dj] for di in (-1, 0, 1) for dj in (-1, 0, 1)], axis=0)
+    return off | (near & ~tested.reshape(rows, cols))
 
 
 def without_off_grid(det, refused: str):

@@ -60,6 +60,13 @@ def test_two_neighbours_off_are_both_found():
     assert sorted(map(tuple, np.argwhere(off_grid(pts, np.full((ROWS, COLS), 0.1))).tolist())) == [(0, 4), (0, 5)]
 
 
+def test_a_board_corner_beside_an_off_corner_goes_with_it():
+    rng = np.random.default_rng(9)
+    pts = _fisheye_board(rng) + rng.normal(0, 0.1, (ROWS, COLS, 2))
+    pts[0, 7] += [2.0, -2.0]  # beside the board's corner (0, 8), which no interpolation tests
+    assert sorted(map(tuple, np.argwhere(off_grid(pts, np.full((ROWS, COLS), 0.1))).tolist())) == [(0, 7), (0, 8)]
+
+
 def test_a_full_board_loses_its_off_corner():
     rng = np.random.default_rng(11)
     pts = _fisheye_board(rng).reshape(-1, 2).astype(np.float32)
