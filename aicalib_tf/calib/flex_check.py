@@ -113,7 +113,10 @@ def confirm_flex(fit, views, refit):
                f"{how}); the board is taken as flat")
         return dataclasses.replace(refit(views, "off"), flex_note=why)
     w = np.asarray(fit.flex, np.float64) * (est / sag)
-    held = refit(views, (float(w[0]), float(w[1])))
+    try:
+        held = refit(views, (float(w[0]), float(w[1])))
+    except CalibrationError:  # the board held where the free fit went past: that fit stands
+        return fit
     cov = np.asarray(fit.flex_covariance, np.float64) * (se / sigma) ** 2 if sigma > 0 else fit.flex_covariance
     return dataclasses.replace(held, flex=w, flex_covariance=cov, covariance=fit.covariance, flex_note="")
 
