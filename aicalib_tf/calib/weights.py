@@ -162,6 +162,8 @@ def variance_components(sigmas, residuals, n_params: int = 0, *, scale: bool = T
 def total_sigmas(sigmas, residuals, n_params: int = 0, rule: str | None = None) -> list:
     """Per view (N_v,) σ_total px that a fit's corners are weighed with after a first fit weighted by ``sigmas``.
 
+    sigmas : per view (N_v,) px (:func:`fit_sigmas`); residuals : per view (N_v, 2) px, the first fit's;
+    n_params : its parameters. rule : as in :func:`fit_sigmas` (None: ``WEIGHTING``).
     ``"components"``, ``"view-components"``: σ_total² = a·σ² + τ² of :func:`variance_components` on the
     first fit's residuals (once: a second round, estimated again after the refit, moved the rendered
     benchmark's projection error by 0.0003 px over 48 calibrations).
