@@ -82,7 +82,9 @@ with ``bend`` (:func:`aicalib_tf.detect.chessboard.grid.assemble_grids`); only a
 network's weak points (``WEAK``) confirm saddles the ring test fails at the dark rim (``proposer``'s ``bent``).
 A grid of either assembly holding the pattern but up to 3 corners of its outer ring gets them placed
 (:func:`aicalib_tf.detect.chessboard.rim.rim_board`), kept only when every corner shows an X-junction like its
-neighbours' (an object in front of the board does not). Steeply tilted boards (55–80° from facing the
+neighbours' (an object in front of the board does not). A grid holding half the pattern or more but no full
+board is searched again on its region with the shading divided out (:mod:`aicalib_tf.detect.chessboard.shading`:
+the rim's darkened outer rings); only a complete board counts. Steeply tilted boards (55–80° from facing the
 camera; their lines meet at 8–20°, sharper than the network's junctions): with no full board at full size, a
 sheared partial board's lattice, else a sliver of coherent texture, is warped to square axes and searched again
 (:mod:`aicalib_tf.detect.chessboard.unshear`); only a complete board counts, mapped back and refined on the image. Any full board with a corner on an object's edge
@@ -118,10 +120,11 @@ from aicalib_tf.detect.chessboard.occlusion import object_in_front, object_in_fr
 from aicalib_tf.detect.chessboard.partial import partial_board, relative_board
 from aicalib_tf.detect.chessboard.rim import rim_board
 from aicalib_tf.detect.chessboard.smooth_grid import without_off_grid
+from aicalib_tf.detect.chessboard.shading import flattened_look
 from aicalib_tf.detect.pyramid import Frame, boards_coarse_to_fine, quick_scales, quick_shift, refine_full, scales, to_full
 from aicalib_tf.detect.corners.refine import Smoothed, refine_candidates
 from aicalib_tf.detect.chessboard.unshear import second_look as unshear_look
-from aicalib_tf.detect.chessboard.zoom import from_zoom, zoom_box, zoom_in
+from aicalib_tf.detect.chessboard.zoom import zoomed_look
 from aicalib_tf.io import read_image
 
 __all__ = ["Detection", "detect_corners", "detect_charuco", "order_full_board", "refined_points"]
@@ -241,7 +244,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     best, reason = None, REASONS[0]
     quick = quick_scales(w, h) if pattern_size is not None else []
     for f in quick + scales(w, h):
-        look = bind(_zoomed, frame.gray, pattern_size, model, threshold) if f == 1 and pattern_size is not None else None
+        look = bind(_second_looks, frame.gray, pattern_size, model, threshold) if f == 1 and pattern_size is not None else None
         net = (getattr(model, "quick", None) or model) if f in quick else model  # the quick passes' own network
         det = _detect_at(frame.reduced(f), pattern_size, net, threshold, second_look=look, relative=relative, full_only=f in quick)
         det = _unsheared(frame.gray, pattern_size, model, threshold, det) if look and not (det.complete or relative) else det
@@ -272,23 +275,20 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
 
 def _zoomed(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: float, seen: Grid,
             others: np.ndarray | None = None) -> Detection | None:
-    """The search again on the region of a thin grid, enlarged (:mod:`aicalib_tf.detect.chessboard.zoom`).
+    """The search again on the region of a thin grid ``seen``, enlarged (:func:`aicalib_tf.detect.chessboard.zoom.zoomed_look`)."""
+    return zoomed_look(gray, pattern_size, seen, others, bind(_detect_at, pattern_size=pattern_size, model=model, threshold=threshold))
 
-    gray : (H, W) float32, full size. seen : the largest grid assembled on it. others : (M, 2) px,
-    the corner candidates found on it (they narrow the region, :func:`aicalib_tf.detect.chessboard.zoom.zoom_box`).
-    Returns the detection in the enlarged region, in gray's coordinates, or None when the grid is
-    not thin, its region too large, or nothing is found there.
-    """
-    h, w = gray.shape
-    box = zoom_box(seen.ij, seen.points, pattern_size, (w, h), others)
-    if box is None:
-        return None
-    # a partial board is only looked for there when the enlarged grid outgrows the one seen (the
-    # partial search is the costly part, and a grid no larger adds nothing)
-    det = _detect_at(zoom_in(gray, box), pattern_size, model, threshold, partial_above=len(seen))
-    if not det.found:
-        return None
-    return replace(det, corners=from_zoom(det.corners, box), image_size=(w, h))
+
+def _second_looks(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: float, seen: Grid,
+                  others: np.ndarray, largest: Grid) -> Detection | None:
+    """:func:`_zoomed`'s detection when complete, else a complete board on the ``largest`` grid's region with the shading
+    divided out (:func:`aicalib_tf.detect.chessboard.shading.flattened_look`), else :func:`_zoomed`'s: ``_detect_at``'s second look."""
+    from aicalib_tf.cnn.inference import weak_corner_points
+
+    look = _zoomed(gray, pattern_size, model, threshold, seen, others)
+    full = bind(_detect_at, pattern_size=pattern_size, model=model, threshold=threshold, partial_above=sum(pattern_size) ** 2)
+    marks = bind(weak_corner_points, model, threshold=threshold, weak=WEAK * threshold)
+    return look if look is not None and look.complete else (flattened_look(gray, pattern_size, largest, others, full, marks) or look)
 
 
 def _unsheared(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: float, seen: Detection) -> Detection:
@@ -344,8 +344,8 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
                second_look=None, partial_above: int = 0, relative: bool = False, full_only: bool = False) -> Detection:
     """:func:`detect_corners` on one scale: gray (H, W) float32, pattern already checked.
 
-    second_look : None, or ``look(grid, candidates) -> Detection | None``, asked with the largest
-    grid and the candidate points when no full board is found (:func:`_zoomed`, at full size). Its
+    second_look : None, or ``look(grid, candidates, largest) -> Detection | None``, asked with the first
+    grid, the candidate points and the largest grid, bent ones too, when no full board is found (:func:`_second_looks`). Its
     board is returned when complete or with more than half the pattern's corners (the partial search
     here is the costly part of a thin board's time); else the larger of it and this scale's partial
     board. partial_above : partial boards are only looked for when the largest
@@ -388,7 +388,7 @@ def _detect_at(gray: np.ndarray, pattern_size: tuple[int, int] | None, model, th
         return Detection(*board, True, (w, h)) if board else replace(empty, reason=NO_MATCH if grids else NO_GRID)
     if not grids:  # no 3×3 block anywhere: strips 2 corners wide (between objects, say)
         grids = assemble_grids(refined, scores, gray=smooth, limit=limit, strips=True)
-    look = second_look(grids[0], refined) if second_look is not None and grids else None
+    look = second_look(grids[0], refined, max(grids + bent, key=len)) if second_look is not None and grids else None
     if look is not None and (look.complete or 2 * len(look.corners) > pattern_size[0] * pattern_size[1]):
         return look
     if not grids or len(grids[0]) <= partial_above:

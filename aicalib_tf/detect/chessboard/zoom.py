@@ -16,6 +16,8 @@ pixel-area alignment).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 
@@ -23,7 +25,7 @@ from aicalib_tf.detect.chessboard.grid import MIN_CORNERS
 from aicalib_tf.detect.corners.junctions import nearest_spacing
 from aicalib_tf.detect.chessboard.lattice import predict_ids
 
-__all__ = ["FACTOR", "MAX_SPACING", "zoom_box", "zoom_in", "from_zoom"]
+__all__ = ["FACTOR", "MAX_SPACING", "zoom_box", "zoom_in", "from_zoom", "zoomed_look"]
 
 FACTOR = 3  # enlargement: 2–4 px squares become 6–12 px
 MAX_SPACING = 6.0  # px: a grid none of whose corners is nearer than this to another is not thin (no second look)
@@ -86,3 +88,24 @@ def from_zoom(points: np.ndarray, box: tuple[int, int, int, int], factor: int = 
     """Points (N, 2) px on a :func:`zoom_in` image -> the same places on the image: (N, 2) float32."""
     f = float(factor)
     return ((np.asarray(points, np.float64) + 0.5) / f - 0.5 + np.array(box[:2], np.float64)).astype(np.float32)
+
+
+def zoomed_look(gray: np.ndarray, pattern_size: tuple[int, int], seen, others: np.ndarray | None, search):
+    """The search again on the region of a thin grid, enlarged ``FACTOR`` times.
+
+    gray : (H, W) float32, full size. seen : the largest grid assembled on it (a
+    :class:`~aicalib_tf.detect.chessboard.grid.Grid`). others : (M, 2) px, the corner candidates
+    found on it (they narrow the region, :func:`zoom_box`), or None. search : ``search(image,
+    partial_above=n) -> Detection`` (the detector's one-scale search; partial boards only looked
+    for when the enlarged grid outgrows the one seen: the partial search is the costly part, and a
+    grid no larger adds nothing). Returns the detection in gray's coordinates, or None when the grid
+    is not thin, its region too large, or nothing is found there.
+    """
+    h, w = gray.shape
+    box = zoom_box(seen.ij, seen.points, pattern_size, (w, h), others)
+    if box is None:
+        return None
+    det = search(zoom_in(gray, box), partial_above=len(seen))
+    if not det.found:
+        return None
+    return replace(det, corners=from_zoom(det.corners, box), image_size=(w, h))
