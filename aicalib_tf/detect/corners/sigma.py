@@ -25,6 +25,13 @@ about the corner, r the refinement's radius for the distance to the nearest othe
   noise of 8-bit grey levels as its floor). Against the window's noise it tells white sensor noise
   (window/flat about e^−0.95) from noise that lives at the edges only: JPEG's ringing and blocks
   (compression flattens the squares' middles), render aliasing (noise-free images);
+* each corner's ``edge width`` σ_b, px, from how much of the board's black/white contrast (the squares'
+  flat middles, :func:`aicalib_tf.detect.corners.sigma_kernels.square_contrast`) its window keeps: for a
+  Gaussian-blurred X-junction in the Gaussian window the ``even`` measure is (C/2)·(2/π)·asin(s²/(s² + σ_b²))
+  (:func:`aicalib_tf.detect.corners.sigma_kernels.edge_width`, the noise's share of ``even`` taken out; about
+  0.9 px on a sharp render, growing as the blur's σ beyond it, and unlike the fit's residual not drowned by
+  the noise under heavy blur); over the corner spacing it tells how far the blur reaches towards the
+  neighbouring squares' edges;
 * the board's JPEG ``blockiness``: the mean step across 8-px block borders over the mean step
   elsewhere in the board's box (:func:`aicalib_tf.detect.corners.sigma_kernels.blockiness`; 1 for
   an image never compressed);
@@ -32,9 +39,10 @@ about the corner, r the refinement's radius for the distance to the nearest othe
 
 The model has two parts (``COLUMNS``). The board's: medians over its corners of these features (the
 noise is one per image, so the board's median ``odd_median`` is its estimate), their spread (90th
-percentile over median) and a few hinges (the detector's own error floor on clean images, heavy blur,
-impulsive noise, strongly bent lines), the flat noise over the contrast, window over flat
-noise, blockiness and the median smoothed/raw asymmetry. Each corner's: its excess over the board's
+percentile over median) and a few hinges (the detector's own error floor on clean images, impulsive
+noise, strongly bent lines, a blur that reaches the neighbouring squares: (edge width / spacing)² beyond
+:data:`aicalib_tf.detect.corners.sigma_kernels.SPREAD_KNOT`), the median edge width, the flat noise over the contrast, window over flat noise,
+blockiness and the median smoothed/raw asymmetry. Each corner's: its excess over the board's
 median of each feature, and a hinge on its own asymmetry (a window with more than noise in it, such
 as an object's edge, pulls the saddle in proportion). log σ = c₀ + Σ cₖ xₖ, x the columns of :func:`design` clipped to [``LOW``, ``HIGH``], the
 range they took in fitting (0.1th to 99.9th percentiles); σ px is one standard deviation per axis
@@ -65,22 +73,22 @@ __all__ = ["COLUMNS", "BOARD_COLUMNS", "COEFFS", "LOW", "HIGH", "design", "sigma
 
 COLUMNS = ("noise/contrast", "residual/contrast", "impulsive noise", "bend/spacing", "score", "(noise/contrast)²",
            "curvature/contrast", "spacing", "bend hinge²", "noise/contrast p90 excess", "bend p90 excess",
-           "impulsive × noise hinge", "own impulsiveness", "noise floor hinge", "blur hinge", "flat noise/contrast",
-           "window/flat noise", "JPEG blockiness", "smoothed/raw asymmetry",  # the board's
+           "impulsive × noise hinge", "own impulsiveness", "noise floor hinge", "edge width", "flat noise/contrast",
+           "window/flat noise", "JPEG blockiness", "smoothed/raw asymmetry", "blur reach hinge",  # the board's
            "Δ noise/contrast", "Δ own asymmetry", "Δ residual/contrast", "Δ own impulsiveness", "Δ bend/spacing",
            "Δ score", "Δ curvature/contrast", "Δ bend hinge²", "Δ smoothed/raw asymmetry",
            "Δ own asymmetry hinge")  # each corner's excess over the board's median
 BOARD_COLUMNS = _BOARD_COLUMNS
 # log σ = COEFFS[0] + Σ COEFFS[1 + k] · clip(design[:, k], LOW[k], HIGH[k]); refit: python benchmarks/corner_sigma.py --fit
-COEFFS = np.array([0.913, 0.662, 0.369, 0.298, 0.006, 0.453, 0.033, -0.386, -0.186, 0.062, -0.002, 0.094, 0.679, 0.124,
-                   -0.244, -0.432, 0.392, 0.270, 0.433, 1.733, 0.881, 0.425, -0.037, 0.375, 0.030, -0.056, -0.382,
-                   0.142, 0.418, 1.093])
-LOW = np.array([-5.009, -2.331, 0.201, -5.891, -0.625, 1.069, -1.899, 1.622, 0.000, 0.012, 0.033, 0.000, -0.215, 0.000,
-                0.000, -5.474, -2.043, -0.406, -1.282, -0.424, -1.582, -0.578, -0.734, -3.436, -2.944, -0.546, -1.482,
-                -0.861, 0.000])
-HIGH = np.array([-1.034, -0.231, 1.360, -0.912, -0.008, 25.089, -1.018, 4.582, 4.358, 0.815, 0.837, 0.584, 0.086, 1.509,
-                 0.831, 0.000, 3.460, 1.110, -0.301, 0.595, 1.355, 0.492, 1.202, 1.043, 0.290, 0.679, 1.578, 0.692,
-                 0.855])
+COEFFS = np.array([1.059, 0.696, 0.166, 0.346, 0.042, 0.341, 0.035, -0.414, -0.217, 0.052, 0.036, 0.016, 0.642, 0.007,
+                   -0.208, -0.405, 0.408, 0.288, 0.395, 1.792, 5.711, 0.882, 0.425, -0.035, 0.375, 0.030, -0.056,
+                   -0.371, 0.140, 0.418, 1.090])
+LOW = np.array([-5.009, -2.331, 0.201, -5.891, -0.625, 1.061, -1.899, 1.622, 0.000, 0.012, 0.033, 0.000, -0.215, 0.000,
+                -0.506, -5.474, -2.043, -0.406, -1.282, 0.000, -0.424, -1.582, -0.578, -0.734, -3.436, -2.944, -0.546,
+                -1.467, -0.861, 0.000])
+HIGH = np.array([-1.030, -0.231, 1.360, -0.912, -0.008, 25.089, -1.018, 4.582, 4.358, 0.815, 0.837, 0.584, 0.086,
+                 1.509, 1.712, -0.000, 3.460, 1.110, -0.301, 0.124, 0.595, 1.355, 0.492, 1.202, 1.031, 0.290, 0.679,
+                 1.518, 0.692, 0.855])
 MIN_SCORE = 0.05  # a corner the network missed (score 0) counts as this weak
 _TINY = 1e-6  # grey levels (px for the bend): keeps the logarithms finite in a flat window
 _MAX_RADIUS = 3  # px: the refinement's window radius, at most this (a 7×7 window: the measures' cost)
@@ -101,10 +109,10 @@ def _operators() -> tuple[np.ndarray, np.ndarray]:
 
 def design(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray,
            origin: tuple[int, int] = (0, 0)) -> np.ndarray:
-    """The model's columns (N, 29) (``COLUMNS``) of one board's corners, unclipped (module docstring).
+    """The model's columns (N, 30) (``COLUMNS``) of one board's corners, unclipped (module docstring).
 
     gray : (H, W) float32 grey in [0, 1] or uint8, unsmoothed (every column is a ratio of grey levels
-    or of px, or a log spacing in px, so either scale gives the same). corners : (N, 2) (x, y) px.
+    or of px, or a log length in px, so either scale gives the same). corners : (N, 2) (x, y) px.
     ids : (N, 2) int (col, row), distinct. scores : (N,) network responses in [0, 1].
     Columns 0..``BOARD_COLUMNS`` − 1 are the board's (the same for all its corners), the rest each
     corner's excess over the board's median of its feature; a corner with no row or column through it
@@ -128,13 +136,13 @@ def design(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray, scores: np.nd
 
 
 def sigma_from_design(x: np.ndarray, coeffs: np.ndarray = COEFFS, low: np.ndarray = LOW, high: np.ndarray = HIGH) -> np.ndarray:
-    """σ (N,) float32 px of design columns x (N, 29) under the model (``coeffs`` (30,), clip bounds (29,) each)."""
+    """σ (N,) float32 px of design columns x (N, 30) under the model (``coeffs`` (31,), clip bounds (30,) each)."""
     x = np.clip(np.asarray(x, np.float64).reshape(-1, len(COLUMNS)), low, high)
     return np.exp(coeffs[0] + x @ np.asarray(coeffs[1:], np.float64)).astype(np.float32)
 
 
 def board_design(image, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """:func:`design` (N, 29) of a board in ``image``, converting no more of it than needed.
+    """:func:`design` (N, 30) of a board in ``image``, converting no more of it than needed.
 
     image : a :class:`~aicalib_tf.detect.pyramid.Frame` (a grey uint8 frame is read as it is, any other
     through its float grey), or ``region(x0, y0, x1, y1) -> (y1 − y0, x1 − x0) float32`` grey of the

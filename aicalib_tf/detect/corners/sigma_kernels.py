@@ -2,8 +2,8 @@
 
 One pass over each corner's window: its bilinear samples, their point-symmetric and
 antisymmetric parts (also after a [1 2 1]² smoothing), the saddle fit's quadratic and what it
-leaves; the bend of the board's lattice at the corner from its neighbours by id; the noise in the
-flat middles of the board's squares; and the JPEG blockiness over the board's box. As array code these took about a third of a
+leaves; the bend of the board's lattice at the corner from its neighbours by id; the noise and the
+black/white contrast in the flat middles of the board's squares; and the JPEG blockiness over the board's box. As array code these took about a third of a
 640×480 detection's time; here a few microseconds per board.
 """
 
@@ -16,21 +16,26 @@ import numpy as np
 from aicalib_tf.kernels import helper, kernel
 
 
-__all__ = ["window_measures", "lattice_bend", "flat_noise", "blockiness", "corner_features", "design_columns",
+__all__ = ["window_measures", "lattice_bend", "flat_noise", "square_contrast", "edge_width", "blockiness", "corner_features", "design_columns",
            "board_columns", "BOARD_COLUMNS", "CORNER_COLUMNS"]
 
 BEND_KNOT = -3.0  # log(bend / spacing) above which lines bend enough to bias the saddle (hinge squared)
 IMPULSE_KNOT = 0.8  # log(RMS / median antisymmetric part) above which the board's noise is impulsive (counted as much
 # as the noise stands above NOISE_KNOT: an almost noise-free image's few grey-level steps look impulsive too)
 NOISE_KNOT = -3.5  # log(noise / contrast) below which the detector's own error floor takes over
-RESIDUAL_KNOT = -1.5  # log(residual / contrast) below which the junction is blurred smooth
+SPREAD_KNOT = 0.05  # (edge width / corner spacing)² above which the blur reaches the neighbouring squares' edges
+# (σ about a fifth of the spacing): the saddle is pulled by what lies beyond the junction (the board's rim)
+WHITE_EVEN = 1.45  # the window's symmetric part (weighted σ) over its median |antisymmetric part| for white noise
+# (1.42 at radius 2, 1.48 at 3): the noise's share of the contrast, taken out before the edge width
+SHARP_RETENTION = 0.63  # the window's contrast over half the squares' of a sharp render (edge width about 0.9 px):
+# taken where no square has all four corners
 ASYM_KNOT = 0.5  # log(own / board's median antisymmetric part) above which a corner's window holds more than noise
 # (an object's edge, a shadow): its saddle is pulled in proportion to that asymmetry (hinge)
 WHITE_ODD = -0.95  # log(median |antisymmetric part| / noise σ) of white noise in the bilinear window: the flat
 # noise taken where a board has no square with all four corners
 BLOCK = 8  # px, the JPEG block: blockiness compares the steps across its borders with the others
 BLOCK_SAMPLES = 20000  # about this many steps each way at most (every k-th row of a larger box)
-BOARD_COLUMNS = 19  # design columns 0..18: the board's; the next CORNER_COLUMNS: each corner's excess over them
+BOARD_COLUMNS = 20  # design columns 0..19: the board's; the next CORNER_COLUMNS: each corner's excess over them
 CORNER_COLUMNS = 10
 
 
@@ -133,20 +138,15 @@ def _inner_and_smoothed(wide, side, vals, smooth):
 
 
 @helper
-def flat_noise(img, pts, ids, step):
-    """The board's noise σ (grey levels of img) in the flat middles of its squares; −1 where no square has all
-    four corners.
-
-    For every square with its four corners found (ids (c, r), (c+1, r), (c, r+1), (c+1, r+1)), the 5×5
-    pixels about the mean of the four (unresampled: interpolation would smooth the noise) through the
-    3×3 mask [1 −2 1]⊗[1 −2 1] (blind to a level or a linear shading; its output is 6 σ for white
-    noise σ): the mean square of its 9 outputs / 36. σ² is the median of these over the squares
-    plus step² / 12, the rounding noise of grey levels ``step`` apart (1 for uint8).
-    """
+def _square_middles(img, pts, ids):
+    """(M, 3) int64 rows (x, y, parity) px: the middle (the mean of its four corners, rounded) of every square with
+    its four corners found (ids (c, r), (c+1, r), (c, r+1), (c+1, r+1)) and 2 px inside the image; parity
+    (c + r) % 2 tells the squares' two colours apart."""
     n = pts.shape[0]
     h, w = img.shape
+    out = np.zeros((n, 3), np.int64)
     if n == 0:
-        return -1.0
+        return out[:0]
     c0, r0 = ids[0, 0], ids[0, 1]
     cols = rows = 0
     for p in range(n):
@@ -157,7 +157,6 @@ def flat_noise(img, pts, ids, step):
     where = np.full((rows + 1, cols + 1), -1, np.int64)
     for p in range(n):
         where[ids[p, 1] - r0, ids[p, 0] - c0] = p
-    ms = np.empty(n)
     k = 0
     for p in range(n):
         i, j = ids[p, 0] - c0, ids[p, 1] - r0
@@ -168,6 +167,28 @@ def flat_noise(img, pts, ids, step):
         y = int(math.floor(0.25 * (pts[p, 1] + pts[q1, 1] + pts[q2, 1] + pts[q3, 1]) + 0.5))
         if x < 2 or y < 2 or x > w - 3 or y > h - 3:
             continue
+        out[k, 0], out[k, 1], out[k, 2] = x, y, (ids[p, 0] + ids[p, 1]) % 2
+        k += 1
+    return out[:k]
+
+
+@helper
+def flat_noise(img, pts, ids, step):
+    """The board's noise σ (grey levels of img) in the flat middles of its squares; −1 where no square has all
+    four corners.
+
+    At every square's middle (:func:`_square_middles`), the 5×5 pixels about it (unresampled:
+    interpolation would smooth the noise) through the 3×3 mask [1 −2 1]⊗[1 −2 1] (blind to a level or
+    a linear shading; its output is 6 σ for white noise σ): the mean square of its 9 outputs / 36. σ² is
+    the median of these over the squares plus step² / 12, the rounding noise of grey levels ``step``
+    apart (1 for uint8).
+    """
+    mids = _square_middles(img, pts, ids)
+    if mids.shape[0] == 0:
+        return -1.0
+    ms = np.empty(mids.shape[0])
+    for k in range(mids.shape[0]):
+        x, y = mids[k, 0], mids[k, 1]
         total = 0.0
         for yy in range(y - 1, y + 2):
             for xx in range(x - 1, x + 2):
@@ -179,10 +200,51 @@ def flat_noise(img, pts, ids, step):
                         v += kj * ki * float(img[yy + dj, xx + di])
                 total += v * v
         ms[k] = total / (9.0 * 36.0)
-        k += 1
-    if k == 0:
+    return math.sqrt(np.median(ms) + step * step / 12.0)
+
+
+@helper
+def square_contrast(img, pts, ids):
+    """The board's black/white contrast (grey levels of img): |median of one colour's squares − the other's|, each
+    square's level the mean of the 3×3 pixels at its middle (:func:`_square_middles`); −1 where a colour has
+    no square with all four corners."""
+    mids = _square_middles(img, pts, ids)
+    levels = np.empty((2, mids.shape[0] + 1))
+    count = np.zeros(2, np.int64)
+    for k in range(mids.shape[0]):
+        t = 0.0
+        for yy in range(mids[k, 1] - 1, mids[k, 1] + 2):
+            for xx in range(mids[k, 0] - 1, mids[k, 0] + 2):
+                t += float(img[yy, xx])
+        c = mids[k, 2]
+        levels[c, count[c]] = t / 9.0
+        count[c] += 1
+    if count[0] == 0 or count[1] == 0:
         return -1.0
-    return math.sqrt(np.median(ms[:k]) + step * step / 12.0)
+    return abs(np.median(levels[0, :count[0]]) - np.median(levels[1, :count[1]]))
+
+
+@helper
+def edge_width(even, radius, contrast, noise):
+    """(P,) px: each corner's edge width σ_b from how much of the squares' contrast its window keeps.
+
+    A straight X-junction of contrast C blurred by a Gaussian σ_b, in a Gaussian window of σ s, has the weighted
+    standard deviation (C/2)·(2/π)·asin(s² / (s² + σ_b²)) (the product of the two edges' erf profiles); with J
+    the window's ``even``, less the board's ``noise`` (median |antisymmetric part|) times ``WHITE_EVEN`` in
+    quadrature (at most halved), over C/2: σ_b² = s² (1 / sin(πJ/2) − 1). s = r/2 + 1/2 for window radius r (the
+    weights of :mod:`aicalib_tf.detect.corners.sigma`); J is held to [0.001, 0.999], and taken as
+    ``SHARP_RETENTION`` where the board has no contrast measured (``contrast`` ≤ 0). The window is cut at
+    r, so a blur of a few px reads about a fifth high (3.6 px for a 3 px blur of a sharp board, r = 3).
+    """
+    n = even.shape[0]
+    out = np.empty(n)
+    for p in range(n):
+        signal = math.sqrt(max(even[p] * even[p] - (WHITE_EVEN * noise) ** 2, 0.25 * even[p] * even[p]))
+        j = signal / (0.5 * contrast) if contrast > 0 else SHARP_RETENTION
+        j = min(max(j, 0.001), 0.999)
+        s = 0.5 * radius[p] + 0.5
+        out[p] = s * math.sqrt(1.0 / math.sin(0.5 * math.pi * j) - 1.0)
+    return out
 
 
 @helper
@@ -314,14 +376,14 @@ def corner_features(measures, bend, spacing, scores, min_score, tiny):
 
 
 @helper
-def design_columns(measures, bend, spacing, scores, min_score, tiny, flat, block):
-    """The σ model's columns (P, 29) of one board (:func:`aicalib_tf.detect.corners.sigma.design`).
+def design_columns(measures, bend, spacing, scores, min_score, tiny, flat, block, width):
+    """The σ model's columns (P, 30) of one board (:func:`aicalib_tf.detect.corners.sigma.design`).
 
     measures (P, 6) :func:`window_measures`, bend (P,) :func:`lattice_bend` px (−1: none), spacing (P,)
     px, scores (P,), flat :func:`flat_noise` (−1: none; the window's noise over ``WHITE_ODD`` then),
-    block :func:`blockiness`. Values are floored at ``tiny`` and scores at ``min_score`` before the
-    logarithms. Columns 0–18 are the board's (the same for all its corners), 19–28 each corner's
-    excess over the board's median of its feature.
+    block :func:`blockiness`, width (P,) :func:`edge_width` px. Values are floored at ``tiny`` and scores
+    at ``min_score`` before the logarithms. Columns 0–19 are the board's (the same for all its corners),
+    20–29 each corner's excess over the board's median of its feature.
     """
     n = measures.shape[0]
     out = np.zeros((n, BOARD_COLUMNS + CORNER_COLUMNS))
@@ -337,8 +399,9 @@ def design_columns(measures, bend, spacing, scores, min_score, tiny, flat, block
     q9_bend = np.percentile(f[:, 4], 90.0) - med[4]
     board = np.array([med[0], med[2], impulsive, med[4], med[5], med[0] * med[0], med[6], np.median(np.log(np.maximum(spacing, tiny))),
                       max(med[4] - BEND_KNOT, 0.0) ** 2, q9_noise, q9_bend, max(impulsive - IMPULSE_KNOT, 0.0) * max(med[0] - NOISE_KNOT, 0.0), med[3],
-                      max(NOISE_KNOT - med[0], 0.0), max(RESIDUAL_KNOT - med[2], 0.0),
-                      log_flat - noise + med[0], noise - log_flat, math.log(max(block, tiny)), med[8]])
+                      max(NOISE_KNOT - med[0], 0.0), np.median(np.log(np.maximum(width, tiny))),
+                      log_flat - noise + med[0], noise - log_flat, math.log(max(block, tiny)), med[8],
+                      max(np.median((width / np.maximum(spacing, tiny)) ** 2) - SPREAD_KNOT, 0.0)])
     for p in range(n):
         out[p, :BOARD_COLUMNS] = board
         for k in range(CORNER_COLUMNS):
@@ -349,9 +412,12 @@ def design_columns(measures, bend, spacing, scores, min_score, tiny, flat, block
 @kernel("f4[:, ::1], f8[:, ::1], i8[:, ::1], f8[::1], i8[::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8, f8, f8, i8, i8",
         "u1[:, ::1], f8[:, ::1], i8[:, ::1], f8[::1], i8[::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8, f8, f8, i8, i8")
 def board_columns(img, pts, ids, spacing, radius, scores, fits, weights, min_score, tiny, step, ox, oy):
-    """The σ model's columns (P, 29) of one board in one call: :func:`window_measures`, :func:`lattice_bend`,
-    :func:`flat_noise`, :func:`blockiness` and :func:`design_columns` of its points (ids shifted to start
-    at 0). step: the grey levels' step in img's units (1 for uint8); ox, oy: img's origin in the whole
-    image, px (the JPEG blocks start at the whole image's)."""
-    return design_columns(window_measures(img, pts, radius, fits, weights), lattice_bend(pts, ids), spacing, scores,
-                          min_score, tiny, flat_noise(img, pts, ids, step), blockiness(img, pts, ox, oy, tiny))
+    """The σ model's columns (P, 30) of one board in one call: :func:`window_measures`, :func:`lattice_bend`,
+    :func:`flat_noise`, :func:`blockiness`, :func:`edge_width` (of :func:`square_contrast`) and
+    :func:`design_columns` of its points (ids shifted to start at 0). step: the grey levels' step in img's
+    units (1 for uint8); ox, oy: img's origin in the whole image, px (the JPEG blocks start at the whole image's)."""
+    measures = window_measures(img, pts, radius, fits, weights)
+    noise = math.exp(np.median(np.log(np.maximum(measures[:, 1], tiny)))) if measures.shape[0] else 0.0
+    width = edge_width(measures[:, 2], radius, square_contrast(img, pts, ids), noise)
+    return design_columns(measures, lattice_bend(pts, ids), spacing, scores, min_score, tiny,
+                          flat_noise(img, pts, ids, step), blockiness(img, pts, ox, oy, tiny), width)

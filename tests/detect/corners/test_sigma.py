@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from aicalib_tf.detect.corners import sigma as cs
-from aicalib_tf.detect.corners.sigma_kernels import blockiness, design_columns, flat_noise, lattice_bend, window_measures
+from aicalib_tf.detect.corners.sigma_kernels import (SPREAD_KNOT, WHITE_EVEN, blockiness, design_columns, edge_width, flat_noise, lattice_bend,
+                                                     square_contrast, window_measures)
 from aicalib_tf.detect.pipeline import Detection, detect_corners
 from aicalib_tf.detect.warm import synthetic_board
 
@@ -106,7 +107,9 @@ def test_lattice_bend_is_zero_on_a_straight_lattice_and_the_second_difference_ot
 def test_design_columns_take_the_boards_medians_and_the_usual_bend_where_a_corner_has_none():
     measures = np.array([[0.02, 0.01, 0.2, 0.05, 0.1, 0.01], [0.02, 0.04, 0.2, 0.05, 0.1, 0.01],
                          [0.08, 0.01, 0.1, 0.05, 0.2, 0.04]])
-    x = design_columns(measures, np.array([0.1, -1.0, 0.3]), np.full(3, 10.0), np.array([1.0, 0.0, 0.5]), 0.05, 1e-6, 0.004, 1.5)
+    width = np.array([1.0, 4.0, 3.0])
+    x = design_columns(measures, np.array([0.1, -1.0, 0.3]), np.full(3, 10.0), np.array([1.0, 0.0, 0.5]), 0.05, 1e-6, 0.004, 1.5,
+                       width)
     nb = cs.BOARD_COLUMNS
     assert x.shape == (3, len(cs.COLUMNS)) and np.all(x[:, :nb] == x[0, :nb])  # the board's columns: one row
     noise = np.log(0.01)  # the median odd_median
@@ -128,7 +131,10 @@ def test_design_columns_take_the_boards_medians_and_the_usual_bend_where_a_corne
     np.testing.assert_allclose(x[0, 18], np.median(smooth))
     np.testing.assert_allclose(x[:, nb + 8], smooth - np.median(smooth))
     np.testing.assert_allclose(x[:, nb + 9], [0.0, np.log(4.0) - 0.5, 0.0])  # own asymmetry beyond e^0.5 the board's
-    no_square = design_columns(measures, np.array([0.1, -1.0, 0.3]), np.full(3, 10.0), np.ones(3), 0.05, 1e-6, -1.0, 1.0)
+    np.testing.assert_allclose(x[0, 14], np.log(3.0))  # the median edge width, px
+    np.testing.assert_allclose(x[0, 19], 0.09 - SPREAD_KNOT)  # (3 px / 10 px)² beyond the knot
+    no_square = design_columns(measures, np.array([0.1, -1.0, 0.3]), np.full(3, 10.0), np.ones(3), 0.05, 1e-6, -1.0, 1.0,
+                               width)
     np.testing.assert_allclose(no_square[0, 16], -0.95)  # no flat noise measured: the window's, as white noise
 
 
@@ -225,3 +231,46 @@ def test_sigma_grows_with_jpeg_compression_of_the_same_board(board):
         img = cv2.imdecode(cv2.imencode(".jpg", noisy, [cv2.IMWRITE_JPEG_QUALITY, q])[1], cv2.IMREAD_GRAYSCALE)
         sig[q] = np.median(detect_corners(img, PATTERN).sigmas)
     assert sig[8] > 2 * sig[95]
+
+
+def test_edge_width_inverts_the_contrast_a_gaussian_blur_leaves_in_the_window():
+    s = 2.0  # the radius-3 window's Gaussian σ
+    for blur in (0.5, 1.0, 3.0, 6.0):
+        kept = (2 / np.pi) * np.arcsin(s * s / (s * s + blur * blur))  # even over C/2 of an X-junction blurred by σ
+        got = edge_width(np.array([0.5 * 0.6 * kept]), np.array([3]), 0.6, 0.0)
+        assert got[0] == pytest.approx(blur, rel=1e-6)
+        noisy = np.hypot(0.5 * 0.6 * kept, WHITE_EVEN * 0.01)  # the noise's share of the contrast comes out
+        assert edge_width(np.array([noisy]), np.array([3]), 0.6, 0.01)[0] == pytest.approx(blur, rel=1e-6)
+    sharp = edge_width(np.array([0.3]), np.array([3]), -1.0, 0.0)  # no contrast measured: a sharp render's
+    assert 0.7 < sharp[0] < 1.1
+
+
+def test_white_noise_alone_has_the_symmetric_part_the_edge_width_takes_out():
+    fits, weights = cs._operators()
+    rng = np.random.default_rng(7)
+    img = rng.normal(0.5, 0.05, (200, 200)).astype(np.float32)
+    pts = rng.uniform(10.0, 190.0, (300, 2))
+    for r in (2, 3):
+        m = window_measures(img, pts, np.full(len(pts), r), fits, weights)
+        ratio = np.sqrt(np.mean(m[:, 2] ** 2)) / np.exp(np.median(np.log(m[:, 1])))
+        assert ratio == pytest.approx(WHITE_EVEN, rel=0.05)
+
+
+def test_the_squares_contrast_and_the_edge_width_follow_a_blurred_board():
+    import cv2
+
+    board = synthetic_board(PATTERN, square=30, angle=7.0)
+    det = detect_corners(board, PATTERN)
+    pts, ids = det.corners.astype(np.float64), det.ids.astype(np.int64)
+    assert square_contrast(board, pts, ids) == pytest.approx(255.0, abs=2.0)
+    fits, weights = cs._operators()
+    widths = {}
+    for blur in (0.0, 3.0):
+        img = cv2.GaussianBlur(board, (0, 0), blur) if blur else board
+        even = window_measures(img, pts, np.full(len(pts), 3), fits, weights)[:, 2]
+        widths[blur] = np.median(edge_width(even, np.full(len(pts), 3), square_contrast(img, pts, ids), 0.0))
+    assert widths[0.0] < 1.2  # the rotated board's own anti-aliasing
+    # the closed form takes an untruncated window: on the 7×7 one it reads a 3 px blur about a fifth high
+    assert np.hypot(3.0, widths[0.0]) < widths[3.0] < 1.3 * np.hypot(3.0, widths[0.0])
+    line = ids[:, 1] == 0  # one row of corners: no square with all four
+    assert square_contrast(board, pts[line], ids[line]) == -1.0
