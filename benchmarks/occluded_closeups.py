@@ -7,7 +7,8 @@ drawn again (``data_gen.sample.draw_scene``) with one object in front of it, cen
 of a square of a visible outer-ring corner (drawn at random, ``--per`` objects per image, one at a
 time; ``--seed`` draws other scenes and objects, the condition's seed replaced): a blob
 (star-convex polygon) or a bar (4 × 0.7 of its radius), radius 0.4–1.6 of the corner's nearest
-step, grey 0.05–0.95, as data_gen's occluders but sized to the rim's corners. The corners under it or within 2 px of its outline are hidden (``data_gen.occlude.occluded``).
+step, grey 0.05–0.95, as data_gen's occluders but sized to the rim's corners. The corners under it
+or within 2 px of its outline are hidden (``data_gen.occlude.occluded``).
 
 Each render goes through :func:`aicalib_tf.detect_corners` four times: as shipped, with the
 object test (:func:`aicalib_tf.detect.chessboard.occlusion.object_in_front`) switched off, with

@@ -15,11 +15,13 @@ each residual by its expected spread (the corners' σ of :mod:`aicalib_tf.detect
 with ``MODEL_SHARE`` of the step for the lens's bend), the offset that best explains them is
 ê_k = C_k·r / C_k·C_k (weighted), and its significance z_k = |C_k·r| / √(C_k·C_k). The corner of
 the largest z is off the grid when z ≥ ``Z_MIN``, |ê| ≥ ``MIN_PX`` and |ê| ≥ ``MIN_SHARE`` of its
-smallest step; it is set aside (its interpolations with it) and the test repeated. A neighbour of
-an off corner, interpolated through it, is not taken for it: the off corner explains every
-residual it touches, the neighbour only its own. A board corner, never interpolated, is not tested:
-beside a corner set aside (an object there), it and any other corner left with no interpolation are
-set aside too.
+smallest step (a corner of high z but a smaller offset ends the search: a board bent beyond its
+interpolations' reach); it is set aside (its interpolations with it) and the test repeated. A
+neighbour of an off corner, interpolated through it, is not taken for it: the off corner explains
+every residual it touches, the neighbour only its own. Next to an object, a corner may be left
+with no interpolation (a board corner is never interpolated), or only across the gap (``GAPPED``,
+weights up to 2): such a corner is set aside too when one of its 8 neighbours on the grid is (none
+left) or two are (only across the gap).
 
 :func:`without_off_grid` turns a full board with such corners into a partial board without them
 (at most ``MAX_OFF``; a board with more is no board).
@@ -61,26 +63,22 @@ def cubic_weights(offs) -> tuple[float, ...]:
 def interpolations(rows: int, cols: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every interpolation of a full rows × cols grid along its lines.
 
-    Returns C (S, rows·cols) float64, each row −1 at its target and the weights at its four
-    corners (row-major positions); target (S,) int, each row's target position; and gapped (S,)
-    bool, the rows of ``GAPPED`` offsets (the others are ``STENCILS``').
+    Returns at (S, 5) int, each interpolation's target and its four corners (row-major positions);
+    weights (S, 5) float64, −1 for the target and the form's weights; and gapped (S,) bool, the
+    interpolations of ``GAPPED`` offsets (the others are ``STENCILS``').
     """
+    r, c = (v.ravel() for v in np.mgrid[:rows, :cols])
     forms = [(offs, wts, False) for offs, wts in STENCILS] + [(offs, cubic_weights(offs), True) for offs in GAPPED]
-    out, target, gapped = [], [], []
-    for r in range(rows):
-        for c in range(cols):
-            for dr, dc in ((0, 1), (1, 0)):
-                for offs, wts, gap in forms:
-                    cells = [(r + o * dr, c + o * dc) for o in offs]
-                    if all(0 <= a < rows and 0 <= b < cols for a, b in cells):
-                        row = np.zeros(rows * cols)
-                        row[r * cols + c] = -1.0
-                        for (a, b), w in zip(cells, wts):
-                            row[a * cols + b] = w
-                        out.append(row)
-                        target.append(r * cols + c)
-                        gapped.append(gap)
-    return np.array(out).reshape(-1, rows * cols), np.array(target, int), np.array(gapped, bool)
+    at, weights, gapped = [], [], []
+    for dr, dc in ((0, 1), (1, 0)):
+        for offs, wts, gap in forms:
+            o = np.array((0,) + tuple(offs))
+            rr, cc = r[:, None] + o * dr, c[:, None] + o * dc  # (rows·cols, 5)
+            inside = ((rr >= 0) & (rr < rows) & (cc >= 0) & (cc < cols)).all(axis=1)
+            at.append((rr * cols + cc)[inside])
+            weights.append(np.tile((-1.0,) + tuple(wts), (int(inside.sum()), 1)))
+            gapped.append(np.full(int(inside.sum()), gap))
+    return np.concatenate(at), np.concatenate(weights), np.concatenate(gapped)
 
 
 @lru_cache(maxsize=8)
@@ -101,33 +99,40 @@ def smallest_steps(points: np.ndarray) -> np.ndarray:
     return step.ravel()
 
 
-def off_grid(points: np.ndarray, sigmas: np.ndarray | None) -> np.ndarray:
+def off_grid(points: np.ndarray, sigmas: np.ndarray | None) -> np.ndarray | None:
     """(rows, cols) bool: the corners of a full grid off the smooth grid of their neighbours, and
-    those beside them (of their 8 neighbours on the grid) that no interpolation is left to test.
+    those beside them (of their 8 neighbours on the grid) that no interpolation is left to test;
+    None when more than ``MAX_OFF`` are off (the search stops there).
 
     points : (rows, cols, 2) px, every position filled. sigmas : (rows, cols) px, each corner's σ
-    (None: ``SIGMA_FLOOR``). At most ``MAX_OFF`` + 1 are found off (the search stops there).
+    (None: ``SIGMA_FLOOR``).
     """
     rows, cols = points.shape[:2]
     flat = np.asarray(points, np.float64).reshape(-1, 2)
     sig = np.full(len(flat), SIGMA_FLOOR) if sigmas is None else np.maximum(np.ravel(sigmas), SIGMA_FLOOR)
     steps = smallest_steps(np.asarray(points, np.float64))
-    c_all, target, gapped = _interpolations(rows, cols)
-    off = np.zeros(len(flat), bool)
-    tested = np.zeros(len(flat), bool)
-    while off.sum() <= MAX_OFF:
-        keep = ~(c_all[:, off] != 0).any(axis=1)
-        plain = np.isin(np.arange(len(flat)), target[keep & ~gapped])
-        keep &= ~gapped | ~plain[target]  # a gapped interpolation only where no other is left
-        c, tgt = c_all[keep], target[keep]
-        tested = np.isin(np.arange(len(flat)), tgt)
-        if len(c) == 0:
+    at_all, w_all, gapped = _interpolations(rows, cols)
+    n = len(flat)
+    off = np.zeros(n, bool)
+    plain, tested = np.zeros(n, bool), np.zeros(n, bool)
+    while True:
+        if off.sum() > MAX_OFF:
+            return None
+        keep = ~off[at_all].any(axis=1)
+        plain = np.zeros(n, bool)  # the corners a form of STENCILS still interpolates
+        plain[at_all[keep & ~gapped, 0]] = True
+        keep &= ~gapped | ~plain[at_all[:, 0]]  # a gapped interpolation only where no other is left
+        at, w = at_all[keep], w_all[keep]
+        tested = np.zeros(n, bool)
+        tested[at[:, 0]] = True
+        if len(at) == 0:
             break
-        spread = np.sqrt((c ** 2) @ sig ** 2 + (MODEL_SHARE * steps[tgt]) ** 2)
-        cw = c / spread[:, None]
-        served = cw.T @ ((c @ flat) / spread[:, None])  # (N, 2): C_k·r, weighted
-        norm = (cw ** 2).sum(axis=0)  # C_k·C_k, weighted
-        z = np.zeros(len(flat))
+        spread = np.sqrt(((w * sig[at]) ** 2).sum(axis=1) + (MODEL_SHARE * steps[at[:, 0]]) ** 2)  # (S,) px
+        ww = w / spread[:, None]
+        res = np.einsum("sj,sjd->sd", w, flat[at]) / spread[:, None]  # (S, 2): each residual, weighted
+        served = np.stack([np.bincount(at.ravel(), (ww * res[:, d, None]).ravel(), n) for d in (0, 1)], 1)  # C_k·r
+        norm = np.bincount(at.ravel(), (ww ** 2).ravel(), n)  # C_k·C_k, weighted
+        z = np.zeros(n)
         tested &= norm > 0
         z[tested] = np.hypot(*served[tested].T) / np.sqrt(norm[tested])
         k = int(np.argmax(z))
@@ -136,22 +141,24 @@ def off_grid(points: np.ndarray, sigmas: np.ndarray | None) -> np.ndarray:
             break
         off[k] = True
     off = off.reshape(rows, cols)
-    near = np.pad(off, 1)
-    near = np.any([near[1 + di:rows + 1 + di, 1 + dj:cols + 1 + dj] for di in (-1, 0, 1) for dj in (-1, 0, 1)], axis=0)
-    return off | (near & ~tested.reshape(rows, cols))
+    pad = np.pad(off, 1)
+    near = np.sum([pad[1 + di:rows + 1 + di, 1 + dj:cols + 1 + dj] for di in (-1, 0, 1) for dj in (-1, 0, 1)], axis=0)
+    untested, gapped_only = (~v.reshape(rows, cols) for v in (tested, plain))
+    return off | (untested & (near >= 1)) | (gapped_only & (near >= 2))
 
 
 def without_off_grid(det, refused: str):
     """A complete detection (:class:`~aicalib_tf.detect.pipeline.Detection`, its corners in OpenCV order)
     without its corners :func:`off_grid`: as it is when none is, a partial board (complete False)
-    without them when at most ``MAX_OFF`` are, and no board (no corners, reason ``refused``) with more."""
+    without them (and the corners beside them left untested, :func:`off_grid`) when at most
+    ``MAX_OFF`` are, and no board (no corners, reason ``refused``) with more."""
     if not det.complete or det.pattern_size is None:
         return det
     cols, rows = det.pattern_size
     sig = None if det.sigmas is None else np.asarray(det.sigmas).reshape(rows, cols)
-    off = off_grid(np.asarray(det.corners, np.float64).reshape(rows, cols, 2), sig).ravel()
-    if not off.any():
+    off = off_grid(np.asarray(det.corners, np.float64).reshape(rows, cols, 2), sig)
+    if off is not None and not off.any():
         return det
-    keep = ~off if off.sum() <= MAX_OFF else np.zeros(len(off), bool)
+    keep = np.zeros(len(det.corners), bool) if off is None else ~off.ravel()
     return replace(det, corners=det.corners[keep], ids=det.ids[keep], scores=det.scores[keep], complete=False,
                    sigmas=None if det.sigmas is None else det.sigmas[keep], reason="" if keep.any() else refused)

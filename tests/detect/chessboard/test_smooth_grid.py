@@ -48,7 +48,8 @@ def test_a_ring_corner_off_its_line_is_found():
     for _ in range(10):
         pts = _fisheye_board(rng) + rng.normal(0, 0.1, (ROWS, COLS, 2))
         moved = pts.copy()
-        moved[0, 3] += 2.5 * np.array([np.cos(a := rng.uniform(0, 2 * np.pi)), np.sin(a)])  # a point on an object's edge
+        a = rng.uniform(0, 2 * np.pi)
+        moved[0, 3] += 2.5 * np.array([np.cos(a), np.sin(a)])  # a point on an object's edge
         assert np.argwhere(off_grid(moved, np.full((ROWS, COLS), 0.1))).tolist() == [[0, 3]]
 
 
@@ -67,6 +68,15 @@ def test_a_board_corner_beside_an_off_corner_goes_with_it():
     assert sorted(map(tuple, np.argwhere(off_grid(pts, np.full((ROWS, COLS), 0.1))).tolist())) == [(0, 7), (0, 8)]
 
 
+def test_three_corners_off_under_one_object_all_go():
+    rng = np.random.default_rng(13)
+    pts = _fisheye_board(rng) + rng.normal(0, 0.1, (ROWS, COLS, 2))
+    for (r, c), shift in zip(((0, 1), (0, 2), (1, 1)), ([2.5, 2.0], [-3.0, 1.5], [3.0, -2.5])):
+        pts[r, c] += shift
+    flagged = set(map(tuple, np.argwhere(off_grid(pts, np.full((ROWS, COLS), 0.1))).tolist()))
+    assert {(0, 1), (0, 2), (1, 1)} <= flagged and all(r <= 2 and c <= 3 for r, c in flagged)
+
+
 def test_a_full_board_loses_its_off_corner():
     rng = np.random.default_rng(11)
     pts = _fisheye_board(rng).reshape(-1, 2).astype(np.float32)
@@ -80,6 +90,10 @@ def test_a_full_board_loses_its_off_corner():
     assert not got.complete and len(got.corners) == COLS * ROWS - 1 and got.reason == ""
     assert [0, 2] not in got.ids.tolist() and len(got.sigmas) == len(got.ids)
     np.testing.assert_array_equal(got.corners, np.delete(moved, 2 * COLS, axis=0))
+    for k in (2, 4 * COLS, 2 * COLS + COLS - 1, 5 * COLS + 4):  # more than MAX_OFF corners off: no board
+        moved[k] += [-2.5, 2.5]
+    refused = without_off_grid(replace(det, corners=moved), "refused")
+    assert not refused.found and refused.reason == "refused"
 
 
 def test_an_object_over_a_close_ups_rim_makes_no_wrong_board():
