@@ -163,8 +163,12 @@ def texture_quads(gray: np.ndarray, most: int = MAX_SLIVERS) -> list[np.ndarray]
     """
     h, w = gray.shape
     f = max(1.0, max(w, h) / GRADIENT_SIDE)
+    if min(w, h) < 16 * f:  # a strip too narrow for any board
+        return []
     small = gray if f == 1.0 else cv2.resize(gray, (round(w / f), round(h / f)), interpolation=cv2.INTER_AREA)
     step = max(1, int(max(small.shape) // ANALYSIS_SIDE))
+    if min(small.shape) < 8 * step:
+        return []
     energy, coherence = _structure(np.asarray(small, np.float32), ENERGY_SIGMA / f, step)
     f *= step  # image px per px of the energy
     top = float(energy.max())

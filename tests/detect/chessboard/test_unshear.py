@@ -83,6 +83,8 @@ def test_texture_slivers_are_found_and_frontal_textures_are_not():
     assert texture_quads(frontal) == []
     rng = np.random.default_rng(3)
     assert texture_quads(cv2.GaussianBlur(rng.random((480, 640), dtype=np.float32), (0, 0), 2.0)) == []
+    for shape in ((1600, 1), (1, 1600), (8, 8), (2000, 12)):  # strips too narrow for a board
+        assert texture_quads(rng.random(shape, dtype=np.float32)) == []
 
 
 @pytest.mark.parametrize("index", [43, 59])  # no grid at all / a partial board of 50 corners at first
