@@ -87,7 +87,7 @@ board is searched again on its region with the shading divided out (:mod:`aicali
 the rim's darkened outer rings); only a complete board counts. Steeply tilted boards (55–80° from facing the
 camera; their lines meet at 8–20°, sharper than the network's junctions): with no full board at full size, a
 sheared partial board's lattice, else a sliver of coherent texture, is warped to square axes and searched again
-(:mod:`aicalib_tf.detect.chessboard.unshear`); only a complete board counts, mapped back and refined on the image. Any full board with a corner on an object's edge
+(:mod:`aicalib_tf.detect.chessboard.unshear`); only a complete board counts, mapped back and refined on its rectified view. Any full board with a corner on an object's edge
 (:func:`aicalib_tf.detect.chessboard.occlusion.object_in_front`: sectors out of the board's alternation
 and a ring unlike its neighbours') is passed over, on its scale and again at full size. A full board's corners
 off the smooth grid of their neighbours (:func:`aicalib_tf.detect.chessboard.smooth_grid.without_off_grid`: over
@@ -123,7 +123,7 @@ from aicalib_tf.detect.chessboard.smooth_grid import without_off_grid
 from aicalib_tf.detect.chessboard.shading import flattened_look
 from aicalib_tf.detect.pyramid import Frame, boards_coarse_to_fine, quick_scales, quick_shift, refine_full, scales, to_full
 from aicalib_tf.detect.corners.refine import Smoothed, refine_candidates
-from aicalib_tf.detect.chessboard.unshear import second_look as unshear_look
+from aicalib_tf.detect.chessboard.unshear import refine_rectified, second_look as unshear_look
 from aicalib_tf.detect.chessboard.zoom import zoomed_look
 from aicalib_tf.io import read_image
 
@@ -176,7 +176,7 @@ REASONS = (NO_CANDIDATES, NO_GRID, NO_MATCH, UNDECIDED)  # from the least to the
 _DEFAULT_MODEL = None
 MAX_CANDIDATES = 3000  # a 20x15 board has 300 corners; more candidates are clutter
 WEAK = 0.5  # of the threshold: network points this weak confirm a corner where the bent grid predicts one
-UNSHEAR_SHIFT = 1.0  # px: an unsheared board's corner moved further by its refinement on the image keeps its mapped place
+UNSHEAR_SHIFT = 1.0  # px: an unsheared board's corner moved further by its refinement (rectified view) keeps its place
 RING_SIGMA = 1.0  # px: the smoothing of the ring tests' image; a quick pass refines its windows on it too
 
 
@@ -293,14 +293,13 @@ def _second_looks(gray: np.ndarray, pattern_size: tuple[int, int], model, thresh
 
 def _unsheared(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: float, seen: Detection) -> Detection:
     """The search again on a steeply tilted board's region, warped to square axes (:mod:`aicalib_tf.detect.chessboard.unshear`),
-    when the full-size search ``seen`` found no full board: a complete board, its corners mapped back and refined on gray
-    (H, W) float32 where they can be, else ``seen``."""
+    when the full-size search ``seen`` found no full board: a complete board, its corners mapped back to gray (H, W)
+    float32 and refined on the board's rectified view of it where they can be, else ``seen``."""
     got = unshear_look(gray, pattern_size, lambda img: _detect_at(img, pattern_size, model, threshold, relative=True),
                        seen.ids if seen.found else None, seen.corners if seen.found else None)
     if got is None:
         return seen
-    corners, ok = refine_full(gray, got[0], max_shift=UNSHEAR_SHIFT)
-    corners = np.where(ok[:, None], corners, got[0])
+    corners = refine_rectified(gray, got[0], pattern_size, bind(refine_full, max_shift=UNSHEAR_SHIFT))
     if sum(pattern_size) % 2 == 0:  # the geometric rule is the image's, not the warp's (colours: the warp's)
         corners = order_full_board(corners, pattern_size, gray)
     return replace(got[1], corners=corners.astype(np.float32), image_size=gray.shape[::-1])
