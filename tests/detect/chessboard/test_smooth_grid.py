@@ -3,6 +3,7 @@
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from aicalib_tf.detect.chessboard.smooth_grid import STENCILS, cubic_weights, off_grid, without_off_grid
 from aicalib_tf.detect.pipeline import Detection
@@ -96,18 +97,26 @@ def test_a_full_board_loses_its_off_corner():
     assert not refused.found and refused.reason == "refused"
 
 
-def test_an_object_over_a_close_ups_rim_makes_no_wrong_board():
-    """closeup-eq image 18 with occluded_closeups.py's object 1 (a blob at the ring's corner (6, 0)): the
-    search assembles a full board whose corner (6, 0) lies 3.7 px off, on the blob's edge."""
+# closeup-eq images with occluded_closeups.py's objects: (image, object's outline px, its grey level)
+OBJECTS = {
+    # a blob at the ring's corner (6, 0): a full board whose corner (6, 0) lies 3.7 px off, on the blob's edge
+    "blob": (18, [[451.13, 245.1], [448.65, 245.49], [444.88, 247.56], [444.17, 247.6], [440.87, 243.58],
+                  [441.14, 240.09], [444.53, 240.08], [446.27, 238.71], [448.89, 238.99], [448.68, 241.36]], 0.306),
+    # a bar over (1, 0), (2, 0) and (1, 1), 3.2-5.5 px off: (1, 0) fits its only interpolation left
+    "bar": (1, [[239.41, 75.81], [243.06, 80.56], [215.91, 101.44], [212.25, 96.69]], 0.83),
+}
+
+
+@pytest.mark.parametrize("name", sorted(OBJECTS))
+def test_an_object_over_a_close_ups_rim_makes_no_wrong_board(name):
     from aicalib_tf import detect_corners
     from aicalib_tf.bench.conditions import PATTERN, select_conditions
     from data_gen.sample import draw_scene
 
+    index, outline, level = OBJECTS[name]
     cond = select_conditions("closeup-eq")[0]
-    scene = draw_scene(cond.preset, cond.seed, 18, size=cond.size, pattern=PATTERN)
-    blob = np.array([[451.13, 245.1], [448.65, 245.49], [444.88, 247.56], [444.17, 247.6], [440.87, 243.58],
-                     [441.14, 240.09], [444.53, 240.08], [446.27, 238.71], [448.89, 238.99], [448.68, 241.36]])
-    img = replace(scene, occluders=[blob], occluder_levels=[0.306]).render()
+    scene = draw_scene(cond.preset, cond.seed, index, size=cond.size, pattern=PATTERN)
+    img = replace(scene, occluders=[np.array(outline)], occluder_levels=[level]).render()
     det = detect_corners(img, PATTERN)
     assert det.found
     truth = scene.corners[det.ids[:, 1] * PATTERN[0] + det.ids[:, 0]]
