@@ -20,7 +20,7 @@ interpolations' reach); it is set aside (its interpolations with it) and the tes
 neighbour of an off corner, interpolated through it, is not taken for it: the off corner explains
 every residual it touches, the neighbour only its own. Next to an object, a corner may be left
 with no interpolation (a board corner is never interpolated), or only across the gap (``GAPPED``,
-weights up to 2): such a corner is set aside too when one of its 8 neighbours on the grid is (none
+weights up to 2.25): such a corner is set aside too when one of its 8 neighbours on the grid is (none
 left) or two are (only across the gap).
 
 :func:`without_off_grid` turns a full board with such corners into a partial board without them
