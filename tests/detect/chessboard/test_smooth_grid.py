@@ -5,7 +5,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from aicalib_tf.detect.chessboard.smooth_grid import STENCILS, cubic_weights, off_grid, without_off_grid
+from aicalib_tf.detect.chessboard.smooth_grid import STENCILS, cubic_weights, off_grid, smallest_steps, without_off_grid
 from aicalib_tf.detect.pipeline import Detection
 
 COLS, ROWS = 9, 6
@@ -121,3 +121,25 @@ def test_an_object_over_a_close_ups_rim_makes_no_wrong_board(name):
     assert det.found
     truth = scene.corners[det.ids[:, 1] * PATTERN[0] + det.ids[:, 0]]
     assert np.hypot(*(det.corners - truth).T).max() <= 2.0
+
+
+def _close_fisheye_board(cols: int = 8, rows: int = 6) -> np.ndarray:
+    """(rows, cols, 2) px: a 32.5 mm board 100 mm from a 185° equidistant fisheye (f 337 px), turned 60°
+    and 20° off-axis: its steps run 27-120 px, as a real fisheye's close board's 39-150 px did."""
+    x, y = np.meshgrid((np.arange(cols) - 3.5) * 32.5, (np.arange(rows) - 2.5) * 32.5)
+    t, o = np.deg2rad(60.0), np.deg2rad(20.0)
+    rot = np.array([[np.cos(t), 0, np.sin(t)], [0, 1, 0], [-np.sin(t), 0, np.cos(t)]])
+    p = np.stack([x, y, np.zeros_like(x)], -1) @ rot.T + 100.0 * np.array([np.sin(o), 0, np.cos(o)])
+    theta, phi = np.arctan2(np.hypot(p[..., 0], p[..., 1]), p[..., 2]), np.arctan2(p[..., 1], p[..., 0])
+    return np.stack([516 + 337 * theta * np.cos(phi), 389 + 337 * theta * np.sin(phi)], -1)
+
+
+def test_a_close_board_bent_all_over_keeps_its_corners_and_still_shows_one_off():
+    pts = _close_fisheye_board()
+    sig = np.full(pts.shape[:2], 0.05)
+    assert not off_grid(pts, sig).any()  # with the least share alone (0.01 of a step) 3 of its corners went
+    steps = smallest_steps(pts).reshape(pts.shape[:2])
+    for r, c in [(0, 3), (2, 4), (5, 2), (3, 0)]:  # 4 px or 0.15 of its step off, on every part of it
+        q = pts.copy()
+        q[r, c, 1] += max(4.0, 0.15 * steps[r, c])
+        assert np.argwhere(off_grid(q, sig)).tolist() == [[r, c]]
