@@ -1,4 +1,4 @@
-"""Images per second of ``python -m aicalib_tf.detect`` against ``--workers`` (issue 26).
+"""Images per second of ``python -m aicalib_tf.detect`` against ``--workers``.
 
     python benchmarks/batch_speed.py [--copies 4] [--workers 1,2] [--repeat 2]
 

@@ -1,4 +1,4 @@
-"""Repeatability of a calibration on real photos (issue 25): two disjoint halves of the views,
+"""Repeatability of a calibration on real photos: two disjoint halves of the views,
 rotation-compensated projection difference (mrcal's projection_diff), against what the
 halves' covariances predict.
 

@@ -1,4 +1,4 @@
-"""Time of ``calibrate_camera(model="auto")`` and of the quality assessment on 40 views (issue 25's ≤ 10 s).
+"""Time of ``calibrate_camera(model="auto")`` and of the quality assessment on 40 views (target ≤ 10 s).
 
 Views are synthetic projections of a 9x6 board (``tests/calib/synthetic.py``) with 0.1 px corner
 noise, for a mild pinhole lens (640x480) and a 185° fisheye (1280x960); OpenCV's

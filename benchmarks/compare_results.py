@@ -1,4 +1,4 @@
-"""Are two evaluate runs' detections the same? (issue 26: a speed change must not change results)
+"""Are two evaluate runs' detections the same? (a speed change must not change results)
 
     python benchmarks/compare_results.py BEFORE/results.csv AFTER/results.csv [--detector cnn]
 

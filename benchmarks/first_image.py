@@ -1,4 +1,4 @@
-"""First image against the median in a fresh process: compile stalls (issue 26).
+"""First image against the median in a fresh process: compile stalls.
 
     python benchmarks/first_image.py [--cold] [--prepare] [--images N]
 

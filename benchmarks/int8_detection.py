@@ -1,4 +1,4 @@
-"""The int8 model against float32: detections per named condition, in one process (issue 26).
+"""The int8 model against float32: detections per named condition, in one process.
 
     python benchmarks/int8_detection.py [--images 30] [--int8 default_int8|PATH.tflite] [--base default]
 
@@ -6,7 +6,7 @@
 compared with ``--base`` on the same images, one table and one verdict each.
 
 Prints, per condition, hits / wrong boards / images with any board / corners found and the median
-corner error of hits for each model, then issue 26's verdict (within one image per condition,
+corner error of hits for each model, then the int8 verdict (within one image per condition,
 corner error within 5%; :func:`aicalib_tf.bench.model_detections.int8_verdict`).
 """
 

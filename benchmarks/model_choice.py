@@ -1,4 +1,4 @@
-"""How often ``--model auto`` picks the right family of lens model (issue 25's ≥ 95% target).
+"""How often ``--model auto`` picks the right family of lens model (target ≥ 95%).
 
 Each sequence is a new camera: data_gen draws the lens from the sequence's seed, renders the views
 (noise as in the benchmark's calibration presets), the CNN detects the boards and

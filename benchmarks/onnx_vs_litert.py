@@ -1,4 +1,4 @@
-"""The corner-map network on ONNX Runtime against LiteRT, on the same inputs (issue 26).
+"""The corner-map network on ONNX Runtime against LiteRT, on the same inputs.
 
     pip install onnxruntime tf2onnx   # not project dependencies
     python benchmarks/onnx_vs_litert.py [--repeat 30]

@@ -1,4 +1,4 @@
-"""Where the CNN pipeline's time goes: ms per stage over evaluate --quick's images (issue 26).
+"""Where the CNN pipeline's time goes: ms per stage over evaluate --quick's images.
 
 Every stage function the pipeline calls is wrapped by a timer that counts its *own* time (a
 stage's time less that of the stages it calls, so the zoom's second search is not counted twice),

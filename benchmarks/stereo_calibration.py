@@ -1,4 +1,4 @@
-"""Rig calibration against the truth (issue 27): ours against OpenCV's stereo pipeline on data_gen rigs.
+"""Rig calibration against the truth: ours against OpenCV's stereo pipeline on data_gen rigs.
 
 Rigs (:mod:`data_gen.rig`, 1280×960, read noise σ 2 grey levels, 20 pairs each; baseline 5–50 cm,
 vergence up to 10°, boards cut by the frame in the other camera allowed):

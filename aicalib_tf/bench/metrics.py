@@ -124,7 +124,7 @@ def calibration_errors(K: np.ndarray, dist: np.ndarray, K_true: np.ndarray, dist
     return out
 
 
-# --- detection outcomes (issue 6) -------------------------------------------------------------
+# --- detection outcomes -------------------------------------------------------------------------
 
 OUTCOMES = ("hit", "wrong", "miss")
 

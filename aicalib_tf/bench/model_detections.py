@@ -1,8 +1,8 @@
-"""Do two corner models detect the same boards? Per condition, in one process (issue 26's int8 check).
+"""Do two corner models detect the same boards? Per condition, in one process (the int8 check).
 
 :func:`compare_models` runs the detection pipeline with each model on the same images of the
 benchmark's named conditions (:func:`aicalib_tf.bench.conditions.named_conditions`, fixed seeds)
-and scores every detection with the benchmark's metrics. :func:`int8_verdict` applies issue 26's
+and scores every detection with the benchmark's metrics. :func:`int8_verdict` applies the int8
 rule for a quantised model: per condition within one image of the float32 model's hits (and wrong
 boards, and boards found on partial/occluded images), and the median corner error within
 5%. ``python -m aicalib_tf.export`` writes the result into the model card;
@@ -61,7 +61,7 @@ def _run(fn, samples) -> dict:
 
 
 def int8_verdict(result: dict, base: str, other: str) -> tuple[bool, list[str], float]:
-    """Issue 26's rule for ``other`` against ``base`` over :func:`compare_models`' result.
+    """The int8 rule for ``other`` against ``base`` over :func:`compare_models`' result.
 
     Returns (passed, the conditions that break it with why, relative change of the median corner
     error over all hits).

@@ -1,4 +1,4 @@
-"""The detection targets (issue 4) checked against one benchmark run (pure pandas).
+"""The detection targets checked against one benchmark run (pure pandas).
 
 :func:`check_targets` reads the summary (one row per condition × detector, see
 :func:`aicalib_tf.bench.report.summarize`) and the per-image results of ``python -m aicalib_tf.evaluate``

@@ -80,7 +80,7 @@ def _map_fn(model, shape: tuple[int, int], precision: str):
 
     Calling a concrete function skips ``tf.function``'s per-call dispatch (about 0.5 ms), and a
     graph traced for a fixed size runs up to 5% faster than one for any size once both have
-    seen that size (session 14: 4.14 against 4.15 ms at 640×480, 3.11 against 3.25 ms at
+    seen that size (measured: 4.14 against 4.15 ms at 640×480, 3.11 against 3.25 ms at
     552×432); either pays 2–3 ms more on its first call at a size, while oneDNN sets up its
     kernels. A trace costs about 40 ms, so a size gets its own function on its second use: a
     folder of photos of one size is traced once, and the one-off sizes of enlarged regions

@@ -114,7 +114,7 @@ def build_model(name: str = "default") -> keras.Sequential:
         "default": _default,
         "report": _report,
         # experimental variants of default, same corner-map output. default_v1: the default shipped
-        # until session 12 (no full-resolution layer, conv1 + max-pooling); c12/c16: a wider conv1
+        # the earlier shipped stack (no full-resolution layer, conv1 + max-pooling); c12/c16: a wider conv1
         "default_v1": lambda: _default(pre=0, strided=False, name="default_v1"),
         "default_c12": lambda: _default(conv1=12, pre=0, strided=False, name="default_c12"),
         "default_c16": lambda: _default(conv1=16, pre=0, strided=False, name="default_c16"),

@@ -15,7 +15,7 @@ Two architectures:
     max-pooling, 32, 32, 32 (ReLU), then a 1×1 Conv2D to the 3 channels. Receptive field 35 px,
     24,739 parameters.
 
-The experimental variants of ``default`` (``default_v1``, the stack shipped until session 12, and
+The experimental variants of ``default`` (``default_v1``, the earlier shipped stack, and
 others) are listed in :func:`build_model`.
 
 Loading always uses ``safe_mode=True``: a model file can hold weights and a layer graph, never code.

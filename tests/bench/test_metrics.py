@@ -111,7 +111,7 @@ def test_projection_error_field_across_models():
     assert mixed["proj_err_fail_frac"] == 0.0 and mixed["proj_err_mean_px"] > 1.0
 
 
-# --- detection outcomes, partial boards, agreement (issue 6) ---------------------------------
+# --- detection outcomes, partial boards, agreement ------------------------------------------
 
 def _ids(cols, rows):
     c, r = np.meshgrid(np.arange(cols), np.arange(rows))

@@ -70,7 +70,7 @@ def test_half_difference_zero_without_noise_and_grows_with_it():
 
 
 def test_predicted_half_difference_agrees_with_measured():
-    """Issue 25 target: predicted and measured half-vs-half differences within a factor of 2
+    """Target: predicted and measured half-vs-half differences within a factor of 2
     (σ 0.3 px, 20 views; means over four view sets so one draw does not decide: single-set ratios
     range 0.5-2.7, as the halves' errors are themselves random)."""
     measured, predicted = [], []

@@ -45,7 +45,7 @@ def test_default_architecture_is_the_documented_stack():
     ]
     assert m.get_layer("conv1").strides == (2, 2)  # conv1 at stride 2 in place of conv1 + pool1
     assert m.get_layer("conv0").strides == (1, 1) and m.count_params() == 24_739
-    v1 = build_model("default_v1")  # shipped until session 12
+    v1 = build_model("default_v1")  # the earlier shipped stack
     assert _stack(v1) == _stack(m)[1:2] + [("MaxPooling2D", None)] + _stack(m)[2:] and v1.count_params() == 24_483
     pre = build_model("default_pre")
     assert _stack(pre) == [("Conv2D", 4)] + _stack(v1) and pre.count_params() == 24_739
