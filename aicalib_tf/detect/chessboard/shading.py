@@ -33,6 +33,7 @@ import numpy as np
 
 from aicalib_tf.detect.corners.junctions import SAME_CORNER, nearest_spacing
 from aicalib_tf.detect.corners.sigma import board_sigmas
+from aicalib_tf.geometry.points import any_within
 
 __all__ = ["SIGMA", "FLOOR", "MIN_SHARE", "NEW_POINTS", "DARK", "local_mean", "flatten", "darkened", "shading_box",
            "flattened_look", "new_points"]
@@ -138,22 +139,15 @@ def flattened_look(gray: np.ndarray, pattern_size: tuple[int, int], seen, others
     if not det.complete:
         return None
     net = np.concatenate([np.reshape(strong, (-1, 2)), np.reshape(weak(), (-1, 2))])
-    if _nearest(det.corners[det.scores <= 0], net).max(initial=0.0) > SAME_CORNER:
+    if not any_within(det.corners[det.scores <= 0], net, SAME_CORNER).all():
         return None
     corners = (det.corners + offset).astype(np.float32)
     sigmas = board_sigmas(lambda a, b, c, d: gray[b:d, a:c], corners, det.ids, det.scores, (w, h))
     return replace(det, corners=corners, image_size=(w, h)) if sigmas.max() <= MAX_SIGMA else None
 
 
-def _nearest(points: np.ndarray, to: np.ndarray) -> np.ndarray:
-    """(M,) px: each of ``points`` (M, 2)'s distance to the nearest of ``to`` (K, 2); inf where K = 0."""
-    p, q = np.asarray(points, np.float64).reshape(-1, 2), np.asarray(to, np.float64).reshape(-1, 2)
-    if len(q) == 0:
-        return np.full(len(p), np.inf)
-    return np.hypot(p[:, None, 0] - q[None, :, 0], p[:, None, 1] - q[None, :, 1]).min(axis=1, initial=np.inf)
-
-
 def new_points(points: np.ndarray, others: np.ndarray) -> int:
     """How many of the network's ``points`` (N, 2) px on the flattened region have none of the
     search's candidates ``others`` (M, 2) px within ``NEAR`` px: the corners the flattening shows."""
-    return int(np.sum(_nearest(points, others) > NEAR))
+    return int(np.sum(~any_within(np.asarray(points, np.float64).reshape(-1, 2),
+                                  np.asarray(others, np.float64).reshape(-1, 2), NEAR)))
