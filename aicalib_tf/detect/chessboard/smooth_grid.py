@@ -35,6 +35,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from aicalib_tf.detect.chessboard.rim import grid_directions
+
 __all__ = ["STENCILS", "interpolations", "off_grid", "without_off_grid", "Z_MIN", "MIN_PX", "MIN_SHARE", "MAX_OFF",
            "bend_share"]
 
@@ -90,16 +92,9 @@ def _interpolations(rows: int, cols: int):
 
 
 def smallest_steps(points: np.ndarray) -> np.ndarray:
-    """(rows·cols,) px: each corner's distance to its nearest neighbour along a grid line; points (rows, cols, 2)."""
-    rows, cols = points.shape[:2]
-    step = np.full((rows, cols), np.inf)
-    across = np.hypot(*np.moveaxis(np.diff(points, axis=0), -1, 0))  # (rows - 1, cols)
-    along = np.hypot(*np.moveaxis(np.diff(points, axis=1), -1, 0))  # (rows, cols - 1)
-    step[:-1] = np.minimum(step[:-1], across)
-    step[1:] = np.minimum(step[1:], across)
-    step[:, :-1] = np.minimum(step[:, :-1], along)
-    step[:, 1:] = np.minimum(step[:, 1:], along)
-    return step.ravel()
+    """(rows·cols,) px: each corner's distance to its nearest neighbour along a grid line; points (rows, cols, 2),
+    rows and cols ≥ 2 (:func:`~aicalib_tf.detect.chessboard.rim.grid_directions`' four steps)."""
+    return np.hypot(*np.moveaxis(grid_directions(points), -1, 0)).min(axis=0).ravel()
 
 
 def bend_share(flat: np.ndarray, steps: np.ndarray, at: np.ndarray, w: np.ndarray) -> float:
