@@ -1,7 +1,7 @@
 """How noisy one split's halves difference is: many random half-splits of each real set, every tool.
 
     .venv/bin/python benchmarks/real_split_noise.py [--sets opencv_left ...] [--splits 200] [--flex-splits 24]
-        [--skip-mrcal] [--json noise.json] [--weighting view]
+        [--modes flat shape] [--skip-mrcal] [--json noise.json] [--weighting view]
 
 ``benchmarks/real_repeatability.py`` scores two fixed splits of each set (even/odd, first/second). One
 split is one draw: here each set's photos (as that benchmark reads them) are split at random into
@@ -11,8 +11,9 @@ scored as there (rotation-fitted projection difference, median over the covered 
 - aicalib_tf, in process on the photos' detections (the calibrate command's CNN detector, each photo
   once), with the lens model ``auto`` chooses on all the photos held for every half:
   flat (the default solve), ``flex="auto"`` (each half's sag shrunk towards flat by its leave-one-view-out
-  noise, :mod:`aicalib_tf.calib.flex_check`) and the flex as solved in both
-  halves (its σ rule only);
+  noise, :mod:`aicalib_tf.calib.flex_check`), the flex as solved in both
+  halves (its σ rule only) and ``flex="shape"`` (the board's 7-term shape, each term shrunk by its
+  leave-one-view-out noise, :mod:`aicalib_tf.calib.board_shape`); ``--modes`` runs a subset of these;
   and, for the flat halves, what their covariances predict for the difference
   (:func:`aicalib_tf.calib.quality.predicted_half_difference`: the mean and the 10-90% band of one draw);
 - the crossed column "flat, classic corners": the flat default's fit on OpenCV's classic corners (equal
@@ -20,7 +21,7 @@ scored as there (rotation-fitted projection difference, median over the covered 
 - OpenCV 5-coefficient, rational and fisheye on classic corners, and mrcal OPENCV8 (one solve a half,
   board flex and outlier rejection; ``--skip-mrcal`` leaves it out), as in real_repeatability.py.
 
-The flat, crossed and OpenCV columns run on every split; the flex columns and mrcal, which refit per
+The flat, crossed and OpenCV columns run on every split; the flex and shape columns and mrcal, which refit per
 view or start a process per half, on the first ``--flex-splits``. Splits of one set share its photos,
 so a set's 24 splits are a noisy sample of its many possible splits: on opencv_left the flat default's
 median over seeds 0-23 was 0.27 px against OpenCV 5-coef's 0.21, over seeds 0-299 0.19 against 0.23
@@ -29,7 +30,8 @@ median over seeds 0-23 was 0.27 px against OpenCV 5-coef's 0.21, over seeds 0-29
 Printed per set: each column's median and quartiles over its splits; for each anchor, how often the
 flat default is at or below it on the same split, and the difference of the two medians with its 90%
 interval over the splits (both columns resampled by split, 1000 draws): an interval that holds 0 does
-not rank the two.
+not rank the two; the same gap for the flex and shape columns against flat and against the best anchor
+of each split.
 """
 
 from __future__ import annotations
@@ -50,8 +52,9 @@ import real_repeatability as rr  # noqa: E402
 
 from aicalib_tf.calib import weights  # noqa: E402
 
-OURS = ("flat", "auto", "flex")
-FLEX_COLUMNS = ("auto", "flex")
+OURS = ("flat", "auto", "flex", "shape")
+FLEX_COLUMNS = ("auto", "flex", "shape")
+FLEX_OPTION = {"flat": "off", "auto": "auto", "shape": "shape"}  # calibrate_camera's flex for a column
 CROSSED = ("flat_classic", "flat, classic corners")
 ANCHORS = (("cv_plumb_bob", "OpenCV 5-coef"), ("cv_rational", "OpenCV rational"), ("cv_fisheye", "OpenCV fisheye"),
            ("mrcal_opencv8", "mrcal OPENCV8"))
@@ -101,19 +104,20 @@ def _ours(views, halves, cfg, size, circle, model, modes=OURS) -> dict:
                 cals.append(F._calibration(fit, vs, pattern, square, size, {}, "", None, (), circle))
             else:
                 cals.append(F.calibrate_camera(vs, pattern, square, size, model=model, image_circle=circle,
-                                               flex="auto" if mode == "auto" else "off"))
+                                               flex=FLEX_OPTION[mode]))
         covered = np.zeros(rr.GRID[0] * rr.GRID[1], bool)
         for c in cals:
             covered |= board_coverage(c.lens, c.pattern_size, c.square_size, c.rvecs, c.tvecs, rr.GRID)
         out[mode] = rr._diff_entry(cals[0].lens, cals[1].lens, np.flatnonzero(covered), size)
         out[mode]["flex_kept"] = [c.flex is not None for c in cals]
+        out[mode]["flex_terms"] = [0 if c.flex is None else int(np.count_nonzero(c.flex)) for c in cals]
         out[mode]["fx"] = float(cals[0].K[0, 0])
         if mode == "flat":
             out["predicted"] = predicted_half_difference(cals[0], cals[1], covered, grid=rr.GRID)
     return out
 
 
-def run_set(name, folder, n_splits, venv, tmp: Path, flex_splits: int = 24) -> dict:
+def run_set(name, folder, n_splits, venv, tmp: Path, flex_splits: int = 24, ours=OURS) -> dict:
     from aicalib_tf.calib.fit import View, calibrate_camera
     from aicalib_tf.geometry.pattern import pattern_ids
 
@@ -127,7 +131,7 @@ def run_set(name, folder, n_splits, venv, tmp: Path, flex_splits: int = 24) -> d
     rows = []
     for seed in range(n_splits):
         halves = random_split(len(files), seed)
-        modes = OURS if seed < flex_splits else tuple(m for m in OURS if m not in FLEX_COLUMNS)
+        modes = tuple(m for m in ours if seed < flex_splits or m not in FLEX_COLUMNS)
         row = {"seed": seed, **_ours(views, halves, cfg, size, circle, model, modes)}
         row[CROSSED[0]] = rr._attempt(lambda: _ours(classic_views, halves, cfg, size, circle, model, ("flat",))["flat"])
         cv = rr._opencv_split([[classic[i] for i in h] for h in halves], cfg[0], size)
@@ -190,10 +194,17 @@ def summary(res: dict) -> list[str]:
         gap, lo, hi = median_gap(flat, v)
         lines.append(f"  flat against {title:22s} ≤ it on {np.sum(flat[ok] <= v[ok])} of {ok.sum()}; medians' gap "
                      f"{gap:+.3g} px (90%: {lo:+.3g} to {hi:+.3g})")
+    best = np.where(np.isinf(best), np.nan, best)
     for m in OURS:
         v = med(m)
-        ok = ~np.isnan(v)
+        ok = ~np.isnan(v) & ~np.isnan(best)
+        if not ok.any():
+            continue
         lines.append(f"  {m} ≤ the best anchor on {np.sum(v[ok] <= best[ok])} of {ok.sum()} splits")
+        gaps = [(title, *median_gap(v, ref)) for title, ref in (("flat", flat), ("the best anchor", best))
+                if m != "flat" or title != "flat"]
+        lines.append(f"  {m}: medians' gap " + "; ".join(f"to {t} {g:+.3g} px (90%: {lo:+.3g} to {hi:+.3g})"
+                                                         for t, g, lo, hi in gaps))
     return lines
 
 
@@ -203,6 +214,8 @@ def main(argv=None) -> int:
     ap.add_argument("--splits", type=int, default=200, help="random half-splits per set (default: 200)")
     ap.add_argument("--flex-splits", type=int, default=24,
                     help="the first this many splits also run the flex columns and mrcal (default: 24)")
+    ap.add_argument("--modes", nargs="+", default=list(OURS), choices=list(OURS),
+                    help="the aicalib_tf columns to run (flat always runs; default: all)")
     ap.add_argument("--mrcal-venv", default="/work/scratch/mrcal-venv")
     ap.add_argument("--skip-mrcal", action="store_true")
     ap.add_argument("--data", default=str(rr.SHARED))
@@ -218,7 +231,8 @@ def main(argv=None) -> int:
     results = []
     with tempfile.TemporaryDirectory(prefix="real_split_noise_") as tmp:
         for name, folder in rr.find_sets(args.sets, Path(args.data)):
-            results.append(run_set(name, folder, args.splits, venv, Path(tmp), args.flex_splits))
+            ours = tuple(m for m in OURS if m == "flat" or m in args.modes)
+            results.append(run_set(name, folder, args.splits, venv, Path(tmp), args.flex_splits, ours))
             if args.json:
                 Path(args.json).write_text(json.dumps(results, indent=1, default=float) + "\n")
     print()

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aicalib_tf.geometry.board_flex import flex_height, flexed_points
+from aicalib_tf.geometry.board_shape import SHAPE_TERMS, shape_height, shaped_points
 from aicalib_tf.geometry.pattern import board_points, check_pattern, pattern_ids
 
 __all__ = ["Board", "sample_board"]
@@ -53,6 +54,8 @@ class Board:
     black, white : printed grey levels in [0, 1] (paper is never pure 0/1).
     flex : (w_x, w_y) the board's parabolic sag in squares (:mod:`aicalib_tf.geometry.board_flex`):
         a board point (X, Y) lies at z = s·flex_height(X / s, Y / s); (0, 0) is a flat board.
+    shape : () or the first K terms of a board shape in squares (:mod:`aicalib_tf.geometry.board_shape`:
+        sag_x, sag_y, twist, cubic_x, ...), added to the flex's z; () is no shape.
     """
 
     pattern_size: tuple[int, int]
@@ -61,6 +64,7 @@ class Board:
     black: float = 0.1
     white: float = 0.85
     flex: tuple[float, float] = (0.0, 0.0)
+    shape: tuple[float, ...] = ()
 
     def __post_init__(self):
         object.__setattr__(self, "pattern_size", check_pattern(self.pattern_size))
@@ -68,6 +72,10 @@ class Board:
         if len(flex) != 2 or not np.all(np.isfinite(flex)):
             raise ValueError(f"flex must be two finite numbers (w_x, w_y) in squares, got {self.flex!r}")
         object.__setattr__(self, "flex", flex)
+        shape = tuple(float(v) for v in np.asarray(self.shape, np.float64).ravel())
+        if len(shape) > len(SHAPE_TERMS) or not np.all(np.isfinite(shape)):
+            raise ValueError(f"shape must be at most {len(SHAPE_TERMS)} finite numbers (squares), got {self.shape!r}")
+        object.__setattr__(self, "shape", shape)
         if not self.square_size > 0:
             raise ValueError(f"square_size must be > 0, got {self.square_size}")
         if self.margin < 0:
@@ -84,14 +92,23 @@ class Board:
         return self.pattern_size[1]
 
     def object_points(self) -> np.ndarray:
-        """(cols·rows, 3) float64 inner-corner positions, OpenCV order (index = r·cols + c), flexed by ``flex``."""
-        return flexed_points(board_points(pattern_ids(self.pattern_size), self.square_size), self.pattern_size,
-                             self.flex, self.square_size)
+        """(cols·rows, 3) float64 inner-corner positions, OpenCV order (index = r·cols + c), flexed by ``flex``
+        and shaped by ``shape``."""
+        p = flexed_points(board_points(pattern_ids(self.pattern_size), self.square_size), self.pattern_size,
+                          self.flex, self.square_size)
+        return shaped_points(p, self.pattern_size, self.shape, self.square_size) if self.shape else p
+
+    @property
+    def bent(self) -> bool:
+        """Is the board out of its plane (a nonzero ``flex`` or ``shape``)?"""
+        return any(self.flex) or any(self.shape)
 
     def height(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
-        """(...) z of the flexed board at board-plane positions X, Y (..., board units)."""
+        """(...) z of the flexed (and shaped) board at board-plane positions X, Y (..., board units)."""
         s = self.square_size
-        return s * flex_height(np.asarray(X) / s, np.asarray(Y) / s, self.pattern_size, self.flex)
+        x, y = np.asarray(X) / s, np.asarray(Y) / s
+        z = flex_height(x, y, self.pattern_size, self.flex)
+        return s * (z + shape_height(x, y, self.pattern_size, self.shape) if self.shape else z)
 
     def paper_bounds(self) -> tuple[float, float, float, float]:
         """(x0, y0, x1, y1) of the paper in board units."""
@@ -124,6 +141,7 @@ class Board:
             "black": self.black,
             "white": self.white,
             **({"flex": list(self.flex)} if any(self.flex) else {}),  # squares; absent: a flat board
+            **({"shape": list(self.shape)} if any(self.shape) else {}),  # squares, geometry.board_shape's terms
         }
 
 

@@ -47,7 +47,8 @@ class Preset:
     margin_range : the chessboard paper's white margin around the outer squares, in squares.
     paper_black, paper_white : the ranges of the chessboard's black and white reflectance (0..1).
     flex : (w_x, w_y) every chessboard's parabolic sag in squares (:class:`data_gen.board.Board`'s ``flex``,
-    recorded in the label's ``board``); (0, 0): flat boards.
+    recorded in the label's ``board``); (0, 0): flat boards. shape : every chessboard's shape terms in squares
+    (:class:`data_gen.board.Board`'s ``shape``, :mod:`aicalib_tf.geometry.board_shape`); (): none.
     """
 
     name: str
@@ -72,13 +73,14 @@ class Preset:
     board: str | None = None
     fisheye_circular_from_deg: float = 175.0
     flex: tuple[float, float] = (0.0, 0.0)
+    shape: tuple[float, ...] = ()
     margin_range: tuple[float, float] = (0.15, 1.0)
     paper_black: tuple[float, float] = (0.04, 0.22)
     paper_white: tuple[float, float] = (0.7, 0.95)
 
     def __post_init__(self):
-        if any(self.flex) and self.board is not None:
-            raise ValueError(f"preset {self.name!r}: flex applies to chessboards only, not {self.board!r}")
+        if (any(self.flex) or any(self.shape)) and self.board is not None:
+            raise ValueError(f"preset {self.name!r}: flex and shape apply to chessboards only, not {self.board!r}")
         lenses = (self.lens,) if isinstance(self.lens, str) else tuple(self.lens)
         if not lenses or any(ln not in LENSES for ln in lenses):
             raise ValueError(f"preset {self.name!r}: lens must be one of {LENSES} or a tuple of them, got {self.lens!r}")

@@ -150,7 +150,8 @@ def board_coordinates(rays: np.ndarray, rvec, tvec, board=None) -> tuple[np.ndar
 
 
 def surface_homogeneous(rays: np.ndarray, rvec, tvec, board=None, iterations: int = 6) -> np.ndarray:
-    """:func:`plane_homogeneous` for a flexed board (``board.flex`` nonzero; else the plane's q itself).
+    """:func:`plane_homogeneous` for a flexed or shaped board (``board.flex`` or ``board.shape`` nonzero; else the
+    plane's q itself).
 
     The ray meets the surface z = board.height(X, Y) (:mod:`aicalib_tf.geometry.board_flex`) by fixed-point
     iteration from the plane's hit: the ray's point at height z(X_k, Y_k) gives (X_k+1, Y_k+1). Each step
@@ -160,7 +161,7 @@ def surface_homogeneous(rays: np.ndarray, rvec, tvec, board=None, iterations: in
     hit. Returns (..., 3) q = (X, Y, 1)·q2 with the plane's q2 (its sign says in front).
     """
     q = plane_homogeneous(rays, rvec, tvec)
-    if board is None or not any(getattr(board, "flex", ())):
+    if board is None or not (any(getattr(board, "flex", ())) or any(getattr(board, "shape", ()))):
         return q
     R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
     t = np.asarray(tvec, dtype=np.float64).ravel()

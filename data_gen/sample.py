@@ -103,8 +103,8 @@ def scene_for(preset: Preset, seed: int, camera_id: int, size=None, pattern=None
         black_range=preset.paper_black,
         white_range=preset.paper_white,
     )
-    if any(preset.flex):  # after the draws: the same camera and board as the flat preset
-        board = replace(board, flex=preset.flex)
+    if any(preset.flex) or any(preset.shape):  # after the draws: the same camera and board as the flat preset
+        board = replace(board, flex=preset.flex, shape=preset.shape)
     return cam, board
 
 

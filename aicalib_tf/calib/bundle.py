@@ -26,7 +26,8 @@ outside the range.
 Weights (:mod:`~aicalib_tf.calib.weights`): residuals and Jacobian rows are multiplied by σ_ref/σ per
 corner, 0 for rejected corners (not in the RMS or the degrees of freedom); the covariance σ̂²·(JᵀWJ)⁻¹
 depends only on the σ's ratios. Board flex: with ``flex_basis`` two global parameters (w_x, w_y) of
-:mod:`~aicalib_tf.geometry.board_flex` follow the free intrinsics (z offset w·basis along the board's
+:mod:`~aicalib_tf.geometry.board_flex` (or the K of a board shape, :mod:`~aicalib_tf.geometry.board_shape`)
+follow the free intrinsics (z offset w·basis along the board's
 z axis; Jacobian: the projection's along the rotated z axis times the basis), in the Schur complement.
 
 Starts: :mod:`aicalib_tf.calib.starts` gives the intrinsics; :func:`~aicalib_tf.calib.poses.poses_from_rays`
@@ -73,8 +74,9 @@ class BundleResult:
     columns of fixed parameters are 0), or None when not asked for. jtj : (P, P) JᵀJ of the free
     parameters (free intrinsics first, then 6 per view), or None. sigma2 : residual variance, px².
     cost : ½ sum of squared residuals. nfev : function evaluations. note : why the covariance is a
-    pseudo-inverse (rank-deficient fit), else "". flex : (2,) the board flex (w_x, w_y) in the unit of the
-    board points, or None when not solved; flex_covariance : (2, 2) its covariance, or None. inliers :
+    pseudo-inverse (rank-deficient fit), else "". flex : (2,) the board flex (w_x, w_y) (or (K,) a board
+    shape's terms) in the unit of the board points, or None when not solved; flex_covariance : (K, K) its
+    covariance, or None. inliers :
     (N,) bool over all corners in order (False: rejected, weight 0), or None when all count. flex_note :
     why a flex was not solved or kept (:mod:`aicalib_tf.calib.robust`), else "".
     """
@@ -118,10 +120,10 @@ class _Problem(SchurProblem):
         self.base = np.asarray(intr0, np.float64).copy()
         self.free = np.asarray(free, bool)
         self.w = None if weights is None else np.asarray(weights, np.float64).reshape(self.N)
-        self.basis = None if flex_basis is None else np.concatenate(
-            [np.asarray(b, np.float64).reshape(-1, 2) for b in flex_basis])
-        self.nflex = 0 if self.basis is None else 2
-        self.flex0 = np.zeros(2) if flex0 is None else np.asarray(flex0, np.float64).reshape(2)
+        self.basis = None if flex_basis is None else np.concatenate(  # (N, K): K = 2 the flex, more a board shape
+            [np.asarray(b, np.float64).reshape(len(np.asarray(p).reshape(-1, 2)), -1) for b, p in zip(flex_basis, px)])
+        self.nflex = 0 if self.basis is None else self.basis.shape[1]
+        self.flex0 = np.zeros(self.nflex) if flex0 is None else np.asarray(flex0, np.float64).reshape(self.nflex)
         self.nf = int(self.free.sum()) + self.nflex
         self.n_used = self.N if self.w is None else int(np.count_nonzero(self.w > 0))
         self._key, self._val = None, None
@@ -160,8 +162,8 @@ class _Problem(SchurProblem):
         return intr, poses[:, :3], poses[:, 3:]
 
     def flex_of(self, x):
-        """(2,) the flex of parameter vector x, or None when not solved."""
-        return None if self.nflex == 0 else x[self.nf - 2: self.nf].copy()
+        """(K,) the flex (or board shape) of parameter vector x, or None when not solved."""
+        return None if self.nflex == 0 else x[self.nf - self.nflex: self.nf].copy()
 
     def _evaluate(self, x):
         if self._key is not None and np.array_equal(x, self._key):
@@ -212,7 +214,8 @@ def _covariance(prob: _Problem, x, cost: float, model: str, strict: bool):
     if dof <= 0:
         raise CalibrationError(f"{model}: {prob.n_used} corners give {2 * prob.n_used} residuals for "
                                f"{prob.shape[1]} parameters")
-    names = [n for n, f in zip(param_names(model), prob.free) if f] + ["flex_x", "flex_y"][:prob.nflex]
+    names = [n for n, f in zip(param_names(model), prob.free) if f] + (["flex_x", "flex_y"] if prob.nflex == 2
+                                                                       else [f"shape_{k}" for k in range(prob.nflex)])
     dv = np.sqrt(np.einsum("vii->vi", Vb))
     wv = np.linalg.eigvalsh(Vb / (dv[:, :, None] * dv[:, None, :]))
     if not np.all(np.isfinite(Vb)) or np.any(~(wv[:, 0] > _RANK_TOL * wv[:, -1])):
@@ -261,8 +264,8 @@ def bundle_adjust(model: str, obj, px, intrinsics, rvecs, tvecs, *, free=None, m
     rank_strict : raise on a rank-deficient fit (else the covariance is a pseudo-inverse and ``note`` says so).
     sigmas : list of V (N_v,) per-corner σ, px (> 0), or None (all equal). inliers : (N,) bool over all
     corners in order, or None (all); rejected corners get weight 0 and their residuals are still
-    returned. flex_basis : list of V (N_v, 2) :func:`~aicalib_tf.geometry.board_flex.flex_basis` rows
-    to solve the board flex (module docstring), or None; flex : its (2,) start (default 0).
+    returned. flex_basis : list of V (N_v, K) :func:`~aicalib_tf.geometry.board_shape.shape_basis` rows
+    (K = 2: the flex) to solve the board's shape (module docstring), or None; flex : its (K,) start (default 0).
     """
     if model in N_COEFFS:  # a known model whose start lies outside its valid range: no fit to make
         try:

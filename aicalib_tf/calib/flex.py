@@ -21,26 +21,34 @@ from __future__ import annotations
 
 import numpy as np
 
-from aicalib_tf.geometry.board_flex import flex_basis
+from aicalib_tf.calib.board_shape import N_SHAPE_TERMS, SHAPE_MODE, shape_fields, shape_text
+from aicalib_tf.geometry.board_shape import shape_basis
 
-__all__ = ["FLEX_SIGMA_MAX", "FLEX_TYPICAL", "FLEX_PLAUSIBLE", "FLEX_MODES", "basis_of_views", "flex_problem",
+__all__ = ["FLEX_SIGMA_MAX", "FLEX_TYPICAL", "FLEX_PLAUSIBLE", "FLEX_MODES", "basis_of_views", "mode_terms",
+           "flex_problem",
            "flex_line", "flex_dict"]
 
 FLEX_TYPICAL = 0.02  # squares: the sag a flex must resolve (the benchmark's largest)
 FLEX_SIGMA_MAX = FLEX_TYPICAL / 4  # squares: the largest σ of a kept flex
 FLEX_PLAUSIBLE = 0.25  # squares: beyond this a "flex" is the lens model's misfit, not the board's
-FLEX_MODES = ("auto", "off")
+FLEX_MODES = ("auto", "off", SHAPE_MODE)  # "shape": the board's shape beyond the sag (calib.board_shape)
 
 
-def basis_of_views(views, pattern_size) -> tuple[list | None, str]:
-    """(list of V (N_v, 2) :func:`~aicalib_tf.geometry.board_flex.flex_basis` rows, "") for views with
-    absolute ids, or (None, why) when the flex cannot be solved for these views."""
+def basis_of_views(views, pattern_size, n_terms: int = 2) -> tuple[list | None, str]:
+    """(list of V (N_v, n_terms) :func:`~aicalib_tf.geometry.board_shape.shape_basis` rows (2: the flex's
+    :func:`~aicalib_tf.geometry.board_flex.flex_basis`), "") for views with absolute ids, or (None, why) when
+    the flex cannot be solved for these views."""
     relative = sum(1 for v in views if getattr(v, "relative", False))
     if relative:
         return None, f"not solved: {relative} view{'s' if relative != 1 else ''} with ids relative to what is seen"
     if pattern_size is None:
         return None, "not solved: no pattern size"
-    return [flex_basis(v.ids[:, 0], v.ids[:, 1], pattern_size) for v in views], ""
+    return [shape_basis(v.ids[:, 0], v.ids[:, 1], pattern_size, n_terms) for v in views], ""
+
+
+def mode_terms(mode: str) -> int:
+    """How many shape terms a flex mode solves: 2 (the sag) for "auto", :data:`N_SHAPE_TERMS` for "shape"."""
+    return N_SHAPE_TERMS if mode == SHAPE_MODE else 2
 
 
 def flex_problem(flex, covariance, unit: float = 1.0) -> str:
@@ -75,6 +83,9 @@ def flex_line(cal) -> str | None:
     note = getattr(cal, "flex_note", "")
     if flex is None:
         return f"board flex: {note}" if note else None
+    if len(flex) > 2:
+        text = shape_text(flex, cal.flex_covariance, cal.pattern_size, float(cal.square_size), cal.square_unit)
+        return f"board shape: {text}" + (f"; {note}" if note else "")
     sag, sd = _sag(flex, cal.flex_covariance)
     s, unit = float(cal.square_size), cal.square_unit
     wx, wy = (float(v) for v in flex)
@@ -85,16 +96,20 @@ def flex_line(cal) -> str | None:
 
 def flex_dict(cal) -> dict | None:
     """camera.json's ``board_flex``: {"wx", "wy" (squares), "covariance" (2×2 squares²), "sag", "sag_std"
-    (squares), "sag_unit" (the board's unit: square size × squares), "note"}, or None when not considered."""
+    (squares), "sag_unit" (the board's unit: square size × squares), "note"}, or None when not considered; a
+    board shape (``flex="shape"``) adds :func:`~aicalib_tf.calib.board_shape.shape_fields` (its first two terms
+    are wx and wy)."""
     flex = getattr(cal, "flex", None)
     note = getattr(cal, "flex_note", "")
     if flex is None:
         return {"wx": None, "wy": None, "note": note} if note else None
-    sag, sd = _sag(flex, cal.flex_covariance)
+    cov = np.asarray(cal.flex_covariance, np.float64)
+    sag, sd = _sag(flex[:2], cov[:2, :2])
+    extra = shape_fields(flex, cov, cal.pattern_size, float(cal.square_size)) if len(flex) > 2 else {}
     return {"wx": float(flex[0]), "wy": float(flex[1]),
-            "covariance": np.asarray(cal.flex_covariance, np.float64).tolist(), "sag": sag, "sag_std": sd,
+            "covariance": cov[:2, :2].tolist(), "sag": sag, "sag_std": sd,
             "sag_unit": sag * float(cal.square_size), "sag_std_unit": sd * float(cal.square_size),
-            "unit": cal.square_unit, "note": note}
+            "unit": cal.square_unit, "note": note, **extra}
 
 
 def solve_fields_from_dict(d: dict) -> dict:
@@ -106,7 +121,13 @@ def solve_fields_from_dict(d: dict) -> dict:
     flex = S.require_mapping(d, "board_flex", {}) if d.get("board_flex") is not None else {}
     with S.within("board_flex"):
         out["flex_note"] = S.require_str(flex, "note", "")
-        if flex.get("wx") is not None or flex.get("wy") is not None:
+        if flex.get("shape") is not None:  # a board shape: its K terms
+            out["flex"] = S.require_vector(flex, "shape")
+            n = len(out["flex"])
+            if not 2 < n <= N_SHAPE_TERMS:
+                raise S.FieldError("shape", f"must hold 3 to {N_SHAPE_TERMS} numbers, got {n}")
+            out["flex_covariance"] = S.require_matrix(flex, "shape_covariance", (n, n))
+        elif flex.get("wx") is not None or flex.get("wy") is not None:
             out["flex"] = np.array([S.require_number(flex, "wx"), S.require_number(flex, "wy")])
             out["flex_covariance"] = S.require_matrix(flex, "covariance", (2, 2))
     corners = S.require_mapping(d, "rejected_corners", {}) if d.get("rejected_corners") is not None else {}

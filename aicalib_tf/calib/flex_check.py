@@ -39,10 +39,11 @@ import dataclasses
 
 import numpy as np
 
+from aicalib_tf.calib.board_shape import SHAPE_TERMS, leave_one_out_shapes
 from aicalib_tf.calib.bundle import CalibrationError
 
 __all__ = ["MIN_JACKKNIFE_VIEWS", "SHRINK_FROM", "SHRINK_TO", "leave_one_out_sags", "jackknife_se", "sag_estimate",
-           "confirm_flex", "solve_fields"]
+           "confirm_flex", "shape_estimate", "confirm_shape", "solve_fields"]
 
 MIN_JACKKNIFE_VIEWS = 4  # every leave-one-out refit keeps at least 3 views
 SHRINK_FROM = 0.5  # t up to which the board is taken as flat (the module docstring's measurements)
@@ -101,6 +102,8 @@ def confirm_flex(fit, views, refit):
     refit(views, "auto" | "off" | (w_x, w_y) held) -> BundleResult (unit square)."""
     if getattr(fit, "flex", None) is None:
         return fit
+    if len(fit.flex) > 2:  # a board shape (flex="shape"): each of its terms shrunk
+        return confirm_shape(fit, views, refit)
     try:
         loo = leave_one_out_sags(views, refit) if len(views) >= MIN_JACKKNIFE_VIEWS else None
     except CalibrationError as exc:
@@ -119,6 +122,49 @@ def confirm_flex(fit, views, refit):
         return fit
     cov = np.asarray(fit.flex_covariance, np.float64) * (se / sigma) ** 2 if sigma > 0 else fit.flex_covariance
     return dataclasses.replace(held, flex=w, flex_covariance=cov, covariance=fit.covariance, flex_note="")
+
+
+def shape_estimate(shape, sigma, loo=None) -> tuple[np.ndarray, np.ndarray, str]:
+    """(ŵ (K,), SE (K,), how the SE were found): each term of ``shape`` (K,) squares with its fit's σ (K,)
+    and leave-one-out values ``loo`` ((V, K), or None) shrunk by :func:`sag_estimate`.
+
+    >>> est, se, _ = shape_estimate([0.02, 0.0003], [0.001, 0.001])
+    >>> est.tolist(), se.tolist()
+    ([0.02, 0.0], [0.001, 0.001])
+    """
+    w, s = np.asarray(shape, np.float64).ravel(), np.asarray(sigma, np.float64).ravel()
+    use = loo is not None and len(loo) >= MIN_JACKKNIFE_VIEWS
+    found = [sag_estimate(w[k], s[k], np.asarray(loo)[:, k] if use else None) for k in range(len(w))]
+    how = f"from leaving each of the {len(loo)} views out" if use else "the fit's own σ"
+    return np.array([f[0] for f in found]), np.array([f[1] for f in found]), how
+
+
+def confirm_shape(fit, views, refit):
+    """The fit with the board shape of :func:`shape_estimate` (:mod:`aicalib_tf.calib.board_shape`): the views
+    refitted with the board held there, or flat (``flex_note`` saying why) when every term is 0.
+    refit(views, "shape" | "off" | (K,) squares held) -> BundleResult (unit square)."""
+    try:
+        loo = leave_one_out_shapes(views, refit) if len(views) >= MIN_JACKKNIFE_VIEWS else None
+    except CalibrationError as exc:
+        why = f"not used: a fit leaving one view out failed ({exc}); the board is taken as flat"
+        return dataclasses.replace(refit(views, "off"), flex_note=why)
+    w = np.asarray(fit.flex, np.float64)
+    cov = np.asarray(fit.flex_covariance, np.float64)
+    sigma = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    est, se, how = shape_estimate(w, sigma, loo)
+    if not np.any(est):
+        return dataclasses.replace(refit(views, "off"), flex_note=(
+            f"not used: every term of the board's shape is within {SHRINK_FROM:g} standard error of 0 ({how}); "
+            "the board is taken as flat"))
+    try:
+        held = refit(views, tuple(float(v) for v in est))
+    except CalibrationError:  # the board held where the free fit went past: that fit stands
+        return fit
+    scale = np.where(sigma > 0, se / np.where(sigma > 0, sigma, 1.0), 1.0)
+    zero = [SHAPE_TERMS[k] for k in range(len(est)) if est[k] == 0.0]
+    note = f"taken as 0 (within {SHRINK_FROM:g} standard error, {how}): {', '.join(zero)}" if zero else ""
+    return dataclasses.replace(held, flex=est, flex_covariance=cov * np.outer(scale, scale), covariance=fit.covariance,
+                               flex_note=note)
 
 
 def solve_fields(fit, views) -> dict:

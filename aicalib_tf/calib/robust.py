@@ -20,7 +20,8 @@ rule's of :mod:`aicalib_tf.calib.fit`: none of its corners is rejected), and at 
 :data:`MAX_CORNER_FRACTION` of all corners go, the worst first. The floor keeps the rule from cutting
 into a fit whose residuals are far below a detector's precision.
 
-Flex: see :mod:`aicalib_tf.calib.flex`. With ``flex="auto"`` the flex is solved in every fit and,
+Flex: see :mod:`aicalib_tf.calib.flex` (and :mod:`aicalib_tf.calib.board_shape` for ``flex="shape"``).
+With ``flex="auto"`` the flex is solved in every fit and,
 when the views do not determine it, the last fit is redone with a flat board.
 """
 
@@ -32,10 +33,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from aicalib_tf.calib.bundle import BundleResult, CalibrationError, bundle_adjust
-from aicalib_tf.calib.flex import FLEX_MODES, basis_of_views, flex_problem
+from aicalib_tf.calib.board_shape import SHAPE_MODE, shape_problem
+from aicalib_tf.calib.flex import FLEX_MODES, basis_of_views, flex_problem, mode_terms
 from aicalib_tf.calib.view_checks import MIN_VIEW_CORNERS
 from aicalib_tf.calib.weights import fit_sigmas, total_sigmas
-from aicalib_tf.geometry.board_flex import flexed_points
+from aicalib_tf.geometry.board_shape import shaped_points
 
 __all__ = ["SolveOptions", "solve", "view_sigmas", "with_floor", "flag_corners", "CORNER_K", "CORNER_FLOOR_PX", "MAX_ROUNDS",
            "MAX_CORNER_FRACTION"]
@@ -52,15 +54,17 @@ class SolveOptions:
     """How a calibration solve treats corners and the board.
 
     pattern_size : (cols, rows) inner corners, needed to solve the flex (None: flat board).
-    flex : "auto" (solve it, keep it when determined) or "off". reject_corners : reject single corners.
-    flex_value : with flex "off", the board held flexed by this (w_x, w_y) squares instead of flat
-    (the estimate of :mod:`aicalib_tf.calib.flex_check`; needs ``pattern_size``), or None.
+    flex : "auto" (solve it, keep it when determined), "shape" (the board's shape of
+    :mod:`aicalib_tf.calib.board_shape`) or "off". reject_corners : reject single corners.
+    flex_value : with flex "off", the board held flexed by this (w_x, w_y) squares, or shaped by these K
+    shape terms, instead of flat (the estimate of :mod:`aicalib_tf.calib.flex_check`; needs ``pattern_size``),
+    or None.
     """
 
     pattern_size: tuple[int, int] | None = None
     flex: str = "auto"
     reject_corners: bool = True
-    flex_value: tuple[float, float] | None = None
+    flex_value: tuple[float, ...] | None = None
 
     def __post_init__(self):
         if self.flex not in FLEX_MODES:
@@ -130,9 +134,10 @@ def solve(model: str, views, obj, px, intrinsics, poses, *, free, rank_strict: b
     """
     options = options or SolveOptions()
     if options.flex_value is not None:  # the board held flexed: its points moved, nothing more solved
-        obj = [flexed_points(o, options.pattern_size, options.flex_value, unit) for o in obj]
+        obj = [shaped_points(o, options.pattern_size, options.flex_value, unit) for o in obj]
     sigmas = view_sigmas(views)
-    basis, why = (None, "") if options.flex == "off" else basis_of_views(views, options.pattern_size)
+    basis, why = ((None, "") if options.flex == "off"
+                  else basis_of_views(views, options.pattern_size, mode_terms(options.flex)))
     fit = None
     if basis is not None:
         try:
@@ -155,7 +160,7 @@ def solve(model: str, views, obj, px, intrinsics, poses, *, free, rank_strict: b
         seen.add(key)
         fit = _refit(fit, obj, px, free, sigmas, None if keep.all() else keep, basis, rank_strict)
     if basis is not None:
-        why = flex_problem(fit.flex, fit.flex_covariance, unit)
+        why = (shape_problem if options.flex == SHAPE_MODE else flex_problem)(fit.flex, fit.flex_covariance, unit)
         if why:
             fit = _refit(fit, obj, px, free, sigmas, fit.inliers, None, rank_strict)
     return dataclasses.replace(fit, flex_note=why)

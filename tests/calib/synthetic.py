@@ -6,7 +6,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from aicalib_tf.calib.fit import View
-from aicalib_tf.geometry.board_flex import flexed_points
+from aicalib_tf.geometry.board_shape import shaped_points
 from aicalib_tf.geometry.pattern import board_points
 
 PATTERN = (9, 6)
@@ -18,14 +18,15 @@ def synthetic_views(lens, n=20, noise=0.0, *, seed=0, avoid=None, distance=(0.35
     """``n`` views of a 9x6 board (square 0.04) seen by ``lens``, corner noise ``noise`` px (1σ per axis).
 
     avoid : (x0, y0, x1, y1) px: no board centre and no corner in that rectangle. flex : (w_x, w_y) the
-    board's sag in squares (:mod:`aicalib_tf.geometry.board_flex`), None flat. noise_of : k -> view k's
+    board's sag in squares (:mod:`aicalib_tf.geometry.board_flex`), or (K,) the terms of a board shape
+    (:mod:`aicalib_tf.geometry.board_shape`), None flat. noise_of : k -> view k's
     noise px, in place of ``noise``. seed : anything ``np.random.default_rng`` takes (a Generator too).
     Corners outside the image (or with no projection) are dropped, so boards can be partial.
     """
     rng = np.random.default_rng(seed)
     cols, rows = PATTERN
     ids = np.stack(np.meshgrid(np.arange(cols), np.arange(rows)), -1).reshape(-1, 2)
-    X = board_points(ids, SQUARE) if flex is None else flexed_points(board_points(ids, SQUARE), PATTERN, flex, SQUARE)
+    X = board_points(ids, SQUARE) if flex is None else shaped_points(board_points(ids, SQUARE), PATTERN, flex, SQUARE)
     X = X - [(cols - 1) * SQUARE / 2, (rows - 1) * SQUARE / 2, 0]
     w, h = lens.image_size
     views = []
