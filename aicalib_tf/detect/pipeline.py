@@ -296,7 +296,7 @@ def _unsheared(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold
     when the full-size search ``seen`` found no full board: a complete board, its corners mapped back to gray (H, W)
     float32 and refined on the board's rectified view of it where they can be, else ``seen``."""
     got = unshear_look(gray, pattern_size, lambda img: _detect_at(img, pattern_size, model, threshold, relative=True),
-                       seen.ids if seen.found else None, seen.corners if seen.found else None)
+                       seen.ids if seen.found else None, seen.corners if seen.found else None, refine_full)
     if got is None:
         return seen
     corners = refine_rectified(gray, got[0], pattern_size, bind(refine_full, max_shift=UNSHEAR_SHIFT))

@@ -19,7 +19,10 @@ complete board found there is mapped back (:func:`second_look`). Two kinds of ev
   is fitted again by its lattice's homography and searched once more (``ROUNDS``).
 
 A board found is refined on its rectified view (:func:`refine_rectified`): on the image, a saddle
-fit fails at most junctions that sharp.
+fit fails at most junctions that sharp. A search that leaves a few of the board's far corners out
+(squares 1.5–3 px thick on the image, blurred across once enlarged) gets them placed on its view,
+each where the found corners' homography predicts it and only where the view shows a junction there
+(:mod:`aicalib_tf.detect.chessboard.unshear_fill`).
 
 On evaluate's tilt-steep (seed 41, 40 images) this finds 5 more full boards (33 -> 38; a held-out
 seed, 80 images: 63 -> 74), on tilt60 (100) 1 more, none wrong; it costs about 8 ms on a
@@ -35,6 +38,8 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+
+from aicalib_tf.detect.chessboard.unshear_fill import filled_board
 
 __all__ = ["MAX_ANGLE", "MAX_STEP_RATIO", "lattice_axes", "is_sheared", "lattice_map", "texture_quads", "quad_map",
            "warp", "from_warp", "candidate_maps", "second_look",
@@ -251,7 +256,7 @@ def _spans(ids) -> bool:
 
 
 def second_look(gray: np.ndarray, pattern_size: tuple[int, int], search, ids: np.ndarray | None = None,
-                corners: np.ndarray | None = None):
+                corners: np.ndarray | None = None, refine=None):
     """The first complete board found on the warps of :func:`candidate_maps`, or None.
 
     search : ``search(warped (h, w) float32) -> detection`` with ``complete``, ``found``, ``ids``
@@ -259,21 +264,34 @@ def second_look(gray: np.ndarray, pattern_size: tuple[int, int], search, ids: np
     again to that part's lattice (:func:`lattice_map`, with room for the whole pattern on every side) and searched
     once more (the search is sensitive to the crop: a tight one around the board did worse):
     the outline's affine map leaves the board's perspective, the lattice's homography does not.
+    refine : ``refine(view, points (M, 2), max_shift) -> (points, ok)``, a saddle fit; with it, a
+    placed partial board spanning the pattern but for a few empty positions is completed on its view
+    (:func:`aicalib_tf.detect.chessboard.unshear_fill.filled_board`); None: only complete boards count.
     Returns (corners (N, 2) float32 px on gray, in the warped detection's order; that detection).
     """
     for m, size in candidate_maps(gray, pattern_size, ids, corners):
         for _ in range(ROUNDS):
             img = warp(gray, m, size)
             det = search(img) if img is not None else None
-            if det is None or det.complete or not _spans(det.ids):
+            if det is not None and det.complete:
+                return from_warp(det.corners, m), det
+            filled = _filled(det, img, pattern_size, refine)
+            if filled is not None:
+                return from_warp(filled.corners, m), filled
+            if det is None or not _spans(det.ids):
                 break
             got = lattice_map(det.ids, from_warp(det.corners, m), pattern_size, placed=False)
             if got is None:
                 break
             m, size = got
-        if det is not None and det.complete:
-            return from_warp(det.corners, m), det
     return None
+
+
+def _filled(det, img: np.ndarray | None, pattern_size: tuple[int, int], refine):
+    """A partial ``det`` on the view ``img`` completed (:func:`~aicalib_tf.detect.chessboard.unshear_fill.filled_board`), or None."""
+    if refine is None or det is None or img is None or not det.found:
+        return None
+    return filled_board(det, pattern_size, img, refine)
 
 
 def refine_rectified(gray: np.ndarray, corners: np.ndarray, pattern_size: tuple[int, int], refine,
