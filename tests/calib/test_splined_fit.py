@@ -77,3 +77,25 @@ def test_the_model_choice_fits_a_spline_only_where_the_residuals_show_a_pattern(
     # a 0.1 px displacement over the image's right third, below the noise of single corners
     bump = [n + 0.1 * (v.corners[:, :1] > 430) * [1.0, -0.5] for n, v in zip(noise, views)]
     assert misfit_note(SimpleNamespace(residuals=bump), views) is None
+
+
+def test_a_start_that_bends_back_near_the_corners_gives_a_fitted_and_a_plain_base():
+    import math
+
+    from aicalib_tf.calib.splined_fit import RANGE_MARGIN_DEG, _bases
+
+    bent = L.Lens("equidistant", WIDE.K, [-0.022, -0.114, 0.067, -0.033], WIDE.image_size)  # turns back at 67°
+    theta = np.radians(np.linspace(5.0, 62.0, 40))
+    rays = np.stack([np.sin(theta), 0.3 * np.sin(theta), np.cos(theta)], axis=1)
+    px = [bent.project(rays)]
+    fitted, plain = _bases(bent, px)
+    assert not np.any(plain.dist) and np.count_nonzero(fitted.dist) >= 1
+    widest = math.degrees(np.max(np.arctan2(np.hypot(*bent.unproject(px[0])[:, :2].T), bent.unproject(px[0])[:, 2])))
+    assert math.degrees(fitted.max_angle()) >= widest + RANGE_MARGIN_DEG
+    # the fitted base holds the start's radial bulk over the corners; θ_d = θ leaves it all to the knots
+    err = lambda lens: np.max(np.abs(lens.project(rays) - px[0]))  # noqa: E731
+    assert err(fitted) < 0.2 * err(plain)
+    # a start that stays monotonic well beyond the corners is its own base
+    good = L.Lens("equidistant", WIDE.K, [0.01, -0.002, 0.0, 0.0], WIDE.image_size)
+    (only,) = _bases(good, [good.project(rays)])
+    np.testing.assert_array_equal(only.dist, good.dist)
