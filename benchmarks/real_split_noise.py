@@ -1,7 +1,8 @@
 """How noisy one split's halves difference is: many random half-splits of each real set, every tool.
 
     .venv/bin/python benchmarks/real_split_noise.py [--sets opencv_left ...] [--splits 200] [--flex-splits 24]
-        [--modes flat shape] [--skip-mrcal] [--json noise.json] [--weighting view]
+        [--modes flat shape] [--shape-terms 7] [--shape-shrink-from 0.5] [--shape-gate cv] [--skip-mrcal] [--json noise.json]
+        [--weighting view]
 
 ``benchmarks/real_repeatability.py`` scores two fixed splits of each set (even/odd, first/second). One
 split is one draw: here each set's photos (as that benchmark reads them) are split at random into
@@ -13,7 +14,8 @@ scored as there (rotation-fitted projection difference, median over the covered 
   flat (the default solve), ``flex="auto"`` (each half's sag shrunk towards flat by its leave-one-view-out
   noise, :mod:`aicalib_tf.calib.flex_check`), the flex as solved in both
   halves (its σ rule only) and ``flex="shape"`` (the board's 7-term shape, each term shrunk by its
-  leave-one-view-out noise, :mod:`aicalib_tf.calib.board_shape`); ``--modes`` runs a subset of these;
+  leave-one-view-out noise, :mod:`aicalib_tf.calib.board_shape`; ``--shape-terms`` solves its first N terms,
+  ``--shape-shrink-from`` sets the t up to which a term is 0); ``--modes`` runs a subset of these;
   and, for the flat halves, what their covariances predict for the difference
   (:func:`aicalib_tf.calib.quality.predicted_half_difference`: the mean and the 10-90% band of one draw);
 - the crossed column "flat, classic corners": the flat default's fit on OpenCV's classic corners (equal
@@ -50,7 +52,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import real_repeatability as rr  # noqa: E402
 
-from aicalib_tf.calib import weights  # noqa: E402
+from aicalib_tf.calib import board_shape, weights  # noqa: E402
 
 OURS = ("flat", "auto", "flex", "shape")
 FLEX_COLUMNS = ("auto", "flex", "shape")
@@ -216,6 +218,14 @@ def main(argv=None) -> int:
                     help="the first this many splits also run the flex columns and mrcal (default: 24)")
     ap.add_argument("--modes", nargs="+", default=list(OURS), choices=list(OURS),
                     help="the aicalib_tf columns to run (flat always runs; default: all)")
+    ap.add_argument("--shape-terms", type=int, default=board_shape.N_SHAPE_TERMS, choices=range(3, 8),
+                    help=f"the shape column's terms (geometry.board_shape's first N; default: {board_shape.N_SHAPE_TERMS})")
+    ap.add_argument("--shape-shrink-from", type=float, default=board_shape.SHAPE_SHRINK_FROM,
+                    help=f"the shape column: a term within this many standard errors of 0 is 0 "
+                         f"(default: {board_shape.SHAPE_SHRINK_FROM})")
+    ap.add_argument("--shape-gate", choices=("shrink", "cv"), default=board_shape.SHAPE_GATE,
+                    help="the shape column: cv also takes the board flat when the shape does not predict views left "
+                         f"out better (default: {board_shape.SHAPE_GATE})")
     ap.add_argument("--mrcal-venv", default="/work/scratch/mrcal-venv")
     ap.add_argument("--skip-mrcal", action="store_true")
     ap.add_argument("--data", default=str(rr.SHARED))
@@ -224,6 +234,8 @@ def main(argv=None) -> int:
                     help=f"the corners' weighting rule in every aicalib_tf fit (default: {weights.WEIGHTING}; aicalib_tf.calib.weights)")
     args = ap.parse_args(argv)
     weights.WEIGHTING = args.weighting
+    board_shape.N_SHAPE_TERMS, board_shape.SHAPE_SHRINK_FROM = args.shape_terms, args.shape_shrink_from
+    board_shape.SHAPE_GATE = args.shape_gate
     venv = None if args.skip_mrcal else Path(args.mrcal_venv)
     if venv is not None and not (venv / "bin" / "mrcal-calibrate-cameras").exists():
         print(f"mrcal not found in {venv}: its column is skipped")

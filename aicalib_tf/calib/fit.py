@@ -99,8 +99,10 @@ class Calibration:
     meta : free-form provenance (detector, model sha256, flags) kept in the JSON file.
     image_circle : a circular fisheye's :class:`~aicalib_tf.geometry.image_circle.ImageCircle`
     (px; estimated from the photos), or None when the photos fill the frame or it is unknown.
-    flex : (2,) the board flex (w_x, w_y) in squares (:mod:`aicalib_tf.calib.flex`), or None when the board
-    was taken as flat; flex_covariance : (2, 2) squares²; flex_note : why there is no flex ("" otherwise).
+    flex : (2,) the board flex (w_x, w_y) in squares (:mod:`aicalib_tf.calib.flex`), or (7,) the board shape's
+    terms (``flex="shape"``, :mod:`aicalib_tf.calib.board_shape`), or None when the board was taken as flat;
+    flex_covariance : (K, K) squares²; flex_note : why there is no flex ("" otherwise; for a shape, the terms
+    taken as 0).
     rejected_corners : {view name: (K, 2) ids (col, row)} of single corners rejected inside the solve.
     """
 
@@ -297,7 +299,7 @@ def fit_views(views, pattern_size: tuple[int, int], square_size: float, image_si
     usable, rejected = _usable_views(views, pattern_size, 3, image_size)
     opts = SolveOptions(pattern_size, flex, reject_corners)
     fit = _fit_model(model, usable, 1.0, image_size, start, fix_k3, False, opts)  # a unit square: tvecs scaled last
-    fit = confirm_flex(fit, usable, _flex_refit(fit, image_size, fix_k3, opts))
+    fit = confirm_flex(fit, usable, _flex_refit(fit, image_size, fix_k3, opts), pattern_size)
     return _calibration(fit, usable, pattern_size, square_size, image_size, rejected, square_unit, meta)
 
 
@@ -361,8 +363,9 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
     image_circle : a circular fisheye's image circle (:func:`~aicalib_tf.geometry.image_circle.estimate_image_circle`),
     kept in the Calibration; under ``auto`` a pinhole model is not eligible when the circle's rim lies
     at or near 90° off-axis. flex : "auto" solves the board's flex with the camera and uses it shrunk
-    towards flat by the noise of its estimate, "off" (default) takes the board as flat
-    (:mod:`aicalib_tf.calib.flex`; its cost and gain on real photos: docs/benchmark.md). reject_corners :
+    towards flat by the noise of its estimate, "shape" does the same for each term of the board's
+    shape beyond the sag (twist, cubics: :mod:`aicalib_tf.calib.board_shape`), "off" (default) takes the board
+    as flat (:mod:`aicalib_tf.calib.flex`; its cost and gain on real photos: docs/benchmark.md). reject_corners :
     reject single outlying corners inside every solve (:mod:`aicalib_tf.calib.robust`); a view's
     ``sigmas`` weight its corners.
     Raises :class:`CalibrationError` with fewer than ``min_views`` usable views or when the model
@@ -391,6 +394,6 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
         usable.pop(worst)
         max_drop -= 1
         fit = _refit(model, usable, 1.0, image_size, fit, fix_k3, opts)
-    fit = confirm_flex(fit, usable, _flex_refit(fit, image_size, fix_k3, opts))
+    fit = confirm_flex(fit, usable, _flex_refit(fit, image_size, fix_k3, opts), pattern_size)
     return _calibration(fit, usable, pattern_size, square_size, image_size, rejected, square_unit, meta, table,
                         image_circle)

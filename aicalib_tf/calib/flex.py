@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from aicalib_tf.calib import board_shape
 from aicalib_tf.calib.board_shape import N_SHAPE_TERMS, SHAPE_MODE, shape_fields, shape_text
 from aicalib_tf.geometry.board_shape import shape_basis
 
@@ -47,8 +48,9 @@ def basis_of_views(views, pattern_size, n_terms: int = 2) -> tuple[list | None, 
 
 
 def mode_terms(mode: str) -> int:
-    """How many shape terms a flex mode solves: 2 (the sag) for "auto", :data:`N_SHAPE_TERMS` for "shape"."""
-    return N_SHAPE_TERMS if mode == SHAPE_MODE else 2
+    """How many shape terms a flex mode solves: 2 (the sag) for "auto",
+    :data:`~aicalib_tf.calib.board_shape.N_SHAPE_TERMS` for "shape"."""
+    return board_shape.N_SHAPE_TERMS if mode == SHAPE_MODE else 2
 
 
 def flex_problem(flex, covariance, unit: float = 1.0) -> str:

@@ -39,6 +39,7 @@ import dataclasses
 
 import numpy as np
 
+from aicalib_tf.calib import board_shape
 from aicalib_tf.calib.board_shape import SHAPE_TERMS, leave_one_out_shapes
 from aicalib_tf.calib.bundle import CalibrationError
 
@@ -76,9 +77,10 @@ def jackknife_se(loo) -> float:
     return float(np.sqrt((len(s) - 1) / len(s) * np.sum((s - s.mean()) ** 2)))
 
 
-def sag_estimate(sag: float, sigma: float, loo=None) -> tuple[float, float, str]:
+def sag_estimate(sag: float, sigma: float, loo=None, shrink_from: float = SHRINK_FROM) -> tuple[float, float, str]:
     """(ŝ, SE, how SE was found) for a solved sag (squares) with its fit's σ and the leave-one-out sags
-    ``loo`` ((V,), or None with fewer than :data:`MIN_JACKKNIFE_VIEWS` views): the module docstring's rule.
+    ``loo`` ((V,), or None with fewer than :data:`MIN_JACKKNIFE_VIEWS` views): the module docstring's rule
+    (flat up to t = ``shrink_from``).
 
     >>> [round(v, 5) for v in sag_estimate(0.010, 0.001, 0.010 + 0.0005 * np.arange(8))[:2]]  # t 3.3
     [0.0097, 0.00303]
@@ -91,19 +93,21 @@ def sag_estimate(sag: float, sigma: float, loo=None) -> tuple[float, float, str]
         if jack > se:
             se, how = jack, f"from leaving each of the {len(loo)} views out"
     t = abs(sag) / se if se > 0 else float("inf")
-    part = 0.0 if t <= SHRINK_FROM else 1.0 if t >= SHRINK_TO else SHRINK_TO * (1 - SHRINK_FROM / t) / (SHRINK_TO - SHRINK_FROM)
+    lo, hi = shrink_from, SHRINK_TO
+    part = 0.0 if t <= lo else 1.0 if t >= hi else hi * (1 - lo / t) / (hi - lo)
     est = float(sag * part)
     return round(est, 12) + 0.0, se, how  # + 0.0: no -0.0
 
 
-def confirm_flex(fit, views, refit):
+def confirm_flex(fit, views, refit, pattern_size=None):
     """The fit with the flex of :func:`sag_estimate`: ``fit`` itself when it has no flex, else the views
     refitted with the board held at the estimate, or flat (``flex_note`` saying why) when it is 0.
-    refit(views, "auto" | "off" | (w_x, w_y) held) -> BundleResult (unit square)."""
+    refit(views, "auto" | "off" | (w_x, w_y) held) -> BundleResult (unit square). pattern_size : (cols, rows),
+    for a board shape's test on views left out (:func:`confirm_shape`)."""
     if getattr(fit, "flex", None) is None:
         return fit
     if len(fit.flex) > 2:  # a board shape (flex="shape"): each of its terms shrunk
-        return confirm_shape(fit, views, refit)
+        return confirm_shape(fit, views, refit, pattern_size)
     try:
         loo = leave_one_out_sags(views, refit) if len(views) >= MIN_JACKKNIFE_VIEWS else None
     except CalibrationError as exc:
@@ -124,9 +128,10 @@ def confirm_flex(fit, views, refit):
     return dataclasses.replace(held, flex=w, flex_covariance=cov, covariance=fit.covariance, flex_note="")
 
 
-def shape_estimate(shape, sigma, loo=None) -> tuple[np.ndarray, np.ndarray, str]:
+def shape_estimate(shape, sigma, loo=None, shrink_from: float | None = None) -> tuple[np.ndarray, np.ndarray, str]:
     """(ŵ (K,), SE (K,), how the SE were found): each term of ``shape`` (K,) squares with its fit's σ (K,)
-    and leave-one-out values ``loo`` ((V, K), or None) shrunk by :func:`sag_estimate`.
+    and leave-one-out values ``loo`` ((V, K), or None) shrunk by :func:`sag_estimate` (flat up to t =
+    ``shrink_from``, default :data:`~aicalib_tf.calib.board_shape.SHAPE_SHRINK_FROM`).
 
     >>> est, se, _ = shape_estimate([0.02, 0.0003], [0.001, 0.001])
     >>> est.tolist(), se.tolist()
@@ -134,17 +139,28 @@ def shape_estimate(shape, sigma, loo=None) -> tuple[np.ndarray, np.ndarray, str]
     """
     w, s = np.asarray(shape, np.float64).ravel(), np.asarray(sigma, np.float64).ravel()
     use = loo is not None and len(loo) >= MIN_JACKKNIFE_VIEWS
-    found = [sag_estimate(w[k], s[k], np.asarray(loo)[:, k] if use else None) for k in range(len(w))]
+    lo = board_shape.SHAPE_SHRINK_FROM if shrink_from is None else shrink_from
+    found = [sag_estimate(w[k], s[k], np.asarray(loo)[:, k] if use else None, lo) for k in range(len(w))]
     how = f"from leaving each of the {len(loo)} views out" if use else "the fit's own σ"
     return np.array([f[0] for f in found]), np.array([f[1] for f in found]), how
 
 
-def confirm_shape(fit, views, refit):
+def confirm_shape(fit, views, refit, pattern_size=None):  # size: the estimate, its two ways to flat and the refit
     """The fit with the board shape of :func:`shape_estimate` (:mod:`aicalib_tf.calib.board_shape`): the views
     refitted with the board held there, or flat (``flex_note`` saying why) when every term is 0.
-    refit(views, "shape" | "off" | (K,) squares held) -> BundleResult (unit square)."""
+    refit(views, "shape" | "off" | (K,) squares held) -> BundleResult (unit square). With
+    :data:`~aicalib_tf.calib.board_shape.SHAPE_GATE` "cv" and a ``pattern_size``, a shape whose leave-one-view-out
+    fits predict the views they left out no better than flat boards' is not used either."""
     try:
-        loo = leave_one_out_shapes(views, refit) if len(views) >= MIN_JACKKNIFE_VIEWS else None
+        loo, loo_fits = leave_one_out_shapes(views, refit) if len(views) >= MIN_JACKKNIFE_VIEWS else (None, None)
+        if board_shape.SHAPE_GATE == "cv" and loo_fits is not None and pattern_size is not None:
+            on = board_shape.held_out_rms(views, loo_fits, pattern_size)
+            off = board_shape.held_out_rms(views, [refit(views[:i] + views[i + 1:], "off") for i in range(len(views))],
+                                           pattern_size)
+            if on >= off:
+                return dataclasses.replace(refit(views, "off"), flex_note=(
+                    f"not used: with the shape, views left out are predicted no better ({on:.3f} px) than on a flat "
+                    f"board ({off:.3f} px); the board is taken as flat"))
     except CalibrationError as exc:
         why = f"not used: a fit leaving one view out failed ({exc}); the board is taken as flat"
         return dataclasses.replace(refit(views, "off"), flex_note=why)
@@ -152,9 +168,10 @@ def confirm_shape(fit, views, refit):
     cov = np.asarray(fit.flex_covariance, np.float64)
     sigma = np.sqrt(np.maximum(np.diag(cov), 0.0))
     est, se, how = shape_estimate(w, sigma, loo)
+    lo = board_shape.SHAPE_SHRINK_FROM
     if not np.any(est):
         return dataclasses.replace(refit(views, "off"), flex_note=(
-            f"not used: every term of the board's shape is within {SHRINK_FROM:g} standard error of 0 ({how}); "
+            f"not used: every term of the board's shape is within {lo:g} standard error of 0 ({how}); "
             "the board is taken as flat"))
     try:
         held = refit(views, tuple(float(v) for v in est))
@@ -162,7 +179,7 @@ def confirm_shape(fit, views, refit):
         return fit
     scale = np.where(sigma > 0, se / np.where(sigma > 0, sigma, 1.0), 1.0)
     zero = [SHAPE_TERMS[k] for k in range(len(est)) if est[k] == 0.0]
-    note = f"taken as 0 (within {SHRINK_FROM:g} standard error, {how}): {', '.join(zero)}" if zero else ""
+    note = f"taken as 0 (within {lo:g} standard error, {how}): {', '.join(zero)}" if zero else ""
     return dataclasses.replace(held, flex=est, flex_covariance=cov * np.outer(scale, scale), covariance=fit.covariance,
                                flex_note=note)
 

@@ -88,7 +88,7 @@ import numpy as np
 from aicalib_tf.calib.bundle import CalibrationError, solve_pose
 from aicalib_tf.calib.splined_fit import misfit_note
 from aicalib_tf.calib.starts import widest_angle
-from aicalib_tf.geometry.board_flex import flexed_points
+from aicalib_tf.geometry.board_shape import shaped_points
 from aicalib_tf.geometry.image_circle import circle_fov_deg
 from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens, get_model
 from aicalib_tf.geometry.pattern import board_points
@@ -132,7 +132,7 @@ def held_out_rms(fit, held, square_size: float, pattern_size=None) -> float:
     for v in held:
         obj = board_points(v.ids, square_size)
         if flex is not None:
-            obj = flexed_points(obj, pattern_size, np.asarray(flex, np.float64) / square_size, square_size)
+            obj = shaped_points(obj, pattern_size, np.asarray(flex, np.float64) / square_size, square_size)
         pose = solve_pose(lens, obj, v.corners)
         if pose is None or not np.isfinite(pose[2]):
             raise CalibrationError(f"{fit.model}: held-out view {v.name} cannot be posed with the fold's intrinsics")

@@ -44,3 +44,13 @@ def test_the_flex_columns_count_over_the_splits_that_ran_them():
     assert "flat ≤ the best anchor on 1 of 6 splits" in text
     assert any("OpenCV 5-coef" in ln and "≤ it on 5 of 6" in ln for ln in lines)
     assert any("aicalib_tf auto" in ln and "2 splits" in ln for ln in lines)
+
+
+def test_the_shape_column_is_compared_with_flat_and_the_best_anchor_on_its_splits():
+    rows = [_row(s, 0.3, (0.25, 0.4, 0.5)) for s in range(8)]
+    for s, r in enumerate(rows[:4]):
+        r["shape"] = {"median": 0.1 + 0.01 * s}
+    text = "\n".join(sn.summary({"set": "x", "photos": 8, "model": "plumb_bob", "splits": rows}))
+    assert "shape ≤ the best anchor on 4 of 4 splits" in text
+    line = next(ln for ln in text.splitlines() if ln.strip().startswith("shape: medians' gap"))
+    assert "to flat -0.185 px" in line and "to the best anchor -0.135 px" in line

@@ -79,3 +79,15 @@ def test_an_implausible_shape_is_not_used():
     assert BS.shape_problem(np.zeros(7), np.eye(7)) == ""
     assert "twist" in BS.shape_problem(np.array([0, 0, 0.3, 0, 0, 0, 0.0]), np.eye(7))
     assert BS.shape_problem(None, None) == "not determined by these views"
+
+
+def test_held_out_views_of_the_model_choice_are_posed_on_the_shape_the_fold_solved():
+    from aicalib_tf.calib.fit import _fit_model
+    from aicalib_tf.calib.robust import SolveOptions
+    from aicalib_tf.calib.select import fold_scores
+
+    views = synthetic_views(PINHOLE, 12, 0.1, seed=8, flex=(0.0, 0.0, 0.02))
+    fit = lambda vs, m, start: _fit_model(m, vs, 1.0, SIZE, start, False, True, SolveOptions(PATTERN, "shape"))  # noqa: E731
+    full = fit(views, "plumb_bob", None)
+    scores = fold_scores(views, 1.0, fit, "plumb_bob", full, PATTERN)
+    assert len(full.flex) == 7 and scores.mean() < 1.2 * full.rms, (scores, full.rms)
