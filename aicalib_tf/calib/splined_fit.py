@@ -165,7 +165,7 @@ def spline_start(base: Lens, model: str, px, k=None) -> np.ndarray:
     m = spec.nx * spec.ny
     B = np.zeros((len(u), m))
     B[np.repeat(np.arange(len(u)), 16), idx.reshape(-1)] = w.reshape(-1)
-    _, P = spec.prior(np.zeros(spec.n_coeffs))
+    P = spec._prior_matrix()  # its rows per grid: the x grid's first
     half = P[: P.shape[0] // 2, N_BASE:N_BASE + m]
     knots = []
     for axis, (f, c, s) in enumerate(((base.fx, base.cx, u), (base.fy, base.cy, v))):  # px rows and the prior's

@@ -97,8 +97,12 @@ def test_the_regularization_penalizes_bending_and_pins_the_affine_part():
     X, Y = np.meshgrid(xs, ys)
     affine = np.concatenate([np.zeros(N_BASE), (0.01 + 0.02 * X - 0.01 * Y).ravel(), np.zeros(X.size)])
     bent = np.concatenate([np.zeros(N_BASE), (0.01 * X * X).ravel(), np.zeros(X.size)])
-    r_aff, r_bent = spec.prior(affine)[0], spec.prior(bent)[0]
-    assert np.linalg.norm(r_aff) > 10.0  # held at 0 by the gauge rows
+    r_aff, r_bent = spec._prior_matrix() @ affine, spec._prior_matrix() @ bent
+    assert np.linalg.norm(spec.prior(affine)[0]) > 10.0  # held at 0 by the gauge rows
+    # the fit's rows are a compact factor of these: the same cost for every coefficient vector
+    for d in (affine, bent):
+        np.testing.assert_allclose(np.linalg.norm(spec.prior(d)[0]), np.linalg.norm(spec._prior_matrix() @ d), rtol=1e-9)
+    assert J.shape[0] == spec.n_coeffs < spec._prior_matrix().shape[0]
     # an affine field has no second differences: only the ridge and gauge rows see it
     n_smooth = (spec.ny * (spec.nx - 2) + (spec.ny - 2) * spec.nx + (spec.ny - 1) * (spec.nx - 1))
     assert np.abs(r_aff[:n_smooth]).max() < 1e-12 and np.abs(r_bent[:n_smooth]).max() > 1e-4
