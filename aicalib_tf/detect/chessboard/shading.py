@@ -17,7 +17,9 @@ or hidden by an object in front shows none. Three things keep the noise that fla
 of the board: ``FLOOR`` (near-black pixels are not divided by their own near-zero mean), every
 corner the grid placed without a candidate must be marked by the network there, if weakly, and no
 corner may be expected off by more than ``MAX_SIGMA`` px on the image (its contrast near the
-noise). A miss rather than a corner px off.
+noise). A miss rather than a corner px off. A corner whose saddle is far flatter than its
+neighbours' (:func:`flat_saddles`: a blurred, darkened board corner the fit left 2.5 px along an
+edge) is set aside: the board comes back partial without it.
 
 Coordinates are (x, y) px, OpenCV's convention (the centre of pixel (0, 0) at (0.0, 0.0)); a
 region ``box = (x0, y0, x1, y1)`` holds pixels x0 … x1 − 1 and y0 … y1 − 1, and a point (x, y)
@@ -31,12 +33,15 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
+from aicalib_tf.detect.chessboard.rim import neighbour_median
 from aicalib_tf.detect.corners.junctions import SAME_CORNER, nearest_spacing
+from aicalib_tf.detect.corners.refine import window_radius
+from aicalib_tf.detect.corners.saddle import saddle_fit_matrix
 from aicalib_tf.detect.corners.sigma import board_sigmas
 from aicalib_tf.geometry.points import any_within
 
-__all__ = ["SIGMA", "FLOOR", "MIN_SHARE", "NEW_POINTS", "DARK", "local_mean", "flatten", "darkened", "shading_box",
-           "flattened_look", "new_points"]
+__all__ = ["SIGMA", "FLOOR", "MIN_SHARE", "NEW_POINTS", "DARK", "FLAT_SADDLE", "LOOK_ENDS", "local_mean", "flatten", "darkened",
+           "shading_box", "flattened_look", "new_points", "saddle_sharpness", "flat_saddles"]
 
 SIGMA = 12.0  # px: the local mean's Gaussian, wider than the close-up's squares, narrower than the fall-off
 COARSE = 4  # px: the block size the local mean is worked out on
@@ -48,6 +53,10 @@ MAX_SIGMA = 0.8  # px: a board whose corner's expected error (sigma.py) on the i
 DARK, DARK_SHARE = 0.5, 0.05  # a region whose darkest 5 % is under half its grid's light is darkened
 NEW_POINTS = 4  # the flattened region's new network points that start its search (fewer: as many as the grid misses)
 NEAR = 2.0  # px: a network point this near a candidate of the search is not new
+FLAT_SADDLE = 2.0  # ln: a corner whose saddle_sharpness is this far under its neighbours' median is set aside
+SHARP_RADIUS = 3  # px: the largest window radius of saddle_sharpness (a 7×7 window)
+LOOK_ENDS = ("no region", "not darkened", "nothing new", "no full board", "unmarked corner", "sigma", "flat saddle",
+             "found")  # where flattened_look ends, in its order
 
 
 def local_mean(gray: np.ndarray) -> np.ndarray:
@@ -105,7 +114,8 @@ def shading_box(ij: np.ndarray, points: np.ndarray, pattern_size: tuple[int, int
     return int(x0), int(y0), int(x1), int(y1)
 
 
-def flattened_look(gray: np.ndarray, pattern_size: tuple[int, int], seen, others: np.ndarray, search, marks):
+def flattened_look(gray: np.ndarray, pattern_size: tuple[int, int], seen, others: np.ndarray, search, marks,
+                   why: list | None = None):
     """The search again, for a full board, on the region of a grid that is none, its shading divided out.
 
     gray : (H, W) float32 in [0, 1], full size. seen : the largest grid assembled on it (a
@@ -113,37 +123,49 @@ def flattened_look(gray: np.ndarray, pattern_size: tuple[int, int], seen, others
     found on it. search : ``search(image) -> Detection``, the detector's one-scale search. marks :
     ``marks(image) -> (points (N, 2), weights (N,), weak() -> (K, 2))``, the network's points on an
     image, down to the weak weight (:func:`aicalib_tf.cnn.inference.weak_corner_points`).
-    Returns the search's detection, complete, in gray's coordinates, or None: no region worth it
+    Returns the search's detection in gray's coordinates, or None: no region worth it
     (:func:`shading_box`), or none of it dark beside the grid (:func:`darkened`); the network's points on the flattened region (:func:`new_points`) fewer
     than the corners the grid misses or ``NEW_POINTS`` (the flattening shows nothing the search did
     not have: a board cut by the frame or hidden, not darkened; the search is not run); no complete
     board there; a corner the network does not mark there, even weakly, within ``SAME_CORNER`` px
     (one the grid placed where only noise is left, lifted by the flattening); or a corner whose
     expected error on gray (:func:`aicalib_tf.detect.corners.sigma.board_sigmas`) is over
-    ``MAX_SIGMA`` (its contrast near the noise).
+    ``MAX_SIGMA`` (its contrast near the noise). The board comes back partial (complete False), without
+    its corners of a flat saddle (:func:`flat_saddles`), where it has any. why : a list that receives where the
+    look ended, one of ``LOOK_ENDS`` (``benchmarks/stage_misses.py`` traces the misses with it).
     """
+    def end(reason: str, det=None):
+        if why is not None:
+            why.append(reason)
+        return det
+
     h, w = gray.shape
     box = shading_box(seen.ij, seen.points, pattern_size, (w, h))
     if box is None:
-        return None
+        return end("no region")
     x0, y0, x1, y1 = box
     offset = np.array([x0, y0], np.float32)
     mean = local_mean(gray[y0:y1, x0:x1])
     if not darkened(mean, np.asarray(seen.points, np.float64) - offset):
-        return None
+        return end("not darkened")
     flat = flatten(gray[y0:y1, x0:x1], mean)
     strong, _, weak = marks(flat)
     if new_points(np.reshape(strong, (-1, 2)) + offset, others) < min(NEW_POINTS, pattern_size[0] * pattern_size[1] - len(seen)):
-        return None
+        return end("nothing new")
     det = search(flat)
     if not det.complete:
-        return None
+        return end("no full board")
     net = np.concatenate([np.reshape(strong, (-1, 2)), np.reshape(weak(), (-1, 2))])
     if not any_within(det.corners[det.scores <= 0], net, SAME_CORNER).all():
-        return None
+        return end("unmarked corner")
     corners = (det.corners + offset).astype(np.float32)
     sigmas = board_sigmas(lambda a, b, c, d: gray[b:d, a:c], corners, det.ids, det.scores, (w, h))
-    return replace(det, corners=corners, image_size=(w, h)) if sigmas.max() <= MAX_SIGMA else None
+    if sigmas.max() > MAX_SIGMA:
+        return end("sigma")
+    keep = ~flat_saddles(gray, corners, det.ids)
+    return end("found" if keep.all() else "flat saddle",
+               replace(det, corners=corners[keep], ids=det.ids[keep], scores=det.scores[keep], complete=bool(keep.all()),
+                       image_size=(w, h)))
 
 
 def new_points(points: np.ndarray, others: np.ndarray) -> int:
@@ -151,3 +173,47 @@ def new_points(points: np.ndarray, others: np.ndarray) -> int:
     search's candidates ``others`` (M, 2) px within ``NEAR`` px: the corners the flattening shows."""
     return int(np.sum(~any_within(np.asarray(points, np.float64).reshape(-1, 2),
                                   np.asarray(others, np.float64).reshape(-1, 2), NEAR)))
+
+
+def saddle_sharpness(gray: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N,) ln(√|det H| / contrast) of each corner's saddle: H the Hessian (grey / px²) of the saddle fit's quadratic
+    (:func:`aicalib_tf.detect.corners.saddle.saddle_fit_matrix`) on the unsmoothed ``gray`` (H, W) float32 about
+    ``points`` (N, 2) px (bilinear samples, the window radius of the corner spacing, at most ``SHARP_RADIUS``),
+    the contrast the Gaussian-weighted standard deviation of the window's point-symmetric part. An X-junction's
+    quadratic curves both ways; a point off the junction along one of its edges sees an edge, one curvature near
+    0, and the position along that edge is set by the noise (a blurred, darkened board corner: 2.5 px off)."""
+    pts = np.asarray(points, np.float64).reshape(-1, 2)
+    radius = np.minimum(window_radius(nearest_spacing(pts.astype(np.float32))), SHARP_RADIUS) if len(pts) > 1 \
+        else np.full(len(pts), SHARP_RADIUS)
+    out = np.zeros(len(pts))
+    g = np.asarray(gray, np.float32)
+    for r in sorted(set(radius.tolist())):
+        sel = np.flatnonzero(radius == r)
+        offsets, fit = saddle_fit_matrix(int(r))
+        at = (pts[sel, None, :] + offsets[None].astype(np.float64)).astype(np.float32)  # (K, M, 2)
+        vals = cv2.remap(g, at[..., 0], at[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float64)
+        a, b, c = (vals @ fit[:3].T).T  # f = a x² + b xy + c y² + ...
+        s = r / 2.0 + 0.5
+        w = np.exp(-(offsets.astype(np.float64) ** 2).sum(axis=1) / (2 * s * s))
+        w /= w.sum()
+        even = 0.5 * (vals + vals[:, ::-1])  # offsets run row-major, so offset −o is the mirrored index
+        even -= (even * w).sum(axis=1, keepdims=True)
+        contrast = np.sqrt((w * even * even).sum(axis=1))
+        out[sel] = 0.5 * np.log(np.maximum(np.abs(4 * a * c - b * b), 1e-24)) - np.log(np.maximum(contrast, 1e-12))
+    return out
+
+
+def flat_saddles(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """(N,) bool: the corners of a board whose :func:`saddle_sharpness` on ``gray`` (H, W) is more than ``FLAT_SADDLE``
+    under the median of their (up to 8) neighbours' on the board. corners : (N, 2) px; ids : (N, 2) int (col, row).
+    Blur, darkening and the squeeze change it slowly across a board (on the shading look's true boards a corner
+    is at most 1.64 under its neighbours; the corner 2.5 px off an edge's length along it, 2.49)."""
+    ids = np.asarray(ids, np.int64).reshape(-1, 2)
+    if len(ids) < 2:
+        return np.zeros(len(ids), bool)
+    sharp = saddle_sharpness(gray, corners)
+    grid = np.full((int(ids[:, 1].max()) + 1, int(ids[:, 0].max()) + 1), np.nan)
+    grid[ids[:, 1], ids[:, 0]] = sharp
+    with np.errstate(all="ignore"):  # a corner with no neighbour on the board: NaN, never flagged
+        near = neighbour_median(grid)[ids[:, 1], ids[:, 0]]
+    return sharp < near - FLAT_SADDLE

@@ -93,3 +93,50 @@ def test_a_board_with_a_corner_lost_in_the_noise_is_not_kept(seed, index, gate, 
     monkeypatch.setattr(shading, gate, off)
     det = detect.detect_corners(s.image, PATTERN)
     assert board_detection_outcome(det.corners if det.complete else None, s.corners, PATTERN)[0] == "wrong"
+
+
+def _blurred_board(blur=2.0, square=16, h=112, w=144):
+    import cv2
+
+    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
+    board = np.where(((x // square) + (y // square)) % 2 == 0, 0.2, 0.8).astype(np.float32)
+    return cv2.GaussianBlur(board, (0, 0), blur)
+
+
+def _lattice_corners(cols=7, rows=5, square=16):
+    ids = np.array([(c, r) for r in range(rows) for c in range(cols)])
+    return 15.5 + square * ids.astype(np.float64), ids  # the squares' edges lie between pixels 15|16, 31|32, ...
+
+
+def test_a_saddles_sharpness_is_the_same_at_every_junction_and_under_any_light():
+    from aicalib_tf.detect.chessboard.shading import saddle_sharpness
+
+    corners, _ = _lattice_corners()
+    sharp = saddle_sharpness(_blurred_board(), corners)
+    assert np.ptp(sharp) < 1e-6  # blur and contrast the same at every junction
+    assert np.allclose(saddle_sharpness(0.05 * _blurred_board() + 0.01, corners), sharp, atol=1e-4)  # a ratio
+
+
+def test_only_a_corner_whose_saddle_is_flat_against_its_neighbours_is_flagged(monkeypatch):
+    from aicalib_tf.detect.chessboard.shading import FLAT_SADDLE, flat_saddles
+
+    corners, ids = _lattice_corners()
+    trend = -0.5 * ids[:, 0].astype(np.float64)  # blur and darkening grow across the board: 3 in all
+    for sharp, flagged in ((trend, []), (trend - 0.9 * FLAT_SADDLE * (ids[:, 0] + ids[:, 1] == 0), []),
+                           (trend - 1.5 * FLAT_SADDLE * (np.arange(len(ids)) % 12 == 0), [0, 12, 24])):
+        monkeypatch.setattr(shading, "saddle_sharpness", lambda gray, pts, s=sharp: s)
+        assert np.flatnonzero(flat_saddles(None, corners, ids)).tolist() == flagged
+
+
+def test_a_blurred_dark_board_corner_off_along_its_edge_leaves_a_partial_board(monkeypatch):
+    # closeup-unified seed 97 #44: the flattened look's board corner (0, 5), 20 grey levels, blurred, sits 2.5 px
+    # along its row's edge (its σ read 0.28 px); its saddle 2.49 flatter than its neighbours' (true corners <= 1.64)
+    import aicalib_tf.detect.pipeline as detect
+
+    cond = select_conditions("closeup-unified")[0]
+    s = make_sample(cond.preset, 97, 44, size=cond.size, pattern=PATTERN)
+    det = detect.detect_corners(s.image, PATTERN)
+    assert not det.complete and len(det.corners) == 53 and [0, 5] not in det.ids.tolist()
+    monkeypatch.setattr(shading, "FLAT_SADDLE", np.inf)
+    det = detect.detect_corners(s.image, PATTERN)
+    assert board_detection_outcome(det.corners if det.complete else None, s.corners, PATTERN)[0] == "wrong"
