@@ -1,18 +1,21 @@
-"""The field of view across a circular fisheye's image circle when the rim lies beyond the boards'
-reach: the fitted model's own extrapolation against the first-order continuation past the reach
-(:func:`continued_fov_deg`), on corner-level synthetic truth.
-The report prints the model's own figure: the continuation wins only where the true r(theta) is linear.
+"""The field of view across a circular fisheye's image circle when the rim lies beyond the boards' reach:
+the model's own extrapolation, the figure through the fewest equidistant terms the held-out views support
+(:func:`aicalib_tf.calib.circle_fov.extrapolated_fov`, what the report prints) and the first-order
+continuation past the reach (:func:`continued_fov_deg`), on corner-level synthetic truth.
 
-    .venv/bin/python benchmarks/circle_fov.py [--families equidistant ds eucm] [--fit equidistant|same]
-        [--seeds 4] [--noise 0.3]
+    .venv/bin/python benchmarks/circle_fov.py [--families ...] [--fovs 150 165 180 195 210]
+        [--reaches 70 78 85] [--seeds 2] [--noise 0.3]
 
-Per true lens family (equidistant k = 0; equidistant_k with data_gen's rig lens k1..k4; ds xi -0.2, alpha 0.6; eucm alpha 0.6, beta 1.1), field of
-view 180, 190, 200° on 1280x960 px with its image circle (radius 470 px, centred), boards (9x6,
-:func:`tests.calib.synthetic.synthetic_views`) whose corners are kept only up to 70, 80 or 88°
-off-axis (true rays), 20 views, corner noise --noise px. One fit (:func:`aicalib_tf.calib.fit.fit_views`,
-model --fit; ``same``: the true family); the reach is :func:`boards_reach_deg` through the fit. Prints
-each run and, per family and reach, the |error| mean/max (degrees) of the circle's field of view
-through the model alone and with the continuation.
+True lenses (``COEFFS``): equidistant with k = 0, with data_gen's circular rig lens k1..k4 (r(θ) steepening
+past the reach), with the Taylor terms of the equisolid (2 sin θ/2) and stereographic (2 tan θ/2) laws;
+Double Sphere and EUCM, two each. Each at field of view --fovs on 1280x960 px with its image circle
+(radius 470 px, centred); 20 views of a 9x6 board (:func:`tests.calib.synthetic.synthetic_views`) whose
+corners are kept only up to --reaches degrees off-axis (true rays), corner noise --noise px; runs whose
+rim lies within 3° of the reach are skipped (nothing is extrapolated). The model is chosen as ``auto``
+chooses among equidistant, ds and eucm (:func:`aicalib_tf.calib.select.select_model`, the circle given).
+Prints each run and, per family and over all, the |error| mean / 90th percentile / max (degrees) of:
+``model`` (the chosen model's own figure), ``rule`` (the order rule where the chosen model is equidistant,
+else the model's own) and ``continued`` (the chosen model continued with its slope at the reach).
 """
 
 from __future__ import annotations
@@ -26,7 +29,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from aicalib_tf.calib.fit import View, fit_views  # noqa: E402
+from aicalib_tf.calib.circle_fov import extrapolated_fov  # noqa: E402
+from aicalib_tf.calib.fit import View, _fit_model, _calibration  # noqa: E402
+from aicalib_tf.calib.robust import SolveOptions  # noqa: E402
+from aicalib_tf.calib.select import select_model  # noqa: E402
 from aicalib_tf.geometry import lens as L  # noqa: E402
 from aicalib_tf.geometry.image_circle import (ImageCircle, boards_reach_deg, circle_fov_deg, rim_angles_deg,  # noqa: E402
                                               rim_points)
@@ -36,9 +42,13 @@ SIZE = (1280, 960)
 CIRCLE = ImageCircle(640.0, 480.0, 470.0)
 # equidistant_k: a Kannala-Brandt lens with the k1..k4 of data_gen's circular rig lens (seed 3), whose r(theta)
 # steepens past the boards' reach: the pure equidistant law (k = 0) is exactly the continuation's own.
+# equisolid / stereographic: the first four Taylor terms of 2 sin(θ/2) / θ and 2 tan(θ/2) / θ.
 COEFFS = {"equidistant": [0.0, 0.0, 0.0, 0.0], "equidistant_k": [0.0129, 0.0018, 0.0019, 0.0006],
-          "ds": [-0.2, 0.6], "eucm": [0.6, 1.1]}
-FAMILY = {"equidistant_k": "equidistant"}  # the lens model of a COEFFS entry, where its name is not one
+          "equisolid": [-1 / 24, 1 / 1920, -1 / 322560, 1 / 92897280], "stereographic": [1 / 12, 1 / 120, 17 / 20160, 31 / 362880],
+          "ds": [-0.2, 0.6], "ds_b": [0.1, 0.55], "eucm": [0.6, 1.1], "eucm_b": [0.5, 1.0]}
+FAMILY = {"equidistant_k": "equidistant", "equisolid": "equidistant", "stereographic": "equidistant", "ds_b": "ds",
+          "eucm_b": "eucm"}  # the lens model of a COEFFS entry, where its name is not one
+CANDIDATES = ("equidistant", "ds", "eucm")  # the models auto chooses among for a circular fisheye
 
 
 EXTEND_STEP_DEG = 2.0  # degrees below the boards' reach over which the continuation takes the model's slope
@@ -95,39 +105,74 @@ def off_axis_deg(lens: L.Lens, uv: np.ndarray) -> np.ndarray:
     return np.degrees(np.arctan2(np.hypot(r[:, 0], r[:, 1]), r[:, 2]))
 
 
-def run(family: str, fov: float, reach: float, model: str, seed: int, noise: float) -> tuple[float, float, float]:
-    """(model's own error, continued error, reach through the fit) in degrees for one trial."""
-    truth, rng = true_lens(family, fov), np.random.default_rng(seed)
-    views = []
-    for v in synthetic_views(truth, n=60, noise=0.0, seed=rng, distance=(0.25, 0.5)):
+def boards(truth: L.Lens, reach: float, seed: int, noise: float) -> list[View]:
+    """20 views of the board (corners up to ``reach`` degrees off-axis through ``truth``), noise px."""
+    rng, views = np.random.default_rng(seed), []
+    for v in synthetic_views(truth, n=80, noise=0.0, seed=rng, distance=(0.25, 0.5)):
         ok = off_axis_deg(truth, v.corners) <= reach
         if ok.sum() >= 20 and len(views) < 20:
             views.append(View(v.name, v.corners[ok] + noise * rng.standard_normal((int(ok.sum()), 2)), v.ids[ok]))
-    cal = fit_views(views, PATTERN, SQUARE, SIZE, FAMILY.get(family, family) if model == "same" else model)
-    fit = L.Lens(cal.model, cal.K, cal.dist, SIZE)
-    got = boards_reach_deg(fit, np.concatenate([v.corners for v in views]))
-    true = circle_fov_deg(truth, CIRCLE)
-    return circle_fov_deg(fit, CIRCLE) - true, continued_fov_deg(fit, CIRCLE, got) - true, got
+    return views
+
+
+def run(family: str, fov: float, reach: float, seed: int, noise: float) -> dict:
+    """{"model", "terms", "reach", "model_err", "rule_err", "continued_err"} (degrees) for one trial."""
+    truth = true_lens(family, fov)
+    views = boards(truth, reach, seed, noise)
+    opts = SolveOptions(PATTERN, "off", True)
+    _, model, fit = select_model(views, 1.0, lambda vs, m, start: _fit_model(m, vs, 1.0, SIZE, start, False, True, opts),
+                                 CANDIDATES, circle=CIRCLE, pattern_size=PATTERN)
+    cal = _calibration(fit, views, PATTERN, SQUARE, SIZE, {}, "", None, (), CIRCLE)
+    lens = L.Lens(cal.model, cal.K, cal.dist, SIZE)
+    got = boards_reach_deg(lens, np.concatenate([v.corners for v in views]))
+    own, true = circle_fov_deg(lens, CIRCLE), circle_fov_deg(truth, CIRCLE)
+    rule = extrapolated_fov(cal, views, lens) or {"circle_fov_deg": own, "circle_fov_terms": None}
+    return {"model": model, "terms": rule["circle_fov_terms"], "reach": got, "model_err": own - true,
+            "rule_err": rule["circle_fov_deg"] - true, "continued_err": continued_fov_deg(lens, CIRCLE, got) - true}
+
+
+def _images(family: str, fov: float) -> bool:
+    """Whether the ``family`` lens of field of view ``fov`` images its whole rim (a unified model has a limit)."""
+    try:
+        return abs(circle_fov_deg(true_lens(family, fov), CIRCLE) - fov) < 0.5
+    except ValueError:
+        return False
+
+
+def _line(title: str, rows: list[dict]) -> str:
+    e = np.abs(np.array([[r["model_err"], r["rule_err"], r["continued_err"]] for r in rows]))
+    cell = lambda k: f"{e[:, k].mean():.2f}/{np.percentile(e[:, k], 90):.1f}/{e[:, k].max():.1f}"  # noqa: E731
+    return f"== {title} ({len(rows)} runs): |error| mean/p90/max model {cell(0)}, rule {cell(1)}, continued {cell(2)} deg"
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--families", nargs="+", default=["equidistant", "equidistant_k", "ds", "eucm"], choices=sorted(COEFFS))
-    ap.add_argument("--fit", default="equidistant", help="the fitted model, or 'same' (the true family)")
-    ap.add_argument("--seeds", type=int, default=4)
+    ap.add_argument("--families", nargs="+", default=list(COEFFS), choices=list(COEFFS))
+    ap.add_argument("--fovs", nargs="+", type=float, default=[150.0, 165.0, 180.0, 195.0, 210.0])
+    ap.add_argument("--reaches", nargs="+", type=float, default=[70.0, 78.0, 85.0])
+    ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--noise", type=float, default=0.3)
     args = ap.parse_args(argv)
+    everything = []
     for family in args.families:
-        for reach in (70.0, 80.0, 88.0):
-            rows = []
-            for fov in (180.0, 190.0, 200.0):
+        rows = []
+        for fov in args.fovs:
+            if not _images(family, fov):
+                print(f"{family} fov {fov:.0f}: the model cannot image its rim; skipped")
+                continue
+            for reach in args.reaches:
+                if reach > fov / 2 - 3:
+                    continue
                 for seed in range(args.seeds):
-                    rows.append(run(family, fov, reach, args.fit, seed, args.noise))
-                    print(f"{family} fov {fov:.0f} reach {reach:.0f} seed {seed}: model {rows[-1][0]:+.1f} "
-                          f"continued {rows[-1][1]:+.1f} (reach through the fit {rows[-1][2]:.1f})", flush=True)
-            e = np.abs(np.array(rows)[:, :2])
-            print(f"== {family} reach {reach:.0f} (fit {args.fit}, {len(rows)} runs): |error| mean/max model "
-                  f"{e[:, 0].mean():.1f}/{e[:, 0].max():.1f}, continued {e[:, 1].mean():.1f}/{e[:, 1].max():.1f} deg")
+                    rows.append(r := run(family, fov, reach, 100 + seed, args.noise))
+                    print(f"{family} fov {fov:.0f} reach {reach:.0f} seed {seed}: {r['model']} k1..k{r['terms']} "
+                          f"model {r['model_err']:+.1f} rule {r['rule_err']:+.1f} continued {r['continued_err']:+.1f} "
+                          f"(reach through the fit {r['reach']:.1f})", flush=True)
+        if rows:
+            print(_line(family, rows), flush=True)
+            everything += rows
+    if everything:
+        print(_line("all", everything))
     return 0
 
 

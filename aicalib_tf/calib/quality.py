@@ -7,6 +7,9 @@
   the difference itself is :func:`aicalib_tf.calib.diff.projection_diff`, which
   ``python -m aicalib_tf.compare`` uses too).
 * :func:`predicted_half_difference`: what the two halves' covariances predict for that number.
+* :func:`honest_covariance`: the covariance with the views as the independent units
+  (:mod:`aicalib_tf.calib.inflation`): what the verdict, ``sigma_px``, the halves' prediction and the
+  report's ± use (:func:`honest_std`), ``cal.covariance`` staying the fit's formal one.
 * :func:`verdict` and :func:`assess`: one line for the user and the dict kept in ``cal.quality``,
   with the regions no board covered (:mod:`aicalib_tf.calib.coverage`).
 
@@ -36,15 +39,17 @@ import math
 import cv2
 import numpy as np
 
+from aicalib_tf.calib.circle_fov import extrapolated_fov
 from aicalib_tf.calib.coverage import covered_mask, in_circle, rim_gaps, uncovered_regions
 from aicalib_tf.calib.diff import grid_points, projection_diff, rotation_compensated_diff, split_views
+from aicalib_tf.calib.inflation import view_inflation
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.image_circle import boards_reach_deg, circle_fov_deg
 from aicalib_tf.geometry.pattern import board_points
 
 __all__ = ["lens_of", "grid_points", "projection_uncertainty", "verdict",
            "rotation_compensated_diff", "half_difference", "predicted_half_difference", "intrinsics_covariance",
-           "covariance_of", "default_fit", "assess", "SIGMA_LADDER_PX", "view_information", "uncertainty_basis",
+           "covariance_of", "honest_covariance", "honest_std", "default_fit", "assess", "SIGMA_LADDER_PX", "view_information", "uncertainty_basis",
            "sigma_from_basis"]
 
 SIGMA_LADDER_PX = (0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0)  # the verdict's "good to X px" rungs
@@ -279,6 +284,26 @@ def covariance_of(cal, views) -> np.ndarray:
     return intrinsics_covariance(cal, views) if cov is None else np.asarray(cov, np.float64)
 
 
+def honest_covariance(cal, views, covered=None, grid=(32, 24)) -> tuple[np.ndarray, float]:
+    """(κ·:func:`covariance_of` (4+n, 4+n), κ): the covariance with the views, not the corners, as the
+    independent units (:func:`aicalib_tf.calib.inflation.view_inflation`, κ >= 1, over the ``covered``
+    (M,) bool grid cells; default those :func:`covered_mask` gives ``views``). What every printed
+    uncertainty uses. Raises ValueError as :func:`covariance_of`."""
+    cov = covariance_of(cal, views)
+    lens = lens_of(cal)
+    if covered is None:
+        covered = covered_mask(views, lens.image_size, grid)
+    _, G, ok = uncertainty_basis(cal, grid, covered)
+    kappa = view_inflation(cal, views, lens, G[ok & np.asarray(covered, bool)], _frame_basis)
+    return kappa * cov, kappa
+
+
+def honest_std(cal) -> dict:
+    """{parameter: 1σ}: ``cal.std`` scaled by √κ, κ = ``cal.quality``'s "inflation" (1 without one)."""
+    kappa = float((getattr(cal, "quality", None) or {}).get("inflation") or 1.0)
+    return {k: float(v) * np.sqrt(kappa) for k, v in (cal.std or {}).items()}
+
+
 def default_fit():
     """The fit :func:`half_difference` uses by default: :func:`aicalib_tf.calib.fit.fit_views`
     (one fit of the given model, no outlier rejection, no model choice)."""
@@ -356,7 +381,8 @@ def assess(cal, views, *, fit=None, split="evenodd", grid=(32, 24), choose=None)
     with the comparison, each half chooses between the chosen model and the best of the other
     family in ``cal.model_table`` (half["models"], the verdict says when their families differ).
     Returns {"sigma_px": {"median_covered", "max_covered", "median_all", "max_all"} (or None
-    without a covariance), "covered_fraction", "uncovered": [region names], "half": {"split",
+    without a covariance; from :func:`honest_covariance`, as the verdict's σ and the halves' prediction),
+    "inflation": its κ (None without a covariance), "covered_fraction", "uncovered": [region names], "half": {"split",
     "median_covered", "mean_covered", "median_all", "mean_all", "predicted_median_covered"} or
     None, "verdict": str, "boards_reach_deg", "circle_fov_deg" (:func:`field_of_view_fields`)}. Grids
     and arrays are left out so the dict is JSON-able.
@@ -366,9 +392,9 @@ def assess(cal, views, *, fit=None, split="evenodd", grid=(32, 24), choose=None)
     inside = in_circle(cal.image_size, grid, circle)
     covered = covered_mask(used, cal.image_size, grid)
     try:
-        cov = covariance_of(cal, used)
+        cov, kappa = honest_covariance(cal, used, covered, grid)
     except (ValueError, np.linalg.LinAlgError):
-        cov = None
+        cov, kappa = None, None
     sigma, sig = None, None
     if cov is not None:
         sigma = projection_uncertainty(cal, grid, covariance=cov, fit_mask=covered)[1]
@@ -385,24 +411,27 @@ def assess(cal, views, *, fit=None, split="evenodd", grid=(32, 24), choose=None)
         if rival is not None:
             half["models"] = [_half_choice(choose, h[f"views_{k}"], (lens_of(cal).model, rival)) for k in "ab"]
         try:
-            covs = [covariance_of(h[f"cal_{k}"], h[f"views_{k}"]) for k in "ab"]
+            covs = [honest_covariance(h[f"cal_{k}"], h[f"views_{k}"], h["covered"], grid)[0] for k in "ab"]
             half["predicted_median_covered"] = predicted_half_difference(
                 h["cal_a"], h["cal_b"], h["covered"], grid=grid, covariances=covs)["median_covered"]
         except (ValueError, np.linalg.LinAlgError):
             half["predicted_median_covered"] = None
-    return {"sigma_px": sig, "covered_fraction": float(np.mean(covered[inside])) if inside.any() else 0.0,
+    return {"sigma_px": sig, "inflation": kappa, "covered_fraction": float(np.mean(covered[inside])) if inside.any() else 0.0,
             "uncovered": uncovered_regions(used, cal.image_size, circle), "half": half,
             "verdict": verdict(cal, used, sigma=sigma, half=half, grid=grid), **field_of_view_fields(cal, used)}
 
 
 def field_of_view_fields(cal, views) -> dict:
     """{"boards_reach_deg": the largest off-axis angle of the ``views``' corners through the model, or None,
-    "circle_fov_deg": the image circle's diameter in degrees through the model (its own extrapolation past
-    that reach; :func:`~aicalib_tf.geometry.image_circle.circle_fov_deg`), or None without an image circle}."""
+    "circle_fov_deg": the image circle's diameter in degrees, or None without an image circle}: through the
+    model (:func:`~aicalib_tf.geometry.image_circle.circle_fov_deg`), or past the boards' reach through
+    the equidistant order the held-out views support, with that rule's "circle_fov_terms",
+    "circle_fov_model_deg" and "circle_fov_orders" (:func:`aicalib_tf.calib.circle_fov.extrapolated_fov`)."""
     lens, circle = lens_of(cal), getattr(cal, "image_circle", None)
     reach = boards_reach_deg(lens, np.concatenate([v.corners for v in views])) if views else math.nan
-    fov = circle_fov_deg(lens, circle) if circle is not None else None
-    return {"boards_reach_deg": reach if math.isfinite(reach) else None, "circle_fov_deg": fov}
+    out = {"boards_reach_deg": reach if math.isfinite(reach) else None,
+           "circle_fov_deg": circle_fov_deg(lens, circle) if circle is not None else None}
+    return {**out, **(extrapolated_fov(cal, views, lens) or {})}
 
 
 def _half_choice(choose, views, models) -> str | None:

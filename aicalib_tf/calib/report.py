@@ -50,7 +50,9 @@ def fov_line(cal: Calibration, views: list[View] | None = None) -> str:
 
     The circle's diameter comes from the model (:func:`~aicalib_tf.geometry.image_circle.circle_fov_deg`)
     and is marked as extrapolated when the rim lies beyond the boards' reach: ``cal.quality``'s
-    ``boards_reach_deg``, else that of ``views``' corners.
+    ``boards_reach_deg``, else that of ``views``' corners; past that reach an equidistant model's figure is
+    that of the fewest terms the held-out views support (:mod:`aicalib_tf.calib.circle_fov`), the model's
+    own beside it.
     """
     lens, circle = Q.lens_of(cal), getattr(cal, "image_circle", None)
     fov = lens.field_of_view(circle)
@@ -58,11 +60,14 @@ def fov_line(cal: Calibration, views: list[View] | None = None) -> str:
     if fov["beyond_model"]:
         text += f"; the frame's edges lie beyond the model's range (counted at its widest, {np.degrees(lens.max_angle()):.0f}°)"
     if circle is not None:
-        reach = (getattr(cal, "quality", None) or {}).get("boards_reach_deg")
-        if reach is None and views:
-            reach = Q.field_of_view_fields(cal, views)["boards_reach_deg"]
-        across = circle_fov_deg(lens, circle)
-        beyond = (f" (beyond the boards' reach, {reach:.0f}° off-axis: extrapolated)"
+        fields = getattr(cal, "quality", None) or {}
+        if fields.get("boards_reach_deg") is None and views:
+            fields = Q.field_of_view_fields(cal, views)
+        reach, terms = fields.get("boards_reach_deg"), fields.get("circle_fov_terms")
+        across = fields.get("circle_fov_deg") if terms else circle_fov_deg(lens, circle)
+        how = (f" through k1..k{terms}, the fewest terms within one standard error held out; the model's own "
+               f"{fields['circle_fov_model_deg']:.1f}°" if terms and terms < 4 else "")
+        beyond = (f" (beyond the boards' reach, {reach:.0f}° off-axis: extrapolated{how})"
                   if reach is not None and np.isfinite(reach) and across > 2 * reach + 0.05 else "")
         text = (f"field of view {across:.1f}° across the image circle{beyond} (centre {circle.cx:.1f}, "
                 f"{circle.cy:.1f}, radius {circle.radius:.1f} px); " + text.removeprefix("field of view "))
@@ -147,7 +152,7 @@ def format_report(cal: Calibration, views: list[View], *, skipped: dict | None =
                  + (f"; {partial} partial board{'s' if partial != 1 else ''}" if partial else "")
                  + (f" ({relative} larger than the frame, ids relative to what is seen)" if relative else ""))
     lines.extend(solve_lines(cal))
-    s = cal.std
+    s = Q.honest_std(cal)
     names_in = "ROS " if L.get_model(model).NAMES["opencv"] else "files: no OpenCV or ROS name, "
     lines.append(f"image {cal.image_size[0]}x{cal.image_size[1]} px, lens model {model} ({names_in}{L.ROS_NAMES[model]})")
     lines.extend(_model_table_lines(getattr(cal, "model_table", ()) or ()))
@@ -180,13 +185,14 @@ def _model_table_lines(table) -> list[str]:
 
 def uncertainty_map(cal: Calibration, views: list[View], grid=(32, 24)) -> tuple[np.ndarray, np.ndarray] | None:
     """(points (gy·gx, 2) px, sigma (gy, gx) px 1σ) of :func:`~aicalib_tf.calib.quality.projection_uncertainty`
-    with ``cal.covariance`` (or one computed from ``views``), the rotation fitted over the covered cells;
-    None when no covariance can be had."""
+    with :func:`~aicalib_tf.calib.quality.honest_covariance` (``cal.covariance``, or one computed from ``views``,
+    with the views as the independent units), the rotation fitted over the covered cells; None when no
+    covariance can be had."""
+    covered = coverage_counts(views, cal.image_size, grid).ravel() > 0
     try:
-        cov = Q.covariance_of(cal, views)
+        cov = Q.honest_covariance(cal, views, covered, grid)[0]
     except (ValueError, np.linalg.LinAlgError):
         return None
-    covered = coverage_counts(views, cal.image_size, grid).ravel() > 0
     pts, sigma = Q.projection_uncertainty(cal, grid, covariance=cov, fit_mask=covered)
     return pts, sigma.reshape(grid[1], grid[0])
 

@@ -94,7 +94,7 @@ from aicalib_tf.geometry.lens import MODELS, N_COEFFS, Lens, get_model
 from aicalib_tf.geometry.pattern import board_points
 
 __all__ = ["select_model", "cross_validate", "fold_scores", "held_out_rms",
-           "choose", "undetermined_extras", "widest_ray_deg", "COMPLEXITY",
+           "choose", "near_best", "undetermined_extras", "widest_ray_deg", "COMPLEXITY",
            "RAY_MARGIN_DEG", "WIDE_REACH_DEG", "PINHOLE_MARGIN_SE", "PINHOLE_MARGIN_FRACTION", "pinhole_margin_note"]
 
 COMPLEXITY = tuple(sorted(MODELS, key=lambda m: get_model(m).RANK))  # simplest first (each model's RANK), see above
@@ -201,6 +201,13 @@ def _gain(r: dict, best: dict) -> float:
         return gain
     folds = np.sort(np.asarray(a, np.float64) - np.asarray(b, np.float64))
     return min(gain, float(folds[:-1].mean()))
+
+
+def near_best(rows: list[dict]) -> list[dict]:
+    """The rows (with "cv_rms", "cv_se" and optionally "cv_folds", "rms", "n_params", "corners") whose
+    held-out RMS is within the noise of the best's (:func:`_gain` within :func:`_gain_noise`); the best among them."""
+    best = min(rows, key=lambda r: r["cv_rms"])
+    return [r for r in rows if _gain(r, best) <= _gain_noise(r, best)]
 
 
 def pinhole_margin_note(rows: list[dict], reach_deg: float) -> dict[str, str]:

@@ -220,9 +220,10 @@ def test_assess_lets_each_half_choose_between_the_chosen_model_and_the_other_fam
     assert "models" not in Q.assess(cal, views, fit=FIT)["half"]
 
 
-def test_the_circles_field_of_view_is_the_models_own_past_the_boards_reach():
-    """Boards up to 70° off-axis of a lens whose r(θ) steepens past them (k1 > 0): the field of view across the
-    circle is the model's own (the lens's true figure), with the boards' reach beside it."""
+def test_without_a_pattern_size_the_circles_field_of_view_is_the_models_own_past_the_boards_reach():
+    """Boards up to 70° off-axis of a lens whose r(θ) steepens past them (k1 > 0), a calibration without a
+    pattern size (no refit can choose the polynomial's order, :mod:`aicalib_tf.calib.circle_fov`): the field
+    of view across the circle is the model's own, with the boards' reach beside it."""
     import dataclasses
 
     from aicalib_tf.geometry.image_circle import circle_fov_deg
@@ -237,3 +238,4 @@ def test_the_circles_field_of_view_is_the_models_own_past_the_boards_reach():
     own = circle_fov_deg(steep, cal.image_circle)
     assert fields["circle_fov_deg"] == pytest.approx(own, abs=1e-9)
     assert 60 < fields["boards_reach_deg"] <= 70.5 and own / 2 > fields["boards_reach_deg"] + 10  # rim past the boards
+    assert "circle_fov_terms" not in fields
