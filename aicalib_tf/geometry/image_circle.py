@@ -9,7 +9,8 @@ there and no uncertainty or undistortion means anything there.
   bright disk), or None for photos that fill the frame; :func:`find_image_circle` also says why
   none was found where the frame's corners are dark (the calibration then uses the full frame).
 * :func:`circle_fov_deg`: the circle's diameter in degrees, through a lens model (past the boards'
-  reach, :func:`boards_reach_deg`, the model's own extrapolation).
+  reach, :func:`boards_reach_deg`, the model's own extrapolation; :mod:`aicalib_tf.calib.circle_fov`
+  chooses the terms an equidistant model extrapolates with).
 * :func:`circle_problem`: whether a lens model and a circle agree (a sentence when they do not).
 
 Pure numpy/OpenCV.
@@ -281,8 +282,9 @@ def circle_fov_deg(lens, circle: ImageCircle) -> float:
     """Degrees: the image circle's diameter through ``lens`` (a :class:`~aicalib_tf.geometry.lens.Lens`),
     the mean over diameters of the two rim rays' off-axis angles; never NaN: a rim point the model
     gives no ray counts with the widest angle the model images. Past the boards' reach
-    (:func:`boards_reach_deg`) this is the model's own extrapolation; ``benchmarks/circle_fov.py``
-    measures it against a first-order continuation, which is better only where the true r(θ) is linear.
+    (:func:`boards_reach_deg`) this is the model's own extrapolation; the calibration's report reads an
+    equidistant model there through the fewest terms the held-out views support
+    (:mod:`aicalib_tf.calib.circle_fov`), which ``benchmarks/circle_fov.py`` scores on synthetic truth.
     """
     theta = rim_angles_deg(lens, circle)
     theta = np.where(np.isfinite(theta), theta, math.degrees(lens.max_angle()))
