@@ -15,13 +15,21 @@ pipeline (:func:`aicalib_tf.detect_corners` with the 9×6 pattern) is scored as 
 - **rim**: whether a grid within the rim completion's reach (the pattern's extent, every point
   on a true corner, up to ``rim.MAX_MISSING`` corners missing, all on the outer ring) is made a
   full board by :func:`aicalib_tf.detect.chessboard.rim.rim_board` (placement and occlusion test);
-- **order**: whether the board order accepts a grid that holds every true corner.
+- **order**: whether the board order accepts a grid that holds every true corner;
+- **shading**: where the shading look (:func:`aicalib_tf.detect.chessboard.shading.flattened_look`), asked as
+  the pipeline asks it with the largest grid, ends (``shading.LOOK_ENDS``: no region, not darkened, nothing
+  new, no full board, unmarked corner, sigma, flat saddle, found), and where it searched, the map,
+  candidates and grid stages again on its flattened region (``flat``);
+- **unshear**: whether the un-shear look (:mod:`aicalib_tf.detect.chessboard.unshear`), asked with the
+  full-size search's partial board, finds a complete board, and whether its corners are on the truth.
 
 The stage blamed is the first that falls short: map (under 80% of the corners), candidates (under
 80%, or a fifth fewer than the map had), grid (no grid with every corner, nor one within the rim
 completion's reach), rim (such a grid, not completed), order (a grid with every corner refused),
 else ``pipeline`` (the full-size stages find it: a scale, the quick pass or the zoom loses it).
-Prints one line per miss with these figures and the counts per condition and stage.
+The two looks are the recoveries from those stages' shortfalls, so they are traced beside the blame.
+Prints one line per miss with these figures, the counts per condition and stage, and the counts of
+the looks' ends over the misses.
 """
 
 from __future__ import annotations
@@ -35,6 +43,7 @@ import numpy as np
 from aicalib_tf.bench.conditions import PATTERN, condition_samples, select_conditions
 from aicalib_tf.bench.metrics import board_detection_outcome
 from aicalib_tf.detect.chessboard.rim import MAX_MISSING, rim_board
+from aicalib_tf.detect.chessboard.shading import flatten, flattened_look, local_mean, shading_box
 
 STAGES = ("map", "candidates", "grid", "rim", "order", "pipeline")
 
@@ -47,12 +56,13 @@ def _recall(truth: np.ndarray, pts: np.ndarray, tol: float) -> np.ndarray:
     return d.min(axis=1) <= tol
 
 
-def trace(gray: np.ndarray, truth: np.ndarray, model, pattern=PATTERN, threshold: float = 0.5) -> dict:
+def trace(gray: np.ndarray, truth: np.ndarray, model, pattern=PATTERN, threshold: float = 0.5, looks: bool = True) -> dict:
     """The full-size stages on ``gray`` (H, W) float32 against ``truth`` (cols·rows, 2) px.
 
     Returns {"map", "candidates"}: shares of true corners found; "grid": most true corners in one
     grid; "grid_shape"; "rim_reach": a grid within the rim completion's reach; "rim": the rim
-    completion makes a full board; "accepted": a grid with every corner passes the board order; "stage".
+    completion makes a full board; "accepted": a grid with every corner passes the board order; "stage";
+    with ``looks``, "shading" and "flat" (:func:`trace_shading`) and "unshear" (:func:`trace_unshear`).
     """
     from aicalib_tf.cnn.inference import weak_corner_points
     from aicalib_tf.detect import pipeline as pl
@@ -84,7 +94,49 @@ def trace(gray: np.ndarray, truth: np.ndarray, model, pattern=PATTERN, threshold
             out["rim_reach"] |= on and _in_rim_reach(g, pattern)
         out["rim"] = rim_board(grids, scores, pattern, smoothed, smooth, ref_amp) is not None
     out["stage"] = _blame(out, n)
+    if looks:
+        out["shading"], out["flat"] = trace_shading(gray, truth, model, grids, refined, pattern, threshold)
+        out["unshear"] = trace_unshear(gray, truth, model, pattern, threshold)
     return out
+
+
+def trace_shading(gray: np.ndarray, truth: np.ndarray, model, grids: list, refined: np.ndarray, pattern,
+                  threshold: float) -> tuple[str, dict | None]:
+    """Where the shading look ends for ``gray`` (H, W) float32 (one of ``shading.LOOK_ENDS``; "no grid" without
+    one), asked with the largest of ``grids`` and the candidates ``refined`` (N, 2) px as the pipeline asks it;
+    and, when it got as far as its flattened region, :func:`trace` (without the looks) on that region
+    against ``truth`` (N, 2) px, else None."""
+    from functools import partial as bind
+
+    from aicalib_tf.cnn.inference import weak_corner_points
+    from aicalib_tf.detect import pipeline as pl
+
+    if not grids:
+        return "no grid", None
+    largest = max(grids, key=len)
+    search = bind(pl._detect_at, pattern_size=pattern, model=model, threshold=threshold, partial_above=sum(pattern) ** 2)
+    marks = bind(weak_corner_points, model, threshold=threshold, weak=pl.WEAK * threshold)
+    why: list = []
+    flattened_look(gray, pattern, largest, refined, search, marks, why=why)
+    end = why[0] if why else "found"
+    if end in ("no region", "not darkened"):
+        return end, None
+    x0, y0, x1, y1 = shading_box(largest.ij, largest.points, pattern, gray.shape[::-1])
+    flat = flatten(gray[y0:y1, x0:x1], local_mean(gray[y0:y1, x0:x1]))
+    return end, trace(flat, truth - np.array([x0, y0], np.float64), model, pattern, threshold, looks=False)
+
+
+def trace_unshear(gray: np.ndarray, truth: np.ndarray, model, pattern, threshold: float) -> str:
+    """The un-shear look on ``gray`` (H, W) float32, asked with the full-size search's partial board as the
+    pipeline asks it: "none" (no complete board), "hit" or "wrong" (its corners against ``truth``)."""
+    from aicalib_tf.detect import pipeline as pl
+
+    seen = pl._detect_at(gray, pattern, model, threshold)
+    got = pl.unshear_look(gray, pattern, lambda img: pl._detect_at(img, pattern, model, threshold, relative=True),
+                          seen.ids if seen.found else None, seen.corners if seen.found else None)
+    if got is None:
+        return "none"
+    return board_detection_outcome(np.asarray(got[0], np.float64), truth, pattern)[0]
 
 
 def _in_rim_reach(grid, pattern) -> bool:
@@ -110,8 +162,10 @@ def _blame(t: dict, n: int) -> str:
 
 
 def run_condition(cond, count: int, model, show: bool) -> Counter:
-    """Counts of outcomes and blamed stages over ``count`` images of ``cond``; prints each miss."""
+    """Counts of outcomes, blamed stages and the looks' ends (keys "shading: END", "unshear: END") over ``count``
+    images of ``cond``; prints each miss."""
     from aicalib_tf import detect_corners
+    from aicalib_tf.io import as_gray_float
 
     counts: Counter = Counter()
     for index, s in condition_samples(cond, count):
@@ -121,12 +175,17 @@ def run_condition(cond, count: int, model, show: bool) -> Counter:
         counts[outcome] += 1
         if outcome == "hit":
             continue
-        t = trace(s.image.astype(np.float32), s.corners, model)
+        t = trace(as_gray_float(s.image), s.corners, model)  # the pipeline's grey in [0, 1]
         counts[t["stage"]] += 1
+        counts[f"shading: {t['shading']}"] += 1
+        counts[f"unshear: {t['unshear']}"] += 1
         lab = s.label
         if show:
+            f = t["flat"]
+            flat = "" if f is None else f" (flat: map {f['map']:.2f} cand {f['candidates']:.2f} grid {f['grid']}/{len(s.corners)})"
             print(f"  {cond.name} #{index}: {outcome}, {t['stage']}: map {t['map']:.2f} cand {t['candidates']:.2f} "
-                  f"grid {t['grid']}/{len(s.corners)} {t['grid_shape']} rim {t['rim_reach']}/{t['rim']} accepted {t['accepted']} | "
+                  f"grid {t['grid']}/{len(s.corners)} {t['grid_shape']} rim {t['rim_reach']}/{t['rim']} accepted {t['accepted']} "
+                  f"| shading {t['shading']}{flat} | unshear {t['unshear']} | "
                   f"{lab['distortion_model']} {2 * (lab['max_theta_deg'] or 0):.0f}° reason {det.reason!r}", flush=True)
     return counts
 
@@ -149,6 +208,8 @@ def main(argv=None) -> int:
         rows.append(f"| {cond.name} | {c['hit']} | {c['wrong']} | {c['miss']} | "
                     + " | ".join(str(c[s]) for s in STAGES) + " |")
         print(rows[-1], flush=True)
+        looks = sorted(k for k in c if k.startswith(("shading: ", "unshear: ")))
+        print(f"|   looks over its misses: {', '.join(f'{k} {c[k]}' for k in looks) or 'none'} |", flush=True)
     return 0
 
 
