@@ -1,7 +1,7 @@
 """How noisy one split's halves difference is: many random half-splits of each real set, every tool.
 
     .venv/bin/python benchmarks/real_split_noise.py [--sets opencv_left ...] [--splits 200] [--flex-splits 24]
-        [--modes flat shape] [--shape-terms 7] [--shape-shrink-from 0.5] [--shape-gate cv] [--skip-mrcal] [--json noise.json]
+        [--modes flat shape] [--shape-terms 7] [--shape-shrink-from 0.5] [--skip-mrcal] [--json noise.json]
         [--weighting view]
 
 ``benchmarks/real_repeatability.py`` scores two fixed splits of each set (even/odd, first/second). One
@@ -223,9 +223,6 @@ def main(argv=None) -> int:
     ap.add_argument("--shape-shrink-from", type=float, default=board_shape.SHAPE_SHRINK_FROM,
                     help=f"the shape column: a term within this many standard errors of 0 is 0 "
                          f"(default: {board_shape.SHAPE_SHRINK_FROM})")
-    ap.add_argument("--shape-gate", choices=("shrink", "cv"), default=board_shape.SHAPE_GATE,
-                    help="the shape column: cv also takes the board flat when the shape does not predict views left "
-                         f"out better (default: {board_shape.SHAPE_GATE})")
     ap.add_argument("--mrcal-venv", default="/work/scratch/mrcal-venv")
     ap.add_argument("--skip-mrcal", action="store_true")
     ap.add_argument("--data", default=str(rr.SHARED))
@@ -235,7 +232,6 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     weights.WEIGHTING = args.weighting
     board_shape.N_SHAPE_TERMS, board_shape.SHAPE_SHRINK_FROM = args.shape_terms, args.shape_shrink_from
-    board_shape.SHAPE_GATE = args.shape_gate
     venv = None if args.skip_mrcal else Path(args.mrcal_venv)
     if venv is not None and not (venv / "bin" / "mrcal-calibrate-cameras").exists():
         print(f"mrcal not found in {venv}: its column is skipped")

@@ -26,14 +26,13 @@ import numpy as np
 
 from aicalib_tf.geometry.board_shape import SHAPE_TERMS, out_of_plane_rms
 
-__all__ = ["SHAPE_MODE", "N_SHAPE_TERMS", "SHAPE_PLAUSIBLE", "SHAPE_SHRINK_FROM", "SHAPE_GATE", "shape_problem",
-           "leave_one_out_shapes", "held_out_rms", "shape_fields", "shape_text"]
+__all__ = ["SHAPE_MODE", "N_SHAPE_TERMS", "SHAPE_PLAUSIBLE", "SHAPE_SHRINK_FROM", "shape_problem",
+           "leave_one_out_shapes", "shape_fields", "shape_text"]
 
 SHAPE_MODE = "shape"
 N_SHAPE_TERMS = len(SHAPE_TERMS)
 SHAPE_PLAUSIBLE = 0.25  # squares: a term beyond this is the lens model's misfit, not the board's (the flex's limit)
 SHAPE_SHRINK_FROM = 0.5  # t = |w_k| / SE_k up to which a term is 0 (the sag's SHRINK_FROM)
-SHAPE_GATE = "shrink"  # "cv": the shape is used only when it predicts views left out better than a flat board
 
 
 def shape_problem(shape, covariance, unit: float = 1.0) -> str:
@@ -51,22 +50,14 @@ def shape_problem(shape, covariance, unit: float = 1.0) -> str:
     return ""
 
 
-def leave_one_out_shapes(views, refit) -> tuple[np.ndarray, list]:
-    """((V, K) squares, the V fits): the shape of refit(views less view i, "shape") for each view i (0 where
-    that refit keeps none). refit(views, mode) -> BundleResult with a unit square; CalibrationError propagates."""
+def leave_one_out_shapes(views, refit) -> np.ndarray:
+    """(V, K) squares: the shape of refit(views less view i, "shape") for each view i (0 where that refit
+    keeps none). refit(views, mode) -> BundleResult with a unit square; CalibrationError propagates."""
     fits = [refit(views[:i] + views[i + 1:], SHAPE_MODE) for i in range(len(views))]
     out = [None if f.flex is None else np.asarray(f.flex, np.float64) for f in fits]
     k = max((len(s) for s in out if s is not None), default=0)
-    return np.array([np.zeros(k) if s is None else s for s in out]).reshape(len(views), k), fits
+    return np.array([np.zeros(k) if s is None else s for s in out]).reshape(len(views), k)
 
-
-def held_out_rms(views, fits, pattern_size) -> float:
-    """px: the RMS over every view's corners, each view posed with the intrinsics and on the board of the fit
-    that left it out (``fits``, V BundleResults with a unit square; :func:`aicalib_tf.calib.select.held_out_rms`)."""
-    from aicalib_tf.calib.select import held_out_rms as one
-
-    sq = [one(f, [v], 1.0, pattern_size) ** 2 * len(v.ids) for f, v in zip(fits, views)]
-    return float(np.sqrt(np.sum(sq) / sum(len(v.ids) for v in views)))
 
 
 def shape_fields(shape, covariance, pattern_size, square_size: float) -> dict:

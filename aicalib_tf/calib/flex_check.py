@@ -99,15 +99,15 @@ def sag_estimate(sag: float, sigma: float, loo=None, shrink_from: float = SHRINK
     return round(est, 12) + 0.0, se, how  # + 0.0: no -0.0
 
 
-def confirm_flex(fit, views, refit, pattern_size=None):
+def confirm_flex(fit, views, refit):
     """The fit with the flex of :func:`sag_estimate`: ``fit`` itself when it has no flex, else the views
     refitted with the board held at the estimate, or flat (``flex_note`` saying why) when it is 0.
-    refit(views, "auto" | "off" | (w_x, w_y) held) -> BundleResult (unit square). pattern_size : (cols, rows),
-    for a board shape's test on views left out (:func:`confirm_shape`)."""
+    refit(views, "auto" | "off" | (w_x, w_y) held) -> BundleResult (unit square); a board shape's fit goes to
+    :func:`confirm_shape`."""
     if getattr(fit, "flex", None) is None:
         return fit
     if len(fit.flex) > 2:  # a board shape (flex="shape"): each of its terms shrunk
-        return confirm_shape(fit, views, refit, pattern_size)
+        return confirm_shape(fit, views, refit)
     try:
         loo = leave_one_out_sags(views, refit) if len(views) >= MIN_JACKKNIFE_VIEWS else None
     except CalibrationError as exc:
@@ -145,22 +145,12 @@ def shape_estimate(shape, sigma, loo=None, shrink_from: float | None = None) -> 
     return np.array([f[0] for f in found]), np.array([f[1] for f in found]), how
 
 
-def confirm_shape(fit, views, refit, pattern_size=None):  # size: the estimate, its two ways to flat and the refit
+def confirm_shape(fit, views, refit):
     """The fit with the board shape of :func:`shape_estimate` (:mod:`aicalib_tf.calib.board_shape`): the views
     refitted with the board held there, or flat (``flex_note`` saying why) when every term is 0.
-    refit(views, "shape" | "off" | (K,) squares held) -> BundleResult (unit square). With
-    :data:`~aicalib_tf.calib.board_shape.SHAPE_GATE` "cv" and a ``pattern_size``, a shape whose leave-one-view-out
-    fits predict the views they left out no better than flat boards' is not used either."""
+    refit(views, "shape" | "off" | (K,) squares held) -> BundleResult (unit square)."""
     try:
-        loo, loo_fits = leave_one_out_shapes(views, refit) if len(views) >= MIN_JACKKNIFE_VIEWS else (None, None)
-        if board_shape.SHAPE_GATE == "cv" and loo_fits is not None and pattern_size is not None:
-            on = board_shape.held_out_rms(views, loo_fits, pattern_size)
-            off = board_shape.held_out_rms(views, [refit(views[:i] + views[i + 1:], "off") for i in range(len(views))],
-                                           pattern_size)
-            if on >= off:
-                return dataclasses.replace(refit(views, "off"), flex_note=(
-                    f"not used: with the shape, views left out are predicted no better ({on:.3f} px) than on a flat "
-                    f"board ({off:.3f} px); the board is taken as flat"))
+        loo = leave_one_out_shapes(views, refit) if len(views) >= MIN_JACKKNIFE_VIEWS else None
     except CalibrationError as exc:
         why = f"not used: a fit leaving one view out failed ({exc}); the board is taken as flat"
         return dataclasses.replace(refit(views, "off"), flex_note=why)

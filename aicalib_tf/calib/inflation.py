@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 
 from aicalib_tf.geometry import lens as L
-from aicalib_tf.geometry.board_flex import flexed_points
+from aicalib_tf.geometry.board_shape import shaped_points
 from aicalib_tf.geometry.pattern import board_points
 
 __all__ = ["view_terms", "view_inflation", "MIN_VIEWS", "MAX_LEVERAGE"]
@@ -45,7 +45,7 @@ def _kept_points(cal, view) -> tuple[np.ndarray, np.ndarray]:
     obj = board_points(view.ids[keep], cal.square_size)
     flex = getattr(cal, "flex", None)
     if flex is not None:
-        obj = flexed_points(obj, cal.pattern_size, np.asarray(flex, np.float64), cal.square_size)
+        obj = shaped_points(obj, cal.pattern_size, np.asarray(flex, np.float64), cal.square_size)
     return obj, np.asarray(view.corners, np.float64)[keep]
 
 
