@@ -1,6 +1,6 @@
 """Which stage of the detector loses each board it misses, judged against the truth.
 
-    python benchmarks/stage_misses.py --conditions generalize --count 40 [--model PATH] [--show]
+    python benchmarks/stage_misses.py --conditions generalize --count 40 [--seed S] [--model PATH] [--show]
 
 For each image of the named evaluate conditions (``aicalib_tf.bench.conditions``: the same renders,
 ``generalize`` for the close-up and steep-tilt conditions the detector was not tuned on), the shipped
@@ -37,6 +37,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections import Counter
+from dataclasses import replace
 
 import numpy as np
 
@@ -196,6 +197,7 @@ def main(argv=None) -> int:
     ap.add_argument("--count", type=int, default=40, help="images per condition")
     ap.add_argument("--model", default=None, help="corner model (default: the shipped one)")
     ap.add_argument("--show", action="store_true", help="one line per miss")
+    ap.add_argument("--seed", type=int, default=None, help="data_gen seed in place of the conditions' (other scenes)")
     args = ap.parse_args(argv)
     from aicalib_tf.cnn.model import load_model
     from aicalib_tf.cnn.spec import DETECTOR_NETWORK
@@ -204,6 +206,7 @@ def main(argv=None) -> int:
     print(f"| condition | hit | wrong | miss | {' | '.join(STAGES)} |\n|---|---|---|---|{'---|' * len(STAGES)}")
     rows = []
     for cond in select_conditions(args.conditions):
+        cond = cond if args.seed is None else replace(cond, seed=args.seed)
         c = run_condition(cond, args.count, model, args.show)
         rows.append(f"| {cond.name} | {c['hit']} | {c['wrong']} | {c['miss']} | "
                     + " | ".join(str(c[s]) for s in STAGES) + " |")
