@@ -9,6 +9,14 @@ views; the odd views are posed with those intrinsics held fixed and their RMS is
 The projection error is against the true lens over the corners of every view (a rotation fitted
 out), px. Then ``calibrate_camera(model="auto")`` on all views shows what the model choice keeps.
 
+``--halves SET ...``: real photos (``opencv_left``, ``udacity_lane_cal``, ``ocam_fisheye`` in
+``../shared/data``; ocam has no licence: read in place) detected once each as ``real_split_noise.py`` does
+(the calibrate command's detector), split into halves (even/odd, first/second and ``--splits`` random
+splits), each half calibrated three ways: the parametric model ``auto`` chooses on all the photos, the
+spline forced, and ``auto`` with the spline tried from :data:`~aicalib_tf.calib.splined_fit.MIN_VIEWS`
+views. Printed per split: the halves' projection difference (median px over the covered cells, rotation
+fitted) of each, what the third chose in each half, and its time.
+
 ``--real``: the calibration workflow with ``--model auto`` on ``tests/data/opencv_left`` (13 photos,
 9x6) and ``../shared/data/ocam_fisheye`` (15 photos of a ~185° fisheye, 8x6; no licence: read in
 place, never copied), printing the model-choice table (the spline's row included) and the choice.
@@ -29,9 +37,11 @@ from scipy.spatial.transform import Rotation
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from aicalib_tf.calib.bundle import CalibrationError, solve_pose  # noqa: E402
 from aicalib_tf.calib.fit import View, calibrate_camera, fit_views  # noqa: E402
+from aicalib_tf.calib.splined_fit import MIN_VIEWS  # noqa: E402
 from aicalib_tf.geometry import lens as L  # noqa: E402
 from aicalib_tf.geometry.pattern import board_points  # noqa: E402
 from aicalib_tf.geometry.pose import best_rotation  # noqa: E402
@@ -150,16 +160,91 @@ def run_real(name) -> list[str]:
     return out
 
 
+def half_splits(n: int, n_random: int) -> dict:
+    """{name: (first indices, second indices)}: even/odd, first/second and ``n_random`` random splits."""
+    import real_split_noise as rsn
+
+    out = {"evenodd": (list(range(0, n, 2)), list(range(1, n, 2))),
+           "halves": (list(range((n + 1) // 2)), list(range((n + 1) // 2, n)))}
+    out.update({f"random{s}": rsn.random_split(n, s) for s in range(n_random)})
+    return out
+
+
+def _half_cal(vs, cfg, size, circle, model):
+    from aicalib_tf.calib import select
+
+    if model != "auto10":
+        return calibrate_camera(vs, cfg[0], 1.0, size, model=model, image_circle=circle)
+    keep = select.AUTO_SPLINE_VIEWS
+    select.AUTO_SPLINE_VIEWS = MIN_VIEWS
+    try:
+        return calibrate_camera(vs, cfg[0], 1.0, size, image_circle=circle)
+    finally:
+        select.AUTO_SPLINE_VIEWS = keep
+
+
+def _halves_diff(cals, grid) -> tuple[np.ndarray, np.ndarray]:
+    """(diff (cells,) px, NaN where a half has no ray or projection; covered (cells,) bool): the halves'
+    projection difference over the cells both halves' boards cover, rotation fitted there."""
+    from aicalib_tf.calib.diff import board_coverage, projection_diff
+
+    covered = np.zeros(grid[0] * grid[1], bool)
+    for c in cals:
+        covered |= board_coverage(c.lens, c.pattern_size, c.square_size, c.rvecs, c.tvecs, grid)
+    d = projection_diff(cals[0].lens, cals[1].lens, grid=grid, covered=covered)
+    return d["diff"], covered
+
+
+def run_halves(name, n_random) -> list[str]:
+    """The halves' differences of one real set (module docstring, ``--halves``): per column the median px over
+    the covered cells where both halves image, with those cells' count; the last column the parametric
+    model's median over the spline's cells (a spline has no ray beyond its knots)."""
+    import real_repeatability as rr
+    import real_split_noise as rsn
+
+    cfg = rr.SETS[name]
+    files, size, _ = rr.photos(ROOT.parent / "shared" / "data" / name)
+    views, circle = rsn.detections(files, cfg[0])
+    model = calibrate_camera([v for v in views if v is not None], cfg[0], 1.0, size, image_circle=circle).model
+    out = [f"## {name}: {len(files)} photos, {sum(v is not None for v in views)} detected; auto on all: {model}",
+           f"| split | views | {model} | splined_equidistant | auto from {MIN_VIEWS} views (choice) | {model} on the "
+           "spline's cells | s |", "|---|---|---|---|---|---|---|"]
+    for split, halves in half_splits(len(files), n_random).items():
+        cells, diffs, t = [], {}, time.time()
+        for m in (model, "splined_equidistant", "auto10"):
+            try:
+                cals = [_half_cal([views[i] for i in h if views[i] is not None], cfg, size, circle, m) for h in halves]
+                diffs[m] = _halves_diff(cals, rr.GRID)
+            except (CalibrationError, ValueError) as exc:
+                cells.append(f"refused: {str(exc)[:60]}")
+                continue
+            d, cov = diffs[m]
+            chose = "" if m != "auto10" else " (" + ", ".join(c.model.split("_nx")[0] for c in cals) + ")"
+            cells.append(f"{np.nanmedian(d[cov]):.3f} ({np.isfinite(d[cov]).sum()}/{cov.sum()}){chose}")
+        same = "-"
+        if model in diffs and "splined_equidistant" in diffs:
+            (dp, _), (ds, cov) = diffs[model], diffs["splined_equidistant"]
+            same = f"{np.nanmedian(dp[cov & np.isfinite(ds)]):.3f}"
+        n = "/".join(str(sum(views[i] is not None for i in h)) for h in halves)
+        out.append(f"| {split} | {n} | " + " | ".join(cells) + f" | {same} | {time.time() - t:.0f} |")
+        print(out[-1], flush=True)
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--views", type=int, default=20)
     ap.add_argument("--noise", type=float, default=0.02)
     ap.add_argument("--seed", type=int, default=5)
-    ap.add_argument("--scenes", nargs="*", default=list(SCENES))
+    ap.add_argument("--scenes", nargs="*", default=list(SCENES), help="synthetic scenes (bare: none)")
     ap.add_argument("--real", nargs="*", default=None, help="real sets to run (default none; bare: all)")
+    ap.add_argument("--halves", nargs="*", default=(), help="real sets whose halves to compare (default none)")
+    ap.add_argument("--splits", type=int, default=2, help="random half-splits per --halves set")
     args = ap.parse_args(argv)
     for name in args.scenes:
         print("\n".join(run_scene(name, SCENES[name], args.views, args.noise, args.seed)), "\n", flush=True)
+    for name in args.halves:
+        print("\n".join(run_halves(name, args.splits)), "\n", flush=True)
     for name in (REAL if args.real == [] else args.real or ()):
         print("\n".join(run_real(name)), "\n", flush=True)
     return 0
