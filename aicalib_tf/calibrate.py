@@ -122,10 +122,10 @@ def build_parser():
     ap.add_argument("--network", default=DETECTOR_NETWORK, help=NETWORK_HELP)
     ap.add_argument("--fix-k3", action="store_true", help="hold k3 at 0 (pinhole models; narrow lenses, few views)")
     ap.add_argument("--rational", action="store_true", help="the same as --model rational_polynomial")
-    ap.add_argument("--flex", choices=("off", "auto", "shape"), default="off",
-                    help="photos: auto solves the board's flex (a parabolic sag) with the camera and uses it shrunk "
-                         "towards flat by the noise of its estimate; shape does the same for each term of the board's "
-                         "shape (sag, twist, cubics) (default: %(default)s; see docs/calibration.md)")
+    ap.add_argument("--flex", choices=("off", "auto", "sag", "shape"), default="off",
+                    help="photos: auto (or shape) solves the board's shape (its sag, twist and S-bends, 7 terms) with "
+                         "the camera, each term shrunk towards flat by the noise of its estimate; sag does so for the "
+                         "parabolic sag alone (default: %(default)s; see docs/calibration.md)")
     ap.add_argument("--workers", type=int, default=None,
                     help="detection processes (default: one per core, but one per 8 images at most)")
     ap.add_argument("--resize-policy", default="error", choices=RESIZE_POLICIES,

@@ -5,7 +5,7 @@
 Corner sequences: a 640x480 plumb_bob lens (fx 500 px, k1 -0.25) sees a 9x6 board of 40 mm squares,
 flexed by w = (0.6·sag, 0.4·sag) squares (:mod:`aicalib_tf.geometry.board_flex`; sag = w_x + w_y, the
 centre against the grid's corners), in 20 poses 0.35-0.6 m away tilted up to 40°; corners get Gaussian
-noise (--noise px per axis). Each sequence is calibrated with the flex solved (``flex="auto"``) and with
+noise (--noise px per axis). Each sequence is calibrated with the flex solved (``flex="sag"``) and with
 the board taken as flat (``flex="off"``), plumb_bob forced.
 
 Rendered sequences (--rendered N per sag, N >= 3): cameras 0..N-1 of data_gen's ``calib`` preset (a
@@ -90,7 +90,7 @@ def corner_rows(sags, seeds: int, noise: float) -> list[str]:
         fits = []
         for seed in range(seeds):
             views = corner_sequence((SPLIT[0] * sag, SPLIT[1] * sag), noise, np.random.default_rng([seed, 47]))
-            on = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", square_unit="m", flex="auto")
+            on = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", square_unit="m", flex="sag")
             fits.append((on, calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="off"), 500.0))
         lines.append(sag_row(sag, fits))
         print(lines[-1], flush=True)
@@ -123,7 +123,7 @@ def rendered_rows(sags, n: int) -> list[str]:
         for cam in range(n):
             views, label = rendered_views(sag, cam, detect)
             sq, size, fx = label["square_size"], tuple(label["image_size"]), label["K"][0][0]
-            on = calibrate_camera(views, PATTERN, sq, size, square_unit="mm", flex="auto")
+            on = calibrate_camera(views, PATTERN, sq, size, square_unit="mm", flex="sag")
             off = calibrate_camera(views, PATTERN, sq, size, model=on.model, flex="off")
             fits.append((on, off, fx))
             print(f"  sag {sag:g} camera {cam}: {on.model}, sag {_sag(on):.4f}, fx {on.fx - fx:+.3f} ± "

@@ -7,7 +7,7 @@ Corner sequences as in ``benchmarks/board_flex.py``: a 640x480 plumb_bob lens (f
 (--noise px per axis). The board is shaped by one of :data:`SHAPES` (the terms of
 :mod:`aicalib_tf.geometry.board_shape`, squares): flat, the sag alone, a twist, and all seven terms.
 Each sequence is calibrated three ways, plumb_bob forced: the board flat (``flex="off"``), the sag
-(``flex="auto"``) and the shape (``flex="shape"``, each term shrunk by its leave-one-view-out noise,
+(``flex="sag"``) and the shape (``flex="auto"``, each term shrunk by its leave-one-view-out noise,
 :mod:`aicalib_tf.calib.board_shape`).
 
 Rendered sequences (--rendered N per shape, N >= 3): cameras 0..N-1 of data_gen's ``calib`` preset with
@@ -41,7 +41,7 @@ from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views  # noqa: E402
 # squares, in SHAPE_TERMS' order: sag_x, sag_y, twist, cubic_x, cubic_y, sag_x_by_y, sag_y_by_x
 SHAPES = {"flat": (0.0,) * 7, "sag": (0.006, 0.004, 0.0, 0.0, 0.0, 0.0, 0.0),
           "twist": (0.0, 0.0, 0.01, 0.0, 0.0, 0.0, 0.0), "full": (0.006, 0.004, 0.01, 0.004, -0.003, 0.002, 0.003)}
-FITS = (("off", "flat board"), ("auto", "sag (flex auto)"), ("shape", "shape"))
+FITS = (("off", "flat board"), ("sag", "sag"), ("auto", "shape (flex auto)"))
 HEADER = ["| shape | out-of-plane RMS, truth (squares) | solved (mean ± sd) | worst term error / SE | "
           "fx bias flat (px ± s.e.) | fx bias sag | fx bias shape | median σ_fx (shape) | shape bias / σ_fx |",
           "|---|---|---|---|---|---|---|---|---|"]
@@ -68,13 +68,13 @@ def term_errors(fits, truth) -> np.ndarray:
 def shape_row(name: str, truth, fits) -> str:
     """One table row: fits is a list of ({flex mode: Calibration}, true fx)."""
     rms_true = out_of_plane_rms(truth, np.zeros((7, 7)), PATTERN)[0]
-    shaped = [f["shape"] for f, _ in fits]
+    shaped = [f["auto"] for f, _ in fits]
     solved = [out_of_plane_rms(shape_of(c), np.zeros((7, 7)), PATTERN)[0] for c in shaped]
     worst = np.max(np.abs(term_errors(shaped, np.asarray(truth))))
     bias = {m: fx_bias([f[m].fx - fx for f, fx in fits], [f[m].std["fx"] for f, fx in fits]) for m, _ in FITS}
     b = lambda m: f"{bias[m]['mean']:+.3f} ± {bias[m]['se']:.3f}"  # noqa: E731
     return (f"| {name} | {rms_true:.4f} | {np.mean(solved):.4f} ± {np.std(solved):.4f} | {worst:.2f} | {b('off')} | "
-            f"{b('auto')} | {b('shape')} | {bias['shape']['sigma']:.3f} | {bias['shape']['ratio']:+.2f} |")
+            f"{b('sag')} | {b('auto')} | {bias['auto']['sigma']:.3f} | {bias['auto']['ratio']:+.2f} |")
 
 
 def corner_rows(names, seeds: int, noise: float) -> list[str]:
@@ -107,9 +107,9 @@ def rendered_rows(names, n: int) -> list[str]:
                      for k, hit in enumerate(detect(s.image) for s in samples) if hit is not None]
             label = samples[0].label
             sq, size, fx = label["square_size"], tuple(label["image_size"]), label["K"][0][0]
-            shape = calibrate_camera(views, PATTERN, sq, size, square_unit="mm", flex="shape")
-            cals = {m: calibrate_camera(views, PATTERN, sq, size, model=shape.model, flex=m) for m in ("off", "auto")}
-            fits.append(({**cals, "shape": shape}, fx))
+            shape = calibrate_camera(views, PATTERN, sq, size, square_unit="mm", flex="auto")
+            cals = {m: calibrate_camera(views, PATTERN, sq, size, model=shape.model, flex=m) for m in ("off", "sag")}
+            fits.append(({**cals, "auto": shape}, fx))
             print(f"  {name} camera {cam}: {shape.model}, fx {shape.fx - fx:+.3f} ± {shape.std['fx']:.3f} px shape, "
                   f"{cals['off'].fx - fx:+.3f} flat; {shape.flex_note or 'every term kept'}", flush=True)
         lines.append(shape_row(name, SHAPES[name], fits))

@@ -11,9 +11,9 @@ scored as there (rotation-fitted projection difference, median over the covered 
 
 - aicalib_tf, in process on the photos' detections (the calibrate command's CNN detector, each photo
   once), with the lens model ``auto`` chooses on all the photos held for every half:
-  flat (the default solve), ``flex="auto"`` (each half's sag shrunk towards flat by its leave-one-view-out
-  noise, :mod:`aicalib_tf.calib.flex_check`), the flex as solved in both
-  halves (its σ rule only) and ``flex="shape"`` (the board's 7-term shape, each term shrunk by its
+  flat (the default solve), "sag" (``flex="sag"``: each half's sag shrunk towards flat by its leave-one-view-out
+  noise, :mod:`aicalib_tf.calib.flex_check`), "flex" (the sag as solved in both
+  halves, its σ rule only) and "shape" (``flex="auto"``: the board's 7-term shape, each term shrunk by its
   leave-one-view-out noise, :mod:`aicalib_tf.calib.board_shape`; ``--shape-terms`` solves its first N terms,
   ``--shape-shrink-from`` sets the t up to which a term is 0); ``--modes`` runs a subset of these;
   and, for the flat halves, what their covariances predict for the difference
@@ -54,9 +54,9 @@ import real_repeatability as rr  # noqa: E402
 
 from aicalib_tf.calib import board_shape, weights  # noqa: E402
 
-OURS = ("flat", "auto", "flex", "shape")
-FLEX_COLUMNS = ("auto", "flex", "shape")
-FLEX_OPTION = {"flat": "off", "auto": "auto", "shape": "shape"}  # calibrate_camera's flex for a column
+OURS = ("flat", "sag", "flex", "shape")
+FLEX_COLUMNS = ("sag", "flex", "shape")
+FLEX_OPTION = {"flat": "off", "sag": "sag", "shape": "auto"}  # calibrate_camera's flex for a column
 CROSSED = ("flat_classic", "flat, classic corners")
 ANCHORS = (("cv_plumb_bob", "OpenCV 5-coef"), ("cv_rational", "OpenCV rational"), ("cv_fisheye", "OpenCV fisheye"),
            ("mrcal_opencv8", "mrcal OPENCV8"))
@@ -102,7 +102,7 @@ def _ours(views, halves, cfg, size, circle, model, modes=OURS) -> dict:
         for idx in halves:
             vs = [views[i] for i in idx if views[i] is not None]
             if mode == "flex":  # the flex as the solve keeps it (its σ rule), no test against its noise
-                fit = F._fit_model(model, vs, 1.0, size, None, False, False, SolveOptions(pattern, "auto", True))
+                fit = F._fit_model(model, vs, 1.0, size, None, False, False, SolveOptions(pattern, "sag", True))
                 cals.append(F._calibration(fit, vs, pattern, square, size, {}, "", None, (), circle))
             else:
                 cals.append(F.calibrate_camera(vs, pattern, square, size, model=model, image_circle=circle,

@@ -13,8 +13,8 @@ worst view goes at a time. At most a third of the views are rejected, never belo
 
 The fit is one least-squares bundle over all views (:mod:`aicalib_tf.calib.bundle`). Inside each
 solve (:mod:`aicalib_tf.calib.robust`) single outlying corners are rejected, corners are weighted by
-their views' ``sigmas``, and with ``flex="auto"`` the board's flex is solved and used, shrunk towards
-flat by the noise of its estimate (:mod:`aicalib_tf.calib.flex`). Starts: the
+their views' ``sigmas``, and with ``flex="auto"`` the board's shape is solved and used, shrunk towards
+flat by the noise of its estimate (:mod:`aicalib_tf.calib.board_shape`). Starts: the
 pinhole models from OpenCV's multi-start plumb_bob fit; the fisheye models (equidistant, ds, eucm) from a grid of focal lengths
 (:func:`~aicalib_tf.calib.starts.fisheye_start`), so fisheye lenses need no guess. ``model="auto"``
 picks the model by cross-validation over views (:mod:`aicalib_tf.calib.select`).
@@ -99,8 +99,8 @@ class Calibration:
     meta : free-form provenance (detector, model sha256, flags) kept in the JSON file.
     image_circle : a circular fisheye's :class:`~aicalib_tf.geometry.image_circle.ImageCircle`
     (px; estimated from the photos), or None when the photos fill the frame or it is unknown.
-    flex : (2,) the board flex (w_x, w_y) in squares (:mod:`aicalib_tf.calib.flex`), or (7,) the board shape's
-    terms (``flex="shape"``, :mod:`aicalib_tf.calib.board_shape`), or None when the board was taken as flat;
+    flex : (2,) the board flex (w_x, w_y) in squares (``flex="sag"``, :mod:`aicalib_tf.calib.flex`), or (7,) the
+    board shape's terms (``flex="auto"``, :mod:`aicalib_tf.calib.board_shape`), or None when the board was taken as flat;
     flex_covariance : (K, K) squares²; flex_note : why there is no flex ("" otherwise; for a shape, the terms
     taken as 0).
     rejected_corners : {view name: (K, 2) ids (col, row)} of single corners rejected inside the solve.
@@ -362,10 +362,10 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
     reject_outliers : drop views by the rule in the module docstring and refit.
     image_circle : a circular fisheye's image circle (:func:`~aicalib_tf.geometry.image_circle.estimate_image_circle`),
     kept in the Calibration; under ``auto`` a pinhole model is not eligible when the circle's rim lies
-    at or near 90° off-axis. flex : "auto" solves the board's flex with the camera and uses it shrunk
-    towards flat by the noise of its estimate, "shape" does the same for each term of the board's
-    shape beyond the sag (twist, cubics: :mod:`aicalib_tf.calib.board_shape`), "off" (default) takes the board
-    as flat (:mod:`aicalib_tf.calib.flex`; its cost and gain on real photos: docs/benchmark.md). reject_corners :
+    at or near 90° off-axis. flex : "auto" (or "shape") solves the board's shape (sag, twist, cubics:
+    :mod:`aicalib_tf.calib.board_shape`) with the camera and uses each term shrunk towards flat by the noise of
+    its estimate, "sag" does so for the parabolic sag alone (:mod:`aicalib_tf.calib.flex`), "off" (default)
+    takes the board as flat (their cost and gain on real photos: docs/benchmark.md). reject_corners :
     reject single outlying corners inside every solve (:mod:`aicalib_tf.calib.robust`); a view's
     ``sigmas`` weight its corners.
     Raises :class:`CalibrationError` with fewer than ``min_views`` usable views or when the model

@@ -7,7 +7,11 @@ One flex is shared by every view (one physical board); the bundle solves (w_x, w
 (:mod:`aicalib_tf.calib.bundle`). Here w is in squares; ``sag`` is the centre's offset against the
 corners of the grid, w_x + w_y, reported in squares and in the board's unit.
 
-Rule (``flex="auto"``): the flex is solved, and used when the views determine it: both standard
+Modes: ``flex="sag"`` solves this flex; ``"auto"`` (the same as ``"shape"``) the board's shape of
+:mod:`aicalib_tf.calib.board_shape`, whose first two terms are this flex and which repeats better on
+real photos (its measurements there); ``"off"`` takes the board as flat.
+
+Rule (``flex="sag"``): the flex is solved, and used when the views determine it: both standard
 deviations at most :data:`FLEX_SIGMA_MAX` squares (a quarter of :data:`FLEX_TYPICAL`, the sag of a
 printed board on a rigid backing that a flex must resolve: mrcal measures about 0.014 squares on a
 GoPro set) and |w| within :data:`FLEX_PLAUSIBLE`; then its sag is moved towards 0 by part of the noise
@@ -22,17 +26,17 @@ from __future__ import annotations
 import numpy as np
 
 from aicalib_tf.calib import board_shape
-from aicalib_tf.calib.board_shape import N_SHAPE_TERMS, SHAPE_MODE, shape_fields, shape_text
+from aicalib_tf.calib.board_shape import N_SHAPE_TERMS, SHAPE_MODE, SHAPE_MODES, shape_fields, shape_text
 from aicalib_tf.geometry.board_shape import shape_basis
 
-__all__ = ["FLEX_SIGMA_MAX", "FLEX_TYPICAL", "FLEX_PLAUSIBLE", "FLEX_MODES", "basis_of_views", "mode_terms",
-           "flex_problem",
-           "flex_line", "flex_dict"]
+__all__ = ["FLEX_SIGMA_MAX", "FLEX_TYPICAL", "FLEX_PLAUSIBLE", "FLEX_MODES", "SAG_MODE", "basis_of_views",
+           "mode_terms", "flex_problem", "flex_line", "flex_dict"]
 
 FLEX_TYPICAL = 0.02  # squares: the sag a flex must resolve (the benchmark's largest)
 FLEX_SIGMA_MAX = FLEX_TYPICAL / 4  # squares: the largest σ of a kept flex
 FLEX_PLAUSIBLE = 0.25  # squares: beyond this a "flex" is the lens model's misfit, not the board's
-FLEX_MODES = ("auto", "off", SHAPE_MODE)  # "shape": the board's shape beyond the sag (calib.board_shape)
+SAG_MODE = "sag"  # the two-term flex alone
+FLEX_MODES = ("auto", "off", SAG_MODE, SHAPE_MODE)  # auto = shape: the board's shape (calib.board_shape)
 
 
 def basis_of_views(views, pattern_size, n_terms: int = 2) -> tuple[list | None, str]:
@@ -48,9 +52,9 @@ def basis_of_views(views, pattern_size, n_terms: int = 2) -> tuple[list | None, 
 
 
 def mode_terms(mode: str) -> int:
-    """How many shape terms a flex mode solves: 2 (the sag) for "auto",
-    :data:`~aicalib_tf.calib.board_shape.N_SHAPE_TERMS` for "shape"."""
-    return board_shape.N_SHAPE_TERMS if mode == SHAPE_MODE else 2
+    """How many shape terms a flex mode solves: 2 (the sag) for "sag",
+    :data:`~aicalib_tf.calib.board_shape.N_SHAPE_TERMS` for "auto" and "shape"."""
+    return board_shape.N_SHAPE_TERMS if mode in SHAPE_MODES else 2
 
 
 def flex_problem(flex, covariance, unit: float = 1.0) -> str:
@@ -87,7 +91,7 @@ def flex_line(cal) -> str | None:
         return f"board flex: {note}" if note else None
     if len(flex) > 2:
         text = shape_text(flex, cal.flex_covariance, cal.pattern_size, float(cal.square_size), cal.square_unit)
-        return f"board shape: {text}" + (f"; {note}" if note else "")
+        return f"board flex: shape {text}" + (f"; {note}" if note else "")
     sag, sd = _sag(flex, cal.flex_covariance)
     s, unit = float(cal.square_size), cal.square_unit
     wx, wy = (float(v) for v in flex)

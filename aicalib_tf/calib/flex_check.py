@@ -52,11 +52,11 @@ SHRINK_TO = 4.0  # t from which the sag is used as solved
 
 
 def leave_one_out_sags(views, refit) -> np.ndarray:
-    """(V,) squares: the sag w_x + w_y of refit(views less view i, "auto") for each view i (0 where that
+    """(V,) squares: the sag w_x + w_y of refit(views less view i, "sag") for each view i (0 where that
     refit keeps no flex). refit(views, mode) -> BundleResult with a unit square; CalibrationError propagates."""
     sags = []
     for i in range(len(views)):
-        f = refit(views[:i] + views[i + 1:], "auto")
+        f = refit(views[:i] + views[i + 1:], "sag")
         sags.append(0.0 if f.flex is None else float(np.sum(f.flex)))
     return np.array(sags)
 
@@ -102,7 +102,7 @@ def sag_estimate(sag: float, sigma: float, loo=None, shrink_from: float = SHRINK
 def confirm_flex(fit, views, refit):
     """The fit with the flex of :func:`sag_estimate`: ``fit`` itself when it has no flex, else the views
     refitted with the board held at the estimate, or flat (``flex_note`` saying why) when it is 0.
-    refit(views, "auto" | "off" | (w_x, w_y) held) -> BundleResult (unit square); a board shape's fit goes to
+    refit(views, "sag" | "off" | (w_x, w_y) held) -> BundleResult (unit square); a board shape's fit goes to
     :func:`confirm_shape`."""
     if getattr(fit, "flex", None) is None:
         return fit

@@ -20,8 +20,8 @@ rule's of :mod:`aicalib_tf.calib.fit`: none of its corners is rejected), and at 
 :data:`MAX_CORNER_FRACTION` of all corners go, the worst first. The floor keeps the rule from cutting
 into a fit whose residuals are far below a detector's precision.
 
-Flex: see :mod:`aicalib_tf.calib.flex` (and :mod:`aicalib_tf.calib.board_shape` for ``flex="shape"``).
-With ``flex="auto"`` the flex is solved in every fit and,
+Flex: see :mod:`aicalib_tf.calib.flex` (``flex="sag"``) and :mod:`aicalib_tf.calib.board_shape`
+(``flex="auto"`` or ``"shape"``). The flex or shape is solved in every fit and,
 when the views do not determine it, the last fit is redone with a flat board.
 """
 
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aicalib_tf.calib.bundle import BundleResult, CalibrationError, bundle_adjust
-from aicalib_tf.calib.board_shape import SHAPE_MODE, shape_problem
+from aicalib_tf.calib.board_shape import SHAPE_MODES, shape_problem
 from aicalib_tf.calib.flex import FLEX_MODES, basis_of_views, flex_problem, mode_terms
 from aicalib_tf.calib.view_checks import MIN_VIEW_CORNERS
 from aicalib_tf.calib.weights import fit_sigmas, total_sigmas
@@ -54,8 +54,8 @@ class SolveOptions:
     """How a calibration solve treats corners and the board.
 
     pattern_size : (cols, rows) inner corners, needed to solve the flex (None: flat board).
-    flex : "auto" (solve it, keep it when determined), "shape" (the board's shape of
-    :mod:`aicalib_tf.calib.board_shape`) or "off". reject_corners : reject single corners.
+    flex : "auto" or "shape" (the board's shape of :mod:`aicalib_tf.calib.board_shape`), "sag" (the flex of
+    :mod:`aicalib_tf.calib.flex`: solve it, keep it when determined) or "off". reject_corners : reject single corners.
     flex_value : with flex "off", the board held flexed by this (w_x, w_y) squares, or shaped by these K
     shape terms, instead of flat (the estimate of :mod:`aicalib_tf.calib.flex_check`; needs ``pattern_size``),
     or None.
@@ -160,7 +160,7 @@ def solve(model: str, views, obj, px, intrinsics, poses, *, free, rank_strict: b
         seen.add(key)
         fit = _refit(fit, obj, px, free, sigmas, None if keep.all() else keep, basis, rank_strict)
     if basis is not None:
-        why = (shape_problem if options.flex == SHAPE_MODE else flex_problem)(fit.flex, fit.flex_covariance, unit)
+        why = (shape_problem if options.flex in SHAPE_MODES else flex_problem)(fit.flex, fit.flex_covariance, unit)
         if why:
             fit = _refit(fit, obj, px, free, sigmas, fit.inliers, None, rank_strict)
     return dataclasses.replace(fit, flex_note=why)

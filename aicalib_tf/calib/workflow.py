@@ -130,7 +130,7 @@ class CalibrateConfig(RunOptions):
     fix_k3: bool = False
     rational: bool = False
     resize_policy: str = "error"
-    flex: str = "off"  # the board's flex: "auto" solves it with the camera, shrunk towards flat by its noise
+    flex: str = "off"  # the board's shape: "auto" solves it with the camera, shrunk towards flat by its noise
 
 
 @dataclass

@@ -30,7 +30,7 @@ def _row(seed, flat, anchors, flex=None):
     row = {"seed": seed, "flat": {"median": flat}, "flat_classic": {"median": flat + 0.05},
            "predicted": {"median_covered": 0.2, "p10_covered": 0.05, "p90_covered": 0.4}}
     if flex is not None:
-        row.update(auto={"median": flex}, flex={"median": flex})
+        row.update(sag={"median": flex}, flex={"median": flex})
     row.update({k: {"median": v} for k, v in zip(("cv_plumb_bob", "cv_rational", "cv_fisheye"), anchors)})
     return row
 
@@ -43,7 +43,7 @@ def test_the_flex_columns_count_over_the_splits_that_ran_them():
     assert "flex ≤ the best anchor on 1 of 2 splits" in text
     assert "flat ≤ the best anchor on 1 of 6 splits" in text
     assert any("OpenCV 5-coef" in ln and "≤ it on 5 of 6" in ln for ln in lines)
-    assert any("aicalib_tf auto" in ln and "2 splits" in ln for ln in lines)
+    assert any("aicalib_tf sag" in ln and "2 splits" in ln for ln in lines)
 
 
 def test_the_shape_column_is_compared_with_flat_and_the_best_anchor_on_its_splits():

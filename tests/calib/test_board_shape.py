@@ -26,11 +26,11 @@ SHAPE = (0.006, 0.004, 0.01, 0.004, -0.003, 0.0, 0.003)  # squares: a twisted bo
 
 @pytest.fixture(scope="module")
 def shaped():
-    """(views, the shape fit, the flat fit) of 20 views of SHAPE, 0.2 px noise."""
+    """(views, the shape fit (flex "auto"), the flat fit) of 20 views of SHAPE, 0.2 px noise."""
     views = synthetic_views(PINHOLE, 20, 0.2, seed=np.random.default_rng([0, 47]), flex=SHAPE)
     fit = lambda mode: calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", square_unit="m",  # noqa: E731
                                         flex=mode)
-    return views, fit("shape"), fit("off")
+    return views, fit("auto"), fit("off")
 
 
 def test_a_twisted_board_is_recovered_and_the_focal_length_unbiased(shaped):
@@ -54,7 +54,7 @@ def test_the_shape_round_trips_through_camera_json_and_the_report_names_its_term
     np.testing.assert_array_equal(back.flex, cal.flex)
     np.testing.assert_array_equal(back.flex_covariance, cal.flex_covariance)
     line = flex_line(cal)
-    assert line.startswith("board shape: out of plane RMS") and "twist +0.01" in line
+    assert line.startswith("board flex: shape out of plane RMS") and "twist +0.01" in line
     bad = json.loads(to_json(cal))
     bad["board_flex"]["shape"] = bad["board_flex"]["shape"][:2]
     with pytest.raises(FieldError, match="board_flex.shape"):

@@ -40,7 +40,7 @@ def test_flex_basis_is_zero_on_the_grid_edges_and_one_at_the_centre():
 
 def test_flex_is_recovered_and_the_focal_length_unbiased():
     views = flexed_views(flex=(0.012, 0.006))
-    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", square_unit="m", flex="auto")
+    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", square_unit="m", flex="sag")
     sd = np.sqrt(np.diag(cal.flex_covariance))
     assert cal.flex_note == "" and sd.max() < FLEX_SIGMA_MAX
     np.testing.assert_allclose(cal.flex, [0.012, 0.006], atol=max(0.002, 3 * sd.max()))
@@ -56,14 +56,14 @@ def test_a_flex_the_views_cannot_determine_stays_off_and_says_why():
     assert flex_problem([0.01, 0.0], np.diag([0.001, 0.001]) ** 2) == ""
     assert "plausible" in flex_problem([0.6, 0.0], np.diag([0.001, 0.001]) ** 2)
     views = [View(v.name, v.corners, v.ids, relative=True) for v in flexed_views(8, flex=(0.01, 0.0))]
-    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="auto")
+    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="sag")
     assert cal.flex is None and "relative" in cal.flex_note
     assert solve_lines(cal)[-1].startswith("board flex: not solved")
 
 
 def test_a_flex_too_noisy_to_determine_is_left_off_in_the_fit_the_report_and_camera_json():
     views = flexed_views(6, noise=1.5, flex=(0.01, 0.0), seed=6)  # six views at 1.5 px: σ of the flex ≈ 0.01 squares
-    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="auto")
+    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="sag")
     flat = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="off")
     assert cal.flex is None and cal.flex_note.startswith("not determined by these views (σ")
     assert abs(cal.fx - flat.fx) < 1e-3 * flat.std["fx"]  # the fit is the flat one
@@ -77,7 +77,7 @@ def test_held_out_views_are_posed_on_the_board_the_fold_solved():
     # the model choice's folds: a held-out view posed on a flat board charged a flexed fit with its own flex
     # (12 views, sag 0.02 squares: held-out RMS 1.29x the in-sample RMS, against 1.05x on the fold's board)
     views = flexed_views(12, noise=0.1, flex=(0.012, 0.008), seed=8)
-    options = SolveOptions(PATTERN, "auto")
+    options = SolveOptions(PATTERN, "sag")
     fit = lambda vs, m, start: _fit_model(m, vs, 1.0, SIZE, start, False, True, options)  # noqa: E731
     full = fit(views, "plumb_bob", None)
     scores = fold_scores(views, 1.0, fit, "plumb_bob", full, PATTERN)
@@ -129,7 +129,7 @@ def test_per_corner_sigmas_weight_the_fit():
 
 def test_flex_round_trips_through_camera_json():
     cal = calibrate_camera(flexed_views(12, flex=(0.01, 0.0), seed=5), PATTERN, SQUARE, SIZE, model="plumb_bob",
-                           square_unit="m", flex="auto")
+                           square_unit="m", flex="sag")
     d = json.loads(to_json(cal))
     assert d["board_flex"]["wx"] == pytest.approx(cal.flex[0]) and d["board_flex"]["note"] == ""
     assert d["board_flex"]["sag_unit"] == pytest.approx(d["board_flex"]["sag"] * SQUARE)

@@ -28,7 +28,7 @@ def _wobbly_board(n: int, seed: int, spread: float = 0.01, noise: float = 0.05) 
 def test_a_small_flex_in_noisy_corners_is_kept_and_fx_unbiased():
     # sag 0.005 squares at 0.2 px: a flex dropped here leaves fx about 1.65σ off
     views = synthetic_views(PINHOLE, 20, 0.2, seed=np.random.default_rng([0, 47]), flex=(0.003, 0.002))
-    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="auto")
+    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="sag")
     flat = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="off")
     assert cal.flex is not None and cal.flex_note == ""
     assert abs(float(np.sum(cal.flex)) - 0.005) <= 0.002
@@ -36,7 +36,7 @@ def test_a_small_flex_in_noisy_corners_is_kept_and_fx_unbiased():
 
 
 def _calibrate_and_spy(views, monkeypatch):
-    """(calibrate_camera's flex="auto" Calibration, the (sag, SE) its estimate started from)."""
+    """(calibrate_camera's flex="sag" Calibration, the (sag, SE) its estimate started from)."""
     from aicalib_tf.calib import flex_check
 
     seen, inner = {}, flex_check.sag_estimate
@@ -47,7 +47,7 @@ def _calibrate_and_spy(views, monkeypatch):
         return out
 
     monkeypatch.setattr(flex_check, "sag_estimate", spy)
-    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="auto")
+    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="sag")
     return cal, seen["sag"], seen["se"]
 
 
@@ -71,7 +71,7 @@ def test_a_flat_boards_sag_stays_near_zero(monkeypatch):
 
 def test_a_flex_that_only_the_fits_own_sigma_believes_is_reported_with_the_views_spread(monkeypatch):
     views = _wobbly_board(12, seed=1)
-    fit = _fit_model("plumb_bob", views, 1.0, SIZE, None, options=SolveOptions(PATTERN, "auto"))
+    fit = _fit_model("plumb_bob", views, 1.0, SIZE, None, options=SolveOptions(PATTERN, "sag"))
     c = fit.flex_covariance
     sigma = np.sqrt(c[0, 0] + c[1, 1] + 2 * c[0, 1])
     assert fit.flex is not None and abs(np.sum(fit.flex)) > 5 * sigma
@@ -97,13 +97,13 @@ def test_the_estimate_on_given_numbers():
 
 def test_a_board_held_at_the_solved_flex_refits_to_the_same_camera():
     views = synthetic_views(PINHOLE, 8, 0.1, seed=3, flex=(0.01, 0.01))
-    free = _fit_model("plumb_bob", views, 1.0, SIZE, None, options=SolveOptions(PATTERN, "auto"))
+    free = _fit_model("plumb_bob", views, 1.0, SIZE, None, options=SolveOptions(PATTERN, "sag"))
     held = _fit_model("plumb_bob", views, 1.0, SIZE, None,
                       options=SolveOptions(PATTERN, "off", flex_value=tuple(free.flex)))
     assert held.flex is None
     np.testing.assert_allclose(held.intrinsics, free.intrinsics, rtol=1e-5, atol=1e-4)
     with pytest.raises(ValueError, match="flex_value"):
-        SolveOptions(PATTERN, "auto", flex_value=(0.01, 0.0))
+        SolveOptions(PATTERN, "sag", flex_value=(0.01, 0.0))
 
 
 def test_doctests():
