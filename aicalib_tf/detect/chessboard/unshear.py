@@ -47,6 +47,7 @@ __all__ = ["MAX_ANGLE", "MAX_STEP_RATIO", "lattice_axes", "is_sheared", "lattice
 
 MAX_ANGLE = 30.0  # degrees: a partial board whose axes meet at less than this is looked at again, unsheared
 MAX_STEP_RATIO = 2.5  # ... and so is one whose steps along its two axes differ more than this
+MIN_THICKNESS = 5.0  # px: ... and one whose lattice predicts a square thinner than this (the far squares of a tilted board)
 STEP = 12.0  # px: a square's side in the warped image (an upsampled board is blurred across: larger is worse)
 SIDE = 120.0  # px: the side of the square a texture sliver's outline is mapped onto (10×7 squares: 12×17 px)
 PAD = 0.4  # of the board's warped extent: margin around it (the outer squares and paper)
@@ -56,11 +57,13 @@ MIN_COHERENCE = 0.7  # energy-weighted orientation coherence of a sliver (0: no 
 MIN_ELONGATION = 3.0  # length / width of a sliver (from its second moments)
 MAX_SLIVERS = 2  # texture slivers looked at again
 CANDIDATE_REGIONS = 4  # high-energy regions, by summed energy, that may be one
+ENERGY_PASSES = 2  # the regions taken again without the brightest one while none is a sliver
 MIN_LENGTH = 150.0  # px: a shorter sliver holds no board the network could read once unsheared (10 squares of 15 px)
 MIN_LATTICE = 9  # corners of a partial board that a lattice is fitted to
 REFINE_STEP = 16.0  # px: a square's side in the view a found board's corners are refined on
 ROUNDS = 2  # searches per warp: the outline's, then the lattice of what it found
 MAX_PIXELS = 250_000  # the warped region's most pixels
+INTERPOLATION = cv2.INTER_CUBIC  # of the warp (bilinear leaves an enlarged sliver's squares blurrier)
 GRADIENT_SIDE = 800  # px: the texture's gradients are taken on the image reduced to this longer side at most
 ANALYSIS_SIDE = 320  # px: ... and smoothed and searched for slivers on blocks of them, this longer side at most
 
@@ -169,7 +172,10 @@ def texture_quads(gray: np.ndarray, most: int = MAX_SLIVERS) -> list[np.ndarray]
     gray : (H, W) float32. The regions where the smoothed gradient energy is at least ``ENERGY_SHARE``
     of its largest value are taken by their summed energy, the largest ``CANDIDATE_REGIONS`` only;
     a board's has coherent edges (``MIN_COHERENCE``), is ``MIN_ELONGATION`` times longer than wide
-    and ``MIN_LENGTH`` px long (a small patterned object beside it may hold the largest value).
+    and ``MIN_LENGTH`` px long (a small patterned object beside it may hold the largest value). When
+    none is and the largest value's region is no sliver (bold text, say, so bright that a thin board
+    beside it falls apart under that share), the regions are taken again with that one left out
+    (``ENERGY_PASSES``).
     """
     h, w = gray.shape
     f = max(1.0, max(w, h) / GRADIENT_SIDE)
@@ -181,21 +187,26 @@ def texture_quads(gray: np.ndarray, most: int = MAX_SLIVERS) -> list[np.ndarray]
         return []
     energy, coherence = _structure(np.asarray(small, np.float32), ENERGY_SIGMA / f, step)
     f *= step  # image px per px of the energy
-    top = float(energy.max())
-    if not top > 0:
-        return []
-    n, labels = cv2.connectedComponents((energy >= ENERGY_SHARE * top).astype(np.uint8), connectivity=8)
-    sums = np.bincount(labels.ravel(), weights=energy.ravel(), minlength=n)
-    sums[0] = 0.0  # the background
-    out = []
-    for lab in np.argsort(sums)[::-1][:min(CANDIDATE_REGIONS, n - 1)]:
-        yx = np.argwhere(labels == lab)
-        e, c = energy[yx[:, 0], yx[:, 1]], coherence[yx[:, 0], yx[:, 1]]
-        quad = _sliver(yx[:, ::-1], e, c, f)
-        if quad is not None:
-            out.append(quad)
-        if len(out) >= most:
+    out: list[np.ndarray] = []
+    for _ in range(ENERGY_PASSES):
+        top = float(energy.max())
+        if not top > 0:
             break
+        n, labels = cv2.connectedComponents((energy >= ENERGY_SHARE * top).astype(np.uint8), connectivity=8)
+        sums = np.bincount(labels.ravel(), weights=energy.ravel(), minlength=n)
+        sums[0] = 0.0  # the background
+        for lab in np.argsort(sums)[::-1][:min(CANDIDATE_REGIONS, n - 1)]:
+            yx = np.argwhere(labels == lab)
+            quad = _sliver(yx[:, ::-1], energy[yx[:, 0], yx[:, 1]], coherence[yx[:, 0], yx[:, 1]], f)
+            if quad is not None:
+                out.append(quad)
+            if len(out) >= most:
+                break
+        if out:
+            break
+        brightest = (labels == labels.flat[int(np.argmax(energy))]).astype(np.uint8)
+        reach = 2 * int(np.ceil(3 * ENERGY_SIGMA / f)) + 1  # and its smoothed halo
+        energy = np.where(cv2.dilate(brightest, np.ones((reach, reach), np.uint8)) > 0, 0.0, energy)
     return out
 
 
@@ -224,8 +235,8 @@ def warp(gray: np.ndarray, m: np.ndarray, size: tuple[int, int]) -> np.ndarray |
         return None
     g = np.asarray(gray, np.float32)
     if np.allclose(m[2], [0.0, 0.0, 1.0]):
-        return cv2.warpAffine(g, m[:2], size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    return cv2.warpPerspective(g, m, size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        return cv2.warpAffine(g, m[:2], size, flags=INTERPOLATION, borderMode=cv2.BORDER_REPLICATE)
+    return cv2.warpPerspective(g, m, size, flags=INTERPOLATION, borderMode=cv2.BORDER_REPLICATE)
 
 
 def from_warp(points: np.ndarray, m: np.ndarray) -> np.ndarray:
@@ -245,9 +256,31 @@ def candidate_maps(gray: np.ndarray, pattern_size: tuple[int, int], ids: np.ndar
     """
     if _spans(ids):
         _, u, v = lattice_axes(ids, corners)
-        got = lattice_map(ids, corners, pattern_size) if is_sheared(u, v) else None
+        thin = is_sheared(u, v) or thinnest_square(ids, corners) < MIN_THICKNESS
+        got = lattice_map(ids, corners, pattern_size) if thin else None
         return [] if got is None else [got]
     return [quad_map(q) for q in texture_quads(gray)]
+
+
+def thinnest_square(ids: np.ndarray, points: np.ndarray) -> float:
+    """The thickness (px) of the thinnest square a grid's lattice predicts about it.
+
+    ids (K, 2) int, points (K, 2) px: a grid. The homography of ids to points places the squares of
+    the grid's extent and one square beyond it on every side; a square's thickness is its area over
+    its longest side (its height across that side). Returns the least, or inf when no homography fits.
+    """
+    ij = np.asarray(ids, np.float64).reshape(-1, 2)
+    lat, _ = cv2.findHomography(ij, np.asarray(points, np.float64).reshape(-1, 2), 0)
+    if lat is None or not np.all(np.isfinite(lat)):
+        return float("inf")
+    lo, hi = ij.min(axis=0) - 1, ij.max(axis=0) + 1
+    c, r = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1))
+    g = cv2.perspectiveTransform(np.stack([c, r], -1).reshape(-1, 1, 2), lat).reshape(c.shape + (2,))
+    a, b = g[1:, :-1] - g[:-1, :-1], g[:-1, 1:] - g[:-1, :-1]  # the two sides at each square's first corner
+    d = g[1:, 1:] - g[:-1, :-1]
+    area = 0.5 * (np.abs(a[..., 0] * d[..., 1] - a[..., 1] * d[..., 0]) + np.abs(d[..., 0] * b[..., 1] - d[..., 1] * b[..., 0]))
+    side = np.maximum.reduce([np.linalg.norm(x, axis=-1) for x in (a, b, g[1:, 1:] - g[1:, :-1], g[1:, 1:] - g[:-1, 1:])])
+    return float((area / np.maximum(side, 1e-9)).min())
 
 
 def _spans(ids) -> bool:
