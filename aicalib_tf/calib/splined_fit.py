@@ -211,34 +211,42 @@ def misfit_note(fit, views) -> str | None:
             f"(z = {z:.1f} < {MISFIT_Z:g} over {k // 2} cells)")
 
 
-def _held_out_rms(model: str, obj, px, intr, poses, train: np.ndarray) -> float:
-    """px: fit on the views ``train`` (bool (V,)), the held-out views' RMS with those intrinsics."""
+def _held_out_rms(model: str, obj, px, intr, rvecs, tvecs, train: np.ndarray) -> tuple[float, BundleResult]:
+    """(px, the fit): fit on the views ``train`` (bool (V,)) from ``intr`` and their poses ``rvecs``,
+    ``tvecs`` ((T, 3) each, the train views'), the held-out views' RMS with those intrinsics (inf when one
+    cannot be posed)."""
     pick = lambda seq: [s for s, t in zip(seq, train) if t]  # noqa: E731
-    fit = bundle_adjust(model, pick(obj), pick(px), intr, np.asarray(poses[0])[train], np.asarray(poses[1])[train],
-                        covariance=False, strict=False, max_nfev=HELD_OUT_NFEV)
+    fit = bundle_adjust(model, pick(obj), pick(px), intr, rvecs, tvecs, covariance=False, strict=False,
+                        max_nfev=HELD_OUT_NFEV)
     lens = Lens.from_intrinsics(model, fit.intrinsics, (1, 1))
     sq, n = 0.0, 0
     for o, p, t in zip(obj, px, train):
         if not t:
             pose = solve_pose(lens, o, p)
             if pose is None or not np.isfinite(pose[2]):
-                return math.inf
+                return math.inf, fit
             sq, n = sq + pose[2] ** 2 * len(p), n + len(p)
-    return math.sqrt(sq / n)
+    return math.sqrt(sq / n), fit
 
 
 def _choose_smooth(base: Lens, layout, obj, px, poses) -> tuple[float, np.ndarray]:
     """(smoothness weight px per normalized unit, base k1..k4) with the lowest k-fold held-out RMS over
-    :data:`SMOOTH_REL` and :func:`_bases` (module docstring)."""
+    :data:`SMOOTH_REL` and :func:`_bases` (module docstring). Each fold's fit starts from its fit at the
+    previous, smoother, weight (a continuation: on 20 views of the 130° bump lens 571 evaluations in place
+    of 665 from the base, 10 s CPU in place of 12, the same choice)."""
     k = min(SMOOTH_FOLDS, len(px))
     folds = [np.arange(len(px)) % k != f for f in range(k)]
     best = None
     for cand in _bases(base, px):
-        mine = None
+        mine, warm = None, None
         for s in SMOOTH_REL:  # the smoothest first: it keeps a tie
             model = splined_name(*layout, s * base.fx)
-            intr = spline_start(base, model, px, cand.dist)
-            score = float(np.mean([_held_out_rms(model, obj, px, intr, poses, train) for train in folds]))
+            if warm is None:
+                intr = spline_start(base, model, px, cand.dist)
+                warm = [(intr, np.asarray(poses[0])[t], np.asarray(poses[1])[t]) for t in folds]
+            scored = [_held_out_rms(model, obj, px, *w, t) for w, t in zip(warm, folds)]
+            warm = [(f.intrinsics, f.rvecs, f.tvecs) for _, f in scored]
+            score = float(np.mean([r for r, _ in scored]))
             if mine is None or score < 0.99 * mine:
                 mine = score
                 if best is None or score < 0.99 * best[0]:
