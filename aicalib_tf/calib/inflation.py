@@ -54,16 +54,15 @@ def view_terms(cal, views, lens: L.Lens, frame_basis) -> tuple[list[np.ndarray],
     residuals with its pose's 6 directions projected out, and the residual variance over the
     degrees of freedom (2N − n − 6V).
 
-    views : View objects holding the used ones (matched by name to ``cal.views``); frame_basis :
-    :func:`aicalib_tf.calib.quality._frame_basis` (points, distance 1: the pose's rotation and
-    translation). Raises ValueError when a used view is missing."""
+    views : View objects holding the used ones (matched by name to ``cal.views``; a used view not among
+    them is left out); frame_basis : :func:`aicalib_tf.calib.quality._frame_basis` (points, distance 1:
+    the pose's rotation and translation)."""
     by_name = {v.name: v for v in views}
-    missing = [n for n in cal.views if n not in by_name]
-    if missing:
-        raise ValueError(f"views missing for the view inflation: {missing[:5]}")
     n = 4 + lens.dist.size
     Js, rs, sq, rows = [], [], 0.0, 0
     for name, rvec, tvec in zip(cal.views, cal.rvecs, cal.tvecs):
+        if name not in by_name:
+            continue
         obj, px = _kept_points(cal, by_name[name])
         P = obj @ cv2.Rodrigues(np.asarray(rvec, np.float64))[0].T + np.asarray(tvec, np.float64).ravel()
         uv = lens.project(P)
