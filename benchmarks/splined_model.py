@@ -1,13 +1,17 @@
 """The splined lens model against the parametric ones: held-out error on lenses no parametric model holds.
 
-    .venv/bin/python benchmarks/splined_model.py [--views 20] [--noise 0.02] [--real]
+    .venv/bin/python benchmarks/splined_model.py [--views 20] [--noise 0.02] [--auto-from N] [--scenes ...]
+        [--halves SET ...] [--splits 2] [--real ...]
 
 Synthetic scenes: a lens that none of the parametric models holds exactly (a wide rational lens or a
-~190° Kannala-Brandt fisheye, each with a local bump of 0.6 px in the image: a lens element's flaw),
+~190° Kannala-Brandt fisheye, each with a local bump of 0.6 px in the image: a lens element's flaw), and
+the fisheye without its bump (equidistant holds it: ``auto`` should not choose the spline),
 ``--views`` boards of 9x6 corners with ``--noise`` px (1σ per axis). Each model is fitted to the even
 views; the odd views are posed with those intrinsics held fixed and their RMS is the held-out error.
 The projection error is against the true lens over the corners of every view (a rotation fitted
 out), px. Then ``calibrate_camera(model="auto")`` on all views shows what the model choice keeps.
+
+``--auto-from N``: that ``auto`` run tries the spline from N views (the library's threshold otherwise).
 
 ``--halves SET ...``: real photos (``opencv_left``, ``udacity_lane_cal``, ``ocam_fisheye`` in
 ``../shared/data``; ocam has no licence: read in place) detected once each as ``real_split_noise.py`` does
@@ -25,6 +29,7 @@ place, never copied), printing the model-choice table (the spline's row included
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import subprocess
 import sys
@@ -72,6 +77,8 @@ SCENES = {
                                             [0.35, 0.05, 1e-3, -8e-4, 0.0, 0.72, 0.14, 0.01], (640, 480)), (470, 150)),
     "KB 190° + bump": BumpLens(L.Lens("equidistant", [[300.0, 0, 641.0], [0, 300.5, 479.0], [0, 0, 1]],
                                       [0.03, -0.012, 0.004, -0.0008], (1280, 960)), (900, 330)),
+    "KB 190°": BumpLens(L.Lens("equidistant", [[300.0, 0, 641.0], [0, 300.5, 479.0], [0, 0, 1]],
+                               [0.03, -0.012, 0.004, -0.0008], (1280, 960)), (900, 330), amp=(0.0, 0.0)),
 }
 
 
@@ -117,7 +124,7 @@ def projection_error(lens, truth, views) -> tuple[float, float]:
     return float(np.nanmedian(err)), float(np.nanpercentile(err, 95))
 
 
-def run_scene(name, truth, n, noise, seed) -> list[str]:
+def run_scene(name, truth, n, noise, seed, auto_from=None) -> list[str]:
     views = render(truth, n, noise, np.random.default_rng(seed))
     train, test = views[0::2], views[1::2]
     out = [f"## {name}: {n} views, noise {noise} px; fit on {len(train)}, held out {len(test)}",
@@ -135,9 +142,12 @@ def run_scene(name, truth, n, noise, seed) -> list[str]:
         out.append(f"| {label} | {4 + cal.dist.size} | {cal.rms:.4f} | {held_out(cal.lens, test):.4f} | "
                    f"{med:.3f} / {p95:.3f} | {time.time() - t:.0f} |")
     t = time.time()
-    cal = calibrate_camera(views, PATTERN, SQUARE, truth.image_size)
+    with auto_spline_from(auto_from):
+        cal = calibrate_camera(views, PATTERN, SQUARE, truth.image_size)
     rows = ", ".join(f"{r['model']} {r['cv_rms']:.4f}" for r in cal.model_table if np.isfinite(r["cv_rms"]))
-    out.append(f"\nauto on all {n} views: **{cal.model}** ({time.time() - t:.0f} s); held-out RMS by model: {rows}")
+    med, p95 = projection_error(cal.lens, truth, views)
+    out.append(f"\nauto on all {n} views: **{cal.model}** ({time.time() - t:.0f} s; projection error {med:.3f} / "
+               f"{p95:.3f} px); held-out RMS by model: {rows}")
     return out
 
 
@@ -160,6 +170,19 @@ def run_real(name) -> list[str]:
     return out
 
 
+@contextlib.contextmanager
+def auto_spline_from(n_views):
+    """``auto`` tries the spline from ``n_views`` views (None: the library's threshold) inside the block."""
+    from aicalib_tf.calib import select
+
+    keep = select.AUTO_SPLINE_VIEWS
+    select.AUTO_SPLINE_VIEWS = keep if n_views is None else n_views
+    try:
+        yield
+    finally:
+        select.AUTO_SPLINE_VIEWS = keep
+
+
 def half_splits(n: int, n_random: int) -> dict:
     """{name: (first indices, second indices)}: even/odd, first/second and ``n_random`` random splits."""
     import real_split_noise as rsn
@@ -173,14 +196,10 @@ def half_splits(n: int, n_random: int) -> dict:
 def _half_cal(vs, cfg, size, circle, model):
     from aicalib_tf.calib import select
 
-    if model != "auto10":
+    if model != "auto_min":
         return calibrate_camera(vs, cfg[0], 1.0, size, model=model, image_circle=circle)
-    keep = select.AUTO_SPLINE_VIEWS
-    select.AUTO_SPLINE_VIEWS = MIN_VIEWS
-    try:
+    with auto_spline_from(MIN_VIEWS):
         return calibrate_camera(vs, cfg[0], 1.0, size, image_circle=circle)
-    finally:
-        select.AUTO_SPLINE_VIEWS = keep
 
 
 def _halves_diff(cals, grid) -> tuple[np.ndarray, np.ndarray]:
@@ -211,7 +230,7 @@ def run_halves(name, n_random) -> list[str]:
            "spline's cells | s |", "|---|---|---|---|---|---|---|"]
     for split, halves in half_splits(len(files), n_random).items():
         cells, diffs, t = [], {}, time.time()
-        for m in (model, "splined_equidistant", "auto10"):
+        for m in (model, "splined_equidistant", "auto_min"):
             try:
                 cals = [_half_cal([views[i] for i in h if views[i] is not None], cfg, size, circle, m) for h in halves]
                 diffs[m] = _halves_diff(cals, rr.GRID)
@@ -219,7 +238,7 @@ def run_halves(name, n_random) -> list[str]:
                 cells.append(f"refused: {str(exc)[:60]}")
                 continue
             d, cov = diffs[m]
-            chose = "" if m != "auto10" else " (" + ", ".join(c.model.split("_nx")[0] for c in cals) + ")"
+            chose = "" if m != "auto_min" else " (" + ", ".join(c.model.split("_nx")[0] for c in cals) + ")"
             cells.append(f"{np.nanmedian(d[cov]):.3f} ({np.isfinite(d[cov]).sum()}/{cov.sum()}){chose}")
         same = "-"
         if model in diffs and "splined_equidistant" in diffs:
@@ -238,11 +257,14 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=5)
     ap.add_argument("--scenes", nargs="*", default=list(SCENES), help="synthetic scenes (bare: none)")
     ap.add_argument("--real", nargs="*", default=None, help="real sets to run (default none; bare: all)")
+    ap.add_argument("--auto-from", type=int, default=None, help="views from which auto tries the spline "
+                    "(default: the library's AUTO_SPLINE_VIEWS)")
     ap.add_argument("--halves", nargs="*", default=(), help="real sets whose halves to compare (default none)")
     ap.add_argument("--splits", type=int, default=2, help="random half-splits per --halves set")
     args = ap.parse_args(argv)
     for name in args.scenes:
-        print("\n".join(run_scene(name, SCENES[name], args.views, args.noise, args.seed)), "\n", flush=True)
+        print("\n".join(run_scene(name, SCENES[name], args.views, args.noise, args.seed, args.auto_from)), "\n",
+              flush=True)
     for name in args.halves:
         print("\n".join(run_halves(name, args.splits)), "\n", flush=True)
     for name in (REAL if args.real == [] else args.real or ()):
