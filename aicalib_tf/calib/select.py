@@ -102,9 +102,9 @@ MAX_FOLDS = 5
 MIN_CV_VIEWS = 4  # every fold then leaves at least 3 views to fit
 # the fewest views with which the choice tries a spline. From 10 views it won held-out and the true projection
 # on a 130° lens with a bump (0.06 px median against equidistant's 0.37), won held-out and lost the true
-# projection on a 190° fisheye with a bump (0.076 against 0.052 px); on the real sets' halves (6-9 photos) it
-# lost held-out to the parametric model in every half (benchmarks/splined_model.py --halves), and a test's
-# 13 partial views of a pinhole lens would spend 21 s CPU on it
+# projection on a 190° fisheye with a bump (0.076 against 0.052 px); on the real sets' halves (6-9 photos)
+# the choice trying it from 6 views kept the parametric model in every half (no residual pattern, or a lost
+# held-out: benchmarks/splined_model.py --halves), and a test's 13 partial views would spend 21 s CPU on it
 AUTO_SPLINE_VIEWS = 20
 RAY_MARGIN_DEG = 5.0  # a model must image rays this far beyond the widest reached (pinholes: below 85°)
 WIDE_REACH_DEG = 70.0  # from this reach on, a pinhole needs a clear held-out margin over the wide models
