@@ -29,7 +29,8 @@ per normalized unit of each control grid's second differences along x, along y a
 mixed difference: a thin plate's bending energy), ``RIDGE`` × smooth per unit of each value, and
 ``GAUGE`` px per unit of each grid's affine part (the least-squares fit of a + b·x + c·y to its
 control values: a spline with affine control values is that affine map, which K and the poses hold
-already; without these rows the fit would drift along them).
+already; without these rows the fit would drift along them). The fit sees them through their QR factor
+(the same cost in n rows; :meth:`SplinedModel._prior_matrix` has them one by one).
 """
 
 from __future__ import annotations
