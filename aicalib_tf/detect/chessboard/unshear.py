@@ -5,16 +5,20 @@ and its squares become slivers; the corner network misses X-junctions that sharp
 it finds crosses at 18° or more). A warp that makes the board's axes perpendicular with equal
 steps turns those slivers back into squares of the network's range. So when the full-size search
 gives no complete board (:func:`aicalib_tf.detect.pipeline.detect_corners`), the board's axes are
-estimated from what the search did find, the region is warped (bilinear) and searched again, and a
-complete board found there is mapped back (:func:`second_look`). Two kinds of evidence:
+estimated from what the search did find, the region is warped (bicubic: bilinear leaves the
+enlarged slivers blurrier) and searched again, and a complete board found there is mapped back
+(:func:`second_look`). Two kinds of evidence:
 
-* a partial board (corners with ids) whose axes meet at under ``MAX_ANGLE`` or whose steps differ
-  by more than ``MAX_STEP_RATIO``: the homography of its ids to its corners (:func:`lattice_map`);
+* a partial board (corners with ids) whose axes meet at under ``MAX_ANGLE``, whose steps differ
+  by more than ``MAX_STEP_RATIO``, or whose lattice predicts a square thinner than
+  ``MIN_THICKNESS`` px next to it (:func:`thinnest_square`: the far rows of a board tilted along one
+  axis): the homography of its ids to its corners (:func:`lattice_map`);
 * a sliver of texture (:func:`texture_quads`): the network may find no corner at all on the board,
   but its many nearly parallel edges stand out. The image's gradient energy, smoothed, has a
   connected region whose edges are nearly all of one orientation (coherence at least
   ``MIN_COHERENCE``), ``MIN_ELONGATION`` times longer than wide and ``MIN_LENGTH`` px long: a
-  board seen nearly edge-on. Its outline, a parallelogram, is mapped onto a square (an affine
+  board seen nearly edge-on (sought again without the brightest region when bold text outshines
+  it, ``ENERGY_PASSES``). Its outline, a parallelogram, is mapped onto a square (an affine
   map, :func:`quad_map`). That leaves the board's perspective, so a part of the board found there
   is fitted again by its lattice's homography and searched once more (``ROUNDS``).
 
@@ -24,10 +28,10 @@ fit fails at most junctions that sharp. A search that leaves a few of the board'
 each where the found corners' homography predicts it and only where the view shows a junction there
 (:mod:`aicalib_tf.detect.chessboard.unshear_fill`).
 
-On evaluate's tilt-steep (seed 41, 40 images) this finds 5 more full boards (33 -> 38; a held-out
-seed, 80 images: 63 -> 74), on tilt60 (100) 1 more, none wrong; it costs about 8 ms on a
-board-free 640×480 frame (the texture analysis) and a search of a 200–300 px warp where a sliver
-is found.
+Steep tilts (tilt-steep, 55–80°, 100 images a seed): 99, 98 of 100 on the seeds it was tuned on (41, 97),
+100, 100, 100, 98 on others (211, 307, 401, 503), none wrong; the misses are a board under text and
+boards whose far squares are 1.2–1.5 px thick. On a board-free 640×480 frame it costs about 9 ms (the texture analysis, a
+second pass of it included) and a search of a 200–300 px warp where a sliver is found.
 
 Coordinates are (x, y) px, OpenCV's convention: the centre of pixel (0, 0) is at (0.0, 0.0), and
 ``cv2.warpAffine`` / ``cv2.warpPerspective`` sample the image at M⁻¹ (x', y') for the pixel centre
@@ -192,11 +196,12 @@ def texture_quads(gray: np.ndarray, most: int = MAX_SLIVERS) -> list[np.ndarray]
         top = float(energy.max())
         if not top > 0:
             break
-        n, labels = cv2.connectedComponents((energy >= ENERGY_SHARE * top).astype(np.uint8), connectivity=8)
+        n, labels, boxes, _ = cv2.connectedComponentsWithStats((energy >= ENERGY_SHARE * top).astype(np.uint8), connectivity=8)
         sums = np.bincount(labels.ravel(), weights=energy.ravel(), minlength=n)
         sums[0] = 0.0  # the background
         for lab in np.argsort(sums)[::-1][:min(CANDIDATE_REGIONS, n - 1)]:
-            yx = np.argwhere(labels == lab)
+            x, y, bw, bh = boxes[lab, :4]
+            yx = np.argwhere(labels[y:y + bh, x:x + bw] == lab) + [y, x]
             quad = _sliver(yx[:, ::-1], energy[yx[:, 0], yx[:, 1]], coherence[yx[:, 0], yx[:, 1]], f)
             if quad is not None:
                 out.append(quad)
