@@ -28,10 +28,11 @@ fit fails at most junctions that sharp. A search that leaves a few of the board'
 each where the found corners' homography predicts it and only where the view shows a junction there
 (:mod:`aicalib_tf.detect.chessboard.unshear_fill`).
 
-Steep tilts (tilt-steep, 55–80°, 100 images a seed): 99, 98 of 100 on the seeds it was tuned on (41, 97),
-100, 100, 100, 98 on others (211, 307, 401, 503), none wrong; the misses are a board under text and
-boards whose far squares are 1.2–1.5 px thick. On a board-free 640×480 frame it costs about 9 ms (the texture analysis, a
-second pass of it included) and a search of a 200–300 px warp where a sliver is found.
+Steep tilts (tilt-steep, 55–80°, 100 images a seed): 99 and 98 of 100 on the seeds it was tuned
+on (41, 97), 100, 100, 100 and 98 on others (211, 307, 401, 503), none wrong; the misses are a board
+under text and boards whose far squares are 1.2–1.5 px thick. On a board-free 640×480 frame it costs
+about 9 ms (the texture analysis, its second pass included) and a search of a 200–300 px warp where
+a sliver is found.
 
 Coordinates are (x, y) px, OpenCV's convention: the centre of pixel (0, 0) is at (0.0, 0.0), and
 ``cv2.warpAffine`` / ``cv2.warpPerspective`` sample the image at M⁻¹ (x', y') for the pixel centre
