@@ -7,7 +7,8 @@ CNN peak gives) and the error after refinement is measured, per condition: clean
 lens blur) and Gaussian noise σ = 10, 20 and 40 grey levels on top of it; with --shading also
 evaluate's ``shading`` condition (illumination gradient and a hard shadow). "windowed" is the
 detector's own refinement (:func:`aicalib_tf.detect.corners.refine.refine_windowed`: the window sized to the
-squares, and the shadow-robust fit where the window is not point-symmetric).
+squares, and the shadow-robust fit where the window is not point-symmetric); "windowed + polish" adds
+the ramp fit the detector ends with (:func:`aicalib_tf.detect.corners.refine.polish`).
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import numpy as np
 
 from aicalib_tf.detect.corners.junctions import nearest_spacing
 from aicalib_tf.bench.metrics import corner_error_stats
-from aicalib_tf.detect.corners.refine import Smoothed, refine_saddle, refine_subpix, refine_windowed
+from aicalib_tf.detect.corners.refine import Smoothed, polish, refine_saddle, refine_subpix, refine_windowed
 from data_gen import make_sample
 from data_gen.presets import Rule, get_preset
 
@@ -31,7 +32,14 @@ REFINERS = {
     "cornerSubPix hw3": lambda g, p: refine_subpix(g, p, half_window=3),
     "cornerSubPix hw5": lambda g, p: refine_subpix(g, p, half_window=5),
     "windowed": lambda g, p: refine_windowed(Smoothed(g), p, nearest_spacing(p)),
+    "windowed + polish": lambda g, p: _polished(Smoothed(g), p),
 }
+
+
+def _polished(smoothed, p):
+    """The detector's last step on a board's corners: :func:`refine_windowed`, then :func:`polish`."""
+    out, ok = refine_windowed(smoothed, p, nearest_spacing(p))
+    return polish(smoothed, out, nearest_spacing(p)), ok
 
 
 def condition(noise: float):
