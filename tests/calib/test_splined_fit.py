@@ -99,3 +99,35 @@ def test_a_start_that_bends_back_near_the_corners_gives_a_fitted_and_a_plain_bas
     good = L.Lens("equidistant", WIDE.K, [0.01, -0.002, 0.0, 0.0], WIDE.image_size)
     (only,) = _bases(good, [good.project(rays)])
     np.testing.assert_array_equal(only.dist, good.dist)
+
+
+class _Bumped:
+    """A lens plus a local 1.2 px displacement (σ 80 px at (900, 330)): no parametric model holds it."""
+
+    def __init__(self, lens):
+        self.lens, self.image_size = lens, lens.image_size
+
+    def project(self, P):
+        q = self.lens.project(P)
+        g = np.exp(-np.sum((q - (900.0, 330.0)) ** 2, axis=-1) / (2 * 80.0 ** 2))
+        return q + g[..., None] * np.array([1.0, -0.6])
+
+    def unproject(self, q):
+        return self.lens.unproject(q)
+
+
+def test_the_folds_keep_the_smoothest_spline_unless_the_lens_asks_for_less():
+    from aicalib_tf.calib.splined_fit import SMOOTH_REL
+    from aicalib_tf.geometry.lens import get_model
+
+    kb = L.Lens("equidistant", [[300.0, 0, 641.0], [0, 300.5, 479.0], [0, 0, 1]], [0.03, -0.012, 0.004, -0.0008],
+                (1280, 960))
+    smooth = lambda cal: get_model(cal.model).smooth / cal.lens.fx  # noqa: E731
+    # 8 views of a lens equidistant holds: less smoothing only fits the noise
+    plain = fit_views(synthetic_views(kb, 8, 0.05, seed=1), PATTERN, SQUARE, kb.image_size, "splined_equidistant")
+    assert smooth(plain) == pytest.approx(SMOOTH_REL[0], rel=0.02)
+    # with a bump the boards saw, the held-out views ask for a bendier spline
+    views = synthetic_views(_Bumped(kb), 8, 0.02, seed=2)
+    bumped = fit_views(views, PATTERN, SQUARE, kb.image_size, "splined_equidistant")
+    assert smooth(bumped) < 0.5 * SMOOTH_REL[0]
+    assert bumped.rms < fit_views(views, PATTERN, SQUARE, kb.image_size, "equidistant").rms
