@@ -22,7 +22,7 @@ covariance is the fit's scaled to the SE's. Reported: the coefficients with thei
 Measured (random half-splits of each real set, ``benchmarks/real_split_noise.py``; geometric mean of
 the halves' projection difference, 90% interval over the splits): against the sag alone
 (``flex="sag"``) 1.04 (0.97-1.12) on OpenCV's left photos (150 splits), 0.80 (0.69-0.92) on the bent
-udacity board (48) and, held out while the rule was chosen, 0.83 (0.79-0.88) on the 185° fisheye (48);
+udacity board (48) and, held out while the rule was chosen, 0.85 (0.83-0.88) on the 185° fisheye (96);
 against a flat board 1.43 (1.25-1.63), 0.32 (0.25-0.40) and 1.00 (0.92-1.07, 96 splits). So
 ``flex="auto"`` solves the shape, and a flat board stays the default: halves of 6-8 views of a nearly
 flat board cannot tell its shape from noise. Tried on the first two sets (48 splits) and not kept: three
