@@ -43,15 +43,10 @@ percentile over median) and a few hinges (the detector's own error floor on clea
 noise, strongly bent lines, a blur that reaches the neighbouring squares: (edge width / spacing)² beyond
 :data:`aicalib_tf.detect.corners.sigma_kernels.SPREAD_KNOT`), the median edge width, the flat noise over the contrast, window over flat noise,
 blockiness and the median smoothed/raw asymmetry. Each corner's: its excess over the board's
-median of each feature, a hinge on its own asymmetry (a window with more than noise in it, such
-as an object's edge, pulls the saddle in proportion), and its own blur reach: (its edge width / its own
-spacing)² beyond the same knot, alone and on the board's rim (:func:`aicalib_tf.detect.corners.sigma_kernels.on_rim`:
-the first or last row or column of its ids). Under perspective the smaller squares are reached first, and
-one square beyond a rim corner the pattern ends, so a blur reaching that far pulls the rim's saddles.
-log σ = c₀ + Σ cₖ xₖ, x the columns of :func:`design` clipped to [``LOW``, ``HIGH``], the
-range they took in fitting (0.1th to 99.9th percentiles; window over flat noise and JPEG blockiness
-unbounded, ±1000, so that a harsher compression than any fitted still raises σ); σ px is one standard
-deviation per axis (isotropic).
+median of each feature, and a hinge on its own asymmetry (a window with more than noise in it, such
+as an object's edge, pulls the saddle in proportion). log σ = c₀ + Σ cₖ xₖ, x the columns of :func:`design` clipped to [``LOW``, ``HIGH``], the
+range they took in fitting (0.1th to 99.9th percentiles); σ px is one standard deviation per axis
+(isotropic).
 
 ``COEFFS``, ``LOW`` and ``HIGH`` were fitted on rendered boards with exact truth (data_gen renders of
 the benchmark's sweeps and named conditions with other seeds than the benchmark's): the corner's
@@ -82,19 +77,18 @@ COLUMNS = ("noise/contrast", "residual/contrast", "impulsive noise", "bend/spaci
            "window/flat noise", "JPEG blockiness", "smoothed/raw asymmetry", "blur reach hinge",  # the board's
            "Δ noise/contrast", "Δ own asymmetry", "Δ residual/contrast", "Δ own impulsiveness", "Δ bend/spacing",
            "Δ score", "Δ curvature/contrast", "Δ bend hinge²", "Δ smoothed/raw asymmetry",
-           "Δ own asymmetry hinge", "Δ own blur reach hinge", "Δ rim blur reach hinge")  # each corner's excess over the
-# board's median
+           "Δ own asymmetry hinge")  # each corner's excess over the board's median
 BOARD_COLUMNS = _BOARD_COLUMNS
 # log σ = COEFFS[0] + Σ COEFFS[1 + k] · clip(design[:, k], LOW[k], HIGH[k]); refit: python benchmarks/corner_sigma.py --fit
-COEFFS = np.array([0.834, 0.671, 0.127, 0.318, 0.047, 0.258, 0.027, -0.466, -0.209, 0.034, 0.145, 0.013, 0.743, 0.061,
-                   -0.161, -0.438, 0.399, 0.272, 0.449, 1.711, 0.051, 0.829, 0.427, -0.073, 0.382, 0.029, -0.042,
-                   -0.403, 0.134, 0.410, 1.064, 7.603, 5.762])
-LOW = np.array([-5.009, -2.331, 0.201, -5.891, -0.625, 1.069, -1.899, 1.622, 0.000, 0.012, 0.033, 0.000, -0.215, 0.000,
-                -0.506, -5.474, -1000.000, -1000.000, -1.282, 0.000, -0.424, -1.582, -0.578, -0.734, -3.436, -2.944,
-                -0.546, -1.547, -0.861, 0.000, -0.037, 0.000])
-HIGH = np.array([-1.034, -0.231, 1.360, -0.912, -0.008, 25.089, -1.018, 4.582, 4.358, 0.815, 0.837, 0.584, 0.086,
-                 1.509, 1.712, -0.000, 1000.000, 1000.000, -0.301, 0.124, 0.595, 1.383, 0.492, 1.202, 1.032, 0.290,
-                 0.679, 1.524, 0.679, 0.883, 0.065, 0.094])
+COEFFS = np.array([1.059, 0.696, 0.166, 0.346, 0.042, 0.341, 0.035, -0.414, -0.217, 0.052, 0.036, 0.016, 0.642, 0.007,
+                   -0.208, -0.405, 0.408, 0.288, 0.395, 1.792, 5.711, 0.882, 0.425, -0.035, 0.375, 0.030, -0.056,
+                   -0.371, 0.140, 0.418, 1.090])
+LOW = np.array([-5.009, -2.331, 0.201, -5.891, -0.625, 1.061, -1.899, 1.622, 0.000, 0.012, 0.033, 0.000, -0.215, 0.000,
+                -0.506, -5.474, -2.043, -0.406, -1.282, 0.000, -0.424, -1.582, -0.578, -0.734, -3.436, -2.944, -0.546,
+                -1.467, -0.861, 0.000])
+HIGH = np.array([-1.030, -0.231, 1.360, -0.912, -0.008, 25.089, -1.018, 4.582, 4.358, 0.815, 0.837, 0.584, 0.086,
+                 1.509, 1.712, -0.000, 3.460, 1.110, -0.301, 0.124, 0.595, 1.355, 0.492, 1.202, 1.031, 0.290, 0.679,
+                 1.518, 0.692, 0.855])
 MIN_SCORE = 0.05  # a corner the network missed (score 0) counts as this weak
 _TINY = 1e-6  # grey levels (px for the bend): keeps the logarithms finite in a flat window
 _MAX_RADIUS = 3  # px: the refinement's window radius, at most this (a 7×7 window: the measures' cost)
@@ -115,7 +109,7 @@ def _operators() -> tuple[np.ndarray, np.ndarray]:
 
 def design(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray,
            origin: tuple[int, int] = (0, 0)) -> np.ndarray:
-    """The model's columns (N, 32) (``COLUMNS``) of one board's corners, unclipped (module docstring).
+    """The model's columns (N, 30) (``COLUMNS``) of one board's corners, unclipped (module docstring).
 
     gray : (H, W) float32 grey in [0, 1] or uint8, unsmoothed (every column is a ratio of grey levels
     or of px, or a log length in px, so either scale gives the same). corners : (N, 2) (x, y) px.
@@ -142,13 +136,13 @@ def design(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray, scores: np.nd
 
 
 def sigma_from_design(x: np.ndarray, coeffs: np.ndarray = COEFFS, low: np.ndarray = LOW, high: np.ndarray = HIGH) -> np.ndarray:
-    """σ (N,) float32 px of design columns x (N, 32) under the model (``coeffs`` (33,), clip bounds (32,) each)."""
+    """σ (N,) float32 px of design columns x (N, 30) under the model (``coeffs`` (31,), clip bounds (30,) each)."""
     x = np.clip(np.asarray(x, np.float64).reshape(-1, len(COLUMNS)), low, high)
     return np.exp(coeffs[0] + x @ np.asarray(coeffs[1:], np.float64)).astype(np.float32)
 
 
 def board_design(image, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """:func:`design` (N, 32) of a board in ``image``, converting no more of it than needed.
+    """:func:`design` (N, 30) of a board in ``image``, converting no more of it than needed.
 
     image : a :class:`~aicalib_tf.detect.pyramid.Frame` (a grey uint8 frame is read as it is, any other
     through its float grey), or ``region(x0, y0, x1, y1) -> (y1 − y0, x1 − x0) float32`` grey of the

@@ -16,7 +16,7 @@ import numpy as np
 from aicalib_tf.kernels import helper, kernel
 
 
-__all__ = ["window_measures", "lattice_bend", "on_rim", "flat_noise", "square_contrast", "edge_width", "blockiness", "corner_features", "design_columns",
+__all__ = ["window_measures", "lattice_bend", "flat_noise", "square_contrast", "edge_width", "blockiness", "corner_features", "design_columns",
            "board_columns", "BOARD_COLUMNS", "CORNER_COLUMNS"]
 
 BEND_KNOT = -3.0  # log(bend / spacing) above which lines bend enough to bias the saddle (hinge squared)
@@ -36,7 +36,7 @@ WHITE_ODD = -0.95  # log(median |antisymmetric part| / noise σ) of white noise 
 BLOCK = 8  # px, the JPEG block: blockiness compares the steps across its borders with the others
 BLOCK_SAMPLES = 20000  # about this many steps each way at most (every k-th row of a larger box)
 BOARD_COLUMNS = 20  # design columns 0..19: the board's; the next CORNER_COLUMNS: each corner's excess over them
-CORNER_COLUMNS = 12
+CORNER_COLUMNS = 10
 
 
 @helper
@@ -327,20 +327,6 @@ def lattice_bend(pts, ids):
 
 
 @helper
-def on_rim(ids):
-    """(P,) float64: 1 where a point is on its board's first or last column or row of ids (the lattice ends one
-    square beyond it), else 0. ids (P, 2) int64 (col, row)."""
-    out = np.zeros(ids.shape[0])
-    if ids.shape[0] == 0:
-        return out
-    c0, c1, r0, r1 = np.min(ids[:, 0]), np.max(ids[:, 0]), np.min(ids[:, 1]), np.max(ids[:, 1])
-    for p in range(ids.shape[0]):
-        if ids[p, 0] == c0 or ids[p, 0] == c1 or ids[p, 1] == r0 or ids[p, 1] == r1:
-            out[p] = 1.0
-    return out
-
-
-@helper
 def _board_median_fill(bend, tiny):
     """bend (P,) px with −1 (none) replaced by the board's median bend (``tiny`` when no corner has one)."""
     seen = 0
@@ -360,12 +346,11 @@ def _board_median_fill(bend, tiny):
 
 
 @helper
-def corner_features(measures, bend, spacing, scores, min_score, tiny, width, rim):
-    """(P, 12) per-corner features and the board's impulsiveness (:func:`aicalib_tf.detect.corners.sigma.design`):
+def corner_features(measures, bend, spacing, scores, min_score, tiny):
+    """(P, 10) per-corner features and the board's impulsiveness (:func:`aicalib_tf.detect.corners.sigma.design`):
     noise/contrast, own excess asymmetry, residual/contrast, own impulsiveness, bend/spacing, score,
     curvature/contrast, the bend's excess over ``BEND_KNOT`` squared, smoothed/raw asymmetry, the own
-    excess asymmetry's excess over ``ASYM_KNOT`` (all logarithms); the own blur reach (width (P,) px over the
-    own spacing)² beyond ``SPREAD_KNOT``, and that reach on the board's rim (rim (P,) 1 or 0, :func:`on_rim`)."""
+    excess asymmetry's excess over ``ASYM_KNOT``; all logarithms."""
     n = measures.shape[0]
     f = np.zeros((n, CORNER_COLUMNS))
     log_odd, log_med = np.empty(n), np.empty(n)
@@ -387,26 +372,24 @@ def corner_features(measures, bend, spacing, scores, min_score, tiny, width, rim
         f[p, 7] = max(f[p, 4] - BEND_KNOT, 0.0) ** 2
         f[p, 8] = math.log(max(measures[p, 5], tiny)) - log_odd[p]
         f[p, 9] = max(f[p, 1] - ASYM_KNOT, 0.0)
-        f[p, 10] = max((width[p] / max(spacing[p], tiny)) ** 2 - SPREAD_KNOT, 0.0)
-        f[p, 11] = rim[p] * f[p, 10]
     return f, impulsive
 
 
 @helper
-def design_columns(measures, bend, spacing, scores, min_score, tiny, flat, block, width, rim):
-    """The σ model's columns (P, 32) of one board (:func:`aicalib_tf.detect.corners.sigma.design`).
+def design_columns(measures, bend, spacing, scores, min_score, tiny, flat, block, width):
+    """The σ model's columns (P, 30) of one board (:func:`aicalib_tf.detect.corners.sigma.design`).
 
     measures (P, 6) :func:`window_measures`, bend (P,) :func:`lattice_bend` px (−1: none), spacing (P,)
     px, scores (P,), flat :func:`flat_noise` (−1: none; the window's noise over ``WHITE_ODD`` then),
-    block :func:`blockiness`, width (P,) :func:`edge_width` px, rim (P,) :func:`on_rim`. Values are floored at
-    ``tiny`` and scores at ``min_score`` before the logarithms. Columns 0–19 are the board's (the same for all its
-    corners), 20–31 each corner's excess over the board's median of its feature.
+    block :func:`blockiness`, width (P,) :func:`edge_width` px. Values are floored at ``tiny`` and scores
+    at ``min_score`` before the logarithms. Columns 0–19 are the board's (the same for all its corners),
+    20–29 each corner's excess over the board's median of its feature.
     """
     n = measures.shape[0]
     out = np.zeros((n, BOARD_COLUMNS + CORNER_COLUMNS))
     if n == 0:
         return out
-    f, impulsive = corner_features(measures, bend, spacing, scores, min_score, tiny, width, rim)
+    f, impulsive = corner_features(measures, bend, spacing, scores, min_score, tiny)
     med = np.empty(CORNER_COLUMNS)
     for k in range(CORNER_COLUMNS):
         med[k] = np.median(f[:, k])
@@ -429,7 +412,7 @@ def design_columns(measures, bend, spacing, scores, min_score, tiny, flat, block
 @kernel("f4[:, ::1], f8[:, ::1], i8[:, ::1], f8[::1], i8[::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8, f8, f8, i8, i8",
         "u1[:, ::1], f8[:, ::1], i8[:, ::1], f8[::1], i8[::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8, f8, f8, i8, i8")
 def board_columns(img, pts, ids, spacing, radius, scores, fits, weights, min_score, tiny, step, ox, oy):
-    """The σ model's columns (P, 32) of one board in one call: :func:`window_measures`, :func:`lattice_bend`,
+    """The σ model's columns (P, 30) of one board in one call: :func:`window_measures`, :func:`lattice_bend`,
     :func:`flat_noise`, :func:`blockiness`, :func:`edge_width` (of :func:`square_contrast`) and
     :func:`design_columns` of its points (ids shifted to start at 0). step: the grey levels' step in img's
     units (1 for uint8); ox, oy: img's origin in the whole image, px (the JPEG blocks start at the whole image's)."""
@@ -437,4 +420,4 @@ def board_columns(img, pts, ids, spacing, radius, scores, fits, weights, min_sco
     noise = math.exp(np.median(np.log(np.maximum(measures[:, 1], tiny)))) if measures.shape[0] else 0.0
     width = edge_width(measures[:, 2], radius, square_contrast(img, pts, ids), noise)
     return design_columns(measures, lattice_bend(pts, ids), spacing, scores, min_score, tiny,
-                          flat_noise(img, pts, ids, step), blockiness(img, pts, ox, oy, tiny), width, on_rim(ids))
+                          flat_noise(img, pts, ids, step), blockiness(img, pts, ox, oy, tiny), width)

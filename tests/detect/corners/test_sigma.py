@@ -5,7 +5,7 @@ import pytest
 
 from aicalib_tf.detect.corners import sigma as cs
 from aicalib_tf.detect.corners.sigma_kernels import (SPREAD_KNOT, WHITE_EVEN, blockiness, design_columns, edge_width, flat_noise, lattice_bend,
-                                                     on_rim, square_contrast, window_measures)
+                                                     square_contrast, window_measures)
 from aicalib_tf.detect.pipeline import Detection, detect_corners
 from aicalib_tf.detect.warm import synthetic_board
 
@@ -108,9 +108,8 @@ def test_design_columns_take_the_boards_medians_and_the_usual_bend_where_a_corne
     measures = np.array([[0.02, 0.01, 0.2, 0.05, 0.1, 0.01], [0.02, 0.04, 0.2, 0.05, 0.1, 0.01],
                          [0.08, 0.01, 0.1, 0.05, 0.2, 0.04]])
     width = np.array([1.0, 4.0, 3.0])
-    spacing, rim = np.array([10.0, 10.0, 5.0]), np.array([0.0, 1.0, 1.0])
-    x = design_columns(measures, np.array([0.1, -1.0, 0.3]), spacing, np.array([1.0, 0.0, 0.5]), 0.05, 1e-6, 0.004, 1.5,
-                       width, rim)
+    x = design_columns(measures, np.array([0.1, -1.0, 0.3]), np.full(3, 10.0), np.array([1.0, 0.0, 0.5]), 0.05, 1e-6, 0.004, 1.5,
+                       width)
     nb = cs.BOARD_COLUMNS
     assert x.shape == (3, len(cs.COLUMNS)) and np.all(x[:, :nb] == x[0, :nb])  # the board's columns: one row
     noise = np.log(0.01)  # the median odd_median
@@ -119,7 +118,7 @@ def test_design_columns_take_the_boards_medians_and_the_usual_bend_where_a_corne
     np.testing.assert_allclose(x[:, nb], n - np.median(n))
     np.testing.assert_allclose(x[:, nb + 1], np.log([0.01, 0.04, 0.01]) - noise)
     np.testing.assert_allclose(x[0, 2], np.median(np.log([0.02, 0.02, 0.08])) - noise)  # the board's impulsiveness
-    bend = np.log([0.1, 0.2, 0.3]) - np.log(spacing)  # (0.1 + 0.3) / 2 for the second
+    bend = np.log([0.1, 0.2, 0.3]) - np.log(10.0)  # (0.1 + 0.3) / 2 for the second
     np.testing.assert_allclose(x[0, 3], np.median(bend))
     np.testing.assert_allclose(x[:, nb + 4], bend - np.median(bend))
     np.testing.assert_allclose(x[:, nb + 5], np.log([1.0, 0.05, 0.5]) - np.log(0.5))
@@ -133,12 +132,9 @@ def test_design_columns_take_the_boards_medians_and_the_usual_bend_where_a_corne
     np.testing.assert_allclose(x[:, nb + 8], smooth - np.median(smooth))
     np.testing.assert_allclose(x[:, nb + 9], [0.0, np.log(4.0) - 0.5, 0.0])  # own asymmetry beyond e^0.5 the board's
     np.testing.assert_allclose(x[0, 14], np.log(3.0))  # the median edge width, px
-    np.testing.assert_allclose(x[0, 19], 0.16 - SPREAD_KNOT)  # the median of (1/10, 4/10, 3/5)² beyond the knot
-    reach = np.maximum(np.array([0.01, 0.16, 0.36]) - SPREAD_KNOT, 0.0)  # each corner's own (width / spacing)²
-    np.testing.assert_allclose(x[:, nb + 10], reach - np.median(reach))
-    np.testing.assert_allclose(x[:, nb + 11], rim * reach - np.median(rim * reach))  # the same on the rim only
-    no_square = design_columns(measures, np.array([0.1, -1.0, 0.3]), spacing, np.ones(3), 0.05, 1e-6, -1.0, 1.0,
-                               width, rim)
+    np.testing.assert_allclose(x[0, 19], 0.09 - SPREAD_KNOT)  # (3 px / 10 px)² beyond the knot
+    no_square = design_columns(measures, np.array([0.1, -1.0, 0.3]), np.full(3, 10.0), np.ones(3), 0.05, 1e-6, -1.0, 1.0,
+                               width)
     np.testing.assert_allclose(no_square[0, 16], -0.95)  # no flat noise measured: the window's, as white noise
 
 
@@ -278,26 +274,3 @@ def test_the_squares_contrast_and_the_edge_width_follow_a_blurred_board():
     assert np.hypot(3.0, widths[0.0]) < widths[3.0] < 1.3 * np.hypot(3.0, widths[0.0])
     line = ids[:, 1] == 0  # one row of corners: no square with all four
     assert square_contrast(board, pts[line], ids[line]) == -1.0
-
-
-def test_on_rim_marks_the_first_and_last_rows_and_columns_of_the_ids():
-    ids = np.array([[c, r] for r in range(3) for c in range(4)], np.int64) + [2, 5]  # a 4 × 3 board, ids from (2, 5)
-    assert on_rim(ids).tolist() == [1.0] * 5 + [0.0, 0.0] + [1.0] * 5  # only (1, 1) and (2, 1) are inside
-    assert on_rim(ids[[5, 6]]).tolist() == [1.0, 1.0]  # a row alone is all rim
-    assert on_rim(np.zeros((0, 2), np.int64)).shape == (0,)
-
-
-def test_a_blur_reaching_one_square_raises_the_rims_sigma_over_the_inside():
-    """Squares of 14 px under a 4 px blur: the pattern's end one square beyond the rim corners is within the blur's
-    reach, so their σ grows over the inner corners'; on the sharp board the two stay alike."""
-    import cv2
-
-    board = synthetic_board(PATTERN, square=14, angle=7.0)
-    det = detect_corners(board, PATTERN)
-    rim = on_rim(det.ids.astype(np.int64)) > 0
-    ratio = {}
-    for blur in (0.0, 4.0):
-        img = _noisy(cv2.GaussianBlur(board, (0, 0), blur) if blur else board, 2.0)
-        s = cs.sigma_from_design(cs.design(img, det.corners, det.ids, det.scores))
-        ratio[blur] = np.median(s[rim]) / np.median(s[~rim])
-    assert ratio[0.0] < 1.1 and ratio[4.0] > 1.15
