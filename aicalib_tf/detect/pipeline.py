@@ -87,7 +87,8 @@ board is searched again on its region with the shading divided out (:mod:`aicali
 the rim's darkened outer rings); only a complete board counts. Steeply tilted boards (55–80° from facing the
 camera; their lines meet at 8–20°, sharper than the network's junctions): with no full board at full size, a
 sheared partial board's lattice, else a sliver of coherent texture, is warped to square axes and searched again
-(:mod:`aicalib_tf.detect.chessboard.unshear`); only a complete board counts, mapped back and refined on its rectified view. Any full board with a corner on an object's edge
+(:mod:`aicalib_tf.detect.chessboard.unshear`; a board spanning the pattern there with up to 5 corners missing gets
+them where its homography predicts a junction, :mod:`aicalib_tf.detect.chessboard.unshear_fill`); only a complete board counts, mapped back and refined on its rectified view. Any full board with a corner on an object's edge
 (:func:`aicalib_tf.detect.chessboard.occlusion.object_in_front`: sectors out of the board's alternation
 and a ring unlike its neighbours') is passed over, on its scale and again at full size. A full board's corners
 off the smooth grid of their neighbours (:func:`aicalib_tf.detect.chessboard.smooth_grid.without_off_grid`: over
