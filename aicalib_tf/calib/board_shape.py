@@ -44,8 +44,8 @@ __all__ = ["SHAPE_MODE", "SHAPE_MODES", "N_SHAPE_TERMS", "SHAPE_PLAUSIBLE", "SHA
 SHAPE_MODE = "shape"  # the flex mode that solves the shape; "auto" is the same
 SHAPE_MODES = ("auto", SHAPE_MODE)
 N_SHAPE_TERMS = len(SHAPE_TERMS)
-SHAPE_PLAUSIBLE = 0.25  # squares: a term beyond this is the lens model's misfit, not the board's (the flex's limit)
-SHAPE_SHRINK_FROM = 0.5  # t = |w_k| / SE_k up to which a term is 0 (the sag's SHRINK_FROM)
+SHAPE_PLAUSIBLE = 0.25  # squares: a term beyond this is the lens model's misfit, not the board's (the flex's too)
+SHAPE_SHRINK_FROM = 0.5  # t = |w_k| / SE_k up to which a term is 0 (the sag's too: flex_check.SHRINK_FROM)
 
 
 def shape_problem(shape, covariance, unit: float = 1.0) -> str:

@@ -26,7 +26,8 @@ from __future__ import annotations
 import numpy as np
 
 from aicalib_tf.calib import board_shape
-from aicalib_tf.calib.board_shape import N_SHAPE_TERMS, SHAPE_MODE, SHAPE_MODES, shape_fields, shape_text
+from aicalib_tf.calib.board_shape import (N_SHAPE_TERMS, SHAPE_MODE, SHAPE_MODES, SHAPE_PLAUSIBLE, shape_fields,
+                                         shape_text)
 from aicalib_tf.geometry.board_shape import shape_basis
 
 __all__ = ["FLEX_SIGMA_MAX", "FLEX_TYPICAL", "FLEX_PLAUSIBLE", "FLEX_MODES", "SAG_MODE", "basis_of_views",
@@ -34,7 +35,7 @@ __all__ = ["FLEX_SIGMA_MAX", "FLEX_TYPICAL", "FLEX_PLAUSIBLE", "FLEX_MODES", "SA
 
 FLEX_TYPICAL = 0.02  # squares: the sag a flex must resolve (the benchmark's largest)
 FLEX_SIGMA_MAX = FLEX_TYPICAL / 4  # squares: the largest σ of a kept flex
-FLEX_PLAUSIBLE = 0.25  # squares: beyond this a "flex" is the lens model's misfit, not the board's
+FLEX_PLAUSIBLE = SHAPE_PLAUSIBLE  # squares: beyond this a "flex" is the lens model's misfit, not the board's
 SAG_MODE = "sag"  # the two-term flex alone
 FLEX_MODES = ("auto", "off", SAG_MODE, SHAPE_MODE)  # auto = shape: the board's shape (calib.board_shape)
 

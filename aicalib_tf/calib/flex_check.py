@@ -40,14 +40,14 @@ import dataclasses
 import numpy as np
 
 from aicalib_tf.calib import board_shape
-from aicalib_tf.calib.board_shape import SHAPE_TERMS, leave_one_out_shapes
+from aicalib_tf.calib.board_shape import SHAPE_SHRINK_FROM, SHAPE_TERMS, leave_one_out_shapes
 from aicalib_tf.calib.bundle import CalibrationError
 
 __all__ = ["MIN_JACKKNIFE_VIEWS", "SHRINK_FROM", "SHRINK_TO", "leave_one_out_sags", "jackknife_se", "sag_estimate",
            "confirm_flex", "shape_estimate", "confirm_shape", "solve_fields"]
 
 MIN_JACKKNIFE_VIEWS = 4  # every leave-one-out refit keeps at least 3 views
-SHRINK_FROM = 0.5  # t up to which the board is taken as flat (the module docstring's measurements)
+SHRINK_FROM = SHAPE_SHRINK_FROM  # t up to which the board is taken as flat (the module docstring's measurements)
 SHRINK_TO = 4.0  # t from which the sag is used as solved
 
 
