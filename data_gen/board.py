@@ -12,7 +12,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aicalib_tf.geometry.board_flex import flex_height, flexed_points
 from aicalib_tf.geometry.board_shape import SHAPE_TERMS, shape_height, shaped_points
 from aicalib_tf.geometry.pattern import board_points, check_pattern, pattern_ids
 
@@ -53,7 +52,7 @@ class Board:
     margin : white paper border around the outer squares, in squares (0.25 = a quarter square).
     black, white : printed grey levels in [0, 1] (paper is never pure 0/1).
     flex : (w_x, w_y) the board's parabolic sag in squares (:mod:`aicalib_tf.geometry.board_flex`):
-        a board point (X, Y) lies at z = s·flex_height(X / s, Y / s); (0, 0) is a flat board.
+        a board point (X, Y) lies at z = s·(w_x·(1 − u²) + w_y·(1 − v²)); (0, 0) is a flat board.
     shape : () or the first K terms of a board shape in squares (:mod:`aicalib_tf.geometry.board_shape`:
         sag_x, sag_y, twist, cubic_x, ...), added to the flex's z; () is no shape.
     """
@@ -94,9 +93,8 @@ class Board:
     def object_points(self) -> np.ndarray:
         """(cols·rows, 3) float64 inner-corner positions, OpenCV order (index = r·cols + c), flexed by ``flex``
         and shaped by ``shape``."""
-        p = flexed_points(board_points(pattern_ids(self.pattern_size), self.square_size), self.pattern_size,
-                          self.flex, self.square_size)
-        return shaped_points(p, self.pattern_size, self.shape, self.square_size) if self.shape else p
+        return shaped_points(board_points(pattern_ids(self.pattern_size), self.square_size), self.pattern_size,
+                             self._terms(), self.square_size)
 
     @property
     def bent(self) -> bool:
@@ -107,8 +105,14 @@ class Board:
         """(...) z of the flexed (and shaped) board at board-plane positions X, Y (..., board units)."""
         s = self.square_size
         x, y = np.asarray(X) / s, np.asarray(Y) / s
-        z = flex_height(x, y, self.pattern_size, self.flex)
-        return s * (z + shape_height(x, y, self.pattern_size, self.shape) if self.shape else z)
+        return s * shape_height(x, y, self.pattern_size, self._terms())
+
+    def _terms(self) -> np.ndarray:
+        """(max(2, K),) squares: the board shape's terms with the flex (w_x, w_y) added to its two sags."""
+        w = np.zeros(max(2, len(self.shape)))
+        w[:len(self.shape)] = self.shape
+        w[:2] += self.flex
+        return w
 
     def paper_bounds(self) -> tuple[float, float, float, float]:
         """(x0, y0, x1, y1) of the paper in board units."""

@@ -153,7 +153,7 @@ def surface_homogeneous(rays: np.ndarray, rvec, tvec, board=None, iterations: in
     """:func:`plane_homogeneous` for a flexed or shaped board (``board.flex`` or ``board.shape`` nonzero; else the
     plane's q itself).
 
-    The ray meets the surface z = board.height(X, Y) (:mod:`aicalib_tf.geometry.board_flex`) by fixed-point
+    The ray meets the surface z = board.height(X, Y) (:mod:`aicalib_tf.geometry.board_shape`) by fixed-point
     iteration from the plane's hit: the ray's point at height z(X_k, Y_k) gives (X_k+1, Y_k+1). Each step
     shrinks the error by the surface's slope times the ray's tangent to the board normal (a sag of 0.02
     squares has slopes below 0.1), so ``iterations`` steps reach float precision for rays up to ~80°

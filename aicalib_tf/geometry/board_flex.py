@@ -19,12 +19,14 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["flex_basis", "flex_height", "flexed_points"]
+__all__ = ["flex_basis"]
 
 
 def flex_basis(x, y, pattern_size) -> np.ndarray:
     """(..., 2) float64 [1 − u², 1 − v²] at positions x, y (..., squares) on a (cols, rows) pattern:
-    the derivative of :func:`flex_height` with respect to (w_x, w_y).
+    the derivative of the flexed board's z with respect to (w_x, w_y). The board shape of
+    :mod:`aicalib_tf.geometry.board_shape` takes these as its first two terms and moves the points
+    (:func:`~aicalib_tf.geometry.board_shape.shaped_points` with (w_x, w_y) is the flexed board).
 
     >>> flex_basis(np.array([0.0, 4.0]), np.array([0.0, 2.5]), (9, 6)).tolist()
     [[0.0, 0.0], [1.0, 1.0]]
@@ -35,22 +37,3 @@ def flex_basis(x, y, pattern_size) -> np.ndarray:
     u = 2.0 * np.asarray(x, np.float64) / (cols - 1) - 1.0
     v = 2.0 * np.asarray(y, np.float64) / (rows - 1) - 1.0
     return np.stack([1.0 - u * u, 1.0 - v * v], axis=-1)
-
-
-def flex_height(x, y, pattern_size, flex) -> np.ndarray:
-    """(...) z offset, squares, of board positions x, y (..., squares) under ``flex`` (w_x, w_y) squares."""
-    w = np.asarray(flex, np.float64).reshape(2)
-    return flex_basis(x, y, pattern_size) @ w
-
-
-def flexed_points(points, pattern_size, flex, square_size: float = 1.0) -> np.ndarray:
-    """(N, 3) float64 board points with the flex applied: z += s·:func:`flex_height`(X / s, Y / s).
-
-    points : (N, 3) flat board points in board units (z = 0); flex : (w_x, w_y) squares;
-    square_size : s, board units. A zero flex returns the points unchanged (a copy).
-    """
-    p = np.array(points, dtype=np.float64).reshape(-1, 3)
-    if np.any(np.asarray(flex, np.float64) != 0.0):
-        s = float(square_size)
-        p[:, 2] += s * flex_height(p[:, 0] / s, p[:, 1] / s, pattern_size, flex)
-    return p

@@ -53,7 +53,8 @@ def shape_basis(x, y, pattern_size, n_terms: int = len(SHAPE_TERMS)) -> np.ndarr
     u = 2.0 * np.asarray(x, np.float64) / (cols - 1) - 1.0
     v = 2.0 * np.asarray(y, np.float64) / (rows - 1) - 1.0
     u, v = np.broadcast_arrays(u, v)
-    terms = [sag[..., 0], sag[..., 1], u * v, _p3(u), _p3(v), sag[..., 0] * v, u * sag[..., 1]]
+    more = (lambda: u * v, lambda: _p3(u), lambda: _p3(v), lambda: sag[..., 0] * v, lambda: u * sag[..., 1])
+    terms = [sag[..., 0], sag[..., 1]] + [term() for term in more[:max(n - 2, 0)]]  # only the n asked for
     return np.stack(terms[:n], axis=-1)
 
 

@@ -14,7 +14,8 @@ from aicalib_tf.calib.report import solve_lines
 from aicalib_tf.calib.robust import SolveOptions
 from aicalib_tf.calib.select import fold_scores
 from aicalib_tf.geometry import lens as L
-from aicalib_tf.geometry.board_flex import flex_basis, flex_height, flexed_points
+from aicalib_tf.geometry.board_flex import flex_basis
+from aicalib_tf.geometry.board_shape import shape_height, shaped_points
 from aicalib_tf.geometry.pattern import board_points
 from tests.calib.synthetic import synthetic_views
 
@@ -33,8 +34,8 @@ def flexed_views(n=20, noise=0.2, flex=(0.0, 0.0), seed=2, noise_of=None):
 def test_flex_basis_is_zero_on_the_grid_edges_and_one_at_the_centre():
     b = flex_basis(np.array([0.0, 8.0, 4.0, 4.0]), np.array([0.0, 5.0, 2.5, 0.0]), PATTERN)
     np.testing.assert_allclose(b, [[0, 0], [0, 0], [1, 1], [1, 0]])
-    assert flex_height(4.0, 2.5, PATTERN, (0.01, 0.02)) == pytest.approx(0.03)
-    p = flexed_points(board_points(np.array([[4, 0], [0, 0]]), 25.0), PATTERN, (0.02, 0.0), 25.0)
+    assert shape_height(4.0, 2.5, PATTERN, (0.01, 0.02)) == pytest.approx(0.03)
+    p = shaped_points(board_points(np.array([[4, 0], [0, 0]]), 25.0), PATTERN, (0.02, 0.0), 25.0)
     np.testing.assert_allclose(p[:, 2], [0.5, 0.0])  # 0.02 squares of 25 mm at the centre column
 
 
