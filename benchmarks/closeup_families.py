@@ -1,0 +1,192 @@
+"""Close-up fisheye boards by family: one law of data_gen's ``closeup_laws`` pinned at a time, full boards per family.
+
+    python benchmarks/closeup_families.py [--split tune|held-out|both] [--count 12] [--seed 301]
+                                          [--families NAME,...] [--show]
+
+Each family is data_gen's ``closeup_laws`` (circular 150–210° fisheyes, the paper over 30–90% of
+the image circle and up to its rim, rim vignetting, field blur, narrow margins, low contrast,
+checker distractors in clutter; 640×480 unless named ``-hd``) with one law pinned, the others
+drawn as the preset draws them:
+
+- ``cover-30-50``, ``cover-50-70``, ``cover-70-90``: the paper's share of the image circle;
+- ``fov-150-180``, ``fov-180-210``: the lens's full field of view;
+- ``vig-cos4``, ``vig-poly``, ``vig-hard``: the light's fall towards the rim (cos⁴, polynomial, a
+  hard black rim), at full strength (0.97–1.0: black at the circle);
+- ``blur-linear``, ``blur-quadratic``: field blur growing as ρ or ρ² to σ 2–3.5 px at the rim;
+- ``margin-narrow``: 0.05–0.2 squares of white paper about the outer squares;
+- ``contrast-low``: black 0.25–0.4, white 0.5–0.65 (a fifth to a third of the full swing);
+- ``rim-reach``, ``rim-reach-hd``: 180–210° lenses, kept only when the outer squares reach 85° or
+  more off the optical axis (squeezed to a few px, darkened to black, up to and past 90°).
+
+The lens family is the split: ``tune`` draws equidistant (Kannala–Brandt) lenses, the family the
+detector's rim stages were tuned on; ``held-out`` draws Double Sphere and EUCM lenses. ``--seed``
+draws other scenes (the families' renders are not the evaluate conditions' seed-41 ones).
+Each image goes through :func:`aicalib_tf.detect_corners` with the 9×6 pattern, scored as evaluate
+scores it (hit: every corner within 2 px; wrong: a full board with a corner further off). Prints
+one row per family (hits, wrong, misses, the misses' blamed stage by ``stage_misses.trace``) and
+the total; ``--show`` one line per miss.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from collections import Counter
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from aicalib_tf.bench.conditions import PATTERN, VGA, Condition  # noqa: E402
+from aicalib_tf.bench.metrics import board_detection_outcome  # noqa: E402
+from data_gen.presets import Rule, get_preset  # noqa: E402
+
+SPLITS = {"tune": "fisheye", "held-out": ("ds", "eucm")}
+RIM_DEG = 85.0  # rim-reach families: the least off-axis angle of the outer squares' farthest corner
+
+
+def _rules(vig: dict | None = None, blur: dict | None = None) -> tuple[Rule, ...]:
+    """closeup_laws' rules with the vignetting or the blur rule's parameters replaced."""
+    out = []
+    for r in get_preset("closeup_laws").rules:
+        new = vig if r.name == "rim_vignetting" else blur if r.name == "field_blur" else None
+        out.append(r if new is None else Rule.of(r.name, r.p, **{**dict(r.params), **new}))
+    return tuple(out)
+
+
+def families() -> dict[str, dict]:
+    """{name: overrides of the closeup_laws preset (``pose`` as PoseConfig fields), "size", "rim"}."""
+    def vig(law):
+        return {"rules": _rules(vig={"law": law, "strength": (0.97, 1.0)})}
+
+    def blur(power):
+        return {"rules": _rules(blur={"power": power, "sigma_rim": (2.0, 3.5)})}
+
+    return {
+        "cover-30-50": {"pose": {"circle_fill": (0.3, 0.5)}},
+        "cover-50-70": {"pose": {"circle_fill": (0.5, 0.7)}},
+        "cover-70-90": {"pose": {"circle_fill": (0.7, 0.9)}},
+        "fov-150-180": {"fisheye_fov_deg": (150.0, 180.0)},
+        "fov-180-210": {"fisheye_fov_deg": (180.0, 210.0)},
+        "vig-cos4": vig("cos4"), "vig-poly": vig("poly"), "vig-hard": vig("hard"),
+        "blur-linear": blur(1.0), "blur-quadratic": blur(2.0),
+        "margin-narrow": {"margin_range": (0.05, 0.2)},
+        "contrast-low": {"paper_black": (0.25, 0.4), "paper_white": (0.5, 0.65)},
+        "rim-reach": {"fisheye_fov_deg": (180.0, 210.0), "rim": True},
+        "rim-reach-hd": {"fisheye_fov_deg": (180.0, 210.0), "rim": True, "size": (1280, 960)},
+    }
+
+
+def family_condition(name: str, split: str, seed: int) -> Condition:
+    """The evaluate :class:`~aicalib_tf.bench.conditions.Condition` of family ``name`` in ``split``."""
+    spec = dict(families()[name])
+    size = spec.pop("size", VGA)
+    spec.pop("rim", None)
+    base = get_preset("closeup_laws")
+    pose = replace(base.pose, **spec.pop("pose", {}))
+    preset = replace(base, name=f"{name}-{split}", lens=SPLITS[split], sizes=(size,), pose=pose, **spec)
+    return Condition(f"{name}-{split}", preset, size=size, seed=seed)
+
+
+def off_axis_deg(label: dict, squares: bool = False) -> np.ndarray:
+    """(N,) degrees: each true corner's angle from the optical axis (board pose of the label); with
+    ``squares``, each vertex of the chessboard's squares, the outer squares' outer corners included."""
+    cols, rows = label["pattern_size"]
+    s = float(label["square_size"])
+    R = cv2.Rodrigues(np.asarray(label["rvec"], np.float64).reshape(3, 1))[0]
+    c, r = np.meshgrid(np.arange(-1, cols + 1), np.arange(-1, rows + 1)) if squares else np.meshgrid(np.arange(cols), np.arange(rows))
+    p = np.stack([c.ravel() * s, r.ravel() * s, np.zeros(c.size)], 1) @ R.T + np.asarray(label["tvec"], np.float64)
+    return np.degrees(np.arctan2(np.hypot(p[:, 0], p[:, 1]), p[:, 2]))
+
+
+def samples(cond: Condition, count: int, rim: bool, max_tries: int = 30):
+    """Yield (index, Sample): the first ``count`` renders of ``cond`` (with ``rim``, only those whose outer
+    squares reach ``RIM_DEG`` or more off axis). Raises RuntimeError when too few pass in ``max_tries``·count."""
+    from data_gen.sample import make_sample
+
+    kept = 0
+    for index in range(max_tries * max(count, 1)):
+        if kept >= count:
+            return
+        s = make_sample(cond.preset, cond.seed, index, size=cond.size, pattern=PATTERN)
+        if rim and off_axis_deg(s.label, squares=True).max() < RIM_DEG:
+            continue
+        kept += 1
+        yield index, s
+    raise RuntimeError(f"family {cond.name}: only {kept} of {count} renders passed its filter")
+
+
+def run_family(name: str, split: str, seed: int, count: int, model, show: bool) -> Counter:
+    """Counts of hit / wrong / miss, the misses' blamed stages and "seconds" (detection time) for one family."""
+    from stage_misses import trace
+
+    from aicalib_tf import detect_corners
+    from aicalib_tf.io import as_gray_float
+
+    cond = family_condition(name, split, seed)
+    counts: Counter = Counter()
+    for index, s in samples(cond, count, bool(families()[name].get("rim"))):
+        t0 = time.perf_counter()
+        det = detect_corners(s.image, PATTERN, model=model)
+        counts["seconds"] += time.perf_counter() - t0
+        outcome, _ = board_detection_outcome(det.corners if det.complete else None, s.corners, PATTERN)
+        counts[outcome] += 1
+        if outcome == "hit":
+            continue
+        t = trace(as_gray_float(s.image), s.corners, model, looks=False)
+        counts[t["stage"]] += 1
+        if show:
+            lab = s.label
+            print(f"  {cond.name} #{index}: {outcome}, {t['stage']}: map {t['map']:.2f} cand {t['candidates']:.2f} "
+                  f"grid {t['grid']}/{len(s.corners)} {t['grid_shape']} rim {t['rim_reach']}/{t['rim']} "
+                  f"| {lab['distortion_model']} {2 * (lab['max_theta_deg'] or 0):.0f}° off-axis "
+                  f"{off_axis_deg(lab, squares=True).max():.0f}° | {det.reason!r}", flush=True)
+    return counts
+
+
+def main(argv=None) -> int:
+    from stage_misses import STAGES
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--split", choices=("tune", "held-out", "both"), default="both")
+    ap.add_argument("--count", type=int, default=12, help="images per family")
+    ap.add_argument("--seed", type=int, default=301, help="data_gen seed of the families' renders")
+    ap.add_argument("--families", default=None, help="comma-separated family names (default: all)")
+    ap.add_argument("--model", default=None, help="corner model (default: the shipped one)")
+    ap.add_argument("--show", action="store_true", help="one line per miss")
+    args = ap.parse_args(argv)
+    names = list(families()) if args.families is None else args.families.split(",")
+    unknown = [n for n in names if n not in families()]
+    if unknown or args.count < 1:
+        print(f"closeup_families: unknown families {unknown} (known: {', '.join(families())})" if unknown
+              else f"closeup_families: --count must be >= 1, got {args.count}", file=sys.stderr)
+        return 2
+    from aicalib_tf.cnn.model import load_model
+    from aicalib_tf.cnn.spec import DETECTOR_NETWORK
+
+    model = load_model(args.model or DETECTOR_NETWORK)
+    splits = ("tune", "held-out") if args.split == "both" else (args.split,)
+    print(f"| family | split | hit | wrong | miss | {' | '.join(STAGES)} | ms/image |\n|---|---|---|---|---|{'---|' * len(STAGES)}---|")
+    for split in splits:
+        total: Counter = Counter()
+        for name in names:
+            c = run_family(name, split, args.seed, args.count, model, args.show)
+            total.update(c)
+            n = c["hit"] + c["wrong"] + c["miss"]
+            print(f"| {name} | {split} | {c['hit']} | {c['wrong']} | {c['miss']} | "
+                  + " | ".join(str(c[s]) for s in STAGES) + f" | {1000 * c['seconds'] / n:.0f} |", flush=True)
+        n = total["hit"] + total["wrong"] + total["miss"]
+        print(f"| **all** | {split} | {total['hit']}/{n} ({100 * total['hit'] / n:.1f}%) | {total['wrong']} | "
+              f"{total['miss']} | " + " | ".join(str(total[s]) for s in STAGES)
+              + f" | {1000 * total['seconds'] / n:.0f} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
