@@ -115,7 +115,8 @@ def test_train_on_a_broken_shard_is_one_line_and_exit_2(shards, tmp_path, capsys
     _broken_shards(tmp_path, (shards / "data-00000-of-00002.tfrecord").read_bytes())
     for name in ("empty.tfrecord", "crc.tfrecord"):
         out = tmp_path / f"run-{name}"
-        assert main(["--data", str(tmp_path / name), "--out", str(out), "--steps", "1", "--epochs", "1", "--quiet"]) == 2
+        assert main(["--data", str(tmp_path / name), "--out", str(out), "--steps", "1", "--epochs", "1",
+                     "--val-images", "1", "--workers", "1", "--quiet"]) == 2  # the validation set is rendered first
         err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error")]
         assert len(err) == 1 and name in err[0], err
         assert not (out / "model.keras").exists()
