@@ -1,7 +1,7 @@
 """The splined lens model against the parametric ones: held-out error on lenses no parametric model holds.
 
     .venv/bin/python benchmarks/splined_model.py [--views 20] [--noise 0.02] [--auto-from N] [--scenes ...]
-        [--halves SET ...] [--splits 2] [--real ...]
+        [--halves SET ...] [--splits 2] [--real ...] [--timing 20 30 40] [--choice 8 12 16 20 --seeds 5 6]
 
 Synthetic scenes: a lens that none of the parametric models holds exactly (a wide rational lens or a
 ~190° Kannala-Brandt fisheye, each with a local bump of 0.6 px in the image: a lens element's flaw), and
@@ -12,6 +12,15 @@ The projection error is against the true lens over the corners of every view (a 
 out), px. Then ``calibrate_camera(model="auto")`` on all views shows what the model choice keeps.
 
 ``--auto-from N``: that ``auto`` run tries the spline from N views (the library's threshold otherwise).
+
+``--timing N ...``: the spline's fit alone (the family's own layout and smoothness) on N views of the first
+``--scenes`` scene: CPU seconds, those spent building the normal equations (:func:`aicalib_tf.calib.lm.reduce_blocks`),
+the layout chosen and the projection error.
+
+``--choice N ...``: ``auto`` with the spline tried from 6 views (``--auto-from``, default 6) on N views of each
+``--scenes`` scene per ``--seeds`` seed: what it chose, that model's projection error, and, when it chose the
+spline, the parametric model the choice keeps without it with its projection error: whether the held-out error
+picks the spline only where it truly wins.
 
 ``--halves SET ...``: real photos (``opencv_left``, ``udacity_lane_cal``, ``ocam_fisheye`` in
 ``../shared/data``; ocam has no licence: read in place) detected once each as ``real_split_noise.py`` does
@@ -151,6 +160,64 @@ def run_scene(name, truth, n, noise, seed, auto_from=None) -> list[str]:
     return out
 
 
+def run_timing(name, truth, counts, noise, seed) -> list[str]:
+    """The spline fit's CPU time on ``counts`` views each (module docstring, ``--timing``)."""
+    from aicalib_tf.calib import lm
+
+    spent, keep = [0.0], lm.reduce_blocks
+
+    def counted(*args):
+        t = time.process_time()
+        try:
+            return keep(*args)
+        finally:
+            spent[0] += time.process_time() - t
+
+    out = [f"## {name}: the spline's fit, noise {noise} px", "| views | layout | CPU s | reduce_blocks CPU s (share) "
+           "| projection error median / p95 px |", "|---|---|---|---|---|"]
+    lm.reduce_blocks = counted
+    try:
+        for n in counts:
+            views = render(truth, n, noise, np.random.default_rng(seed))
+            spent[0], t = 0.0, time.process_time()
+            cal = fit_views(views, PATTERN, SQUARE, truth.image_size, "splined_equidistant")
+            cpu = time.process_time() - t
+            med, p95 = projection_error(cal.lens, truth, views)
+            out.append(f"| {n} | {cal.model.split('_', 2)[2]} | {cpu:.1f} | {spent[0]:.1f} ({100 * spent[0] / cpu:.0f}%) "
+                       f"| {med:.3f} / {p95:.3f} |")
+            print(out[-1], flush=True)
+    finally:
+        lm.reduce_blocks = keep
+    return out
+
+
+def run_choice(name, truth, counts, noise, seeds, auto_from) -> list[str]:
+    """``auto`` from ``auto_from`` views against the truth (module docstring, ``--choice``)."""
+    from aicalib_tf.calib.select import choose
+
+    out = [f"## {name}: auto with the spline tried from {auto_from} views, noise {noise} px",
+           "| views | seed | chosen | projection error median / p95 px | without the spline | its error | CPU s |",
+           "|---|---|---|---|---|---|---|"]
+    for n in counts:
+        for seed in seeds:
+            views = render(truth, n, noise, np.random.default_rng(seed))
+            t = time.process_time()
+            with auto_spline_from(auto_from):
+                cal = calibrate_camera(views, PATTERN, SQUARE, truth.image_size)
+            cpu = time.process_time() - t
+            med, p95 = projection_error(cal.lens, truth, views)
+            alt, alt_err = "-", "-"
+            if cal.model.startswith("splined"):
+                rows = [dict(r) for r in cal.model_table if not r["model"].startswith("splined")]
+                alt = choose(rows)
+                other = fit_views(views, PATTERN, SQUARE, truth.image_size, alt)
+                alt_err = "{:.3f} / {:.3f}".format(*projection_error(other.lens, truth, views))
+            out.append(f"| {n} | {seed} | {cal.model.split('_nx')[0]} | {med:.3f} / {p95:.3f} | {alt} | {alt_err} "
+                       f"| {cpu:.0f} |")
+            print(out[-1], flush=True)
+    return out
+
+
 def run_real(name) -> list[str]:
     folder, pattern, square = REAL[name]
     with tempfile.TemporaryDirectory() as tmp:
@@ -261,7 +328,19 @@ def main(argv=None) -> int:
                     "(default: the library's AUTO_SPLINE_VIEWS)")
     ap.add_argument("--halves", nargs="*", default=(), help="real sets whose halves to compare (default none)")
     ap.add_argument("--splits", type=int, default=2, help="random half-splits per --halves set")
+    ap.add_argument("--timing", type=int, nargs="*", default=(), help="view counts of the spline fit's timing")
+    ap.add_argument("--choice", type=int, nargs="*", default=(), help="view counts of the auto-choice check")
+    ap.add_argument("--seeds", type=int, nargs="*", default=(5,), help="seeds of --choice")
     args = ap.parse_args(argv)
+    if args.choice:
+        for name in args.scenes:
+            print("\n".join(run_choice(name, SCENES[name], args.choice, args.noise, args.seeds, args.auto_from or MIN_VIEWS)),
+                  "\n", flush=True)
+        return 0
+    if args.timing:
+        name = args.scenes[0]
+        print("\n".join(run_timing(name, SCENES[name], args.timing, args.noise, args.seed)), "\n", flush=True)
+        return 0
     for name in args.scenes:
         print("\n".join(run_scene(name, SCENES[name], args.views, args.noise, args.seed, args.auto_from)), "\n",
               flush=True)

@@ -245,7 +245,7 @@ def _fit_model(model: str, views: list[View], square_size: float, image_size, st
     if spec.START == "layout":  # a model whose layout the views choose (the spline's knots: calib.splined_fit)
         from aicalib_tf.calib.splined_fit import fit_splined
         return fit_splined(model, obj, px, image_size, start.lens if isinstance(start, Calibration) else start,
-                           rank_strict)
+                           rank_strict, views, options)
     free = np.ones(4 + N_COEFFS[model], bool)
     if fix_k3 and spec.FIX_K3 is not None:
         free[4 + spec.FIX_K3] = False

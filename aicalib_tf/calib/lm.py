@@ -31,18 +31,41 @@ class SchurProblem:
 def reduce_blocks(r, Ji, Jp, splits):
     """JᵀJ and Jᵀr in blocks from residuals r (2N,), global columns Ji (N, 2, nf) and pose columns
     Jp (N, 2, 6), the corners grouped by pose (``splits``: np.split indices, every group non-empty):
-    (U (nf, nf), W (V, nf, 6), Vb (V, 6, 6), gu (nf,), gv (V, 6))."""
+    (U (nf, nf), W (V, nf, 6), Vb (V, 6, 6), gu (nf,), gv (V, 6)).
+
+    W is one (nf × 2n_v)·(2n_v × 6) product per pose (not an (N, nf, 6) stack summed per pose: 5× less
+    time with a spline's 456 columns, less with a handful); U by :func:`_gram`."""
     r = r.reshape(-1, 2)
+    n, _, nf = Ji.shape
     starts = np.concatenate([[0], splits]).astype(np.int64)
-    # batched matmul rather than einsum: the same sums, 3–6× faster here (einsum does not use BLAS)
-    flat = Ji.reshape(Ji.shape[0] * Ji.shape[1], Ji.shape[2])
-    U = flat.T @ flat
-    JiT, JpT = Ji.transpose(0, 2, 1), Jp.transpose(0, 2, 1)
-    W = np.add.reduceat(JiT @ Jp, starts, axis=0)
-    Vb = np.add.reduceat(JpT @ Jp, starts, axis=0)
+    ends = np.concatenate([splits, [n]]).astype(np.int64)
+    flat = Ji.reshape(2 * n, nf)
+    U = _gram(Ji)
+    W = np.stack([flat[2 * a:2 * b].T @ Jp[a:b].reshape(-1, 6) for a, b in zip(starts, ends)])
+    Vb = np.add.reduceat(Jp.transpose(0, 2, 1) @ Jp, starts, axis=0)
     gu = flat.T @ r.ravel()
     gv = np.add.reduceat(np.einsum("nri,nr->ni", Jp, r), starts, axis=0)
     return U, W, Vb, gu, gv
+
+
+SPARSE_GRAM_FROM = 64  # global columns from which :func:`_gram` looks for columns one residual row leaves at 0
+
+
+def _gram(Ji) -> np.ndarray:
+    """(nf, nf) JᵀJ of Ji (N, 2, nf), the sum of the x rows' and the y rows' products, each over only the
+    columns nonzero in its rows when there are :data:`SPARSE_GRAM_FROM` or more: a spline's Δx knots
+    reach only the x residuals and its Δy knots only the y ones (30 views, 16×14 knots: 5.7 ms in place
+    of 14 per evaluation, the same sums)."""
+    n, _, nf = Ji.shape
+    if nf < SPARSE_GRAM_FROM:  # batched matmul rather than einsum: 3–6× faster here (einsum does not use BLAS)
+        flat = Ji.reshape(2 * n, nf)
+        return flat.T @ flat
+    U = np.zeros((nf, nf))
+    for axis in (0, 1):
+        cols = np.flatnonzero(np.any(Ji[:, axis, :] != 0.0, axis=0))
+        rows = Ji[:, axis, cols]
+        U[np.ix_(cols, cols)] += rows.T @ rows
+    return U
 
 
 def schur_complement(U, W, Vb):

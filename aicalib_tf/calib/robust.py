@@ -117,19 +117,22 @@ def flag_corners(fit: BundleResult, sigmas) -> np.ndarray:
     return ~out
 
 
-def _refit(fit: BundleResult, obj, px, free, sigmas, inliers, basis, rank_strict) -> BundleResult:
+def _refit(fit: BundleResult, obj, px, free, sigmas, inliers, basis, rank_strict, max_nfev=None) -> BundleResult:
     flex = fit.flex if (basis is not None and fit.flex is not None) else None
     return bundle_adjust(fit.model, obj, px, fit.intrinsics, fit.rvecs, fit.tvecs, free=free, sigmas=sigmas,
-                         inliers=inliers, flex_basis=basis, flex=flex, rank_strict=rank_strict)
+                         inliers=inliers, flex_basis=basis, flex=flex, rank_strict=rank_strict, max_nfev=max_nfev)
 
 
 def solve(model: str, views, obj, px, intrinsics, poses, *, free, rank_strict: bool,
-          options: SolveOptions | None = None, unit: float = 1.0) -> BundleResult:
+          options: SolveOptions | None = None, unit: float = 1.0, max_nfev: int | None = None,
+          inliers=None) -> BundleResult:
     """Fit ``model`` to the views with the options' flex and corner rejection; returns the final fit, its
     ``flex_note`` saying why the flex is not used ("" when it is, or when ``flex="off"``).
 
     views : the View list (ids, sigmas, relative); obj, px : their board points (in ``unit`` per square)
-    and corners; intrinsics, poses : the start ((4 + n,), (rvecs, tvecs)). Raises CalibrationError as
+    and corners; intrinsics, poses : the start ((4 + n,), (rvecs, tvecs)); max_nfev : each fit's evaluation
+    cap (None: to convergence; a spline's fit caps it); inliers : (N,) bool, the corners the first fit uses
+    (None: all; every corner is tested again after it). Raises CalibrationError as
     :func:`~aicalib_tf.calib.bundle.bundle_adjust` does.
     """
     options = options or SolveOptions()
@@ -142,14 +145,15 @@ def solve(model: str, views, obj, px, intrinsics, poses, *, free, rank_strict: b
     if basis is not None:
         try:
             fit = bundle_adjust(model, obj, px, intrinsics, *poses, free=free, sigmas=sigmas, flex_basis=basis,
-                                rank_strict=True)
+                                rank_strict=True, max_nfev=max_nfev, inliers=inliers)
         except CalibrationError:
             basis, why = None, "not determined by these views"
     if fit is None:
-        fit = bundle_adjust(model, obj, px, intrinsics, *poses, free=free, sigmas=sigmas, rank_strict=rank_strict)
+        fit = bundle_adjust(model, obj, px, intrinsics, *poses, free=free, sigmas=sigmas, rank_strict=rank_strict,
+                            max_nfev=max_nfev, inliers=inliers)
     if sigmas is not None:  # the error the σ's do not explain, shared by every corner, then the weighted refit
         sigmas = with_floor(sigmas, fit)
-        fit = _refit(fit, obj, px, free, sigmas, None, basis, rank_strict)
+        fit = _refit(fit, obj, px, free, sigmas, inliers, basis, rank_strict, max_nfev)
     seen = set()
     for _ in range(MAX_ROUNDS - 1 if options.reject_corners else 0):
         keep = flag_corners(fit, sigmas)
@@ -158,9 +162,9 @@ def solve(model: str, views, obj, px, intrinsics, poses, *, free, rank_strict: b
                                                                     and np.array_equal(keep, fit.inliers)):
             break
         seen.add(key)
-        fit = _refit(fit, obj, px, free, sigmas, None if keep.all() else keep, basis, rank_strict)
+        fit = _refit(fit, obj, px, free, sigmas, None if keep.all() else keep, basis, rank_strict, max_nfev)
     if basis is not None:
         why = (shape_problem if options.flex in SHAPE_MODES else flex_problem)(fit.flex, fit.flex_covariance, unit)
         if why:
-            fit = _refit(fit, obj, px, free, sigmas, fit.inliers, None, rank_strict)
+            fit = _refit(fit, obj, px, free, sigmas, fit.inliers, None, rank_strict, max_nfev)
     return dataclasses.replace(fit, flex_note=why)

@@ -9,7 +9,12 @@ A fit of ``splined_equidistant`` (the bare name; :mod:`aicalib_tf.geometry._spli
 2. **Refusal.** Fewer than :data:`MIN_VIEWS` views, or fewer than :data:`CORNERS_PER_KNOT` corners per
    knot (half the target density below) of the coarsest grid over the area the boards cover, do not determine a spline: a
    :class:`~aicalib_tf.calib.bundle.CalibrationError` says so ("splined_equidistant: needs at least 6
-   views covering ..., got 4") and the model choice moves on. Six views are enough for the fold choice of
+   views covering ..., got 4") and the model choice moves on. So do boards that leave a side of the image
+   unseen: the layout is centred on the principal point, and when more than :data:`MAX_EMPTY_KNOTS` of its
+   knots reach no corner (step 3's layout; a knot reaches the 4×4 cells around it) the regularization alone
+   would set them. With boards over the whole image 7–29% reach none (``opencv_left`` and ``ocam_fisheye``, all
+   photos and 8 halves each), on the benchmark's synthetic lenses 15–35% (6–20 views), with boards kept to
+   one half of the image 46–61%. Six views are enough for the fold choice of
    step 4: on the 130° lens with a bump, 6 views gave a projection error median of 0.03 and 0.16 px (two
    draws; equidistant 0.47 and 0.20), 8 views 0.06 and 0.11 (0.67 and 0.29); on the 190° fisheye with a
    bump, where equidistant holds the lens but the bump, 6 views 0.09 and 0.05 (0.05, 0.05), 8 views 0.11 and 0.05
@@ -34,18 +39,30 @@ leaves a pattern in its residuals over the image (:func:`misfit_note`): it has n
    the base lens's projection of the corners' rays and of a grid over the rectangle (with the
    regularization); poses by PnP on rays; then the bundle fit with the regularization.
 
+6. **Corners.** The fit is a solve like every model's (:func:`~aicalib_tf.calib.robust.solve`, the board
+   flat): corners weighted by their σ, single outlying corners rejected by the same rule and reported the same
+   way (``rejected_corners`` in camera.json). Before step 4, one such solve of the layout at ``smooth`` =
+   :data:`CLEAN_SMOOTH_REL`·f (bendy enough to follow a lens's bump, too stiff to follow one corner; each fit
+   capped at :data:`HELD_OUT_NFEV` evaluations; a concrete layout: at its own smoothness) finds the corners the
+   folds leave out and the final solve starts without: each would otherwise weigh on every held-out score, and a fit that starts with them wanders
+   along the knots' weak directions (10 views, 4 corners moved 3–10 px: 500 evaluations without converging).
+   The final solve tests every corner again. A start that is a fitted spline of the layout (a fold, a refit)
+   flags them at its own smoothness.
+
 A concrete layout (``splined_equidistant_nx=.._ny=.._fov=.._smooth=..``) keeps its layout and smoothness (with two
 candidate bases, the fit that ends with the lower cost is kept); a start that is already a spline of that layout starts the bundle as it is.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import cv2
 import numpy as np
 
 from aicalib_tf.calib.bundle import BundleResult, CalibrationError, bundle_adjust, poses_from_rays, solve_pose
+from aicalib_tf.calib.robust import SolveOptions, solve
 from aicalib_tf.calib.starts import fisheye_start
 from aicalib_tf.geometry._equidistant import monotonic_limit as kb_monotonic
 from aicalib_tf.geometry._equidistant import project as kb_project
@@ -53,7 +70,8 @@ from aicalib_tf.geometry._equidistant import unproject as _unproject_kb
 from aicalib_tf.geometry._splined import FAMILY_NAME, MAX_KNOTS, MIN_KNOTS, N_BASE, splined_name
 from aicalib_tf.geometry.lens import Lens, get_model
 
-__all__ = ["fit_splined", "choose_layout", "spline_start", "misfit_note", "MIN_VIEWS", "CORNERS_PER_KNOT", "SMOOTH_REL"]
+__all__ = ["fit_splined", "choose_layout", "empty_knots", "spline_start", "misfit_note", "MIN_VIEWS", "CORNERS_PER_KNOT",
+           "SMOOTH_REL", "MAX_EMPTY_KNOTS"]
 
 MIN_VIEWS = 6  # the fewest views a spline is fitted to (module docstring, step 2)
 CORNERS_PER_KNOT = 20.0  # corners per knot over the covered area (each knot holds 2 values)
@@ -62,11 +80,13 @@ SMOOTH_FOLDS = 5  # folds of the held-out score that chooses among them
 SMOOTH_STOP = 1.1  # the search stops at a score this much above the best so far
 MAX_NFEV = 500  # a spline fit's evaluations (its weakly regularized directions converge slowly)
 HELD_OUT_NFEV = 100  # each smoothness candidate's fit on half the views
+CLEAN_SMOOTH_REL = 0.03  # smooth / f of the fit whose rejected corners the folds leave out (step 6)
 MAX_HALF_FOV_DEG = 100.0  # the widest border ray the rectangle is stretched to cover
 _MARGIN = 1.02
 RANGE_MARGIN_DEG = 15.0
 BASE_ORDERS = (4, 3, 2, 1)  # the base's k1..k4 terms tried, most first
 MISFIT_GRID = 6  # cells per axis of the residual-pattern test
+MAX_EMPTY_KNOTS = 0.4  # the largest fraction of knots that reach no corner (module docstring, step 2)
 MISFIT_Z = 3.0
 
 
@@ -146,7 +166,19 @@ def choose_layout(base: Lens, px, image_size, n_views: int) -> tuple[int, int, f
     if len(uv) < 0.5 * CORNERS_PER_KNOT * knots_covered:  # even the coarsest grid is finer than the corners allow
         raise CalibrationError(f"{FAMILY_NAME}: needs at least {math.ceil(0.5 * CORNERS_PER_KNOT * knots_covered)} "
                                f"corners covering the image for a {nx}x{ny} knot grid, got {len(uv)} in {n_views} views")
+    empty = empty_knots(uv, nx, ny, math.degrees(2 * U))
+    if empty > MAX_EMPTY_KNOTS:
+        raise CalibrationError(f"{FAMILY_NAME}: {100 * empty:.0f}% of the {nx}x{ny} knots reach no corner (at most "
+                               f"{100 * MAX_EMPTY_KNOTS:.0f}%): the boards leave a side of the image unseen")
     return nx, ny, math.degrees(2 * U)
+
+
+def empty_knots(uv: np.ndarray, nx: int, ny: int, fov_deg: float) -> float:
+    """The fraction of an ``nx × ny`` layout's knots (``fov_deg`` wide) whose 4×4-cell reach holds none of the
+    corners ``uv`` ((N, 2) base-plane points): knots only the regularization sets."""
+    spec = get_model(splined_name(nx, ny, fov_deg, 1.0))
+    inside, idx, _, _, _ = spec._locate(uv[:, 0], uv[:, 1])
+    return float(np.mean(np.bincount(idx[inside].ravel(), minlength=nx * ny) == 0))
 
 
 def spline_start(base: Lens, model: str, px, k=None) -> np.ndarray:
@@ -262,17 +294,36 @@ def _choose_smooth(base: Lens, layout, obj, px, poses) -> tuple[float, np.ndarra
     return best[1], best[2]
 
 
-def fit_splined(model: str, obj, px, image_size, start: Lens | None, rank_strict: bool = True) -> BundleResult:
+def fit_splined(model: str, obj, px, image_size, start: Lens | None, rank_strict: bool = True, views=None,
+                options: SolveOptions | None = None) -> BundleResult:
     """One fit of a splined model (module docstring): a BundleResult whose ``model`` names the layout.
 
     obj, px : lists of V (N_v, 3) board points and (N_v, 2) corners px. start : a Lens (any model) or None.
-    Raises CalibrationError when the views do not determine a spline or the fit fails."""
+    views, options : the View list and the solve's options (None: the default); with views, the fit weights and
+    rejects single corners as every solve does (step 6), else it is one bundle fit. Raises CalibrationError
+    when the views do not determine a spline or the fit fails."""
     spec = get_model(model)
+    solve_opts = None if views is None else dataclasses.replace(options or SolveOptions(), flex="off", flex_value=None)
+    rejecting = solve_opts is not None and solve_opts.reject_corners
+
+    def fit(name, intr, poses, keep):
+        if solve_opts is None:
+            return bundle_adjust(name, obj, px, intr, *poses, rank_strict=rank_strict, max_nfev=MAX_NFEV)
+        return solve(name, views, obj, px, intr, poses, free=np.ones(len(intr), bool), rank_strict=rank_strict,
+                     options=solve_opts, max_nfev=MAX_NFEV, inliers=keep)
+
+    def flagged(name, intr, poses):  # the corners a capped solve keeps (None: all)
+        if not rejecting:
+            return None
+        return solve(name, views, obj, px, intr, poses, free=np.ones(len(intr), bool), rank_strict=False,
+                     options=solve_opts, max_nfev=HELD_OUT_NFEV).inliers
+
     if start is not None and start.spec.FAMILY == spec.FAMILY and (model == FAMILY_NAME or start.model == model):
         poses = poses_from_rays(start, obj, px)
         if poses is None:
             raise CalibrationError(f"{start.model}: the start lens sees no board in front of it in some view")
-        return bundle_adjust(start.model, obj, px, start.intrinsics(), *poses, rank_strict=rank_strict, max_nfev=MAX_NFEV)
+        intr = start.intrinsics()
+        return fit(start.model, intr, poses, flagged(start.model, intr, poses))
     if start is None or start.spec.FAMILY == spec.FAMILY:
         if model == FAMILY_NAME and len(px) < MIN_VIEWS:  # refuse before the equidistant fit
             raise CalibrationError(f"{FAMILY_NAME}: needs at least {MIN_VIEWS} views covering the image, got {len(px)}")
@@ -284,12 +335,26 @@ def fit_splined(model: str, obj, px, image_size, start: Lens | None, rank_strict
     poses = poses_from_rays(base, obj, px)
     if poses is None:
         raise CalibrationError(f"{model}: the start lens sees no board in front of it in some view")
+    layout = choose_layout(base, px, image_size, len(px)) if model == FAMILY_NAME else (spec.nx, spec.ny, spec.fov_deg)
+    clean = splined_name(*layout, CLEAN_SMOOTH_REL * base.fx) if model == FAMILY_NAME else model
+    keep = flagged(clean, spline_start(base, clean, px), poses)
     if model == FAMILY_NAME:
-        layout = choose_layout(base, px, image_size, len(px))
-        smooth, k = _choose_smooth(base, layout, obj, px, poses)
-        model, ks = splined_name(*layout, smooth), [k]
-    else:  # a concrete layout: the candidate base whose fit ends lower
-        ks = [b.dist for b in _bases(base, px)]
-    fits = [bundle_adjust(model, obj, px, spline_start(base, model, px, k), *poses, rank_strict=rank_strict,
-                          max_nfev=MAX_NFEV) for k in ks]
-    return min(fits, key=lambda f: f.cost)
+        smooth, k = _choose_smooth(base, layout, *_kept(obj, px, keep), poses)
+        model = splined_name(*layout, smooth)
+        return fit(model, spline_start(base, model, px, k), poses, keep)
+    bases = _bases(base, px)
+    if len(bases) == 1:
+        return fit(model, spline_start(base, model, px, bases[0].dist), poses, keep)
+    # a concrete layout: the candidate base whose fit ends lower (each capped as a fold's), then its solve
+    fits = [bundle_adjust(model, obj, px, spline_start(base, model, px, b.dist), *poses, covariance=False,
+                          strict=False, max_nfev=HELD_OUT_NFEV, inliers=keep) for b in bases]
+    best = min(fits, key=lambda f: f.cost)
+    return fit(model, best.intrinsics, (best.rvecs, best.tvecs), keep)
+
+
+def _kept(obj, px, keep) -> tuple[list, list]:
+    """(obj, px) of each view without the corners ``keep`` ((N,) bool over all views' corners, or None) drops."""
+    if keep is None:
+        return obj, px
+    masks = np.split(np.asarray(keep, bool), np.cumsum([len(p) for p in px])[:-1])
+    return [o[m] for o, m in zip(obj, masks)], [np.asarray(p)[m] for p, m in zip(px, masks)]

@@ -8,7 +8,8 @@ import pytest
 
 from aicalib_tf.calib import files as F
 from aicalib_tf.calib.bundle import CalibrationError
-from aicalib_tf.calib.fit import fit_views
+from aicalib_tf.calib.fit import View, fit_views
+from aicalib_tf.calib.report import solve_lines
 from aicalib_tf.calib.maps import MAP_FILES
 from aicalib_tf.calib.splined_fit import MIN_VIEWS
 from aicalib_tf.geometry._splined import splined_name
@@ -19,17 +20,42 @@ from tests.calib.synthetic import PATTERN, SQUARE, synthetic_views
 # a wide rational lens (no equidistant polynomial holds it exactly)
 WIDE = L.Lens("rational_polynomial", [[330.0, 0, 322.0], [0, 331.0, 243.0], [0, 0, 1]],
               [0.35, 0.05, 1e-3, -8e-4, 0.0, 0.72, 0.14, 0.01], (640, 480))
+# a ~190° fisheye
+KB = L.Lens("equidistant", [[300.0, 0, 641.0], [0, 300.5, 479.0], [0, 0, 1]], [0.03, -0.012, 0.004, -0.0008], (1280, 960))
+
+
+def displaced(views, every=3, seed=7):
+    """(views with one corner of every ``every``-th view moved 3–10 px, {view name: [[col, row]]} of those)."""
+    rng = np.random.default_rng(seed)
+    out, moved = [], {}
+    for k, v in enumerate(views):
+        c = v.corners.copy()
+        if k % every == 0:
+            i = int(rng.integers(len(c)))
+            c[i] += rng.uniform(3, 10) * np.array([np.cos(a := rng.uniform(0, 2 * np.pi)), np.sin(a)])
+            moved[v.name] = [v.ids[i].tolist()]
+        out.append(View(v.name, c, v.ids))
+    return out, moved
 
 
 @pytest.fixture(scope="module")
 def spline_cal():
     views = synthetic_views(WIDE, 10, 0.005, seed=3, distance=(0.25, 0.45))
+    dirty, moved = displaced(views)
     # a layout of the family's own choice takes a held-out fit per smoothness: the benchmark runs that
-    return views, fit_views(views, PATTERN, SQUARE, WIDE.image_size, splined_name(8, 8, 140.0, 0.033))
+    return views, fit_views(dirty, PATTERN, SQUARE, WIDE.image_size, splined_name(8, 8, 140.0, 0.033)), moved
+
+
+def test_displaced_corners_are_rejected_inside_the_splines_solve(spline_cal):
+    _, cal, moved = spline_cal
+    assert {k: v.tolist() for k, v in cal.rejected_corners.items()} == moved
+    assert cal.n_rejected_corners == len(moved) and not cal.rejected
+    assert solve_lines(cal)[0].startswith(f"{len(moved)} single corners rejected inside the solve")
 
 
 def test_the_fit_recovers_another_models_projections(spline_cal):
-    views, cal = spline_cal
+    # on the views with their displaced corners: a fit that kept them is off by 1.3 px (median)
+    views, cal, _ = spline_cal
     assert cal.model == splined_name(8, 8, 140.0, 0.033) and cal.rms < 0.015
     px = np.concatenate([v.corners for v in views])
     rays = WIDE.unproject(px)
@@ -45,12 +71,13 @@ def test_too_few_views_are_refused_with_the_reason():
 
 
 def test_files_round_trip_and_the_maps_remap_like_the_lens(spline_cal, tmp_path):
-    _, cal = spline_cal
+    _, cal, moved = spline_cal
     F.save_calibration(cal, tmp_path)
     back = F.load_calibration(tmp_path / "camera.json")
     assert back.lens == cal.lens
     data = F.read_json(tmp_path / "camera.json")
     assert data["lens_layout"]["base"] == "equidistant" and data["undistort_maps"]["files"] == list(MAP_FILES)
+    assert data["n_rejected_corners"] == len(moved) and data["rejected_corners"] == moved
     mx, my = (np.load(tmp_path / n, allow_pickle=False) for n in MAP_FILES)
     assert mx.dtype == np.float32 and mx.shape == (480, 640)
     new_K = np.array(data["undistort_maps"]["camera_matrix"])
@@ -63,6 +90,32 @@ def test_files_round_trip_and_the_maps_remap_like_the_lens(spline_cal, tmp_path)
     img = (np.indices((480, 640)).sum(axis=0) % 256).astype(np.uint8)
     out = cv2.remap(img, mx, my, cv2.INTER_LINEAR)
     np.testing.assert_array_equal(out, F.undistort(img, cal))
+
+
+def test_boards_that_leave_a_side_of_the_image_unseen_are_refused_with_the_reason():
+    from aicalib_tf.calib.splined_fit import choose_layout
+
+    w, h = KB.image_size
+    whole = synthetic_views(KB, MIN_VIEWS, 0.0, seed=5, distance=(0.25, 0.45))
+    assert choose_layout(KB, [v.corners for v in whole], KB.image_size, MIN_VIEWS)[0] >= 6
+    right = synthetic_views(KB, MIN_VIEWS, 0.0, seed=5, avoid=(0, 0, w // 2, h), distance=(0.25, 0.45))
+    with pytest.raises(CalibrationError, match=r"^splined_equidistant: \d+% of the \d+x\d+ knots reach no corner "
+                       r"\(at most 40%\): the boards leave a side of the image unseen$"):
+        choose_layout(KB, [v.corners for v in right], KB.image_size, MIN_VIEWS)
+
+
+def test_the_model_choice_moves_on_when_the_spline_is_refused(monkeypatch):
+    from aicalib_tf.calib import select
+    from aicalib_tf.calib.fit import _fit_model
+
+    monkeypatch.setattr(select, "AUTO_SPLINE_VIEWS", 0)
+    monkeypatch.setattr(select, "misfit_note", lambda fit, views: None)  # as if the residuals showed a pattern
+    views = synthetic_views(WIDE, MIN_VIEWS - 1, 0.05, seed=4)
+    table, chosen, _ = select.select_model(views, SQUARE, lambda vs, m, start: _fit_model(m, vs, SQUARE, WIDE.image_size,
+                                                                                           start),
+                                           ("equidistant", "splined_equidistant"))
+    assert chosen == "equidistant"
+    assert table[1]["note"] == f"splined_equidistant: needs at least {MIN_VIEWS} views covering the image, got {MIN_VIEWS - 1}"
 
 
 def test_the_model_choice_fits_a_spline_only_where_the_residuals_show_a_pattern():
@@ -120,8 +173,7 @@ def test_the_folds_keep_the_smoothest_spline_unless_the_lens_asks_for_less():
     from aicalib_tf.calib.splined_fit import SMOOTH_REL
     from aicalib_tf.geometry.lens import get_model
 
-    kb = L.Lens("equidistant", [[300.0, 0, 641.0], [0, 300.5, 479.0], [0, 0, 1]], [0.03, -0.012, 0.004, -0.0008],
-                (1280, 960))
+    kb = KB
     smooth = lambda cal: get_model(cal.model).smooth / cal.lens.fx  # noqa: E731
     # 8 views of a lens equidistant holds: less smoothing only fits the noise
     plain = fit_views(synthetic_views(kb, 8, 0.05, seed=1), PATTERN, SQUARE, kb.image_size, "splined_equidistant")
