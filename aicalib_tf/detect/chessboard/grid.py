@@ -8,8 +8,10 @@ step changes slowly. :func:`assemble_grids` finds such lattices among the candid
    the 3×3 lattice they predict, each found within a tolerance (with ``strips``: the 5 other
    points of a 3×2 block, for boards of which only strips 2 corners wide are in view).
 2. Grow: extrapolate every grid line one step outwards (quadratically when three points are
-   known, so barrel distortion's curvature is followed), accept a new row or column when most
-   of its predictions find a point, and repeat in all four directions.
+   known, so barrel distortion's curvature is followed; on a fisheye's bent lines by the steps'
+   ratio, and by its trend where four are known, so squares shrinking 3× or more towards the rim
+   are followed), accept a new row or column when most of its predictions find a point, and
+   repeat in all four directions.
 3. Fill holes: predict missing inside cells from their neighbours.
 
 Seeds are placed by :mod:`aicalib_tf.detect.chessboard.grid_seeds`, growth and holes by

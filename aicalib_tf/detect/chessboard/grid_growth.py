@@ -15,7 +15,8 @@ every chessboard's first growth, the phase that takes most cells. The Python loo
 (:func:`_grow_side`) serves the phases the compiled one cannot: those that ask ``propose``, a
 callback that runs the saddle fit and ring test on the image (Python and other kernels, not
 callable from a numba kernel) where no candidate is, with the answers for all four sides batched
-(:func:`_answer_sides`), and those of bent lines (``bend``: :func:`_turned` predictions, double
+(:func:`_answer_sides`), and those of bent lines (``bend``: predictions by the steps' ratio and its
+trend, :func:`~aicalib_tf.detect.chessboard.step_trend.turned`; double
 steps undone by :func:`_single_steps`). ``tests/detect/chessboard/test_grid.py`` holds the two to
 the same cells, in the same order, on the phases both can run.
 """
@@ -25,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from aicalib_tf.detect.chessboard.grid_kernels import grow_lines
+from aicalib_tf.detect.chessboard.step_trend import turned as _turned
 from aicalib_tf.detect.corners.junctions import SAME_CORNER
 from aicalib_tf.geometry.points import sq_distances
 
@@ -136,23 +138,6 @@ def _predict(lat: GrowingGrid, cell: tuple[int, int], back: tuple[int, int]) -> 
     return 3 * p1 - 3 * p2 + p3, step
 
 
-def _turned(p1: np.ndarray, p2: np.ndarray, p3: np.ndarray) -> np.ndarray:
-    """The next points (M, 2) of lines ending p3, p2, p1 (each (M, 2) px), each step the last one
-    turned and scaled as the last one was from the one before (a constant complex ratio of steps).
-
-    Towards a fisheye's rim a line's steps shrink by a similar fraction each step while its direction
-    turns steadily; a quadratic (constant second difference) overshoots there, the more the faster
-    they shrink. On the true corners of data_gen's ``fisheye_closeup`` boards the ratio misses the
-    next corner by more than ``TOLERANCE`` of a step 125 times in 12600, the quadratic 144 times.
-    """
-    a, b = p1 - p2, p2 - p3
-    den = (b * b).sum(axis=1)
-    # (a / b) · a in complex numbers: a's length and turn relative to b, applied once more to a
-    re = (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]) / den
-    im = (a[:, 1] * b[:, 0] - a[:, 0] * b[:, 1]) / den
-    return p1 + np.stack([re * a[:, 0] - im * a[:, 1], re * a[:, 1] + im * a[:, 0]], axis=1)
-
-
 def _side(lat: GrowingGrid, axis: int, sign: int):
     """The next line beyond one side: (cells, predictions (M, 2), tolerances (M,)), or None.
 
@@ -184,26 +169,36 @@ def lines_ahead(get, axis: int, sign: int, edge: int, across, bend: bool = False
 
     ``get((i, j))`` gives a cell's point ((2,) px) or None; ``across``: the positions along the other
     axis to look at, in order. A line needs its last two points; it goes on linearly, or quadratically
-    where three points are known (with ``bend``, by the steps' ratio: :func:`_turned`). Returns (cells
+    where three points are known (with ``bend``, by the steps' ratio, and where four are known by that
+    ratio's trend: :func:`~aicalib_tf.detect.chessboard.step_trend.turned`; a hole's lines
+    (:func:`_predict`) keep the ratio, its trend lost corners there). Returns (cells
     one step beyond, as (i, j); predictions (M, 2) px; last steps (M, 2) px) or None when no line ends there.
     """
-    cells, l1, l2, l3, quad = [], [], [], [], []
-    b1, b2, b3, new = edge, edge - sign, edge - 2 * sign, edge + sign
+    cells, l1, l2, l3, l4, quad, trend = [], [], [], [], [], [], []
+    b1, b2, b3, b4, new = edge, edge - sign, edge - 2 * sign, edge - 3 * sign, edge + sign
     for o in across:
         if axis == 0:
-            q1, q2, q3 = get((b1, o)), get((b2, o)), get((b3, o))
+            q1, q2, q3, q4 = get((b1, o)), get((b2, o)), get((b3, o)), get((b4, o)) if bend else None
         else:
-            q1, q2, q3 = get((o, b1)), get((o, b2)), get((o, b3))
+            q1, q2, q3, q4 = get((o, b1)), get((o, b2)), get((o, b3)), get((o, b4)) if bend else None
         if q1 is not None and q2 is not None:
             cells.append((new, o) if axis == 0 else (o, new))
             l1.append(q1)
             l2.append(q2)
-            l3.append(q1 if q3 is None else q3)  # a stand-in: only quadratic rows read it
+            l3.append(q1 if q3 is None else q3)  # stand-ins: only quadratic (trend) rows read them
+            l4.append(q1 if q4 is None else q4)
             quad.append(q3 is not None)
+            trend.append(q3 is not None and q4 is not None)
     if not cells:
         return None
     p1, p2, p3 = np.array(l1), np.array(l2), np.array(l3)
-    ahead = _turned(p1, p2, p3) if bend else 3 * p1 - 3 * p2 + p3
+    if bend:
+        ahead = _turned(p1, p2, p3)
+        if any(trend):
+            on = np.array(trend)
+            ahead[on] = _turned(p1[on], p2[on], p3[on], np.array(l4)[on])
+    else:
+        ahead = 3 * p1 - 3 * p2 + p3
     return cells, np.where(np.array(quad)[:, None], ahead, 2 * p1 - p2), p1 - p2
 
 

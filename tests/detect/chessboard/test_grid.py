@@ -287,19 +287,6 @@ def test_compiled_growth_takes_the_cells_the_python_growth_takes(monkeypatch):
     assert grown > 5  # some lattices grew well past the kernel's first cell grid
 
 
-def test_bent_extrapolation_follows_steps_that_turn_and_shrink_at_a_steady_ratio():
-    # points z_k = c + r^k e^{ik·θ}: each step is the last one turned by θ and scaled by r, as a line's
-    # steps towards a fisheye's rim are, nearly; the steps' ratio predicts the next point exactly
-    from aicalib_tf.detect.chessboard.grid_growth import _turned
-
-    z = 100 + 40 * (0.7 * np.exp(0.3j)) ** np.arange(4)
-    p = np.stack([z.real, z.imag], 1)
-    got = _turned(p[2][None], p[1][None], p[0][None])[0]
-    assert np.allclose(got, p[3], atol=1e-9)
-    quadratic = 3 * p[2] - 3 * p[1] + p[0]
-    assert np.hypot(*(quadratic - p[3])) > 1.0
-
-
 def test_a_corner_proposed_onto_a_cells_point_is_not_taken_again():
     # a squeezed rim corner's saddle fit can slide onto its neighbour: that point is not a second cell
     from aicalib_tf.detect.chessboard.grid_growth import GrowingGrid
