@@ -1,25 +1,27 @@
 """Predicted against measured corner error per condition: the detector's per-corner σ on rendered truth.
 
-    python benchmarks/corner_sigma.py [--images 6] [--conditions named,sweeps] [--cache DIR]
-    python benchmarks/corner_sigma.py --fit [--fit-on sweeps,named] [--images 6] [--leave-out]   # refit COEFFS, LOW, HIGH
+    python benchmarks/corner_sigma.py [--images 6] [--seeds own,2031,2032,2033] [--conditions named,sweeps] [--cache DIR]
+    python benchmarks/corner_sigma.py --fit [--fit-on sweeps,named] [--leave-out]   # refit COEFFS, LOW, HIGH
     python benchmarks/corner_sigma.py --calibrate [--views 20] [--repeats 3] [--as-rendered]   # calibration with and without σ
 
-Renders the benchmark's conditions (:mod:`aicalib_tf.bench.conditions`, with their own seeds), detects
-each board with the shipped model and matches every detected corner to the nearest visible true
-corner (within ``WRONG_PX``; further ones are counted as gross and left out). Per condition it
-prints the corners matched, the measured RMS error per axis, the RMS of the predicted σ
-(:mod:`aicalib_tf.detect.corners.sigma`), their ratio (target 0.8–1.25) with its spread over the
-condition's images (:func:`ratio_interval`) and the rank correlation of
-|error| with σ among the condition's corners; then, over all boards, whether σ spreads inside a board
-as the errors do (:func:`spread`).
+Renders the benchmark's conditions (:mod:`aicalib_tf.bench.conditions`) with each of ``--seeds``
+(``own``: the condition's own seed, 21 named and 31 sweeps; the others, ``EVAL_SEEDS``, other scenes,
+cameras, poses and noise that the model's fit never saw), ``--images`` renders a seed, detects each
+board with the shipped model and matches every detected corner to the nearest visible true corner
+(within ``WRONG_PX``; further ones are counted as gross and left out). Per condition it prints the
+corners matched, the measured RMS error per axis, the RMS of the predicted σ
+(:mod:`aicalib_tf.detect.corners.sigma`), their ratio over all its renders (target 0.8–1.25), the
+lowest and highest ratio of one seed's renders, the ratio's spread over the condition's images
+(:func:`ratio_interval`) and the rank correlation of |error| with σ among the condition's corners;
+then, over all boards, whether σ spreads inside a board as the errors do (:func:`spread`).
 
-``--fit`` renders the conditions of ``--fit-on`` again with other seeds (``FIT_SEEDS``: other
-scenes, cameras, poses and noise), fits the model there (:func:`fit_table`) and reports with the
-fitted table on the benchmark's own renders, which the fit never saw; paste the printed table into
-the module. ``--fit-on sweeps`` leaves the named conditions (shading, occluders, fisheyes, ...) out
-of the fit altogether; ``--leave-out`` refits once per family of conditions (a sweep's levels, or one
-named condition) without it and reports that family on the benchmark's renders: conditions as well
-as seeds held out.
+``--fit`` renders the conditions of ``--fit-on`` with ``FIT_SEEDS`` (scenes of their own), fits the
+model there (:func:`fit_table`) and reports with the fitted table on ``--seeds``' renders, which the fit
+never saw, and in one line on the fit's own renders; paste the printed table into the module.
+``--fit-on sweeps`` leaves the named conditions (shading, occluders, fisheyes, ...) out of the fit
+altogether; ``--leave-out`` refits once per family of conditions (a sweep's levels, or one named
+condition) without it and reports that family on ``--seeds``' renders: conditions as well as seeds
+held out.
 
 ``--calibrate`` degrades the calibration sequences' views (:func:`aicalib_tf.bench.conditions.calibration_sequences`,
 cameras 0–3) one by one with a blur and a noise drawn from ``MIXED`` (seeded per view), detects them
@@ -53,6 +55,7 @@ from aicalib_tf.detect.pyramid import Frame  # noqa: E402
 from aicalib_tf.io import read_image  # noqa: E402
 
 FIT_SEEDS = (1031, 1032)  # scenes for fitting; the benchmark's own seeds are 21 (named) and 31 (sweeps)
+EVAL_SEEDS = ("own", 2031, 2032, 2033)  # scenes reported on: the conditions' own seeds and three more
 CLIP_PERCENTILES = (0.1, 99.9)  # the fitted range of each column (LOW, HIGH): the rare corners beside an object's
 # edge lie beyond the 99th percentile of their asymmetry, and their σ should follow it there
 
@@ -75,19 +78,22 @@ def board_errors(image: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.n
     return x[ok], err[ok], int((~ok).sum())
 
 
-def collect(conditions, images: int) -> dict[str, dict[str, np.ndarray]]:
-    """{condition: {"x": (K, len(COLUMNS)), "err": (K, 2) px, "image": (K,) int, "gross": ()}} over ``images`` renders each."""
+def collect(conditions, images: int, seeds=("own",)) -> dict[str, dict[str, np.ndarray]]:
+    """{condition: {"x": (K, len(COLUMNS)), "err": (K, 2) px, "image": (K,) int, "gross": ()}} over ``images`` renders
+    of each of ``seeds`` ("own": the condition's own seed); "image" is 1000 · the seed's place in ``seeds`` + the
+    render's index."""
     out = {}
     for cond in conditions:
         if not cond.has_board:
             continue
         xs, es, ims, gross = [np.zeros((0, len(cs.COLUMNS)))], [np.zeros((0, 2))], [np.zeros(0, int)], 0
-        for index, s in condition_samples(cond, images):
-            x, e, g = board_errors(s.image, s.corners[s.visible] if len(s.corners) else s.corners)
-            xs.append(x)
-            es.append(e)
-            ims.append(np.full(len(x), index))
-            gross += g
+        for k, seed in enumerate(seeds):
+            for index, s in condition_samples(cond if seed == "own" else replace(cond, seed=int(seed)), images):
+                x, e, g = board_errors(s.image, s.corners[s.visible] if len(s.corners) else s.corners)
+                xs.append(x)
+                es.append(e)
+                ims.append(np.full(len(x), 1000 * k + index))
+                gross += g
         out[cond.name] = {"x": np.concatenate(xs), "err": np.concatenate(es), "image": np.concatenate(ims),
                           "gross": np.array(gross)}
     return out
@@ -158,13 +164,30 @@ def fit_table(train: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.r_[c, b], low, high
 
 
+def ratios_of(data: dict, table) -> dict[str, float]:
+    """{condition: measured RMS error per axis / RMS σ over all its corners} (conditions with corners)."""
+    out = {}
+    for name, v in data.items():
+        if len(v["x"]):
+            sig = cs.sigma_from_design(v["x"], *table).astype(np.float64)
+            out[name] = float(np.sqrt(np.mean(v["err"] ** 2)) / np.sqrt(np.mean(sig ** 2)))
+    return out
+
+
+def summary(ratios) -> str:
+    """How many ratios lie in [0.8, 1.25], and the RMS of their logarithms."""
+    r = np.asarray(list(ratios), np.float64)
+    return (f"{int(np.sum((r >= 0.8) & (r <= 1.25)))} of {len(r)} conditions with the ratio in [0.8, 1.25]; "
+            f"RMS of log ratio {float(np.sqrt(np.mean(np.log(r) ** 2))):.3f}")
+
+
 def report(data: dict, table=None) -> list[float]:
-    """Print one line per condition; return the ratios (measured RMS error / RMS σ)."""
+    """Print one line per condition; return the ratios (measured RMS error / RMS σ over all its renders)."""
     from scipy.stats import spearmanr
 
     table = table or (cs.COEFFS, cs.LOW, cs.HIGH)
-    print(f"{'condition':26s} {'corners':>7s} {'gross':>5s} {'RMS err/axis':>12s} {'RMS σ':>8s} {'ratio':>6s} {'68% over images':>15s} "
-          f"{'rank ρ':>6s}")
+    print(f"{'condition':26s} {'corners':>7s} {'gross':>5s} {'RMS err/axis':>12s} {'RMS σ':>8s} {'ratio':>6s} {'seeds':>11s} "
+          f"{'68% over images':>15s} {'rank ρ':>6s}")
     ratios = []
     for name, v in data.items():
         if len(v["x"]) == 0:
@@ -175,11 +198,11 @@ def report(data: dict, table=None) -> list[float]:
         rho = spearmanr(np.hypot(v["err"][:, 0], v["err"][:, 1]), sig).statistic if np.ptp(sig) > 0 else float("nan")
         ratios.append(rms_e / rms_s)
         lo, hi = ratio_interval(v["err"], sig, v["image"])
-        print(f"{name:26s} {len(sig):7d} {int(v['gross']):5d} {rms_e:12.4f} {rms_s:8.4f} {rms_e / rms_s:6.2f} {lo:7.2f}–{hi:<7.2f} "
-              f"{rho:6.2f}")
-    inside = sum(0.8 <= r <= 1.25 for r in ratios)
-    print(f"{inside} of {len(ratios)} conditions with the ratio in [0.8, 1.25]; "
-          f"RMS of log ratio {float(np.sqrt(np.mean(np.log(ratios) ** 2))):.3f}")
+        seed = v["image"] // 1000
+        per = [float(np.sqrt(np.mean(v["err"][seed == k] ** 2) / np.mean(sig[seed == k] ** 2))) for k in np.unique(seed)]
+        print(f"{name:26s} {len(sig):7d} {int(v['gross']):5d} {rms_e:12.4f} {rms_s:8.4f} {rms_e / rms_s:6.2f} "
+              f"{min(per):5.2f}–{max(per):<5.2f} {lo:7.2f}–{hi:<7.2f} {rho:6.2f}")
+    print(summary(ratios))
     spread(data, table)
     return ratios
 
@@ -226,16 +249,13 @@ def family(name: str) -> str:
 def leave_out(train: dict, held: dict) -> None:
     """Print each family's ratios on ``held`` from a table fitted on ``train`` without that family (held-out
     conditions as well as seeds), and the count within 0.8-1.25."""
-    ratios = []
+    ratios = {}
     for fam in dict.fromkeys(family(n) for n in held):
         table = fit_table({n: v for n, v in train.items() if family(n) != fam and len(v["x"])})
-        for name, v in held.items():
-            if family(name) == fam and len(v["x"]):
-                sig = cs.sigma_from_design(v["x"], *table).astype(np.float64)
-                ratios.append(float(np.sqrt(np.mean(v["err"] ** 2)) / np.sqrt(np.mean(sig ** 2))))
-                print(f"{name:26s} left out of the fit: ratio {ratios[-1]:.2f}")
-    print(f"held-out conditions: {sum(0.8 <= r <= 1.25 for r in ratios)} of {len(ratios)} with the ratio in "
-          f"[0.8, 1.25]; RMS of log ratio {float(np.sqrt(np.mean(np.log(ratios) ** 2))):.3f}")
+        ratios.update(ratios_of({n: v for n, v in held.items() if family(n) == fam}, table))
+    print("families held out of the fit, outside [0.8, 1.25]: "
+          + (", ".join(f"{n} {r:.2f}" for n, r in ratios.items() if not 0.8 <= r <= 1.25) or "none"))
+    print("held-out families: " + summary(ratios.values()))
 
 
 def _cached(path: Path | None, make) -> dict:
@@ -305,7 +325,8 @@ def calibrate_weighted(views: int, degrade: bool = True, repeats: int = 1) -> No
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--images", type=int, default=6, help="renders per condition")
+    ap.add_argument("--images", type=int, default=6, help="renders per condition and seed")
+    ap.add_argument("--seeds", default=",".join(map(str, EVAL_SEEDS)), help="data_gen seeds reported on (own: the condition's)")
     ap.add_argument("--conditions", default="named,sweeps", help="conditions reported (aicalib_tf.bench.conditions names)")
     ap.add_argument("--fit", action="store_true", help="refit the table on --fit-on rendered with FIT_SEEDS")
     ap.add_argument("--fit-on", default="sweeps,named", help="conditions fitted on (with other seeds)")
@@ -323,16 +344,17 @@ def main(argv=None) -> int:
         return 0
     if a.cache:
         a.cache.mkdir(parents=True, exist_ok=True)
-    name = f"{a.conditions.replace(',', '+')}_{a.images}.npz"
-    held = _cached(a.cache and a.cache / name, lambda: collect(select_conditions(a.conditions), a.images))
+    seeds = tuple(s.strip() for s in a.seeds.split(",") if s.strip())
+    name = f"{a.conditions.replace(',', '+')}_{a.images}_{'+'.join(seeds)}.npz"
+    held = _cached(a.cache and a.cache / name, lambda: collect(select_conditions(a.conditions), a.images, seeds))
     table = None
     if a.fit:
-        fitting = [replace(c, name=f"{c.name}@{seed}", seed=seed) for seed in FIT_SEEDS for c in select_conditions(a.fit_on)]
-        train = _cached(a.cache and a.cache / f"fit_{a.fit_on.replace(',', '+')}_{a.images}.npz",
-                        lambda: collect(fitting, a.images))
+        train = _cached(a.cache and a.cache / f"fit_{a.fit_on.replace(',', '+')}_{a.images}_{'+'.join(map(str, FIT_SEEDS))}.npz",
+                        lambda: collect(select_conditions(a.fit_on), a.images, FIT_SEEDS))
         table = fit_table(train)
         print(f"fitted on {sum(len(v['x']) for v in train.values())} corners, {len(train)} conditions "
               f"({', '.join(select_conditions(a.fit_on)[k].name for k in range(2))}, ...) with seeds {FIT_SEEDS}")
+        print("on the fit's own renders: " + summary(ratios_of(train, table).values()))
         if a.leave_out:
             leave_out(train, held)
         for label, arr in zip(("COEFFS", "LOW", "HIGH"), table):

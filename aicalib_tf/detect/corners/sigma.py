@@ -54,7 +54,7 @@ part by the maximum likelihood of the errors with a free scale per image (so it 
 corners inside an image, and its spread matches theirs), then the board's part to make each image's
 mean σ² agree with its mean squared error per axis. ``python benchmarks/corner_sigma.py --fit``
 refits and prints them; ``python benchmarks/corner_sigma.py`` compares predicted and measured errors
-per condition on the benchmark's own renders.
+per condition on scenes the fit never saw (the benchmark's own seeds and three more).
 """
 
 from __future__ import annotations
