@@ -1,5 +1,6 @@
-"""Training on TFRecord shards with tf.distribute: two local workers train like one, and a cluster
-that loses a worker resumes from its BackupAndRestore backup to the same weights.
+"""Training on TFRecord shards with tf.distribute: a two-worker cluster trains like one worker with
+the same global batch, and after losing a worker resumes from its BackupAndRestore backup to the
+same loss curve and weights (one cluster shows both: killed after its first backup, started again).
 
 Every run is tiny (3 epochs of 2 steps on 128×128 crops) and CPU only. Tolerances: the workers
 all-reduce float32 gradients and sum the loss over replicas in another order than one worker's
@@ -110,47 +111,31 @@ def _kill_after_first_backup(out: Path, workers) -> int:
     return json.loads(meta.read_text())["epoch"]
 
 
-@pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    """Shards; then, side by side, one worker (batch 4, rate 2e-3), a two-worker cluster, and a
-    second cluster that loses a worker after its first backup and is started again."""
-    root = tmp_path_factory.mktemp("distribute")
-    write_shards(ShardConfig(DatasetConfig(out=root / "shards", count=6, preset="train", seed=2, size=(320, 240)),
-                             shards=2), progress=False)
-    data = str(root / "shards" / "*.tfrecord")
-    one = _train("--out", str(root / "one"), "--data", data, "--batch-size", "4", "--learning-rate", "2e-3", *TINY)
-    cluster = _cluster(root / "two", data)
-    doomed = _cluster(root / "killed", data)
-    backed_up = _kill_after_first_backup(root / "killed", doomed)
-    restarted = _cluster(root / "killed", data)  # the same commands again
-    _finish([one, *cluster, *restarted])
-    return root, backed_up
-
-
 @pytest.mark.slow
-def test_two_workers_give_the_loss_curve_of_one_worker_with_the_same_global_batch(runs):
-    root, _ = runs
-    one, two = _losses(root / "one"), _losses(root / "two")
+def test_a_cluster_trains_like_one_worker_and_resumes_after_losing_a_worker_to_the_same_weights(tmp_path):
+    """Side by side: one worker (batch 4, rate 2e-3) and a two-worker cluster (2 and 1e-3 per replica)
+    that loses a worker after its first backup and is started again. The epochs before the kill are
+    the fresh cluster's, those after the restarted one's: every epoch's loss and the final weights
+    must be the single worker's (a cluster that never restarts takes the first part's path throughout)."""
+    write_shards(ShardConfig(DatasetConfig(out=tmp_path / "shards", count=6, preset="train", seed=2, size=(320, 240)),
+                             shards=2), progress=False)
+    data = str(tmp_path / "shards" / "*.tfrecord")
+    one = _train("--out", str(tmp_path / "one"), "--data", data, "--batch-size", "4", "--learning-rate", "2e-3", *TINY)
+    doomed = _cluster(tmp_path / "two", data)
+    backed_up = _kill_after_first_backup(tmp_path / "two", doomed)
+    restarted = _cluster(tmp_path / "two", data)  # the same commands again
+    _finish([one, *restarted])
+    assert 1 <= backed_up < EPOCHS  # killed mid-run
+    one, two = _losses(tmp_path / "one"), _losses(tmp_path / "two")
     assert sorted(one) == sorted(two) == list(range(EPOCHS))
     np.testing.assert_allclose([two[e] for e in range(EPOCHS)], [one[e] for e in range(EPOCHS)], rtol=1e-5)
-    for a, b in zip(_weights(root / "two"), _weights(root / "one")):
+    for a, b in zip(_weights(tmp_path / "two"), _weights(tmp_path / "one")):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-5)
-    config = json.loads((root / "two" / "config.json").read_text())
+    config = json.loads((tmp_path / "two" / "config.json").read_text())
     assert config["replicas"] == 2 and config["global_batch_size"] == 4 and config["global_learning_rate"] == 2e-3
-    assert not (root / "two" / "backup").exists()  # removed when training ends
-
-
-@pytest.mark.slow
-def test_a_cluster_that_loses_a_worker_resumes_from_its_backup_to_the_same_weights(runs):
-    root, backed_up = runs
-    assert 1 <= backed_up < EPOCHS  # killed mid-run
-    one, resumed = _losses(root / "one"), _losses(root / "killed")
-    assert sorted(resumed) == list(range(EPOCHS))
-    np.testing.assert_allclose([resumed[e] for e in range(EPOCHS)], [one[e] for e in range(EPOCHS)], rtol=1e-5)
-    for a, b in zip(_weights(root / "killed"), _weights(root / "one")):
-        np.testing.assert_allclose(a, b, rtol=0, atol=1e-5)
-    metrics = json.loads((root / "killed" / "metrics.json").read_text())
+    metrics = json.loads((tmp_path / "two" / "metrics.json").read_text())
     assert metrics["replicas"] == 2 and metrics["resumed_at_epoch"] == backed_up
+    assert not (tmp_path / "two" / "backup").exists()  # removed when training ends
 
 
 def test_multiworker_without_tf_config_is_one_line_exit_2(tmp_path, monkeypatch, capsys):
