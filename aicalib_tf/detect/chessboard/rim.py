@@ -15,7 +15,10 @@ started again from points about the prediction where no window holds at it), and
 the fit stays within a third of that step, the ring about it keeps ``RIM_GATE`` of a typical
 corner's amplitude, and it is no other corner's point. A board's corner is predicted by its cell's
 parallelogram (its two neighbours on the ring and the diagonal one inside). A grid missing more
-than ``MAX_MISSING`` corners, or any inside its outer ring, is left as it is.
+than ``MAX_MISSING`` corners, or any inside its outer ring, is left as it is. Where the rim's
+corner is too faint for the noise, or its outer squares are sheared into slivers, the fit can stop
+2–5 px short of the junction, on an edge or on a sliver's ridge: such a point's saddle is far
+flatter than its neighbours' (:func:`flat_placed`), and the grid is then left as it is.
 
 A full board claims every corner in view. Where an object in front cuts the board, the grid may
 hold points on the object's edge and miss a corner beside it, which this completion would then
@@ -26,15 +29,17 @@ theirs, which the rim's darkening, blur and squeeze change slowly and an object'
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from aicalib_tf.detect.chessboard.board_order import full_board
 from aicalib_tf.detect.chessboard.grid import Grid
-from aicalib_tf.detect.corners.junctions import ring_symmetry
+from aicalib_tf.detect.corners.junctions import nearest_spacing, ring_symmetry
 from aicalib_tf.detect.corners.refine import Smoothed, refine_windowed, window_radius
+from aicalib_tf.detect.corners.saddle import saddle_fit_matrix
 
-__all__ = ["complete_rim", "rim_board", "unlike_neighbours", "grid_directions", "neighbour_median", "MAX_MISSING",
-           "SHIFT"]
+__all__ = ["complete_rim", "rim_board", "unlike_neighbours", "flat_placed", "saddle_sharpness", "grid_directions",
+           "neighbour_median", "MAX_MISSING", "SHIFT", "PLACED_FLAT"]
 
 MAX_MISSING = 3  # most corners of the outer ring placed here
 SHIFT = 0.34  # of the smallest local step: the farthest the saddle fit may move a prediction
@@ -43,6 +48,8 @@ RATIO = (0.3, 1.25)  # bounds of a line's step ratio used to extrapolate its nex
 AMP_RANGE = (0.45, 1.4)  # a corner's ring amplitude over its neighbours' median: the least and the most
 ODD_RATIO = 6.0  # a corner's ring asymmetry (of its amplitude) over its neighbours' median: the most ...
 ODD_FLOOR = 0.05  # ... that median taken as at least this (sharp, evenly lit corners leave almost none)
+PLACED_FLAT = 0.5  # ln: a placed corner whose saddle_sharpness is this far under its neighbours' median is no junction
+SHARP_RADIUS = 3  # px: the largest window radius of saddle_sharpness (a 7×7 window)
 _NEIGHBOURS = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)]
 
 
@@ -178,6 +185,34 @@ def unlike_neighbours(points: np.ndarray, ring_image: np.ndarray) -> np.ndarray:
     return (amp < AMP_RANGE[0] * near_amp) | (amp > AMP_RANGE[1] * near_amp) | (odd > ODD_RATIO * np.maximum(near_odd, ODD_FLOOR))
 
 
+def saddle_sharpness(gray: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N,) ln(√|det H| / contrast) of each corner's saddle: H the Hessian (grey / px²) of the saddle fit's quadratic
+    (:func:`aicalib_tf.detect.corners.saddle.saddle_fit_matrix`) on the unsmoothed ``gray`` (H, W) float32 about
+    ``points`` (N, 2) px (bilinear samples, the window radius of the corner spacing, at most ``SHARP_RADIUS``),
+    the contrast the Gaussian-weighted standard deviation of the window's point-symmetric part. An X-junction's
+    quadratic curves both ways; a point off the junction along one of its edges sees an edge, one curvature near
+    0, and the position along that edge is set by the noise (a blurred, darkened board corner: 2.5 px off)."""
+    pts = np.asarray(points, np.float64).reshape(-1, 2)
+    radius = np.minimum(window_radius(nearest_spacing(pts.astype(np.float32))), SHARP_RADIUS) if len(pts) > 1 \
+        else np.full(len(pts), SHARP_RADIUS)
+    out = np.zeros(len(pts))
+    g = np.asarray(gray, np.float32)
+    for r in sorted(set(radius.tolist())):
+        sel = np.flatnonzero(radius == r)
+        offsets, fit = saddle_fit_matrix(int(r))
+        at = (pts[sel, None, :] + offsets[None].astype(np.float64)).astype(np.float32)  # (K, M, 2)
+        vals = cv2.remap(g, at[..., 0], at[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float64)
+        a, b, c = (vals @ fit[:3].T).T  # f = a x² + b xy + c y² + ...
+        s = r / 2.0 + 0.5
+        w = np.exp(-(offsets.astype(np.float64) ** 2).sum(axis=1) / (2 * s * s))
+        w /= w.sum()
+        even = 0.5 * (vals + vals[:, ::-1])  # offsets run row-major, so offset −o is the mirrored index
+        even -= (even * w).sum(axis=1, keepdims=True)
+        contrast = np.sqrt((w * even * even).sum(axis=1))
+        out[sel] = 0.5 * np.log(np.maximum(np.abs(4 * a * c - b * b), 1e-24)) - np.log(np.maximum(contrast, 1e-12))
+    return out
+
+
 def _as_grid(grid: Grid, cells: dict) -> Grid:
     """A grid of ``cells`` {(i, j): (2,) px}; ``grid``'s own points keep their index, the others get -1."""
     index = {(int(i), int(j)): int(k) for (i, j), k in zip(grid.ij, grid.index)}
@@ -196,8 +231,8 @@ def complete_rim(grid: Grid, shape: tuple[int, int], smoothed: Smoothed, ring_im
     (:func:`aicalib_tf.detect.corners.junctions.typical_amplitude`).
     Returns a grid with every position of ``shape`` filled (placed corners get index -1), or None
     when the grid's extent is not ``shape``, more than ``MAX_MISSING`` corners are missing, one is
-    inside the outer ring, a corner's fit fails, or a corner of the full grid is
-    :func:`unlike_neighbours` (an object in front).
+    inside the outer ring, a corner's fit fails, a corner of the full grid is
+    :func:`unlike_neighbours` (an object in front), or a placed one is :func:`flat_placed`.
     """
     a, b = shape
     if grid.shape != (a, b) or len(grid) >= a * b or a * b - len(grid) > MAX_MISSING or min(a, b) < 4:
@@ -214,9 +249,28 @@ def complete_rim(grid: Grid, shape: tuple[int, int], smoothed: Smoothed, ring_im
             return None
         placed[(i, j)] = q
     full = {**cells, **placed}
-    if unlike_neighbours(np.array([[full[(i, j)] for j in range(b)] for i in range(a)]), ring_image).any():
+    points = np.array([[full[(i, j)] for j in range(b)] for i in range(a)])
+    if unlike_neighbours(points, ring_image).any():
         return None  # an object in front: a full board would claim corners it hides
+    if flat_placed(points, smoothed.gray, [(i, j) for i, j in missing]).any():
+        return None  # a fit left on an edge or a ridge short of the junction
     return _as_grid(grid, full)
+
+
+def flat_placed(points: np.ndarray, gray: np.ndarray, placed: list) -> np.ndarray:
+    """(len(placed),) bool: the placed positions [(i, j)] of a full grid ``points`` (a, b, 2) px whose
+    :func:`saddle_sharpness` on ``gray`` (H, W) is more than ``PLACED_FLAT`` under the median of their
+    neighbours' on the grid. A saddle fit left on a square's edge, or on the ridge of a sliver of light
+    square between two dark ones where the outer squares are sheared at the rim, sees one curvature near 0,
+    and the place along it is set by the noise (2–5 px off; on the rim completion's true corners of
+    closeup-eq, -unified and the closeup_families benchmark, within 0.1 of their neighbours)."""
+    if not placed:
+        return np.zeros(0, bool)
+    a, b = points.shape[:2]
+    sharp = saddle_sharpness(gray, points.reshape(-1, 2)).reshape(a, b)
+    near = neighbour_median(sharp)
+    ii, jj = np.array(placed).T
+    return sharp[ii, jj] < near[ii, jj] - PLACED_FLAT
 
 
 def rim_board(grids: list[Grid], scores: np.ndarray, pattern_size: tuple[int, int], smoothed: Smoothed,

@@ -33,10 +33,8 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
-from aicalib_tf.detect.chessboard.rim import neighbour_median
+from aicalib_tf.detect.chessboard.rim import neighbour_median, saddle_sharpness
 from aicalib_tf.detect.corners.junctions import SAME_CORNER, nearest_spacing
-from aicalib_tf.detect.corners.refine import window_radius
-from aicalib_tf.detect.corners.saddle import saddle_fit_matrix
 from aicalib_tf.detect.corners.sigma import board_sigmas
 from aicalib_tf.geometry.points import any_within
 
@@ -54,7 +52,6 @@ DARK, DARK_SHARE = 0.5, 0.05  # a region whose darkest 5 % is under half its gri
 NEW_POINTS = 4  # the flattened region's new network points that start its search (fewer: as many as the grid misses)
 NEAR = 2.0  # px: a network point this near a candidate of the search is not new
 FLAT_SADDLE = 2.0  # ln: a corner whose saddle_sharpness is this far under its neighbours' median is set aside
-SHARP_RADIUS = 3  # px: the largest window radius of saddle_sharpness (a 7×7 window)
 LOOK_ENDS = ("no region", "not darkened", "nothing new", "no full board", "unmarked corner", "sigma", "flat saddle",
              "found")  # where flattened_look ends, in its order
 
@@ -173,34 +170,6 @@ def new_points(points: np.ndarray, others: np.ndarray) -> int:
     search's candidates ``others`` (M, 2) px within ``NEAR`` px: the corners the flattening shows."""
     return int(np.sum(~any_within(np.asarray(points, np.float64).reshape(-1, 2),
                                   np.asarray(others, np.float64).reshape(-1, 2), NEAR)))
-
-
-def saddle_sharpness(gray: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(N,) ln(√|det H| / contrast) of each corner's saddle: H the Hessian (grey / px²) of the saddle fit's quadratic
-    (:func:`aicalib_tf.detect.corners.saddle.saddle_fit_matrix`) on the unsmoothed ``gray`` (H, W) float32 about
-    ``points`` (N, 2) px (bilinear samples, the window radius of the corner spacing, at most ``SHARP_RADIUS``),
-    the contrast the Gaussian-weighted standard deviation of the window's point-symmetric part. An X-junction's
-    quadratic curves both ways; a point off the junction along one of its edges sees an edge, one curvature near
-    0, and the position along that edge is set by the noise (a blurred, darkened board corner: 2.5 px off)."""
-    pts = np.asarray(points, np.float64).reshape(-1, 2)
-    radius = np.minimum(window_radius(nearest_spacing(pts.astype(np.float32))), SHARP_RADIUS) if len(pts) > 1 \
-        else np.full(len(pts), SHARP_RADIUS)
-    out = np.zeros(len(pts))
-    g = np.asarray(gray, np.float32)
-    for r in sorted(set(radius.tolist())):
-        sel = np.flatnonzero(radius == r)
-        offsets, fit = saddle_fit_matrix(int(r))
-        at = (pts[sel, None, :] + offsets[None].astype(np.float64)).astype(np.float32)  # (K, M, 2)
-        vals = cv2.remap(g, at[..., 0], at[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float64)
-        a, b, c = (vals @ fit[:3].T).T  # f = a x² + b xy + c y² + ...
-        s = r / 2.0 + 0.5
-        w = np.exp(-(offsets.astype(np.float64) ** 2).sum(axis=1) / (2 * s * s))
-        w /= w.sum()
-        even = 0.5 * (vals + vals[:, ::-1])  # offsets run row-major, so offset −o is the mirrored index
-        even -= (even * w).sum(axis=1, keepdims=True)
-        contrast = np.sqrt((w * even * even).sum(axis=1))
-        out[sel] = 0.5 * np.log(np.maximum(np.abs(4 * a * c - b * b), 1e-24)) - np.log(np.maximum(contrast, 1e-12))
-    return out
 
 
 def flat_saddles(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray) -> np.ndarray:
