@@ -139,9 +139,10 @@ def _predict(lat: GrowingGrid, cell: tuple[int, int], back: tuple[int, int]) -> 
 
 
 def _side(lat: GrowingGrid, axis: int, sign: int):
-    """The next line beyond one side: (cells, predictions (M, 2), tolerances (M,)), or None.
+    """The next line beyond one side: (cells, predictions (M, 2), tolerances (M,), steady), or None;
+    steady: with ``bend``, the predictions by the steps' ratio alone (M, 2), else None.
 
-    Each line ending on that side predicts its next point as :func:`_predict` does (all lines at
+    Each line ending on that side predicts its next point as :func:`lines_ahead` does (all lines at
     once). None when the grid has reached ``limit`` along ``axis`` or no line predicts a point.
     Worked out once per lattice version (``GrowingGrid.sides``), so callers must not change the arrays.
     """
@@ -157,14 +158,14 @@ def _work_out_side(lat: GrowingGrid, axis: int, sign: int):
     if lat.limit is not None and lat.extent(axis) >= lat.limit:
         return None
     edge = max(lat.coords[axis]) if sign > 0 else min(lat.coords[axis])
-    ahead = lines_ahead(lat.at.get, axis, sign, edge, sorted(lat.coords[1 - axis]), lat.bend)
+    ahead = lines_ahead(lat.at.get, axis, sign, edge, sorted(lat.coords[1 - axis]), lat.bend, steady=lat.bend)
     if ahead is None:
         return None
-    cells, preds, d = ahead
-    return cells, preds, TOLERANCE * np.sqrt((d * d).sum(axis=1))
+    cells, preds, d = ahead[:3]
+    return cells, preds, TOLERANCE * np.sqrt((d * d).sum(axis=1)), ahead[3] if lat.bend else None
 
 
-def lines_ahead(get, axis: int, sign: int, edge: int, across, bend: bool = False):
+def lines_ahead(get, axis: int, sign: int, edge: int, across, bend: bool = False, steady: bool = False):
     """The next point of every grid line that ends at position ``edge`` along ``axis`` (going ``sign``).
 
     ``get((i, j))`` gives a cell's point ((2,) px) or None; ``across``: the positions along the other
@@ -172,7 +173,8 @@ def lines_ahead(get, axis: int, sign: int, edge: int, across, bend: bool = False
     where three points are known (with ``bend``, by the steps' ratio, and where four are known by that
     ratio's trend: :func:`~aicalib_tf.detect.chessboard.step_trend.turned`; a hole's lines
     (:func:`_predict`) keep the ratio, its trend lost corners there). Returns (cells
-    one step beyond, as (i, j); predictions (M, 2) px; last steps (M, 2) px) or None when no line ends there.
+    one step beyond, as (i, j); predictions (M, 2) px; last steps (M, 2) px) or None when no line ends there;
+    with ``steady`` (and ``bend``) a fourth item, the predictions by the steps' ratio alone (M, 2) px.
     """
     cells, l1, l2, l3, l4, quad, trend = [], [], [], [], [], [], []
     b1, b2, b3, b4, new = edge, edge - sign, edge - 2 * sign, edge - 3 * sign, edge + sign
@@ -192,14 +194,14 @@ def lines_ahead(get, axis: int, sign: int, edge: int, across, bend: bool = False
     if not cells:
         return None
     p1, p2, p3 = np.array(l1), np.array(l2), np.array(l3)
-    if bend:
-        ahead = _turned(p1, p2, p3)
-        if any(trend):
-            on = np.array(trend)
-            ahead[on] = _turned(p1[on], p2[on], p3[on], np.array(l4)[on])
-    else:
-        ahead = 3 * p1 - 3 * p2 + p3
-    return cells, np.where(np.array(quad)[:, None], ahead, 2 * p1 - p2), p1 - p2
+    if not bend:
+        return cells, np.where(np.array(quad)[:, None], 3 * p1 - 3 * p2 + p3, 2 * p1 - p2), p1 - p2
+    ratio = np.where(np.array(quad)[:, None], _turned(p1, p2, p3), 2 * p1 - p2)
+    ahead = ratio.copy()
+    if any(trend):
+        on = np.array(trend)
+        ahead[on] = _turned(p1[on], p2[on], p3[on], np.array(l4)[on])
+    return (cells, ahead, p1 - p2) + ((ratio,) if steady else ())
 
 
 def _grow_side(lat: GrowingGrid, axis: int, sign: int, whole: bool = False, answer=None) -> bool:
@@ -208,15 +210,24 @@ def _grow_side(lat: GrowingGrid, axis: int, sign: int, whole: bool = False, answ
     The line is added when at least half its predictions (and 2) find a point; with ``whole``, only
     when all of them find a candidate point (``propose`` is not asked). answer : None, or
     (version, found) from :func:`_answer_sides`, used while the lattice is still at that version.
+    With ``bend``, a line whose prediction by its ratio's trend finds nothing is asked again where
+    its steps' ratio alone predicts (on noisy candidates, a few px apart at 10 px steps, the trend
+    can follow the noise).
     """
     side = _side(lat, axis, sign)
     if side is None:
         return False
-    cells, preds, tols = side
+    cells, preds, tols, steady = side
+    ask = lat.limit is not None and not whole
     if answer is not None and answer[0] == lat.version:
         found = answer[1]
     else:
-        found = lat.find(preds, tols, allow_propose=lat.limit is not None and not whole)
+        found = lat.find(preds, tols, allow_propose=ask)
+    if steady is not None and (again := np.flatnonzero((found < 0) & np.any(steady != preds, axis=1))).size:
+        found = found.copy()
+        found[again] = lat.find(steady[again], tols[again], allow_propose=ask)
+        preds = preds.copy()
+        preds[again] = steady[again]
     if lat.bend:
         found = _single_steps(lat, axis, sign, cells, preds, tols, found)
     hits = [(c, k) for c, k in zip(cells, found) if k >= 0]
@@ -235,8 +246,8 @@ def _answer_sides(lat: GrowingGrid) -> dict:
     sides = {(axis, sign): side for axis in (0, 1) for sign in (1, -1) if (side := _side(lat, axis, sign)) is not None}
     if len(sides) < 2:
         return {}
-    found = lat.find(np.concatenate([p for _, p, _ in sides.values()]), np.concatenate([t for _, _, t in sides.values()]))
-    ends = np.cumsum([len(c) for c, _, _ in sides.values()])
+    found = lat.find(np.concatenate([s[1] for s in sides.values()]), np.concatenate([s[2] for s in sides.values()]))
+    ends = np.cumsum([len(s[0]) for s in sides.values()])
     return {key: (lat.version, part) for key, part in zip(sides, np.split(found, ends[:-1]))}
 
 

@@ -100,7 +100,7 @@ def test_a_side_is_worked_out_again_only_after_a_cell_is_taken():
             lat.take((int(i), int(j)), k)
     first = _side(lat, 0, 1)
     assert _side(lat, 0, 1) is first  # remembered while nothing changes
-    cells, preds, tols = first
+    cells, preds, tols, _ = first
     assert cells == [(4, 0), (4, 1), (4, 2)]
     np.testing.assert_array_equal(preds[0], 3 * pts[9] - 3 * pts[6] + pts[3])  # three known: quadratic
     lat.take((0, 2), 2)

@@ -61,3 +61,17 @@ def test_true_corners_of_a_close_up_squeezed_6_times_assemble_into_their_lattice
     gray = cv2.GaussianBlur(sc.render().astype(np.float32), (0, 0), 1.0)
     grids = assemble_grids(sc.corners[np.random.default_rng(1).permutation(54)], gray=gray, limit=10, bend=True)
     assert len(grids[0]) == 54 and sorted(grids[0].shape) == [6, 9]
+
+
+def test_a_line_the_trend_misses_is_asked_again_where_the_ratio_alone_predicts():
+    # three lines with steps of 10, 10, 14 px (a corner off by noise, say): the trend predicts a 27 px
+    # step, 7.8 px (1.9 tolerances) beyond the next corners; the ratio alone predicts them
+    from aicalib_tf.detect.chessboard.grid_growth import GrowingGrid, _grow_side
+
+    ys = [0.0, 10.0, 20.0, 34.0]
+    pts = np.array([(10.0 * j, y) for y in ys for j in range(3)] + [(10.0 * j, 53.6) for j in range(3)])
+    lat = GrowingGrid(pts, np.ones(len(pts), bool), bend=True)
+    for k in range(12):
+        lat.take((k // 3, k % 3), k)
+    assert _grow_side(lat, 0, 1)
+    assert [lat.cells[(4, j)] for j in range(3)] == [12, 13, 14]
