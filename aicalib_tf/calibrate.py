@@ -96,6 +96,7 @@ from aicalib_tf.calib.workflow import (
     parse_square,
     run,
 )
+from aicalib_tf.calib.flex import FLEX_DEFAULT, FLEX_MODES
 from aicalib_tf.geometry.lens import MODELS
 
 
@@ -122,10 +123,11 @@ def build_parser():
     ap.add_argument("--network", default=DETECTOR_NETWORK, help=NETWORK_HELP)
     ap.add_argument("--fix-k3", action="store_true", help="hold k3 at 0 (pinhole models; narrow lenses, few views)")
     ap.add_argument("--rational", action="store_true", help="the same as --model rational_polynomial")
-    ap.add_argument("--flex", choices=("off", "auto", "sag", "shape"), default="off",
-                    help="photos: auto (or shape) solves the board's shape (its sag, twist and S-bends, 7 terms) with "
-                         "the camera, each term shrunk towards flat by the noise of its estimate; sag does so for the "
-                         "parabolic sag alone (default: %(default)s; see docs/calibration.md)")
+    ap.add_argument("--flex", choices=FLEX_MODES, default=None,
+                    help="photos: shape solves the board's shape (its sag, twist and S-bends, 7 terms) with the camera, "
+                         "each term shrunk towards flat by the noise of its estimate; auto (the default for photos) "
+                         "keeps it only when it moves the lens by more than its noise, else the board is flat; sag "
+                         "solves the parabolic sag alone; off: flat (videos, cameras and rigs; see docs/calibration.md)")
     ap.add_argument("--workers", type=int, default=None,
                     help="detection processes (default: one per core, but one per 8 images at most)")
     ap.add_argument("--resize-policy", default="error", choices=RESIZE_POLICIES,
@@ -171,7 +173,7 @@ def _main(args) -> int:
     from aicalib_tf.guided.workflow import guided_source
 
     source = guided_source(args.images, args.camera)
-    if args.flex != "off" and (source is not None or args.rig):
+    if args.flex not in (None, "off") and (source is not None or args.rig):
         raise ValueError("--flex is solved for photos of one camera; videos, cameras and rigs take the board flat")
     if args.board and args.board.strip().lower().startswith("circles:") and (source is not None or args.rig):
         raise ValueError("--board circles:... is read from photos of one camera; videos, cameras and rigs take "
@@ -201,7 +203,7 @@ def _main(args) -> int:
             return _run(lambda: _rig_video_config(args, cameras), run_rig_video, wrote)
         return _run(lambda: RigConfig(cameras=cameras, **_common(args)), run_rig, wrote)
     return _run(lambda: CalibrateConfig(images=tuple(args.images), fix_k3=args.fix_k3, rational=args.rational,
-                                        resize_policy=args.resize_policy, flex=args.flex, **_common(args)), run,
+                                        resize_policy=args.resize_policy, flex=args.flex or FLEX_DEFAULT, **_common(args)), run,
                 "camera.yaml, camera.json, camera_info.yaml, camchain.yaml, report.png")
 
 

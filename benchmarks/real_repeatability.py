@@ -9,9 +9,9 @@ counted once), the photos (natural order, the most common image size only) are s
 even/odd and first/second half, and each half is calibrated by:
 
 - aicalib_tf: ``python -m aicalib_tf.calibrate HALF --model auto`` (its own detector, everything the
-  command line does), the halves' camera.json read back; once with the default solve and once with
-  ``--flex auto`` (each half keeps or drops the flex by its own held-out check; ``--no-flex-column``
-  skips it);
+  command line does), the halves' camera.json read back; once with the default solve (``--flex auto``:
+  each half keeps the board's shape only where it moves the lens by more than its leave-one-view-out
+  noise) and once with ``--flex-column MODE`` (default off: a flat board; ``--no-flex-column`` skips it);
 - OpenCV: ``calibrateCamera`` with 5 coefficients and with the rational model, and
   ``cv2.fisheye.calibrate``, on OpenCV's classic corners (``findChessboardCorners`` with adaptive
   threshold and normalisation, ``cornerSubPix`` 5x5, 30 iterations / 1e-3);
@@ -56,7 +56,7 @@ SETS = {"opencv_left": ((9, 6), 1.0, "1"), "udacity_lane_cal": ((9, 6), 1.0, "1"
         "ocam_fisheye": ((8, 6), 0.0325, "32.5mm")}
 SPLITS = ("evenodd", "halves")
 MRCAL_MODELS = ("opencv8", "splined")
-COLUMNS = (("aicalib_tf", "aicalib_tf default"), ("aicalib_tf_flex", "aicalib_tf --flex auto"), ("cv_plumb_bob", "OpenCV 5-coef"), ("cv_rational", "OpenCV rational"),
+COLUMNS = (("aicalib_tf", "aicalib_tf default"), ("aicalib_tf_flex", "aicalib_tf --flex off"), ("cv_plumb_bob", "OpenCV 5-coef"), ("cv_rational", "OpenCV rational"),
            ("cv_fisheye", "OpenCV fisheye"), ("mrcal_opencv8", "mrcal OPENCV8"), ("mrcal_splined", "mrcal splined"))
 
 
@@ -391,7 +391,7 @@ def _mrcal_split(venv: Path, names_halves, corners_halves, set_cfg, size, seeds,
 
 
 def run_set(name: str, folder: Path, venv: Path | None, tmp: Path, repeats: int = 3, spline_nx: int = 10,
-            flex_column: bool = True) -> dict:
+            flex_column: str | None = "off") -> dict:
     """Every split of one set through every tool; {"set", "photos", "size", "left_out", "splits": {...}}."""
     from aicalib_tf.calib.diff import split_views
 
@@ -399,7 +399,7 @@ def run_set(name: str, folder: Path, venv: Path | None, tmp: Path, repeats: int 
     files, size, left_out = photos(folder)
     corners = {p: classic_corners(p, cfg[0]) for p in files}
     out = {"set": name, "photos": len(files), "size": list(size), "left_out": left_out,
-           "classic_boards": sum(c is not None for c in corners.values()), "splits": {}}
+           "classic_boards": sum(c is not None for c in corners.values()), "flex_column": flex_column, "splits": {}}
     for split in SPLITS:
         work = tmp / f"{name}_{split}"
         work.mkdir(parents=True, exist_ok=True)
@@ -407,7 +407,7 @@ def run_set(name: str, folder: Path, venv: Path | None, tmp: Path, repeats: int 
         row = {}
         row["aicalib_tf"], cals = _project_split(halves, cfg, work, size)
         if flex_column:
-            row["aicalib_tf_flex"] = _project_split(halves, cfg, work, size, "auto")[0]
+            row["aicalib_tf_flex"] = _project_split(halves, cfg, work, size, flex_column)[0]
         cv = _opencv_split([[corners[p] for p in h] for h in halves], cfg[0], size)
         row.update({"cv_plumb_bob": cv["plumb_bob"], "cv_rational": cv["rational_polynomial"],
                     "cv_fisheye": cv["equidistant"]})
@@ -443,18 +443,26 @@ def _cell(entry) -> str:
     return f"{m:.3g} ({lo:.3g}-{hi:.3g})" if hi > 1.2 * lo else f"{m:.3g}"
 
 
+def _columns(results) -> tuple:
+    """COLUMNS with the second aicalib_tf column titled by the --flex it ran."""
+    flex = next((r.get("flex_column") for r in results if r.get("flex_column")), "off")
+    return tuple((k, f"aicalib_tf --flex {flex}" if k == "aicalib_tf_flex" else t) for k, t in COLUMNS)
+
+
 def table(results: list[dict]) -> str:
     """The markdown table: each set and split, every tool's halves difference (px), the best anchor."""
-    head = "| set | split | " + " | ".join(t for _, t in COLUMNS) + " | best anchor | aicalib_tf ≤ best |"
-    lines = [head, "|" + "---|" * (len(COLUMNS) + 4)]
+    columns = _columns(results)
+    head = "| set | split | " + " | ".join(t for _, t in columns) + " | best anchor | aicalib_tf ≤ best |"
+    lines = [head, "|" + "---|" * (len(columns) + 4)]
     for r in results:
         for split, row in r["splits"].items():
-            cells = [_cell(row.get(k)) for k, _ in COLUMNS]
+            cells = [_cell(row.get(k)) for k, _ in columns]
             if row.get("aicalib_tf", {}).get("models"):
                 cells[0] += f" ({'/'.join(sorted(set(row['aicalib_tf']['models'])))})"
-            if row.get("aicalib_tf_flex", {}).get("flex_kept"):
-                cells[1] += f" (flex {'/'.join('kept' if k else 'flat' for k in row['aicalib_tf_flex']['flex_kept'])})"
-            anchors = [(_median(row.get(k)), t) for k, t in COLUMNS[2:] if _median(row.get(k)) is not None]
+            for i, key in enumerate(("aicalib_tf", "aicalib_tf_flex")):
+                if any(row.get(key, {}).get("flex_kept", [])):
+                    cells[i] += f" (shape {'/'.join('kept' if k else 'flat' for k in row[key]['flex_kept'])})"
+            anchors = [(_median(row.get(k)), t) for k, t in columns[2:] if _median(row.get(k)) is not None]
             best = min(anchors) if anchors else None
             ours = _median(row.get("aicalib_tf"))
             lead = "-" if best is None or ours is None else ("yes" if ours <= best[0] else "no")
@@ -514,7 +522,9 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-mrcal", action="store_true")
     ap.add_argument("--mrcal-repeats", type=int, default=3, help="mrcal solves per half and model (default: 3)")
     ap.add_argument("--spline-nx", type=int, default=10, help="mrcal splined model's knots across (default: 10)")
-    ap.add_argument("--no-flex-column", action="store_true", help="skip the aicalib_tf --flex auto column")
+    ap.add_argument("--flex-column", default="off", choices=("off", "sag", "shape"),
+                    help="the second aicalib_tf column's --flex (default: off, a flat board)")
+    ap.add_argument("--no-flex-column", action="store_true", help="skip the second aicalib_tf column")
     ap.add_argument("--json", default=None, help="write every figure as JSON here")
     ap.add_argument("--data", default=str(SHARED), help="the real sets' folder (default: ../shared/data)")
     args = ap.parse_args(argv)
@@ -528,7 +538,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="real_repeatability_") as tmp:
         for name, folder in find_sets(args.sets, Path(args.data)):
             results.append(run_set(name, folder, venv, Path(tmp), args.mrcal_repeats, args.spline_nx,
-                                   not args.no_flex_column))
+                                   None if args.no_flex_column else args.flex_column))
     print()
     print(table(results))
     if venv is not None:

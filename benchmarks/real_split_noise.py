@@ -1,7 +1,7 @@
 """How noisy one split's halves difference is: many random half-splits of each real set, every tool.
 
     .venv/bin/python benchmarks/real_split_noise.py [--sets opencv_left ...] [--splits 200] [--flex-splits 24]
-        [--modes flat shape] [--shape-terms 7] [--shape-shrink-from 0.5] [--skip-mrcal] [--json noise.json]
+        [--modes auto shape] [--shape-terms 7] [--shape-shrink-from 0.5] [--skip-mrcal] [--json noise.json]
         [--weighting view]
 
 ``benchmarks/real_repeatability.py`` scores two fixed splits of each set (even/odd, first/second). One
@@ -11,11 +11,12 @@ scored as there (rotation-fitted projection difference, median over the covered 
 
 - aicalib_tf, in process on the photos' detections (the calibrate command's CNN detector, each photo
   once), with the lens model ``auto`` chooses on all the photos held for every half:
-  flat (the default solve), "sag" (``flex="sag"``: each half's sag shrunk towards flat by its leave-one-view-out
-  noise, :mod:`aicalib_tf.calib.flex_check`), "flex" (the sag as solved in both
-  halves, its σ rule only) and "shape" (``flex="auto"``: the board's 7-term shape, each term shrunk by its
-  leave-one-view-out noise, :mod:`aicalib_tf.calib.board_shape`; ``--shape-terms`` solves its first N terms,
-  ``--shape-shrink-from`` sets the t up to which a term is 0); ``--modes`` runs a subset of these;
+  flat (``flex="off"``), "auto" (the default, ``flex="auto"``: the board's shape kept only where it moves
+  the lens by more than its leave-one-view-out noise, :mod:`aicalib_tf.calib.flex_check`), "sag"
+  (``flex="sag"``: each half's sag shrunk towards flat by its leave-one-view-out noise), "flex" (the sag as
+  solved in both halves, its σ rule only) and "shape" (``flex="shape"``: the board's 7-term shape, each term
+  shrunk by its leave-one-view-out noise, :mod:`aicalib_tf.calib.board_shape`; ``--shape-terms`` solves its
+  first N terms, ``--shape-shrink-from`` sets the t up to which a term is 0); ``--modes`` runs a subset;
   and, for the flat halves, what their covariances predict for the difference
   (:func:`aicalib_tf.calib.quality.predicted_half_difference`: the mean and the 10-90% band of one draw);
 - the crossed column "flat, classic corners": the flat default's fit on OpenCV's classic corners (equal
@@ -33,7 +34,8 @@ Printed per set: each column's median and quartiles over its splits; for each an
 flat default is at or below it on the same split, and the difference of the two medians with its 90%
 interval over the splits (both columns resampled by split, 1000 draws): an interval that holds 0 does
 not rank the two; the same gap for the flex and shape columns against flat and against the best anchor
-of each split.
+of each split, and each one's geometric mean over the splits of its difference ÷ flat's (90% interval,
+splits resampled).
 """
 
 from __future__ import annotations
@@ -54,9 +56,9 @@ import real_repeatability as rr  # noqa: E402
 
 from aicalib_tf.calib import board_shape, weights  # noqa: E402
 
-OURS = ("flat", "sag", "flex", "shape")
-FLEX_COLUMNS = ("sag", "flex", "shape")
-FLEX_OPTION = {"flat": "off", "sag": "sag", "shape": "auto"}  # calibrate_camera's flex for a column
+OURS = ("flat", "auto", "sag", "flex", "shape")
+FLEX_COLUMNS = ("auto", "sag", "flex", "shape")
+FLEX_OPTION = {"flat": "off", "auto": "auto", "sag": "sag", "shape": "shape"}  # calibrate_camera's flex for a column
 CROSSED = ("flat_classic", "flat, classic corners")
 ANCHORS = (("cv_plumb_bob", "OpenCV 5-coef"), ("cv_rational", "OpenCV rational"), ("cv_fisheye", "OpenCV fisheye"),
            ("mrcal_opencv8", "mrcal OPENCV8"))
@@ -207,7 +209,28 @@ def summary(res: dict) -> list[str]:
                 if m != "flat" or title != "flat"]
         lines.append(f"  {m}: medians' gap " + "; ".join(f"to {t} {g:+.3g} px (90%: {lo:+.3g} to {hi:+.3g})"
                                                          for t, g, lo, hi in gaps))
+        if m != "flat":
+            g, lo, hi, n = ratio_to_flat(v, flat)
+            lines.append(f"  {m} ÷ flat, geometric mean {g:.3g} (90%: {lo:.3g}-{hi:.3g}, {n} splits); the board's shape "
+                         f"kept in {kept_share(rows, m):.0%} of the halves")
     return lines
+
+
+def ratio_to_flat(v: np.ndarray, flat: np.ndarray, draws: int = 2000, seed: int = 0) -> tuple[float, float, float, int]:
+    """(geometric mean of v ÷ flat over the splits both hold, its 5% and 95% points with the splits resampled,
+    the splits): v and flat (S,) px per split (NaN: missing)."""
+    ok = ~(np.isnan(v) | np.isnan(flat)) & (v > 0) & (flat > 0)
+    r = np.log(v[ok] / flat[ok])
+    if not len(r):
+        return float("nan"), float("nan"), float("nan"), 0
+    b = np.exp(r[np.random.default_rng(seed).integers(0, len(r), (draws, len(r)))].mean(axis=1))
+    return float(np.exp(r.mean())), float(np.percentile(b, 5)), float(np.percentile(b, 95)), int(len(r))
+
+
+def kept_share(rows, mode: str) -> float:
+    """The share of halves whose ``mode`` calibration kept a board flex or shape (0 when it never ran)."""
+    kept = [k for r in rows if isinstance(r.get(mode), dict) for k in r[mode].get("flex_kept", [])]
+    return float(np.mean(kept)) if kept else 0.0
 
 
 def main(argv=None) -> int:

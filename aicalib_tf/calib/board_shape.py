@@ -1,4 +1,4 @@
-"""The board's shape in a calibration (``flex="auto"``): solved with the camera, each term shrunk by its noise.
+"""The board's shape in a calibration (``flex="shape"``, and ``"auto"`` where the views afford it).
 
 A printed sheet on a backing is rarely flat in the parabolic way of the flex alone: it twists, bends in
 an S, or sags more at one edge. The shape is the polynomial z(u, v) of
@@ -19,17 +19,26 @@ flat and the note says so; otherwise the camera is refitted with the board held 
 covariance is the fit's scaled to the SE's. Reported: the coefficients with their SE, the sag
 (w_x + w_y, as for the flex) and the RMS out of the board's best plane over the corners, with σ.
 
-Measured (random half-splits of each real set, ``benchmarks/real_split_noise.py``; geometric mean of
-the halves' projection difference, 90% interval over the splits): against the sag alone
-(``flex="sag"``) 1.04 (0.97-1.12) on OpenCV's left photos (150 splits), 0.80 (0.69-0.92) on the bent
-udacity board (48) and, held out while the rule was chosen, 0.85 (0.83-0.88) on the 185° fisheye (96);
-against a flat board 1.43 (1.25-1.63), 0.32 (0.25-0.40) and 1.00 (0.92-1.07, 96 splits). So
-``flex="auto"`` solves the shape, and a flat board stays the default: halves of 6-8 views of a nearly
-flat board cannot tell its shape from noise. Tried on the first two sets (48 splits) and not kept: three
-terms (the sags and the twist) 1.25 × flat on OpenCV's photos against 1.19 for seven; terms kept only
-beyond 1 SE 1.16; a gate that takes the board flat unless the shape predicts views left out better 1.28.
-Synthetic views (``benchmarks/board_shape.py``): a twisted, S-bent board's terms within 1.3 SE of the
-truth, fx bias below 0.3 σ_fx.
+Whether the views afford a shape (``flex="auto"``, the calibrate command's default). A shape can be real and
+still cost: halves of 6-7 of OpenCV's left photos find its sag along y at t ≈ 4 (the board does sag), yet
+agree 1.26 times worse than flat with only the terms beyond a Bonferroni Student-t cut kept, 1.42 with all,
+because the terms trade against the lens's own parameters while the flat board's error, shared by the two
+halves of one board, does not show. What matters is how far the shape moves the lens against the noise it
+brings: :func:`~aicalib_tf.calib.flex_check.lens_shift` measures the move of the projection over the boards
+(shaped fit against flat, rotation fitted) and the jackknife SE of the shaped lens from the
+leave-one-view-out fits the terms' SE already need. With z = shift / SE and c = t₀.₉₀(V − 1)
+(:func:`~aicalib_tf.calib.flex_check.afford_cut`: Student's t, one-sided 90%, with the jackknife's V − 1
+degrees of freedom: 1.48 for 6 views, 1.33 for 20) none of the shape is used up to z = c, all of it from
+2c, linearly between (:func:`~aicalib_tf.calib.flex_check.afford_part`); the note gives the shift, z and
+the two bounds. Chosen on synthetic views and OpenCV's left photos, with udacity's bent board and the 185°
+fisheye held out: over 81 random half-splits of OpenCV's photos z has median 0.40 (90th percentile
+1.02); all of the shape from z > 1 costs 1.09 × flat, from z > c 1.02, the ramp from c to 2c 0.99
+(0.96-1.01); synthetic flat boards (6-20 views, 0.2 px) stay below z = 0.9 and never keep a shape, while
+boards bent by 0.006-0.015 squares keep it in 25-100% of the sequences, their lens error to the truth
+0.2-0.5 × flat's. The step at c alone (no ramp) cost the held-out fisheye 1.03 (1.01-1.06) × flat over
+51 splits, every bit of it in the 4 splits where one half kept a shape and the other did not: the
+ramp, the firm shrinkage each term already follows, keeps two halves either side of c close. Each view's
+refit costs what ``"shape"``'s do, plus one flat refit. Measured on the real sets: docs/benchmark.md.
 """
 
 from __future__ import annotations
@@ -38,11 +47,12 @@ import numpy as np
 
 from aicalib_tf.geometry.board_shape import SHAPE_TERMS, out_of_plane_rms
 
-__all__ = ["SHAPE_MODE", "SHAPE_MODES", "N_SHAPE_TERMS", "SHAPE_PLAUSIBLE", "SHAPE_SHRINK_FROM", "shape_problem",
-           "leave_one_out_shapes", "shape_fields", "shape_text"]
+__all__ = ["AUTO_MODE", "SHAPE_MODE", "SHAPE_MODES", "N_SHAPE_TERMS", "SHAPE_PLAUSIBLE", "SHAPE_SHRINK_FROM",
+           "shape_problem", "leave_one_out_fits", "loo_shapes", "leave_one_out_shapes", "shape_fields", "shape_text"]
 
-SHAPE_MODE = "shape"  # the flex mode that solves the shape; "auto" is the same
-SHAPE_MODES = ("auto", SHAPE_MODE)
+SHAPE_MODE = "shape"  # the flex mode that solves the shape and keeps each term shrunk by its noise
+AUTO_MODE = "auto"  # the same, kept only when it moves the lens by more than its noise (flex_check.afford_shape)
+SHAPE_MODES = (AUTO_MODE, SHAPE_MODE)
 N_SHAPE_TERMS = len(SHAPE_TERMS)
 SHAPE_PLAUSIBLE = 0.25  # squares: a term beyond this is the lens model's misfit, not the board's (the flex's too)
 SHAPE_SHRINK_FROM = 0.5  # t = |w_k| / SE_k up to which a term is 0 (the sag's too: flex_check.SHRINK_FROM)
@@ -63,14 +73,23 @@ def shape_problem(shape, covariance, unit: float = 1.0) -> str:
     return ""
 
 
+def leave_one_out_fits(views, refit) -> list:
+    """The V fits refit(views less view i, "shape"), one for each view i. refit(views, mode) -> BundleResult
+    with a unit square; CalibrationError propagates."""
+    return [refit(views[:i] + views[i + 1:], SHAPE_MODE) for i in range(len(views))]
+
+
+def loo_shapes(fits) -> np.ndarray:
+    """(V, K) squares: the shapes of V leave-one-out fits (0 where a fit keeps none)."""
+    out = [None if f.flex is None else np.asarray(f.flex, np.float64) for f in fits]
+    k = max((len(s) for s in out if s is not None), default=0)
+    return np.array([np.zeros(k) if s is None else s for s in out]).reshape(len(fits), k)
+
+
 def leave_one_out_shapes(views, refit) -> np.ndarray:
     """(V, K) squares: the shape of refit(views less view i, "shape") for each view i (0 where that refit
     keeps none). refit(views, mode) -> BundleResult with a unit square; CalibrationError propagates."""
-    fits = [refit(views[:i] + views[i + 1:], SHAPE_MODE) for i in range(len(views))]
-    out = [None if f.flex is None else np.asarray(f.flex, np.float64) for f in fits]
-    k = max((len(s) for s in out if s is not None), default=0)
-    return np.array([np.zeros(k) if s is None else s for s in out]).reshape(len(views), k)
-
+    return loo_shapes(leave_one_out_fits(views, refit))
 
 
 def shape_fields(shape, covariance, pattern_size, square_size: float) -> dict:

@@ -299,7 +299,7 @@ def fit_views(views, pattern_size: tuple[int, int], square_size: float, image_si
     usable, rejected = _usable_views(views, pattern_size, 3, image_size)
     opts = SolveOptions(pattern_size, flex, reject_corners)
     fit = _fit_model(model, usable, 1.0, image_size, start, fix_k3, False, opts)  # a unit square: tvecs scaled last
-    fit = confirm_flex(fit, usable, _flex_refit(fit, image_size, fix_k3, opts))
+    fit = confirm_flex(fit, usable, _flex_refit(fit, image_size, fix_k3, opts), opts.flex, image_size)
     return _calibration(fit, usable, pattern_size, square_size, image_size, rejected, square_unit, meta)
 
 
@@ -394,6 +394,6 @@ def calibrate_camera(views, pattern_size: tuple[int, int], square_size: float = 
         usable.pop(worst)
         max_drop -= 1
         fit = _refit(model, usable, 1.0, image_size, fit, fix_k3, opts)
-    fit = confirm_flex(fit, usable, _flex_refit(fit, image_size, fix_k3, opts))
+    fit = confirm_flex(fit, usable, _flex_refit(fit, image_size, fix_k3, opts), opts.flex, image_size)
     return _calibration(fit, usable, pattern_size, square_size, image_size, rejected, square_unit, meta, table,
                         image_circle)

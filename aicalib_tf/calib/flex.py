@@ -7,9 +7,10 @@ One flex is shared by every view (one physical board); the bundle solves (w_x, w
 (:mod:`aicalib_tf.calib.bundle`). Here w is in squares; ``sag`` is the centre's offset against the
 corners of the grid, w_x + w_y, reported in squares and in the board's unit.
 
-Modes: ``flex="sag"`` solves this flex; ``"auto"`` (the same as ``"shape"``) the board's shape of
-:mod:`aicalib_tf.calib.board_shape`, whose first two terms are this flex and which repeats better on
-real photos (its measurements there); ``"off"`` takes the board as flat.
+Modes (:data:`FLEX_MODES`): ``flex="sag"`` solves this flex; ``"shape"`` the board's shape of
+:mod:`aicalib_tf.calib.board_shape`, whose first two terms are this flex; ``"auto"`` (the calibrate
+command's default, :data:`FLEX_DEFAULT`) the shape when the views afford it, else a flat board (the rule
+and its measurements there); ``"off"`` takes the board as flat.
 
 Rule (``flex="sag"``): the flex is solved, and used when the views determine it: both standard
 deviations at most :data:`FLEX_SIGMA_MAX` squares (a quarter of :data:`FLEX_TYPICAL`, the sag of a
@@ -26,18 +27,19 @@ from __future__ import annotations
 import numpy as np
 
 from aicalib_tf.calib import board_shape
-from aicalib_tf.calib.board_shape import (N_SHAPE_TERMS, SHAPE_MODE, SHAPE_MODES, SHAPE_PLAUSIBLE, shape_fields,
-                                         shape_text)
+from aicalib_tf.calib.board_shape import (AUTO_MODE, N_SHAPE_TERMS, SHAPE_MODE, SHAPE_MODES, SHAPE_PLAUSIBLE,
+                                         shape_fields, shape_text)
 from aicalib_tf.geometry.board_shape import shape_basis
 
-__all__ = ["FLEX_SIGMA_MAX", "FLEX_TYPICAL", "FLEX_PLAUSIBLE", "FLEX_MODES", "SAG_MODE", "basis_of_views",
+__all__ = ["FLEX_SIGMA_MAX", "FLEX_TYPICAL", "FLEX_PLAUSIBLE", "FLEX_MODES", "FLEX_DEFAULT", "SAG_MODE", "basis_of_views",
            "mode_terms", "flex_problem", "flex_line", "flex_dict"]
 
 FLEX_TYPICAL = 0.02  # squares: the sag a flex must resolve (the benchmark's largest)
 FLEX_SIGMA_MAX = FLEX_TYPICAL / 4  # squares: the largest σ of a kept flex
 FLEX_PLAUSIBLE = SHAPE_PLAUSIBLE  # squares: beyond this a "flex" is the lens model's misfit, not the board's
 SAG_MODE = "sag"  # the two-term flex alone
-FLEX_MODES = ("auto", "off", SAG_MODE, SHAPE_MODE)  # auto = shape: the board's shape (calib.board_shape)
+FLEX_MODES = (AUTO_MODE, "off", SAG_MODE, SHAPE_MODE)  # the board's shape (calib.board_shape): auto tests it first
+FLEX_DEFAULT = AUTO_MODE  # the calibrate command's (photos of one camera; videos and rigs take the board flat)
 
 
 def basis_of_views(views, pattern_size, n_terms: int = 2) -> tuple[list | None, str]:

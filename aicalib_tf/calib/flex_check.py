@@ -31,6 +31,11 @@ as solved 1.08). No rule tried is the best of flat and as solved on all three: s
 squares each cost 15–60% on one set; a soft threshold of 0.5 SE (worst 1.16) misses the synthetic
 sags of ``benchmarks/board_flex.py`` (0.2 px) by 0.5 SE of bias. Halves of 6–9 views cannot tell a
 sag of 0.004 squares from noise (median t 0.6 on OpenCV's photos), and any flex they keep moves the lens.
+
+A board shape (:mod:`aicalib_tf.calib.board_shape`) shrinks each of its terms by this rule
+(:func:`confirm_shape`); with ``flex="auto"`` it is first tested as a whole (:func:`lens_shift`,
+:func:`afford_cut`): kept only when it moves the lens over the boards by more than its own
+leave-one-view-out noise allows (that module's docstring gives the rule and its measurements).
 """
 
 from __future__ import annotations
@@ -40,15 +45,19 @@ import dataclasses
 import numpy as np
 
 from aicalib_tf.calib import board_shape
-from aicalib_tf.calib.board_shape import SHAPE_SHRINK_FROM, SHAPE_TERMS, leave_one_out_shapes
+from aicalib_tf.calib.board_shape import AUTO_MODE, SHAPE_MODE, SHAPE_SHRINK_FROM, SHAPE_TERMS, leave_one_out_fits, loo_shapes
 from aicalib_tf.calib.bundle import CalibrationError
+from aicalib_tf.calib.significance import t_quantile
 
-__all__ = ["MIN_JACKKNIFE_VIEWS", "SHRINK_FROM", "SHRINK_TO", "leave_one_out_sags", "jackknife_se", "sag_estimate",
-           "confirm_flex", "shape_estimate", "confirm_shape", "solve_fields"]
+__all__ = ["MIN_JACKKNIFE_VIEWS", "SHRINK_FROM", "SHRINK_TO", "AFFORD_LEVEL", "leave_one_out_sags", "jackknife_se",
+           "AFFORD_FULL", "sag_estimate", "confirm_flex", "shape_estimate", "lens_shift", "afford_cut", "afford_part",
+           "confirm_shape", "solve_fields"]
 
 MIN_JACKKNIFE_VIEWS = 4  # every leave-one-out refit keeps at least 3 views
 SHRINK_FROM = SHAPE_SHRINK_FROM  # t up to which the board is taken as flat (the module docstring's measurements)
 SHRINK_TO = 4.0  # t from which the sag is used as solved
+AFFORD_LEVEL = 0.90  # flex="auto": the one-sided Student-t level a shape's lens shift must pass (board_shape's docstring)
+AFFORD_FULL = 2.0  # flex="auto": the shape is used whole from this many times the cut, scaled down linearly below
 
 
 def leave_one_out_sags(views, refit) -> np.ndarray:
@@ -99,15 +108,15 @@ def sag_estimate(sag: float, sigma: float, loo=None, shrink_from: float = SHRINK
     return round(est, 12) + 0.0, se, how  # + 0.0: no -0.0
 
 
-def confirm_flex(fit, views, refit):
+def confirm_flex(fit, views, refit, mode: str = SHAPE_MODE, image_size=None):
     """The fit with the flex of :func:`sag_estimate`: ``fit`` itself when it has no flex, else the views
     refitted with the board held at the estimate, or flat (``flex_note`` saying why) when it is 0.
     refit(views, "sag" | "off" | (w_x, w_y) held) -> BundleResult (unit square); a board shape's fit goes to
-    :func:`confirm_shape`."""
+    :func:`confirm_shape` (``mode`` "auto": kept only when the views afford it, which needs ``image_size``)."""
     if getattr(fit, "flex", None) is None:
         return fit
-    if len(fit.flex) > 2:  # a board shape (flex="shape"): each of its terms shrunk
-        return confirm_shape(fit, views, refit)
+    if len(fit.flex) > 2:  # a board shape (flex="shape" or "auto"): each of its terms shrunk
+        return confirm_shape(fit, views, refit, image_size if mode == AUTO_MODE else None)
     try:
         loo = leave_one_out_sags(views, refit) if len(views) >= MIN_JACKKNIFE_VIEWS else None
     except CalibrationError as exc:
@@ -145,19 +154,97 @@ def shape_estimate(shape, sigma, loo=None, shrink_from: float | None = None) -> 
     return np.array([f[0] for f in found]), np.array([f[1] for f in found]), how
 
 
-def confirm_shape(fit, views, refit):
+def lens_shift(flat, shaped, loo, views, image_size) -> tuple[float, float]:
+    """(shift, SE) px: how far a board shape moves the lens, and that lens's own noise, over the boards.
+
+    Over the cells of a 32 × 24 grid that the views' corners cover (:func:`aicalib_tf.calib.diff.view_coverage`),
+    rays through the cell centres by the ``flat`` fit's lens are projected by another lens after the rotation
+    that best aligns the two (what comparing two calibrations fits out): d (M, 2) px for the ``shaped`` fit
+    and d_i for each of the V leave-one-out shaped fits ``loo``. shift = RMS |d|; SE = the jackknife's
+    √((V − 1)/V · Σ_i mean |d_i − d̄|²). Fits: BundleResult with ``model`` and ``intrinsics``."""
+    from aicalib_tf.calib.diff import GRID, grid_points, view_coverage
+    from aicalib_tf.geometry.lens import Lens
+    from aicalib_tf.geometry.pose import best_rotation
+
+    lens = lambda f: Lens.from_intrinsics(f.model, f.intrinsics, image_size)  # noqa: E731
+    q = grid_points(image_size, GRID)[view_coverage([v.corners for v in views], image_size, GRID)]
+    rays = lens(flat).unproject(q)
+    ok = np.all(np.isfinite(rays), axis=1)
+    q, rays = q[ok], rays[ok]
+
+    def moved(f):
+        other = lens(f)
+        return other.project(rays @ best_rotation(other, rays, q).T) - q
+
+    d, di = moved(shaped), np.array([moved(f) for f in loo])
+    ok = np.all(np.isfinite(d), axis=1) & np.all(np.isfinite(di), axis=(0, 2))
+    d, di = d[ok], di[:, ok]
+    var = (len(di) - 1) / len(di) * float(np.sum(np.mean(np.sum((di - di.mean(axis=0)) ** 2, axis=2), axis=1)))
+    return float(np.sqrt(np.mean(np.sum(d ** 2, axis=1)))), float(np.sqrt(var))
+
+
+def afford_cut(n_views: int) -> float:
+    """The shift / SE beyond which ``n_views`` views afford a board shape: Student's t at :data:`AFFORD_LEVEL`
+    (one-sided) with n_views − 1 degrees of freedom, the jackknife SE's.
+
+    >>> round(afford_cut(6), 2), round(afford_cut(20), 2)
+    (1.48, 1.33)
+    """
+    return t_quantile(AFFORD_LEVEL, n_views - 1)
+
+
+def afford_part(shift: float, se: float, n_views: int) -> float:
+    """The part of a board shape ``n_views`` views afford, by its lens shift and SE (px, :func:`lens_shift`):
+    0 up to z = shift / SE = c = :func:`afford_cut`, 1 from :data:`AFFORD_FULL` · c, (z − c) / ((AFFORD_FULL − 1) · c)
+    between (the firm shrinkage of :func:`sag_estimate`, on the shape as a whole).
+
+    >>> afford_part(0.1, 0.1, 6), afford_part(0.5, 0.1, 6), round(afford_part(0.2, 0.1, 6), 2)
+    (0.0, 1.0, 0.36)
+    """
+    c = afford_cut(n_views)
+    z = shift / se if se > 0 else float("inf")
+    return float(np.clip((z - c) / ((AFFORD_FULL - 1.0) * c), 0.0, 1.0))
+
+
+def _afford(fit, views, refit, fits, image_size):
+    """flex="auto": (the flat fit, the part of the shape afforded, the words on its shift)."""
+    flat = refit(views, "off")
+    shift, se = lens_shift(flat, fit, fits, views, image_size)
+    cut, part = afford_cut(len(views)), afford_part(shift, se, len(views))
+    words = (f"it moves the projection over the boards {shift:.3f} px, {shift / se if se > 0 else float('inf'):.2f} "
+             f"times its leave-one-view-out noise (± {se:.3f} px; {len(views)} views afford none of a shape up to "
+             f"{cut:.2f}, all of it from {AFFORD_FULL * cut:.2f})")
+    return flat, part, words
+
+
+def confirm_shape(fit, views, refit, image_size=None):
     """The fit with the board shape of :func:`shape_estimate` (:mod:`aicalib_tf.calib.board_shape`): the views
     refitted with the board held there, or flat (``flex_note`` saying why) when every term is 0.
-    refit(views, "shape" | "off" | (K,) squares held) -> BundleResult (unit square)."""
+    refit(views, "shape" | "off" | (K,) squares held) -> BundleResult (unit square). With ``image_size``
+    (width, height) px (flex="auto") the shape is first tested: kept only when it moves the lens by more than
+    :func:`afford_cut` times its noise (:func:`lens_shift`), scaled by :func:`afford_part`, else the flat fit,
+    the note saying why."""
+    gate = image_size is not None
+    if gate and len(views) < MIN_JACKKNIFE_VIEWS:
+        return dataclasses.replace(refit(views, "off"), flex_note=(
+            f"not used: {len(views)} views cannot measure the shape's noise (each view is left out once: at least "
+            f"{MIN_JACKKNIFE_VIEWS}); the board is taken as flat"))
     try:
-        loo = leave_one_out_shapes(views, refit) if len(views) >= MIN_JACKKNIFE_VIEWS else None
+        fits = leave_one_out_fits(views, refit) if len(views) >= MIN_JACKKNIFE_VIEWS else None
     except CalibrationError as exc:
         why = f"not used: a fit leaving one view out failed ({exc}); the board is taken as flat"
         return dataclasses.replace(refit(views, "off"), flex_note=why)
+    kept, part = "", 1.0
+    if gate:
+        flat, part, words = _afford(fit, views, refit, fits, image_size)
+        if part == 0.0:
+            return dataclasses.replace(flat, flex_note=f"not used: {words}; the board is taken as flat")
+        kept = f"{'all' if part == 1.0 else f'{part:.0%}'} of it kept: {words}"
     w = np.asarray(fit.flex, np.float64)
     cov = np.asarray(fit.flex_covariance, np.float64)
     sigma = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    est, se, how = shape_estimate(w, sigma, loo)
+    est, se, how = shape_estimate(w, sigma, None if fits is None else loo_shapes(fits))
+    est = est * part
     lo = board_shape.SHAPE_SHRINK_FROM
     if not np.any(est):
         return dataclasses.replace(refit(views, "off"), flex_note=(
@@ -169,7 +256,8 @@ def confirm_shape(fit, views, refit):
         return fit
     scale = np.where(sigma > 0, se / np.where(sigma > 0, sigma, 1.0), 1.0)
     zero = [SHAPE_TERMS[k] for k in range(len(est)) if est[k] == 0.0]
-    note = f"taken as 0 (within {lo:g} standard error, {how}): {', '.join(zero)}" if zero else ""
+    note = "; ".join(filter(None, [kept, f"taken as 0 (within {lo:g} standard error, {how}): {', '.join(zero)}"
+                                   if zero else ""]))
     return dataclasses.replace(held, flex=est, flex_covariance=cov * np.outer(scale, scale), covariance=fit.covariance,
                                flex_note=note)
 

@@ -22,6 +22,7 @@ import numpy as np
 from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.detect.registry import DETECTORS
 from aicalib_tf.calib.fit import Calibration, CalibrationError, View, calibrate_camera, choose_model, fit_views
+from aicalib_tf.calib.flex import FLEX_DEFAULT
 from aicalib_tf.calib.quality import assess
 from aicalib_tf.calib.run_options import RunOptions
 from aicalib_tf.geometry.image_circle import find_image_circle, thumbnail
@@ -130,7 +131,7 @@ class CalibrateConfig(RunOptions):
     fix_k3: bool = False
     rational: bool = False
     resize_policy: str = "error"
-    flex: str = "off"  # the board's shape: "auto" solves it with the camera, shrunk towards flat by its noise
+    flex: str = FLEX_DEFAULT  # the board's shape (calib.flex.FLEX_MODES): "auto" keeps it where the views afford it
 
 
 @dataclass

@@ -11,7 +11,7 @@ from aicalib_tf.calib import board_shape as BS
 from aicalib_tf.calib.files import calibration_from_dict, to_json
 from aicalib_tf.calib.fit import calibrate_camera
 from aicalib_tf.calib.flex import flex_line
-from aicalib_tf.calib.flex_check import confirm_shape, shape_estimate
+from aicalib_tf.calib.flex_check import afford_cut, afford_part, confirm_shape, lens_shift, shape_estimate
 from aicalib_tf.calib.schema import FieldError
 from aicalib_tf.geometry import lens as L
 from aicalib_tf.geometry.board_shape import SHAPE_TERMS, out_of_plane_rms
@@ -73,6 +73,32 @@ def test_terms_within_half_a_standard_error_are_zero_and_a_shape_of_noise_is_fla
     refit = lambda vs, mode: (flat if mode == "off" else type("F", (), {"flex": np.full(7, next(loo))}))  # noqa: E731
     out = confirm_shape(Fit(), views, refit)
     assert out.flex is None and "every term of the board's shape is within 0.5 standard error" in out.flex_note
+
+
+def test_the_shape_is_kept_when_it_moves_the_lens_beyond_its_noise_and_the_note_says_so(shaped):
+    _, cal, _ = shaped  # flex="auto": 20 views of a twisted board
+    assert cal.flex is not None and "of it kept: it moves the projection over the boards" in cal.flex_note
+    assert f"20 views afford none of a shape up to {afford_cut(20):.2f}" in cal.flex_note and "twist" in flex_line(cal)
+
+
+def test_a_flat_boards_shape_is_not_afforded_and_the_note_says_why():
+    views = synthetic_views(PINHOLE, 8, 0.2, seed=np.random.default_rng([1, 47]))
+    cal = calibrate_camera(views, PATTERN, SQUARE, SIZE, model="plumb_bob", flex="auto")
+    assert cal.flex is None and cal.flex_note.startswith("not used: it moves the projection over the boards")
+    assert cal.flex_note.endswith("the board is taken as flat") and "8 views afford none of a shape" in cal.flex_note
+
+
+def test_lens_shift_is_the_move_against_flat_and_se_the_leave_one_out_spread():
+    from types import SimpleNamespace
+
+    fit = lambda fx: SimpleNamespace(model="plumb_bob", intrinsics=np.r_[fx, fx, 320.0, 240.0, PINHOLE.dist])  # noqa: E731
+    views = [SimpleNamespace(corners=np.array([[60.0, 60.0], [580.0, 60.0], [580.0, 420.0], [60.0, 420.0]]))]
+    shift, se = lens_shift(fit(500.0), fit(505.0), [fit(505.0)] * 6, views, SIZE)
+    assert shift > 1.0 and se == 0.0  # fx 1% longer: pixels move outwards, no rotation undoes it
+    shift, se = lens_shift(fit(500.0), fit(500.0), [fit(499.0), fit(501.0)] * 3, views, SIZE)
+    assert shift < 1e-6 and se > 0.5
+    assert afford_cut(6) > afford_cut(20) > 1.28  # fewer views, a higher bar (Student's t, one-sided 90%)
+    assert afford_part(1.0, 1.0, 20) == 0.0 and afford_part(2.7, 1.0, 20) == 1.0 and 0 < afford_part(2.0, 1.0, 20) < 1
 
 
 def test_an_implausible_shape_is_not_used():
