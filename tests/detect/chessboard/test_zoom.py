@@ -78,11 +78,13 @@ def test_a_board_squeezed_at_the_edge_of_a_120_degree_lens_is_found_by_the_secon
     # evaluate barrel #70: squares 1.8-14 px thick; at full size the network finds 32 of the 54
     # corners and the grid cannot be placed; enlarged 3x, the whole board is found
     import aicalib_tf.detect.pipeline as detect
-    from aicalib_tf.bench.conditions import condition_samples, named_conditions
+    from aicalib_tf.bench.conditions import PATTERN, named_conditions
     from aicalib_tf.bench.metrics import board_detection_outcome
+    from data_gen import make_sample
 
     cond = next(c for c in named_conditions() if c.name == "barrel")
-    s = next(s for i, s in condition_samples(cond, index + 1) if i == index)
+    assert cond.min_tilt_deg == 0  # no filter: the condition's image `index` is rendered alone, not after 70 others
+    s = make_sample(cond.preset, cond.seed, index, size=cond.size, pattern=PATTERN)
     looked = []
     real = detect._zoomed
     monkeypatch.setattr(detect, "_zoomed", lambda *a: looked.append(1) or real(*a))
