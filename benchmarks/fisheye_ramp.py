@@ -9,7 +9,8 @@ noise only). Each refiner starts from the true corners moved 0.5 px in a random 
 band of ρ (distance from the circle's centre over its radius): the share refined, the median and RMS
 error (px) and the mean error along the radius (px, outwards positive). Refiners: "windowed" (the
 detector's :func:`aicalib_tf.detect.corners.refine.refine_candidates`), "windowed + polish" (then
-:func:`aicalib_tf.detect.corners.refine.polish`, which allows for a linear light ramp), "ramp" (then
+:func:`aicalib_tf.detect.corners.refine.polish`, which allows for a linear light ramp), "windowed + board
+polish" (then :func:`aicalib_tf.detect.corners.refine.polish_board`, as the detector), "ramp" (then
 :func:`aicalib_tf.detect.corners.refine.refine_ramp` everywhere) and OpenCV's ``cornerSubPix`` (11×11).
 """
 
@@ -22,7 +23,7 @@ from dataclasses import replace
 import numpy as np
 
 from aicalib_tf.detect.corners.junctions import nearest_spacing
-from aicalib_tf.detect.corners.refine import Smoothed, polish, refine_candidates, refine_ramp, refine_subpix
+from aicalib_tf.detect.corners.refine import Smoothed, polish, polish_board, refine_candidates, refine_ramp, refine_subpix
 from aicalib_tf.io import quantize
 from data_gen import make_sample
 from data_gen.presets import Rule, get_preset
@@ -31,25 +32,31 @@ from data_gen.sample import _circle_px, draw_scene
 BANDS = (0.0, 0.3, 0.5, 0.65, 0.8, 1.0)
 
 
-def _windowed(g, p):
+def _windowed(g, p, ids):
     return refine_candidates(Smoothed(g), p, nearest_spacing(p))
 
 
-def _polished(g, p):
+def _polished(g, p, ids):
     smoothed = Smoothed(g)
     out, ok = refine_candidates(smoothed, p, nearest_spacing(p))
     return polish(smoothed, out, nearest_spacing(p)), ok
 
 
-def _ramp(g, p):
+def _board(g, p, ids):
+    smoothed = Smoothed(g)
+    out, ok = refine_candidates(smoothed, p, nearest_spacing(p))
+    return polish_board(smoothed, out, ids, nearest_spacing(p)), ok
+
+
+def _ramp(g, p, ids):
     smoothed = Smoothed(g)
     out, ok = refine_candidates(smoothed, p, nearest_spacing(p))
     got, ramp_ok = refine_ramp(smoothed, out, nearest_spacing(p))
     return got, ok & ramp_ok
 
 
-REFINERS = {"windowed": _windowed, "windowed + polish": _polished, "ramp": _ramp,
-            "cornerSubPix hw5": lambda g, p: refine_subpix(g, p, half_window=5)}
+REFINERS = {"windowed": _windowed, "windowed + polish": _polished, "windowed + board polish": _board, "ramp": _ramp,
+            "cornerSubPix hw5": lambda g, p, ids: refine_subpix(g, p, half_window=5)}
 
 
 def preset(look: str):
@@ -70,6 +77,7 @@ def measure(look: str, images: int, size: tuple[int, int]) -> dict:
         gray = (s.image if s.image.dtype == np.uint8 else quantize(s.image)).astype(np.float32) / 255.0
         circle = _circle_px(draw_scene(pre, 7, i, size=size, pattern=(9, 6)).camera)
         gt = s.corners[s.visible].astype(np.float64)
+        ids = np.stack(np.divmod(np.flatnonzero(s.visible), 9)[::-1], 1)  # (col, row) on the 9-wide pattern
         if len(gt) < 10:
             continue
         ang = rng.uniform(0, 2 * np.pi, len(gt))
@@ -78,7 +86,7 @@ def measure(look: str, images: int, size: tuple[int, int]) -> dict:
         rho = np.hypot(out_dir[:, 0], out_dir[:, 1])
         out_dir /= np.maximum(rho, 1e-9)[:, None]
         for name, fn in REFINERS.items():
-            q, ok = fn(gray, start)
+            q, ok = fn(gray, start, ids)
             err = np.where(ok[:, None], q - gt, np.nan)
             rows[name].append(np.column_stack([rho / circle["radius"], err, np.sum(err * out_dir, axis=1)]))
     return {k: np.concatenate(v) for k, v in rows.items()}

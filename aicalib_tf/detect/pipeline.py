@@ -123,7 +123,7 @@ from aicalib_tf.detect.chessboard.rim import rim_board
 from aicalib_tf.detect.chessboard.smooth_grid import without_off_grid
 from aicalib_tf.detect.chessboard.shading import flattened_look
 from aicalib_tf.detect.pyramid import Frame, boards_coarse_to_fine, quick_scales, quick_shift, refine_full, scales, to_full
-from aicalib_tf.detect.corners.refine import Smoothed, refine_candidates
+from aicalib_tf.detect.corners.refine import Smoothed, polish_in_region, refine_candidates
 from aicalib_tf.detect.chessboard.unshear import refine_rectified, second_look as unshear_look
 from aicalib_tf.detect.chessboard.zoom import zoomed_look
 from aicalib_tf.io import read_image
@@ -258,7 +258,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
             if det.complete and pattern_size is not None and object_in_front_at(frame.region, (w, h), corners, pattern_size):
                 continue  # at full size, a corner on an object's edge: the finer scales
         if det.complete and pattern_size is not None:  # less its corners off the grid of their neighbours
-            return without_off_grid(with_sigmas(det, frame), NO_MATCH)
+            return without_off_grid(with_sigmas(_polished(det, frame), frame), NO_MATCH)
         if f in quick:  # a quick pass counts only with a complete board
             continue
         if not det.found:
@@ -271,7 +271,12 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     if best is None:  # every scale's board was refused on the full image (a corner off its place or on an edge)
         best, reason = Detection(np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
                                  pattern_size, False, (w, h)), max(reason, NO_MATCH, key=REASONS.index)
-    return with_sigmas(replace(best, image_size=(w, h), reason="" if best.found else reason), frame)
+    return with_sigmas(_polished(replace(best, image_size=(w, h), reason="" if best.found else reason), frame), frame)
+
+
+def _polished(det: Detection, frame: Frame) -> Detection:
+    """A found board with its corners polished (:func:`aicalib_tf.detect.corners.refine.polish_in_region`)."""
+    return replace(det, corners=polish_in_region(frame.region, frame.size, det.corners, det.ids)) if det.found else det
 
 
 def _zoomed(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: float, seen: Grid,

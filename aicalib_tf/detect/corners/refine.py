@@ -15,7 +15,9 @@ around the point where its result is not symmetric even with a shadow edge (``RE
 A smooth light ramp (a lens's vignetting, towards a fisheye's rim) also moves the saddle, by up
 to ~0.2 px in a direction set by the lines' angles, yet leaves the window nearly symmetric:
 :func:`refine_ramp` fits the centre of symmetry allowing for a linear ramp, and :func:`polish` moves
-a board's corners by it where a ramp is there. The detector does not apply it (see :func:`polish`).
+a board's corners by it where a ramp is there (not applied by the detector, see there). The detector's
+boards go through :func:`polish_board` (:func:`polish_in_region`): the ramp fit's places where its shifts
+from the saddles form a smooth field over the board.
 :func:`refine_subpix` wraps OpenCV's ``cornerSubPix`` behind the same signature, for comparison.
 
 Coordinates are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0).
@@ -31,7 +33,7 @@ import numpy as np
 from aicalib_tf.detect.corners.saddle import saddle_fit_matrix
 from aicalib_tf.detect.corners.saddle_kernels import ramp_symmetric, saddle_refine
 
-__all__ = ["Smoothed", "gaussian", "polish", "ramp_asymmetry", "refine_ramp", "refine_saddle", "refine_subpix", "refine_windowed",
+__all__ = ["Smoothed", "gaussian", "polish", "polish_board", "polish_in_region", "ramp_asymmetry", "ramp_inflation", "refine_ramp", "refine_saddle", "refine_subpix", "refine_windowed",
            "refine_candidates", "window_radius"]
 
 
@@ -273,6 +275,106 @@ def polish(smoothed: Smoothed, pts: np.ndarray, spacing: np.ndarray) -> np.ndarr
         keep = (left <= MAX_ASYMMETRY) & (np.hypot(ramp[:, 0], ramp[:, 1]) >= MIN_RAMP) & (z >= MIN_RAMP_Z)
         out[sel[keep]] = got[sel[keep]]
     return out
+
+
+BOARD_DEGREE = 2  # the degree in the corners' (col, row) ids of the smooth field fitted to a board's ramp-fit shifts
+MIN_FIELD_F = 9.0  # the smooth field's mean square over its residuals' (per degree of freedom) for a board to be polished
+# (real boards: a 185° fisheye's 3.1-32, 11 of 15 from 9; opencv_left's 1.4-8.4, polished they repeated no better)
+MAX_INFLATION = 3.0  # the most a board's (median) ramp terms may inflate the centre's variance (blur σ 1-2 px: 2-5; 3-4: 13-23)
+
+
+def polish_board(smoothed: Smoothed, pts: np.ndarray, ids: np.ndarray, spacing: np.ndarray) -> np.ndarray:
+    """A board's corners moved to :func:`refine_ramp`'s places where its shifts form a smooth field over the board.
+
+    A light ramp moves the saddle one way at a corner and the other way at its neighbours (the squares'
+    colours swap; the ramp's own term does not), so the shifts it causes alternate over a board (data_gen's
+    vignetted fisheyes: F ratios 0.3-2.3). On real photos the saddle and the finer fits (this ramp fit,
+    ``cornerSubPix``) also disagree by a field the same at neighbouring corners, smooth over each board
+    (a 185° fisheye: 0.04-0.12 px RMS a board, F 3-32), whose cause is not the light; there the finer places
+    repeat better. The shifts (place less saddle) are fitted by a polynomial of degree ``BOARD_DEGREE`` in
+    the ids (least squares), leaving out (and unmoved) corners whose ramp fit failed or whose window, a px
+    wider than the saddle's, reaches past 0.45 of the spacing (steep tilts); the board takes the ramp fit's places
+    where that field holds ``MIN_FIELD_F`` times the mean square per degree of freedom of what it leaves (an
+    F ratio), and keeps its saddles otherwise, as does a board with fewer fitted corners than twice the
+    field's terms, or one so blurred against the window that the ramp fit cannot tell a shift from a ramp
+    (:func:`ramp_inflation` over ``MAX_INFLATION``; evaluate's blur σ 4 px board: 0.07 -> 0.18 px).
+    Over 200 random half-splits of the fisheye's 15 photos (flat fits, ``benchmarks/real_split_noise.py``'s
+    default column) 0.589 -> 0.575 px, lower on 137 (OpenCV's classic corners: 0.527); no board of
+    opencv_left or udacity is polished. pts : (N, 2) px, saddle-refined. ids : (N, 2) int (col, row).
+    spacing : (N,) px, the local corner spacing. Returns (N, 2) float32.
+    """
+    pts = np.asarray(pts, np.float32).reshape(-1, 2)
+    ids = np.asarray(ids, np.float64).reshape(-1, 2)
+    if not len(pts):
+        return pts.copy()
+    got, ok = refine_ramp(smoothed, pts, spacing)
+    radius = window_radius(spacing) + 1
+    ok &= radius <= 0.45 * np.asarray(spacing)  # its window inside the squares, as the saddle's (steep tilts: not)
+    basis = _board_basis(ids)
+    n, k = int(ok.sum()), basis.shape[1]
+    if n < 2 * k:
+        return pts.copy()
+    shift = (got - pts)[ok].astype(np.float64)
+    coef, *_ = np.linalg.lstsq(basis[ok], shift, rcond=None)
+    field = basis[ok] @ coef
+    left = shift - field
+    f_ratio = (np.sum(field * field) / (2 * k)) / max(np.sum(left * left) / (2 * (n - k)), 1e-30)
+    if f_ratio < MIN_FIELD_F:
+        return pts.copy()
+    inflation = np.concatenate([ramp_inflation(smoothed.sigma(RAMP_SIGMA), got[ok & (radius == r)], int(r))
+                                for r in sorted(set(radius[ok].tolist()))])
+    return np.where(ok[:, None], got, pts).astype(np.float32) if np.median(inflation) <= MAX_INFLATION else pts.copy()
+
+
+def ramp_inflation(img: np.ndarray, pts: np.ndarray, radius: int) -> np.ndarray:
+    """(N,) how much the ramp fit's two ramp terms inflate the variance of its centre at ``pts``: the trace of
+    the centre's block of the inverse normal matrix of :func:`aicalib_tf.detect.corners.saddle_kernels.ramp_symmetric`
+    (centre and ramp) over that of the centre alone; 1 where the terms are independent, large where blur leaves
+    the window's odd part a shift or a ramp alike. img : (H, W) float32, the ramp fit's image. pts : (N, 2) px.
+    radius : px, the ramp fit's window."""
+    from aicalib_tf.detect.corners.sampling import sample_windows
+
+    r, side = int(radius), 2 * int(radius) + 3
+    big = sample_windows(np.ascontiguousarray(img, np.float32), np.ascontiguousarray(pts, np.float64).reshape(-1, 2),
+                         r + 1).reshape(-1, side, side)
+    d = np.arange(-r, r + 1, dtype=np.float64)
+    ox, oy = np.meshgrid(d, d)
+    half = ((oy > 0) | ((oy == 0) & (ox > 0))).ravel()  # each pair (o, −o) once
+    even = big[:, 1:-1, 1:-1] + big[:, -2:0:-1, -2:0:-1]
+    gx, gy = 0.5 * (big[:, 1:-1, 2:] - big[:, 1:-1, :-2]), 0.5 * (big[:, 2:, 1:-1] - big[:, :-2, 1:-1])
+    v = np.stack([gx - gx[:, ::-1, ::-1], gy - gy[:, ::-1, ::-1], -even * ox, -even * oy], axis=3)
+    v = v.reshape(len(big), -1, 4)[:, half]
+    a = np.einsum("m,nmi,nmj->nij", _ramp_weights(r)[half], v, v) + 1e-12 * np.eye(4)
+    both = np.trace(np.linalg.inv(a)[:, :2, :2], axis1=1, axis2=2)
+    return both / np.trace(np.linalg.inv(a[:, :2, :2]), axis1=1, axis2=2)
+
+
+def _board_basis(ids: np.ndarray) -> np.ndarray:
+    """(N, K) the monomials up to ``BOARD_DEGREE`` of the ids (col, row) (N, 2), each centred and scaled to [-1, 1]."""
+    lo, hi = ids.min(axis=0), ids.max(axis=0)
+    u = (ids - 0.5 * (lo + hi)) / np.maximum(0.5 * (hi - lo), 1.0)
+    return np.stack([u[:, 0] ** a * u[:, 1] ** b for a in range(BOARD_DEGREE + 1)
+                     for b in range(BOARD_DEGREE + 1 - a)], axis=1)
+
+
+def polish_in_region(region, size: tuple[int, int], pts: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """:func:`polish_board` of a detected board on the part of the image about it.
+
+    region : ``region(x0, y0, x1, y1) -> (y1 − y0, x1 − x0) float32`` grey, pixels x0 … x1 − 1, y0 … y1 − 1
+    (a :class:`~aicalib_tf.detect.pyramid.Frame`'s ``region``). size : (W, H) px. pts : (N, 2) px.
+    ids : (N, 2) int (col, row). Returns (N, 2) float32.
+    """
+    from aicalib_tf.detect.corners.junction_kernels import nearest_distances
+
+    pts = np.asarray(pts, np.float32).reshape(-1, 2)
+    if len(pts) < 2:
+        return pts.copy()
+    spacing = nearest_distances(pts)  # junctions.nearest_spacing's, px
+    margin = int(window_radius(spacing).max()) + 2 + int(np.ceil(3 * RAMP_SIGMA)) + 2
+    x0, y0 = np.maximum(np.floor(pts.min(axis=0)).astype(int) - margin, 0)
+    x1, y1 = np.minimum(np.ceil(pts.max(axis=0)).astype(int) + margin + 1, size)
+    offset = np.array([x0, y0], np.float32)
+    return polish_board(Smoothed(region(int(x0), int(y0), int(x1), int(y1))), pts - offset, ids, spacing) + offset
 
 
 def ramp_asymmetry(img: np.ndarray, pts: np.ndarray, radius: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

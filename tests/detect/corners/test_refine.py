@@ -193,3 +193,70 @@ def test_polish_leaves_corners_a_hard_shadow_edge_crosses():
     assert np.median(err_after) <= np.median(err_before) + 0.005
     assert np.abs(got - out).max() < 0.5
 
+
+
+def _board_shifts(monkeypatch, shift, fail=(), inflation=2.0):
+    """polish_board on a 9×6 board whose ramp fit (stubbed) returns the saddles plus ``shift`` (N, 2) px, failing at ``fail``."""
+    import aicalib_tf.detect.corners.refine as refine
+
+    ids = np.stack(np.divmod(np.arange(54), 9)[::-1], axis=1)
+    pts = (40.0 + 30.0 * ids).astype(np.float32)
+    ok = np.ones(len(pts), bool)
+    ok[list(fail)] = False
+    monkeypatch.setattr(refine, "refine_ramp", lambda smoothed, p, spacing: ((p + shift).astype(np.float32), ok))
+    monkeypatch.setattr(refine, "ramp_inflation", lambda img, p, radius: np.full(len(p), inflation))
+    smoothed = type("Stub", (), {"sigma": lambda self, sigma: None})()
+    return pts, refine.polish_board(smoothed, pts, ids, np.full(len(pts), 30.0)), ids
+
+
+def test_polish_board_moves_a_board_whose_ramp_fit_shifts_are_smooth(monkeypatch):
+    rng = np.random.default_rng(0)
+    ids = np.stack(np.divmod(np.arange(54), 9)[::-1], axis=1)
+    smooth = 0.1 * np.stack([ids[:, 0] / 8.0, (ids[:, 1] / 5.0) ** 2], axis=1) + 0.02 * rng.standard_normal((54, 2))
+    pts, got, _ = _board_shifts(monkeypatch, smooth, fail=(7,))
+    np.testing.assert_allclose(np.delete(got - pts, 7, axis=0), np.delete(smooth, 7, axis=0), atol=1e-4)
+    np.testing.assert_array_equal(got[7], pts[7])  # its ramp fit failed: the saddle stays
+
+
+def test_polish_board_keeps_the_saddles_where_the_shifts_alternate_or_are_noise(monkeypatch):
+    # a light ramp moves neighbouring corners' saddles opposite ways (the squares' colours swap): no smooth field
+    rng = np.random.default_rng(1)
+    ids = np.stack(np.divmod(np.arange(54), 9)[::-1], axis=1)
+    parity = np.where((ids.sum(axis=1) % 2)[:, None] == 0, 1.0, -1.0)
+    for shift in (0.1 * parity * np.array([0.6, -0.8]), 0.05 * rng.standard_normal((54, 2))):
+        pts, got, _ = _board_shifts(monkeypatch, shift)
+        np.testing.assert_array_equal(got, pts)
+    pts, got, _ = _board_shifts(monkeypatch, np.full((54, 2), 0.1), fail=range(43))  # 11 fitted: too few for 6 terms
+    np.testing.assert_array_equal(got, pts)
+    pts, got, _ = _board_shifts(monkeypatch, np.full((54, 2), 0.1), inflation=4.0)  # blurred: shift and ramp alike
+    np.testing.assert_array_equal(got, pts)
+    pts, got, _ = _board_shifts(monkeypatch, np.full((54, 2), 0.1), inflation=2.5)
+    np.testing.assert_allclose(got - pts, 0.1, atol=1e-4)
+
+
+def test_the_ramp_terms_inflate_the_centres_variance_under_heavy_blur():
+    # the ramp fit cannot tell a shift from a ramp once the blur is wide against its window: polish_board
+    # leaves such boards (evaluate's blur σ 3-4 px: its places 2-3x further off than the saddle's)
+    from aicalib_tf.detect.corners.refine import RAMP_SIGMA, Smoothed, ramp_inflation
+
+    c = np.array([23.3, 24.6])
+    sharp, blurred = (ramp_inflation(Smoothed(_junction(c, (20.0, 105.0), blur=b)).sigma(RAMP_SIGMA), c[None], 6)[0]
+                      for b in (0.8, 3.5))
+    assert 1.0 <= sharp < 3.0 < blurred, (sharp, blurred)
+
+
+def test_polish_in_region_is_polish_board_on_the_whole_image(monkeypatch):
+    import aicalib_tf.detect.corners.refine as refine
+    from aicalib_tf.bench.conditions import PATTERN
+    from aicalib_tf.detect.corners.junction_kernels import nearest_distances
+    from aicalib_tf.detect.corners.refine import Smoothed, polish_board, polish_in_region
+
+    monkeypatch.setattr(refine, "MIN_FIELD_F", 0.0)  # every board polished: the region's offset is what is tested
+    s, gray = _shading_image(1)
+    gt = s.corners[s.visible].astype(np.float32)
+    ids = np.stack(np.divmod(np.flatnonzero(s.visible), PATTERN[0])[::-1], axis=1)
+    region = lambda x0, y0, x1, y1: np.ascontiguousarray(gray[y0:y1, x0:x1])  # noqa: E731
+    got = polish_in_region(region, gray.shape[::-1], gt, ids)
+    whole = polish_board(Smoothed(gray), gt, ids, nearest_distances(gt))
+    assert np.abs(whole - gt).max() > 0.01  # the ramp fit moved them
+    np.testing.assert_allclose(got, whole, atol=2e-3)
