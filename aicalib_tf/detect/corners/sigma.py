@@ -42,7 +42,8 @@ noise is one per image, so the board's median ``odd_median`` is its estimate), t
 percentile over median) and a few hinges (the detector's own error floor on clean images, impulsive
 noise, strongly bent lines, a blur that reaches the neighbouring squares: (edge width / spacing)² beyond
 :data:`aicalib_tf.detect.corners.sigma_kernels.SPREAD_KNOT`), the median edge width, the flat noise over the contrast, window over flat noise,
-blockiness and the median smoothed/raw asymmetry. Each corner's: its excess over the board's
+blockiness and the median smoothed/raw asymmetry (white noise's on a board of corners closer than
+``SMOOTHED_MIN_SPACING``: there the smoothed window reaches the next squares). Each corner's: its excess over the board's
 median of each feature, and a hinge on its own asymmetry (a window with more than noise in it, such
 as an object's edge, pulls the saddle in proportion). log σ = c₀ + Σ cₖ xₖ, x the columns of :func:`design` clipped to [``LOW``, ``HIGH``], the
 range they took in fitting (0.1th to 99.9th percentiles); σ px is one standard deviation per axis
@@ -80,16 +81,22 @@ COLUMNS = ("noise/contrast", "residual/contrast", "impulsive noise", "bend/spaci
            "Δ own asymmetry hinge")  # each corner's excess over the board's median
 BOARD_COLUMNS = _BOARD_COLUMNS
 # log σ = COEFFS[0] + Σ COEFFS[1 + k] · clip(design[:, k], LOW[k], HIGH[k]); refit: python benchmarks/corner_sigma.py --fit
-COEFFS = np.array([1.059, 0.696, 0.166, 0.346, 0.042, 0.341, 0.035, -0.414, -0.217, 0.052, 0.036, 0.016, 0.642, 0.007,
-                   -0.208, -0.405, 0.408, 0.288, 0.395, 1.792, 5.711, 0.882, 0.425, -0.035, 0.375, 0.030, -0.056,
-                   -0.371, 0.140, 0.418, 1.090])
-LOW = np.array([-5.009, -2.331, 0.201, -5.891, -0.625, 1.061, -1.899, 1.622, 0.000, 0.012, 0.033, 0.000, -0.215, 0.000,
+COEFFS = np.array([1.058, 0.688, 0.198, 0.375, 0.056, 0.457, 0.035, -0.482, -0.212, 0.050, 0.018, 0.022, 0.526, -0.039,
+                   -0.204, -0.375, 0.405, 0.283, 0.383, 1.899, 5.267, 0.879, 0.428, -0.042, 0.379, 0.030, -0.056,
+                   -0.398, 0.142, 0.419, 1.072])
+LOW = np.array([-5.009, -2.331, 0.201, -5.891, -0.625, 1.069, -1.899, 1.622, 0.000, 0.012, 0.033, 0.000, -0.215, 0.000,
                 -0.506, -5.474, -2.043, -0.406, -1.282, 0.000, -0.424, -1.582, -0.578, -0.734, -3.436, -2.944, -0.546,
-                -1.467, -0.861, 0.000])
-HIGH = np.array([-1.030, -0.231, 1.360, -0.912, -0.008, 25.089, -1.018, 4.582, 4.358, 0.815, 0.837, 0.584, 0.086,
-                 1.509, 1.712, -0.000, 3.460, 1.110, -0.301, 0.124, 0.595, 1.355, 0.492, 1.202, 1.031, 0.290, 0.679,
-                 1.518, 0.692, 0.855])
+                -1.547, -0.861, 0.000])
+HIGH = np.array([-1.034, -0.231, 1.360, -0.912, -0.008, 25.089, -1.018, 4.582, 4.358, 0.815, 0.837, 0.584, 0.086,
+                 1.509, 1.712, -0.000, 3.460, 1.110, -0.301, 0.124, 0.595, 1.383, 0.492, 1.202, 1.032, 0.290, 0.679,
+                 1.524, 0.679, 0.883])
 MIN_SCORE = 0.05  # a corner the network missed (score 0) counts as this weak
+SMOOTHED_MIN_SPACING = 10.0  # px: on a board of closer corners the smoothed window (r + 1 = 4 px) reaches the
+# neighbouring squares' edges, so its asymmetry is the lattice's, not JPEG's or an object's: the board's
+# smoothed/raw asymmetry column is then taken as white noise's (WHITE_SMOOTHED)
+WHITE_SMOOTHED = -0.95  # log(smoothed / raw antisymmetric part) of white noise in the window
+_SMOOTHED_COLUMN = 18  # COLUMNS' "smoothed/raw asymmetry"
+_SPACING_COLUMN = 7  # COLUMNS' "spacing": the median log corner spacing
 _TINY = 1e-6  # grey levels (px for the bend): keeps the logarithms finite in a flat window
 _MAX_RADIUS = 3  # px: the refinement's window radius, at most this (a 7×7 window: the measures' cost)
 
@@ -129,10 +136,13 @@ def design(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray, scores: np.nd
     radius = np.minimum(window_radius(spacing), _MAX_RADIUS)
     fits, weights = _operators()
     img = gray if gray.dtype == np.uint8 and gray.ndim == 2 else np.asarray(gray, np.float32)
-    return board_columns(np.ascontiguousarray(img), pts, np.asarray(ids, np.int64).reshape(-1, 2), spacing, radius,
-                         np.asarray(scores, np.float64).reshape(-1), fits, weights, MIN_SCORE,
-                         _TINY * (255.0 if img.dtype == np.uint8 else 1.0), 1.0 if img.dtype == np.uint8 else 1.0 / 255.0,
-                         int(origin[0]), int(origin[1]))
+    x = board_columns(np.ascontiguousarray(img), pts, np.asarray(ids, np.int64).reshape(-1, 2), spacing, radius,
+                      np.asarray(scores, np.float64).reshape(-1), fits, weights, MIN_SCORE,
+                      _TINY * (255.0 if img.dtype == np.uint8 else 1.0), 1.0 if img.dtype == np.uint8 else 1.0 / 255.0,
+                      int(origin[0]), int(origin[1]))
+    if x[0, _SPACING_COLUMN] < np.log(SMOOTHED_MIN_SPACING):
+        x[:, _SMOOTHED_COLUMN] = WHITE_SMOOTHED
+    return x
 
 
 def sigma_from_design(x: np.ndarray, coeffs: np.ndarray = COEFFS, low: np.ndarray = LOW, high: np.ndarray = HIGH) -> np.ndarray:

@@ -274,3 +274,14 @@ def test_the_squares_contrast_and_the_edge_width_follow_a_blurred_board():
     assert np.hypot(3.0, widths[0.0]) < widths[3.0] < 1.3 * np.hypot(3.0, widths[0.0])
     line = ids[:, 1] == 0  # one row of corners: no square with all four
     assert square_contrast(board, pts[line], ids[line]) == -1.0
+
+
+def test_a_board_of_close_corners_takes_white_noises_smoothed_asymmetry():
+    """Closer than SMOOTHED_MIN_SPACING the smoothed window reaches the next squares' edges: the board's column is white noise's."""
+    ids = np.array([(c, r) for r in range(PATTERN[1]) for c in range(PATTERN[0])], np.int64)
+    k = cs.COLUMNS.index("smoothed/raw asymmetry")
+    for square, close in ((8, True), (30, False)):
+        img = _noisy(synthetic_board(PATTERN, square=square, angle=7.0), 2.0)
+        x = cs.design(img, _true_corners(square), ids, np.ones(len(ids)))
+        assert np.all(x[:, k] == cs.WHITE_SMOOTHED) == close
+        assert np.all(x[:, k] == x[0, k])  # a board's column, the same for all its corners
