@@ -121,7 +121,7 @@ def _ours(views, halves, cfg, size, circle, model, modes=OURS) -> dict:
     return out
 
 
-def run_set(name, folder, n_splits, venv, tmp: Path, flex_splits: int = 24, ours=OURS) -> dict:
+def run_set(name, folder, n_splits, venv, tmp: Path, flex_splits: int = 24, ours=OURS, first_seed: int = 0) -> dict:
     from aicalib_tf.calib.fit import View, calibrate_camera
     from aicalib_tf.geometry.pattern import pattern_ids
 
@@ -133,14 +133,14 @@ def run_set(name, folder, n_splits, venv, tmp: Path, flex_splits: int = 24, ours
     ids = pattern_ids(tuple(cfg[0]))
     classic_views = [None if c is None else View(f.name, c, ids) for f, c in zip(files, classic)]
     rows = []
-    for seed in range(n_splits):
+    for seed in range(first_seed, first_seed + n_splits):
         halves = random_split(len(files), seed)
-        modes = tuple(m for m in ours if seed < flex_splits or m not in FLEX_COLUMNS)
+        modes = tuple(m for m in ours if seed - first_seed < flex_splits or m not in FLEX_COLUMNS)
         row = {"seed": seed, **_ours(views, halves, cfg, size, circle, model, modes)}
         row[CROSSED[0]] = rr._attempt(lambda: _ours(classic_views, halves, cfg, size, circle, model, ("flat",))["flat"])
         cv = rr._opencv_split([[classic[i] for i in h] for h in halves], cfg[0], size)
         row.update(cv_plumb_bob=cv["plumb_bob"], cv_rational=cv["rational_polynomial"], cv_fisheye=cv["equidistant"])
-        if venv is not None and seed < flex_splits:
+        if venv is not None and seed - first_seed < flex_splits:
             rr.MRCAL_MODELS = ("opencv8",)
             work = tmp / f"{name}_{seed}"
             work.mkdir(parents=True)
@@ -237,6 +237,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sets", nargs="+", default=list(rr.SETS), choices=list(rr.SETS))
     ap.add_argument("--splits", type=int, default=200, help="random half-splits per set (default: 200)")
+    ap.add_argument("--first-seed", type=int, default=0,
+                    help="the first split's seed (default: 0; two runs with seeds apart make one longer sample)")
     ap.add_argument("--flex-splits", type=int, default=24,
                     help="the first this many splits also run the flex columns and mrcal (default: 24)")
     ap.add_argument("--modes", nargs="+", default=list(OURS), choices=list(OURS),
@@ -263,7 +265,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="real_split_noise_") as tmp:
         for name, folder in rr.find_sets(args.sets, Path(args.data)):
             ours = tuple(m for m in OURS if m == "flat" or m in args.modes)
-            results.append(run_set(name, folder, args.splits, venv, Path(tmp), args.flex_splits, ours))
+            results.append(run_set(name, folder, args.splits, venv, Path(tmp), args.flex_splits, ours, args.first_seed))
             if args.json:
                 Path(args.json).write_text(json.dumps(results, indent=1, default=float) + "\n")
     print()
