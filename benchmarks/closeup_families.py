@@ -124,7 +124,7 @@ def samples(cond: Condition, count: int, rim: bool, max_tries: int = 30):
 
 def run_family(name: str, split: str, seed: int, count: int, model, show: bool) -> Counter:
     """Counts of hit / wrong / miss, the misses' blamed stages and "seconds" (detection time) for one family."""
-    from stage_misses import trace
+    from stage_misses import stage_figures, trace
 
     from aicalib_tf import detect_corners
     from aicalib_tf.io import as_gray_float
@@ -143,8 +143,7 @@ def run_family(name: str, split: str, seed: int, count: int, model, show: bool) 
         counts[t["stage"]] += 1
         if show:
             lab = s.label
-            print(f"  {cond.name} #{index}: {outcome}, {t['stage']}: map {t['map']:.2f} cand {t['candidates']:.2f} "
-                  f"grid {t['grid']}/{len(s.corners)} {t['grid_shape']} rim {t['rim_reach']}/{t['rim']} "
+            print(f"  {cond.name} #{index}: {outcome}, {stage_figures(t, len(s.corners))} "
                   f"| {lab['distortion_model']} {2 * (lab['max_theta_deg'] or 0):.0f}° off-axis "
                   f"{off_axis_deg(lab, squares=True).max():.0f}° | {det.reason!r}", flush=True)
     return counts

@@ -162,6 +162,13 @@ def _blame(t: dict, n: int) -> str:
     return "pipeline"
 
 
+def stage_figures(t: dict, n: int) -> str:
+    """One line of a miss's trace ``t`` (:func:`trace`) for a board of ``n`` corners: its blamed stage, the map's and
+    the candidates' recall, the grid's corners and shape, and the rim completion's reach."""
+    return (f"{t['stage']}: map {t['map']:.2f} cand {t['candidates']:.2f} grid {t['grid']}/{n} {t['grid_shape']} "
+            f"rim {t['rim_reach']}/{t['rim']}")
+
+
 def run_condition(cond, count: int, model, show: bool) -> Counter:
     """Counts of outcomes, blamed stages and the looks' ends (keys "shading: END", "unshear: END") over ``count``
     images of ``cond``; prints each miss."""
@@ -184,8 +191,7 @@ def run_condition(cond, count: int, model, show: bool) -> Counter:
         if show:
             f = t["flat"]
             flat = "" if f is None else f" (flat: map {f['map']:.2f} cand {f['candidates']:.2f} grid {f['grid']}/{len(s.corners)})"
-            print(f"  {cond.name} #{index}: {outcome}, {t['stage']}: map {t['map']:.2f} cand {t['candidates']:.2f} "
-                  f"grid {t['grid']}/{len(s.corners)} {t['grid_shape']} rim {t['rim_reach']}/{t['rim']} accepted {t['accepted']} "
+            print(f"  {cond.name} #{index}: {outcome}, {stage_figures(t, len(s.corners))} accepted {t['accepted']} "
                   f"| shading {t['shading']}{flat} | unshear {t['unshear']} | "
                   f"{lab['distortion_model']} {2 * (lab['max_theta_deg'] or 0):.0f}° reason {det.reason!r}", flush=True)
     return counts
