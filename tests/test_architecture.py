@@ -32,7 +32,7 @@ SIZE_NOTE = "# size:"  # a comment that says why a function is longer than the l
 # detect's stages, lowest first; a module outside them (pipeline, pyramid, track, batch, ...) is the top
 DETECT_STAGES = ("corners", "chessboard", "charuco", "boards")
 # the one arrow up: the AprilGrid reader returns the pipeline's result type (imported inside a function)
-DETECT_STAGE_EXCEPTIONS = {("aicalib_tf.detect.boards.aprilgrid", "aicalib_tf.detect.pipeline")}
+DETECT_STAGE_EXCEPTIONS = {("aicalib_tf.detect.boards.aprilgrid", "aicalib_tf.detect.detection")}  # its result type
 # leaf helpers every room, data_gen included, may import: they import nothing else of the package
 SHARED_LEAVES = ("aicalib_tf.io", "aicalib_tf.jsonio", "aicalib_tf.cli")
 

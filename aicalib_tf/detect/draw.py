@@ -8,7 +8,7 @@ import textwrap
 import cv2
 import numpy as np
 
-from aicalib_tf.detect.pipeline import Detection
+from aicalib_tf.detect.detection import Detection
 from aicalib_tf.io import quantize
 
 __all__ = ["draw_detection"]

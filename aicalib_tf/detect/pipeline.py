@@ -106,7 +106,7 @@ boards. :func:`aicalib_tf.detect.dropin.find_chessboard_corners` reports full bo
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from functools import partial as bind
 
 import numpy as np
@@ -114,6 +114,7 @@ import numpy as np
 from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.detect.chessboard.board_order import full_board, order_full_board
 from aicalib_tf.detect.corners.sigma import with_sigmas
+from aicalib_tf.detect.detection import NO_CANDIDATES, NO_GRID, NO_MATCH, REASONS, UNDECIDED, Detection, from_charuco
 from aicalib_tf.detect.chessboard.grid import MIN_CORNERS, Grid, assemble_grids, full_subgrid
 from aicalib_tf.detect.corners.junctions import dedupe, nearest_spacing, proposer, typical_amplitude
 from aicalib_tf.detect.chessboard.lattice import drop_outliers
@@ -130,49 +131,6 @@ from aicalib_tf.io import read_image
 
 __all__ = ["Detection", "detect_corners", "detect_charuco", "order_full_board", "refined_points"]
 
-
-@dataclass(frozen=True)
-class Detection:
-    """A detected chessboard.
-
-    corners : (N, 2) float32 (x, y) px, in OpenCV order when ``complete``; a partial board's are
-        ordered by id (row-major), with the unseen corners left out.
-    ids : (N, 2) int32, (col, row) of each corner on the board (see the module docstring for a
-        partial board's).
-    scores : (N,) float32 CNN corner weights in [0, 1]; 0 for a corner the CNN missed that was
-        recovered where the grid predicts one (saddle fit and ring test on the image).
-    pattern_size : (cols, rows) inner corners (the found grid's size when none was given).
-    complete : every corner of ``pattern_size`` is present.
-    image_size : (width, height) px.
-    reason : why no board came back ("" when one did): one of ``REASONS``, the furthest the
-        search got on any scale.
-    relative : the ids are relative to the visible grid, not fixed on the pattern (asked for with
-        ``detect_corners(..., relative=True)``; a board larger than the frame, say).
-    sigmas : (N,) float32 px, each corner's expected error, one standard deviation per axis
-        (:mod:`aicalib_tf.detect.corners.sigma`); None from a detector that does not give it.
-    """
-
-    corners: np.ndarray
-    ids: np.ndarray
-    scores: np.ndarray
-    pattern_size: tuple[int, int] | None
-    complete: bool
-    image_size: tuple[int, int]
-    reason: str = ""
-    relative: bool = False
-    sigmas: np.ndarray | None = None
-
-    @property
-    def found(self) -> bool:
-        return len(self.corners) > 0
-
-
-NO_CANDIDATES = f"fewer than {MIN_CORNERS} corner candidates"
-NO_GRID = "no grid of chessboard corners"
-NO_MATCH = "grids of corners, but none fits the pattern as a board"
-UNDECIDED = ("part of a board is in view, but the image leaves open where it lies on the pattern "
-             "(e.g. one corner of the board, its other two sides cut by the frame)")
-REASONS = (NO_CANDIDATES, NO_GRID, NO_MATCH, UNDECIDED)  # from the least to the furthest the search got
 
 _DEFAULT_MODEL = None
 MAX_CANDIDATES = 3000  # a 20x15 board has 300 corners; more candidates are clutter
@@ -236,7 +194,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
     if _charuco_board(pattern_size) is not None:  # a ChArUco board: the largest one found
         board, refused = _charuco_board(pattern_size), {}
         found = detect_charuco(frame.raw, [board], model=model, threshold=threshold, refused=refused)
-        return with_sigmas(_as_detection(found[0] if found else None, board, (w, h), refused.get(board)), frame)
+        return with_sigmas(from_charuco(found[0] if found else None, board, (w, h), refused.get(board)), frame)
     if pattern_size is not None:
         from aicalib_tf.geometry.pattern import check_pattern
 
@@ -414,14 +372,6 @@ def _charuco_board(board):
     if isinstance(board, CharucoBoard):
         return board
     return parse_board(board) if is_charuco(board) else None
-
-
-def _as_detection(det, board, size: tuple[int, int], why: str | None = None) -> Detection:
-    """A ChArUco detection (or None, ``why`` when known) as a :class:`Detection` of the board's inner corners."""
-    if det is None:
-        return Detection(np.zeros((0, 2), np.float32), np.zeros((0, 2), np.int32), np.zeros(0, np.float32),
-                         board.pattern_size, False, size, why or "no ChArUco board whose markers decide its corners")
-    return Detection(det.corners, det.ids, np.ones(len(det.corners), np.float32), board.pattern_size, det.complete, size)
 
 
 def detect_charuco(image, boards, *, model=None, threshold: float = 0.5, refused: dict | None = None) -> list:

@@ -25,7 +25,7 @@ class Found(NamedTuple):
     ids : (N, 2) int (col, row). complete : a full board (N = cols·rows).
     why : when nothing was found, why, if the detector says (the CNN's ``Detection.reason``).
     relative : the ids are relative to the visible grid (``make_detectors(..., relative=True)``).
-    sigmas : (N,) float32 px, each corner's σ (:attr:`aicalib_tf.detect.pipeline.Detection.sigmas`), or
+    sigmas : (N,) float32 px, each corner's σ (:attr:`aicalib_tf.detect.detection.Detection.sigmas`), or
         None (the OpenCV detectors).
     """
 

@@ -38,7 +38,8 @@ import numpy as np
 from aicalib_tf.detect.chessboard.board_order import full_board_ids, reading
 from aicalib_tf.detect.corners.sigma import with_sigmas
 from aicalib_tf.detect.corners.junctions import nearest_spacing
-from aicalib_tf.detect.pipeline import Detection, detect_corners
+from aicalib_tf.detect.detection import Detection
+from aicalib_tf.detect.pipeline import detect_corners
 from aicalib_tf.detect.pyramid import refine_full
 from aicalib_tf.geometry.image_circle import thumbnail
 from aicalib_tf.io import load_image, to_gray_float
@@ -162,7 +163,7 @@ class Tracker:
 
     pattern_size : (cols, rows) inner corners. model, threshold : as
     :func:`aicalib_tf.detect.pipeline.detect_corners`. Call it with each frame (a path or an array the
-    image gate takes); it returns the frame's :class:`~aicalib_tf.detect.pipeline.Detection`.
+    image gate takes); it returns the frame's :class:`~aicalib_tf.detect.detection.Detection`.
     ``how`` says how the last frame's board was found: "follow", "region", "frame" or "" (none), or
     "still" when the frame repeats the scene of the last frame searched whole, whose result it gets.
 

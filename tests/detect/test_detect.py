@@ -8,13 +8,8 @@ import pytest
 
 pytest.importorskip("keras")
 
-from aicalib_tf.detect.pipeline import (  # noqa: E402
-    NO_CANDIDATES,
-    NO_GRID,
-    UNDECIDED,
-    detect_corners,
-    refined_points,
-)
+from aicalib_tf.detect.detection import NO_CANDIDATES, NO_GRID, UNDECIDED  # noqa: E402
+from aicalib_tf.detect.pipeline import detect_corners, refined_points  # noqa: E402
 from aicalib_tf.detect.dropin import find_chessboard_corners  # noqa: E402
 from aicalib_tf.io import ImageError  # noqa: E402
 from aicalib_tf.cnn.model import MODELS_DIR, load_model  # noqa: E402

@@ -108,8 +108,9 @@ def test_a_photo_whose_every_board_is_refused_on_the_full_image_says_none_was_fo
     """On 8000x6000 every searched scale is reduced; when the full-image check refuses each scale's board the
     answer is no board with a reason, never an error."""
     from aicalib_tf.detect import pipeline
+    from aicalib_tf.detect.detection import NO_MATCH
 
     monkeypatch.setattr(pipeline, "object_in_front_at", lambda *args: True)
     img, _ = _upscaled(*board, (8000, 6000))
     det = pipeline.detect_corners(img, (9, 6))
-    assert not det.found and det.image_size == (8000, 6000) and det.reason == pipeline.NO_MATCH
+    assert not det.found and det.image_size == (8000, 6000) and det.reason == NO_MATCH

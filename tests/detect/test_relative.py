@@ -4,7 +4,8 @@ import cv2
 import numpy as np
 
 from aicalib_tf.detect.chessboard.partial import _fit_pattern
-from aicalib_tf.detect.pipeline import UNDECIDED, detect_corners
+from aicalib_tf.detect.detection import UNDECIDED
+from aicalib_tf.detect.pipeline import detect_corners
 from aicalib_tf.detect.warm import synthetic_board
 
 BIG = dict(square=100, angle=8.0)  # 12 x 9 squares of 100 px: every edge of the board is out of a 640x480 frame

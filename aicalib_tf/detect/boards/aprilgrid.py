@@ -333,9 +333,9 @@ def detect_aprilgrid(gray: np.ndarray, board: AprilGrid, refine: str = "saddle")
 
 
 def detect_corners_aprilgrid(gray: np.ndarray, board: AprilGrid):
-    """:func:`detect_aprilgrid` as a :class:`aicalib_tf.detect.pipeline.Detection` (scores 1, the
+    """:func:`detect_aprilgrid` as a :class:`aicalib_tf.detect.detection.Detection` (scores 1, the
     board's lattice as its pattern; complete when every tag corner is placed)."""
-    from aicalib_tf.detect.pipeline import Detection
+    from aicalib_tf.detect.detection import Detection
 
     g = np.asarray(gray)
     det = detect_aprilgrid(g, board)

@@ -157,7 +157,7 @@ def off_grid(points: np.ndarray, sigmas: np.ndarray | None) -> np.ndarray | None
 
 
 def without_off_grid(det, refused: str):
-    """A complete detection (:class:`~aicalib_tf.detect.pipeline.Detection`, its corners in OpenCV order)
+    """A complete detection (:class:`~aicalib_tf.detect.detection.Detection`, its corners in OpenCV order)
     without its corners :func:`off_grid`: as it is when none is, a partial board (complete False)
     without them (and the corners beside them left untested, :func:`off_grid`) when at most
     ``MAX_OFF`` are, and no board (no corners, reason ``refused``) with more."""

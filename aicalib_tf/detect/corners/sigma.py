@@ -181,7 +181,7 @@ def board_sigmas(image, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray
 
 
 def with_sigmas(det, image):
-    """``det`` (a :class:`~aicalib_tf.detect.pipeline.Detection`) with its corners' ``sigmas`` (:func:`board_sigmas`).
+    """``det`` (a :class:`~aicalib_tf.detect.detection.Detection`) with its corners' ``sigmas`` (:func:`board_sigmas`).
 
     image : as :func:`board_design` (a Frame, or a region function), over the image the corners are in. A detection without
     corners is returned as it is.

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from aicalib_tf.detect.chessboard.smooth_grid import STENCILS, cubic_weights, off_grid, smallest_steps, without_off_grid
-from aicalib_tf.detect.pipeline import Detection
+from aicalib_tf.detect.detection import Detection
 
 COLS, ROWS = 9, 6
 

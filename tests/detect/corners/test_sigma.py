@@ -6,7 +6,8 @@ import pytest
 from aicalib_tf.detect.corners import sigma as cs
 from aicalib_tf.detect.corners.sigma_kernels import (SPREAD_KNOT, WHITE_EVEN, blockiness, design_columns, edge_width, flat_noise, lattice_bend,
                                                      square_contrast, window_measures)
-from aicalib_tf.detect.pipeline import Detection, detect_corners
+from aicalib_tf.detect.detection import Detection
+from aicalib_tf.detect.pipeline import detect_corners
 from aicalib_tf.detect.warm import synthetic_board
 
 PATTERN = (9, 6)
