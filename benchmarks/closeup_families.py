@@ -32,7 +32,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import time
 from collections import Counter
 from dataclasses import replace
 from pathlib import Path
@@ -44,7 +43,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from aicalib_tf.bench.conditions import PATTERN, VGA, Condition  # noqa: E402
-from aicalib_tf.bench.metrics import board_detection_outcome  # noqa: E402
 from data_gen.presets import Rule, get_preset  # noqa: E402
 
 SPLITS = {"tune": "fisheye", "held-out": ("ds", "eucm")}
@@ -124,23 +122,12 @@ def samples(cond: Condition, count: int, rim: bool, max_tries: int = 30):
 
 def run_family(name: str, split: str, seed: int, count: int, model, show: bool) -> Counter:
     """Counts of hit / wrong / miss, the misses' blamed stages and "seconds" (detection time) for one family."""
-    from stage_misses import stage_figures, trace
-
-    from aicalib_tf import detect_corners
-    from aicalib_tf.io import as_gray_float
+    from stage_misses import stage_figures, traced_misses
 
     cond = family_condition(name, split, seed)
     counts: Counter = Counter()
-    for index, s in samples(cond, count, bool(families()[name].get("rim"))):
-        t0 = time.perf_counter()
-        det = detect_corners(s.image, PATTERN, model=model)
-        counts["seconds"] += time.perf_counter() - t0
-        outcome, _ = board_detection_outcome(det.corners if det.complete else None, s.corners, PATTERN)
-        counts[outcome] += 1
-        if outcome == "hit":
-            continue
-        t = trace(as_gray_float(s.image), s.corners, model, looks=False)
-        counts[t["stage"]] += 1
+    found = samples(cond, count, bool(families()[name].get("rim")))
+    for index, s, det, outcome, t in traced_misses(found, model, counts, looks=False):
         if show:
             lab = s.label
             print(f"  {cond.name} #{index}: {outcome}, {stage_figures(t, len(s.corners))} "

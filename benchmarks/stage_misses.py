@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from collections import Counter
 from dataclasses import replace
 
@@ -169,22 +170,31 @@ def stage_figures(t: dict, n: int) -> str:
             f"rim {t['rim_reach']}/{t['rim']}")
 
 
-def run_condition(cond, count: int, model, show: bool) -> Counter:
-    """Counts of outcomes, blamed stages and the looks' ends (keys "shading: END", "unshear: END") over ``count``
-    images of ``cond``; prints each miss."""
+def traced_misses(samples, model, counts: Counter, looks: bool = True):
+    """Detect each (index, Sample) of ``samples``; add its outcome ("hit" / "wrong" / "miss") and its detection
+    time ("seconds") to ``counts``, and each miss's blamed stage; yield (index, sample, Detection, outcome,
+    :func:`trace` of it) for every board not hit (``looks``: trace the second looks too)."""
     from aicalib_tf import detect_corners
     from aicalib_tf.io import as_gray_float
 
-    counts: Counter = Counter()
-    for index, s in condition_samples(cond, count):
+    for index, s in samples:
+        t0 = time.perf_counter()
         det = detect_corners(s.image, PATTERN, model=model)
-        found = det.corners if det.complete else None
-        outcome, _ = board_detection_outcome(found, s.corners, PATTERN)
+        counts["seconds"] += time.perf_counter() - t0
+        outcome, _ = board_detection_outcome(det.corners if det.complete else None, s.corners, PATTERN)
         counts[outcome] += 1
         if outcome == "hit":
             continue
-        t = trace(as_gray_float(s.image), s.corners, model)  # the pipeline's grey in [0, 1]
+        t = trace(as_gray_float(s.image), s.corners, model, looks=looks)  # the pipeline's grey in [0, 1]
         counts[t["stage"]] += 1
+        yield index, s, det, outcome, t
+
+
+def run_condition(cond, count: int, model, show: bool) -> Counter:
+    """Counts of outcomes, blamed stages and the looks' ends (keys "shading: END", "unshear: END") over ``count``
+    images of ``cond``; prints each miss."""
+    counts: Counter = Counter()
+    for index, s, det, outcome, t in traced_misses(condition_samples(cond, count), model, counts):
         counts[f"shading: {t['shading']}"] += 1
         counts[f"unshear: {t['unshear']}"] += 1
         lab = s.label
