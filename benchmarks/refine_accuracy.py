@@ -8,7 +8,8 @@ lens blur) and Gaussian noise σ = 10, 20 and 40 grey levels on top of it; with 
 evaluate's ``shading`` condition (illumination gradient and a hard shadow). "windowed" is the
 detector's own refinement (:func:`aicalib_tf.detect.corners.refine.refine_windowed`: the window sized to the
 squares, and the shadow-robust fit where the window is not point-symmetric); "windowed + polish" adds
-the ramp fit the detector ends with (:func:`aicalib_tf.detect.corners.refine.polish`).
+the per-corner ramp fit (:func:`aicalib_tf.detect.corners.refine.polish`), which the detector does not
+use (it polishes whole boards, :func:`aicalib_tf.detect.corners.refine.polish_board`, which needs a board's ids).
 """
 
 from __future__ import annotations
