@@ -54,3 +54,18 @@ def test_the_shape_column_is_compared_with_flat_and_the_best_anchor_on_its_split
     assert "shape ≤ the best anchor on 4 of 4 splits" in text
     line = next(ln for ln in text.splitlines() if ln.strip().startswith("shape: medians' gap"))
     assert "to flat -0.185 px" in line and "to the best anchor -0.135 px" in line
+
+
+def test_per_split_counts_the_splits_at_or_below_each_anchor_and_the_best_with_an_interval():
+    rows = [_row(s, 0.2, (0.25, 0.3, 0.1 if s < 2 else 0.4)) for s in range(8)]
+    for r in rows:
+        r["auto"] = dict(r["flat"])
+    rows[0]["auto"] = {"median": 0.35}
+    lines, share = sn.per_split({"set": "x", "photos": 8, "model": "plumb_bob", "splits": rows})
+    text = "\n".join(lines)
+    assert "x: auto per split" in text
+    assert "≤ OpenCV 5-coef    on 7 of 8" in text and "≤ OpenCV fisheye   on 6 of 8" in text
+    assert share == pytest.approx(6 / 8) and "≤ the best anchor   on 6 of 8 (75%" in text
+    lo, hi = sn.wilson(6, 8)
+    assert 0.4 < lo < 0.75 < hi < 0.95 and np.isnan(sn.wilson(0, 0)).all()  # NaN without splits
+    assert sn.wilson(8, 8)[1] == 1.0 and sn.wilson(0, 8)[0] == 0.0
