@@ -13,7 +13,11 @@ is interpolated from) leaves a residual r = C·p (px). One corner k off by e mov
 by C[:, k]·e: its own interpolations by −e, those it serves in by its weight times e. Weighting
 each residual by its expected spread (the corners' σ of :mod:`aicalib_tf.detect.corners.sigma`,
 with a share of the step for the lens's bend: ``MODEL_SHARE``, or more on a board whose
-interpolations all miss by more, :func:`bend_share`), the offset that best explains them is
+interpolations all miss by more, :func:`bend_share`, or where it is more, the least of ``NEAR_BEND``
+times the share by which the same interpolation misses on each of the two parallel lines either side
+(:func:`beside`: the bend grows towards a fisheye's rim, its share of the step 1.4-1.7× a line on a
+203° lens's outer rows; the least of four, so that an object over two lines does not hide its own
+corners), the offset that best explains them is
 ê_k = C_k·r / C_k·C_k (weighted), and its significance z_k = |C_k·r| / √(C_k·C_k). The corner of
 the largest z is off the grid when z ≥ ``Z_MIN``, |ê| ≥ ``MIN_PX`` and |ê| ≥ ``MIN_SHARE`` of its
 smallest step (a corner of high z but a smaller offset ends the search: a board bent beyond its
@@ -38,7 +42,7 @@ import numpy as np
 from aicalib_tf.detect.chessboard.rim import grid_directions
 
 __all__ = ["STENCILS", "interpolations", "off_grid", "without_off_grid", "Z_MIN", "MIN_PX", "MIN_SHARE", "MAX_OFF",
-           "bend_share"]
+           "bend_share", "beside", "LINES", "NEAR_BEND"]
 
 # along a line, offsets from the target and weights: exact for a cubic in the id
 STENCILS = (
@@ -58,6 +62,8 @@ Z_MIN = 5.0  # an off corner's offset over its standard error: the least
 MIN_PX = 1.5  # px: the least offset taken as off the grid (a wrong corner is over 2 px off)
 MIN_SHARE = 0.1  # of the corner's smallest step: the least offset (the lens's bend misses by up to 0.06)
 MAX_OFF = 3  # corners off the grid a board may lose; with more it is no board
+LINES = (-2, -1, 1, 2)  # the parallel lines an interpolation's twins lie on (lines across)
+NEAR_BEND = (2.0, 1.5, 1.5, 2.0)  # times each twin's miss share (1.4-1.7x a line at a rim): the least is the expected
 
 
 def cubic_weights(offs) -> tuple[float, ...]:
@@ -88,7 +94,25 @@ def interpolations(rows: int, cols: int) -> tuple[np.ndarray, np.ndarray, np.nda
 
 @lru_cache(maxsize=8)
 def _interpolations(rows: int, cols: int):
-    return interpolations(rows, cols)
+    at, weights, gapped = interpolations(rows, cols)
+    return at, weights, gapped, beside(at, rows, cols)
+
+
+def beside(at: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """(S, 4) int: for each interpolation ``at`` (S, 5) of :func:`interpolations` (row-major positions on a
+    rows × cols grid), the same one on the parallel lines ``LINES`` across from it (every position moved that
+    many lines across), or -1 where that line is off the grid. The lens bends neighbouring lines alike; a
+    corner off the grid moves none of its own line's interpolations' twins."""
+    r, c = np.divmod(at, cols)
+    along_row = (r == r[:, :1]).all(axis=1)
+    index = {tuple(row): k for k, row in enumerate(at.tolist())}
+    out = np.full((len(at), len(LINES)), -1, np.int64)
+    for side, d in enumerate(LINES):
+        rr, cc = np.where(along_row[:, None], r + d, r), np.where(along_row[:, None], c, c + d)
+        inside = ((rr >= 0) & (rr < rows) & (cc >= 0) & (cc < cols)).all(axis=1)
+        moved = (rr * cols + cc).tolist()
+        out[:, side] = [index.get(tuple(m), -1) if ok else -1 for m, ok in zip(moved, inside)]
+    return out
 
 
 def smallest_steps(points: np.ndarray) -> np.ndarray:
@@ -119,8 +143,9 @@ def off_grid(points: np.ndarray, sigmas: np.ndarray | None) -> np.ndarray | None
     flat = np.asarray(points, np.float64).reshape(-1, 2)
     sig = np.full(len(flat), SIGMA_FLOOR) if sigmas is None else np.maximum(np.ravel(sigmas), SIGMA_FLOOR)
     steps = smallest_steps(np.asarray(points, np.float64))
-    at_all, w_all, gapped = _interpolations(rows, cols)
+    at_all, w_all, gapped, twins = _interpolations(rows, cols)
     share = bend_share(flat, steps, at_all[~gapped], w_all[~gapped])
+    miss = np.hypot(*np.einsum("sj,sjd->sd", w_all, flat[at_all]).T) / steps[at_all[:, 0]]  # (S,) of the step
     n = len(flat)
     off = np.zeros(n, bool)
     plain, tested = np.zeros(n, bool), np.zeros(n, bool)
@@ -136,7 +161,10 @@ def off_grid(points: np.ndarray, sigmas: np.ndarray | None) -> np.ndarray | None
         tested[at[:, 0]] = True
         if len(at) == 0:
             break
-        spread = np.sqrt(((w * sig[at]) ** 2).sum(axis=1) + (share * steps[at[:, 0]]) ** 2)  # (S,) px
+        clear = (twins >= 0) & ~off[at_all[np.maximum(twins, 0)]].any(axis=2)  # twins touching no corner set aside
+        near = np.where(clear, np.asarray(NEAR_BEND) * miss[np.maximum(twins, 0)], np.inf).min(axis=1)[keep]  # (S,)
+        bend = np.maximum(share, np.where(np.isfinite(near), near, 0.0)) * steps[at[:, 0]]
+        spread = np.sqrt(((w * sig[at]) ** 2).sum(axis=1) + bend ** 2)  # (S,) px
         ww = w / spread[:, None]
         res = np.einsum("sj,sjd->sd", w, flat[at]) / spread[:, None]  # (S, 2): each residual, weighted
         served = np.stack([np.bincount(at.ravel(), (ww * res[:, d, None]).ravel(), n) for d in (0, 1)], 1)  # C_k·r

@@ -130,3 +130,24 @@ def test_a_placed_corner_left_short_of_its_junction_is_flat_against_its_neighbou
     points[0, 0] = [423.90, 308.03]  # where the rim completion's fit left it
     assert flat_placed(points, gray, corners).tolist() == [True, False, False, False]
     assert PLACED_FLAT < 1.0 and len(flat_placed(points, gray, [])) == 0
+
+
+def _rim_cut_board(cut: float) -> tuple[np.ndarray, np.ndarray]:
+    """A 5×5-corner board of 40 px squares, smoothed (σ 1 px), black beyond the line x + y = ``cut`` (an image
+    circle's rim across its corner): (points (5, 5, 2) px, ring image (240, 240) float32)."""
+    y, x = np.mgrid[:240, :240].astype(np.float64)
+    img = np.where(((x // 40) + (y // 40)) % 2 == 0, 0.8, 0.2)
+    img[x + y < cut] = 0.0
+    points = np.stack(np.meshgrid(40.0 * np.arange(1, 6), 40.0 * np.arange(1, 6)), -1)
+    return points, Smoothed(img.astype(np.float32)).sigma(1.0)
+
+
+def test_a_board_corner_whose_outer_squares_the_rim_cuts_is_like_its_neighbours():
+    # the rim 8.5 px from the board corner (40, 40): the ring of 0.3 of its inner step (12 px) crosses it,
+    # half that ring does not; an object's edge through the corner is lopsided on both rings
+    points, ring = _rim_cut_board(68.0)
+    assert not unlike_neighbours(points, ring).any()
+    y, x = np.mgrid[:240, :240]
+    img = ring.copy()
+    img[(y > 38) & (x < 60)] = 0.5  # an object's edge through the board corner
+    assert unlike_neighbours(points, Smoothed(img).sigma(1.0))[0, 0]

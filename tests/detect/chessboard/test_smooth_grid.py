@@ -2,6 +2,7 @@
 
 from dataclasses import replace
 
+import cv2
 import numpy as np
 import pytest
 
@@ -104,6 +105,10 @@ OBJECTS = {
                   [441.14, 240.09], [444.53, 240.08], [446.27, 238.71], [448.89, 238.99], [448.68, 241.36]], 0.306),
     # a bar over (1, 0), (2, 0) and (1, 1), 3.2-5.5 px off: (1, 0) fits its only interpolation left
     "bar": (1, [[239.41, 75.81], [243.06, 80.56], [215.91, 101.44], [212.25, 96.69]], 0.83),
+    # a blob over (0, 3) and (0, 4), which pulls the column beside them: (0, 3) 2.3-3.1 px off its column's
+    # interpolations; their twins on column 1 miss by 0.08 of the step, on column 2 by 0.03
+    "blob over two lines": (7, [[257.05, 281.1], [249.79, 282.77], [245.55, 281.6], [241.76, 277.56],
+                                [237.38, 273.75], [242.94, 267.21], [249.63, 268.67], [253.37, 270.53]], 0.788),
 }
 
 
@@ -142,4 +147,27 @@ def test_a_close_board_bent_all_over_keeps_its_corners_and_still_shows_one_off()
     for r, c in [(0, 3), (2, 4), (5, 2), (3, 0)]:  # 4 px or 0.15 of its step off, on every part of it
         q = pts.copy()
         q[r, c, 1] += max(4.0, 0.15 * steps[r, c])
+        assert np.argwhere(off_grid(q, sig)).tolist() == [[r, c]]
+
+
+def _rim_row_board() -> np.ndarray:
+    """(6, 9, 2) px: a 25 mm board through a 203° Kannala-Brandt fisheye (f 125 px), its last row 83-86° off
+    axis (closeup_families' cover-70-90, seed 301 #2): that row's steps run 19-50 px, and its interpolations miss
+    by up to 0.1 of the step, about twice the row inside it and four times the board's median."""
+    x, y = np.meshgrid(np.arange(9) * 25.0, np.arange(6) * 25.0)
+    rot = cv2.Rodrigues(np.array([-0.7324, -0.9525, 1.7009]))[0]
+    p = np.stack([x, y, np.zeros_like(x)], -1) @ rot.T + [44.44, -94.35, 145.0]
+    theta, phi = np.arctan2(np.hypot(p[..., 0], p[..., 1]), p[..., 2]), np.arctan2(p[..., 1], p[..., 0])
+    theta = theta * (1 + 0.03287 * theta ** 2 + 0.00386 * theta ** 4 - 0.00128 * theta ** 6 - 0.000897 * theta ** 8)
+    return np.stack([319.54 + 125.15 * theta * np.cos(phi), 237.45 + 125.09 * theta * np.sin(phi)], -1)
+
+
+def test_a_rim_row_bent_twice_as_much_as_the_row_inside_keeps_its_corners():
+    pts, sig = _rim_row_board(), np.full((6, 9), 0.1)
+    moved = pts.copy()
+    moved[5, 7, 1] -= 0.7  # the detector's bias on that row, 0.2-0.3 px a corner, adds up to this on one interpolation
+    assert not off_grid(moved, sig).any()  # judged by the board's median bend alone, (5, 6)-(5, 8) went
+    for r, c in [(1, 2), (3, 6), (0, 4)]:  # 2.5 px off where the rows bend less is still found
+        q = pts.copy()
+        q[r, c] += [1.5, -2.0]
         assert np.argwhere(off_grid(q, sig)).tolist() == [[r, c]]
