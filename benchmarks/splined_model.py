@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/splined_model.py [--views 20] [--noise 0.02] [--auto-from N] [--scenes ...]
         [--halves SET ...] [--splits 2] [--real ...] [--timing 20 30 40] [--choice 8 12 16 20 --seeds 5 6]
+        [--flex 12 20 --seeds 5 6]
 
 Synthetic scenes: a lens that none of the parametric models holds exactly (a wide rational lens or a
 ~190° Kannala-Brandt fisheye, each with a local bump of 0.6 px in the image: a lens element's flaw), and
@@ -21,6 +22,12 @@ the layout chosen and the projection error.
 ``--scenes`` scene per ``--seeds`` seed: what it chose, that model's projection error, and, when it chose the
 spline, the parametric model the choice keeps without it with its projection error: whether the held-out error
 picks the spline only where it truly wins.
+
+``--flex N ...``: the spline forced on N views of each ``--scenes`` scene per ``--seeds`` seed, the board flat
+and bent by ``benchmarks/board_shape.py``'s ``full`` shape (all seven terms), each fitted with the board's shape
+solved (``flex="auto"``: the keep rule of :mod:`aicalib_tf.calib.flex_check`) and taken flat: the shape
+recovered (RMS out of the board's plane, worst term's error in its standard errors), the projection error
+of each, their CPU seconds and the fit's note on the shape.
 
 ``--halves SET ...``: real photos (``opencv_left``, ``udacity_lane_cal``, ``ocam_fisheye`` in
 ``../shared/data``; ocam has no licence: read in place) detected once each as ``real_split_noise.py`` does
@@ -57,6 +64,7 @@ from aicalib_tf.calib.bundle import CalibrationError, solve_pose  # noqa: E402
 from aicalib_tf.calib.fit import View, calibrate_camera, fit_views  # noqa: E402
 from aicalib_tf.calib.splined_fit import MIN_VIEWS  # noqa: E402
 from aicalib_tf.geometry import lens as L  # noqa: E402
+from aicalib_tf.geometry.board_shape import SHAPE_TERMS, out_of_plane_rms, shaped_points  # noqa: E402
 from aicalib_tf.geometry.pattern import board_points  # noqa: E402
 from aicalib_tf.geometry.pose import best_rotation  # noqa: E402
 
@@ -91,11 +99,13 @@ SCENES = {
 }
 
 
-def render(truth, n, noise, rng):
-    """``n`` views of a 9x6 board seen by ``truth`` (corners inside the image, at least 20)."""
+def render(truth, n, noise, rng, shape=None):
+    """``n`` views of a 9x6 board seen by ``truth`` (corners inside the image, at least 20); shape : the board's
+    (7,) shape terms, squares (:mod:`aicalib_tf.geometry.board_shape`), or None (flat)."""
     cols, rows = PATTERN
     ids = np.stack(np.meshgrid(np.arange(cols), np.arange(rows)), -1).reshape(-1, 2)
-    X = board_points(ids, SQUARE) - [(cols - 1) * SQUARE / 2, (rows - 1) * SQUARE / 2, 0]
+    X = board_points(ids, SQUARE) if shape is None else shaped_points(board_points(ids, SQUARE), PATTERN, shape, SQUARE)
+    X = X - [(cols - 1) * SQUARE / 2, (rows - 1) * SQUARE / 2, 0]
     w, h = truth.image_size
     views = []
     while len(views) < n:
@@ -218,6 +228,37 @@ def run_choice(name, truth, counts, noise, seeds, auto_from) -> list[str]:
     return out
 
 
+def run_flex(name, truth, counts, noise, seeds) -> list[str]:
+    """The spline forced on a bent board (module docstring, ``--flex``): per board, view count and seed the
+    board flat (``flex="off"``) and solved (``flex="auto"``)."""
+    from board_shape import SHAPES
+
+    out = [f"## {name}: the spline forced, board shape solved (flex auto) or taken flat, noise {noise} px",
+           "| board | views | seed | out of plane true / solved (squares) | worst term error / SE | projection error "
+           "median / p95 px, auto | flat | CPU s auto / flat | note |", "|---|---|---|---|---|---|---|---|---|"]
+    for board in ("flat", "full"):
+        true = np.asarray(SHAPES[board], np.float64)
+        for n in counts:
+            for seed in seeds:
+                views = render(truth, n, noise, np.random.default_rng(seed), true)
+                cals, cpu = {}, {}
+                for mode in ("auto", "off"):
+                    t = time.process_time()
+                    cals[mode] = fit_views(views, PATTERN, SQUARE, truth.image_size, "splined_equidistant", flex=mode)
+                    cpu[mode] = time.process_time() - t
+                cal = cals["auto"]
+                w = np.zeros(len(SHAPE_TERMS)) if cal.flex is None else np.pad(cal.flex, (0, len(SHAPE_TERMS) - len(cal.flex)))
+                se = (np.full(len(w), np.nan) if cal.flex is None
+                      else np.sqrt(np.diag(cal.flex_covariance))[:len(w)])
+                worst = "-" if cal.flex is None else f"{np.nanmax(np.abs(w - true) / se):.2f}"
+                oop = [out_of_plane_rms(x, np.zeros((len(x), len(x))), PATTERN)[0] for x in (true, w)]
+                errs = ["{:.3f} / {:.3f}".format(*projection_error(cals[m].lens, truth, views)) for m in ("auto", "off")]
+                out.append(f"| {board} | {n} | {seed} | {oop[0]:.4f} / {oop[1]:.4f} | {worst} | {errs[0]} | {errs[1]} | "
+                           f"{cpu['auto']:.0f} / {cpu['off']:.0f} | {cal.flex_note[:70] or 'every term kept'} |")
+                print(out[-1], flush=True)
+    return out
+
+
 def run_real(name) -> list[str]:
     folder, pattern, square = REAL[name]
     with tempfile.TemporaryDirectory() as tmp:
@@ -330,12 +371,17 @@ def main(argv=None) -> int:
     ap.add_argument("--splits", type=int, default=2, help="random half-splits per --halves set")
     ap.add_argument("--timing", type=int, nargs="*", default=(), help="view counts of the spline fit's timing")
     ap.add_argument("--choice", type=int, nargs="*", default=(), help="view counts of the auto-choice check")
-    ap.add_argument("--seeds", type=int, nargs="*", default=(5,), help="seeds of --choice")
+    ap.add_argument("--seeds", type=int, nargs="*", default=(5,), help="seeds of --choice and --flex")
+    ap.add_argument("--flex", type=int, nargs="*", default=(), help="view counts of the bent-board check")
     args = ap.parse_args(argv)
     if args.choice:
         for name in args.scenes:
             print("\n".join(run_choice(name, SCENES[name], args.choice, args.noise, args.seeds, args.auto_from or MIN_VIEWS)),
                   "\n", flush=True)
+        return 0
+    if args.flex:
+        for name in args.scenes:
+            print("\n".join(run_flex(name, SCENES[name], args.flex, args.noise, args.seeds)), "\n", flush=True)
         return 0
     if args.timing:
         name = args.scenes[0]

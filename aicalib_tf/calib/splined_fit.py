@@ -27,12 +27,17 @@ A fit of ``splined_equidistant`` (the bare name; :mod:`aicalib_tf.geometry._spli
    each axis, and nx, ny follow (at least 6 each). Pixels beyond it have no ray: the spline describes
    the lens where the boards were, and the undistortion maps leave the rest black.
 4. **Smoothness.** ``smooth`` = s·f px per normalized unit, for s in :data:`SMOOTH_REL` from the smoothest
-   down, each base of step 1: each is scored by :data:`SMOOTH_FOLDS`-fold held-out RMS (each fold fitted on
-   the other views, its held-out views posed with the fitted intrinsics); the search along s stops once a
-   score exceeds the base's best by :data:`SMOOTH_STOP`, the lowest mean wins, the smoother on a tie within
-   1%. On 10 views of a 130° lens with a bump (``benchmarks/splined_model.py``'s scene, seed 5; projection
-   error median / p95 over the covered area): one even/odd split on θ_d = θ chose s = 0.01, 0.22 / 1.08 px;
-   the folds on θ_d = θ 0.3, 0.19 / 0.69; the folds with the fitted base 0.1, 0.07 / 0.19.
+   down, each base of step 1: each is scored by :func:`held_out_score`, the geometric mean over the views of
+   their held-out RMS (:data:`SMOOTH_FOLDS` folds, each fitted on the other views, its held-out views posed
+   with the fitted intrinsics; with the board's shape solved, each fold solves it too and poses its held-out
+   views on it). Each view counts by its relative change (a per-view normalisation), so one view held out
+   far above the others (posed where no other board reached) cannot decide alone, as it did the mean over
+   folds: on 8 views of a 190° fisheye (0.05 px) one view, held out alone at 0.36 px (the others
+   0.06–0.08), rose to 0.52 px at s = 0.3 and stopped the mean's search there. The search along s stops once a score exceeds the base's best by :data:`SMOOTH_STOP`
+   or :data:`SMOOTH_PATIENCE` in a row do not improve on it by 1%; the lowest score wins, the smoother on a
+   tie within 1%. On 10 views of a 130° lens with a bump (``benchmarks/splined_model.py``'s scene, seed 5;
+   projection error median / p95 over the covered area): one even/odd split on θ_d = θ chose s = 0.01,
+   0.22 / 1.08 px; the folds on θ_d = θ 0.3, 0.19 / 0.69; the folds with the fitted base 0.1, 0.07 / 0.19.
 Under ``auto`` (:mod:`aicalib_tf.calib.select`) a spline is fitted only when the best parametric model
 leaves a pattern in its residuals over the image (:func:`misfit_note`): it has nothing to earn otherwise.
 
@@ -40,15 +45,23 @@ leaves a pattern in its residuals over the image (:func:`misfit_note`): it has n
    the base lens's projection of the corners' rays and of a grid over the rectangle (with the
    regularization); poses by PnP on rays; then the bundle fit with the regularization.
 
-6. **Corners.** The fit is a solve like every model's (:func:`~aicalib_tf.calib.robust.solve`, the board
-   flat): corners weighted by their σ, single outlying corners rejected by the same rule and reported the same
-   way (``rejected_corners`` in camera.json). Before step 4, one such solve of the layout at ``smooth`` =
-   :data:`CLEAN_SMOOTH_REL`·f (bendy enough to follow a lens's bump, too stiff to follow one corner; each fit
-   capped at :data:`HELD_OUT_NFEV` evaluations; a concrete layout: at its own smoothness) finds the corners the
-   folds leave out and the final solve starts without: each would otherwise weigh on every held-out score, and a fit that starts with them wanders
-   along the knots' weak directions (10 views, 4 corners moved 3–10 px: 500 evaluations without converging).
-   The final solve tests every corner again. A start that is a fitted spline of the layout (a fold, a refit)
-   flags them at its own smoothness.
+6. **Corners and board.** The fit is a solve like every model's (:func:`~aicalib_tf.calib.robust.solve`):
+   corners weighted by their σ, single outlying corners rejected by the same rule and reported the same way
+   (``rejected_corners`` in camera.json), the board's shape solved as the options ask; the caller's keep rule
+   (:func:`~aicalib_tf.calib.flex_check.confirm_flex`: each term shrunk by its leave-one-view-out noise, with
+   ``flex="auto"`` the shape kept only when it moves the lens beyond that noise) refits from the spline, each
+   refit at its layout and smoothness. A bent board biases a spline as it does any model: 12 views of the
+   130° lens with a bump on a board 0.0058 squares out of plane (all seven terms, 0.02 px): projection error
+   median / p95 0.21 / 0.70 px flat, 0.032 / 0.127 with the shape (0.0052 solved, 89% kept; a flat board
+   0.029 / 0.080).
+   Before step 4, one solve of the layout at ``smooth`` = :data:`CLEAN_SMOOTH_REL`·f on a flat board
+   (bendy enough to follow a lens's bump, too stiff to follow one corner; each fit capped at
+   :data:`HELD_OUT_NFEV` evaluations; a concrete layout: at its own smoothness) finds the corners the folds
+   leave out and the final solve starts without: each would otherwise weigh on every held-out score, and a
+   fit that starts with them wanders along the knots' weak directions (10 views, 4 corners moved 3–10 px: 500
+   evaluations without converging). The final solve tests every corner again. A start that is a fitted
+   spline of the layout (a fold, a refit) solves from it capped so, and only when that does not converge
+   from the corners it kept to the full cap: the refits of the keep rule cost one capped solve each.
 
 A concrete layout (``splined_equidistant_nx=.._ny=.._fov=.._smooth=..``) keeps its layout and smoothness (with two
 candidate bases, the fit that ends with the lower cost is kept); a start that is already a spline of that layout starts the bundle as it is.
@@ -63,6 +76,7 @@ import cv2
 import numpy as np
 
 from aicalib_tf.calib.bundle import BundleResult, CalibrationError, bundle_adjust, poses_from_rays, solve_pose
+from aicalib_tf.calib.flex import basis_of_views, mode_terms
 from aicalib_tf.calib.robust import SolveOptions, solve
 from aicalib_tf.calib.starts import fisheye_start
 from aicalib_tf.geometry._equidistant import monotonic_limit as kb_monotonic
@@ -78,7 +92,8 @@ MIN_VIEWS = 6  # the fewest views a spline is fitted to (module docstring, step 
 CORNERS_PER_KNOT = 20.0  # corners per knot over the covered area (each knot holds 2 values)
 SMOOTH_REL = (1.0, 0.3, 0.1, 0.03, 0.01, 0.003)  # smooth / f candidates, the smoothest first
 SMOOTH_FOLDS = 5  # folds of the held-out score that chooses among them
-SMOOTH_STOP = 1.1  # the search stops at a score this much above the best so far
+SMOOTH_STOP = 1.1  # the search stops at a score this much above the best so far ...
+SMOOTH_PATIENCE = 2  # ... or after this many scores in a row that do not improve on it by 1%
 MAX_NFEV = 500  # a spline fit's evaluations (its weakly regularized directions converge slowly)
 HELD_OUT_NFEV = 100  # each smoothness candidate's fit on half the views
 CLEAN_SMOOTH_REL = 0.03  # smooth / f of the fit whose rejected corners the folds leave out (step 6)
@@ -183,7 +198,7 @@ def empty_knots(uv: np.ndarray, pixels: np.ndarray, nx: int, ny: int, fov_deg: f
     spec = get_model(splined_name(nx, ny, fov_deg, 1.0))
 
     def reached(p):
-        inside, idx, _, _, _ = spec._locate(p[:, 0], p[:, 1])
+        inside, idx, _, _, _ = spec.locate(p[:, 0], p[:, 1])
         return np.bincount(idx[inside].ravel(), minlength=nx * ny) > 0
 
     under = reached(pixels)
@@ -252,54 +267,70 @@ def misfit_note(fit, views) -> str | None:
             f"(z = {z:.1f} < {MISFIT_Z:g} over {k // 2} cells)")
 
 
-def _held_out_rms(model: str, obj, px, intr, rvecs, tvecs, train: np.ndarray) -> tuple[float, BundleResult]:
-    """(px, the fit): fit on the views ``train`` (bool (V,)) from ``intr`` and their poses ``rvecs``,
-    ``tvecs`` ((T, 3) each, the train views'), the held-out views' RMS with those intrinsics (inf when one
-    cannot be posed)."""
+def _held_out_rms(model: str, obj, px, warm, train: np.ndarray, basis=None) -> tuple[np.ndarray, BundleResult]:
+    """((V,) px, the fit): fit on the views ``train`` (bool (V,)) from ``warm`` = (intrinsics, the train views'
+    rvecs, tvecs (T, 3) each, the board shape (K,) or None); each held-out view's RMS posed with those
+    intrinsics (inf when it cannot be posed; NaN for the train views). basis : per-view (N_v, K) board-shape
+    rows (the shape solved with the fold, its held-out views posed on the board as the fold shaped it), or
+    None (a flat board)."""
     pick = lambda seq: [s for s, t in zip(seq, train) if t]  # noqa: E731
+    intr, rvecs, tvecs, flex = warm
     fit = bundle_adjust(model, pick(obj), pick(px), intr, rvecs, tvecs, covariance=False, strict=False,
-                        max_nfev=HELD_OUT_NFEV)
+                        max_nfev=HELD_OUT_NFEV, flex_basis=None if basis is None else pick(basis), flex=flex)
     lens = Lens.from_intrinsics(model, fit.intrinsics, (1, 1))
-    sq, n = 0.0, 0
-    for o, p, t in zip(obj, px, train):
+    out = np.full(len(px), np.nan)
+    for k, (o, p, t) in enumerate(zip(obj, px, train)):
         if not t:
+            if fit.flex is not None:
+                o = o + np.outer(basis[k] @ fit.flex, [0.0, 0.0, 1.0])
             pose = solve_pose(lens, o, p)
-            if pose is None or not np.isfinite(pose[2]):
-                return math.inf, fit
-            sq, n = sq + pose[2] ** 2 * len(p), n + len(p)
-    return math.sqrt(sq / n), fit
+            out[k] = pose[2] if pose is not None and np.isfinite(pose[2]) else math.inf
+    return out, fit
 
 
-def _choose_smooth(base: Lens, layout, obj, px, poses) -> tuple[float, np.ndarray]:
-    """(smoothness weight px per normalized unit, base k1..k4) with the lowest k-fold held-out RMS over
-    :data:`SMOOTH_REL` and :func:`_bases` (module docstring). Each fold's fit starts from its fit at the
-    previous, smoother, weight (a continuation: on 20 views of the 130° bump lens 571 evaluations in place
-    of 665 from the base, 10 s CPU in place of 12, the same choice). A second base is first scored at the
-    first's best weight and searched only when it beats it there (on opencv_left's 13 photos both bases
-    reach the same fits: 20 fold fits in place of 40)."""
+def held_out_score(rms) -> float:
+    """px: the score of a smoothness from every view's held-out RMS ((V,) px, each view held out once): their
+    geometric mean (inf when a view could not be posed). Each view counts by its relative error, so one view
+    whose held-out error is many times the others' (posed where no other board reached, or badly) does not
+    decide the choice alone, as it does in the mean over folds (module docstring, step 4)."""
+    r = np.asarray(rms, np.float64)
+    if not np.all(np.isfinite(r)):
+        return math.inf
+    return float(np.exp(np.mean(np.log(np.maximum(r, 1e-12)))))
+
+
+def _choose_smooth(base: Lens, layout, obj, px, basis, poses) -> tuple[float, np.ndarray]:
+    """(smoothness weight px per normalized unit, base k1..k4) with the lowest :func:`held_out_score` of the
+    k-fold held-out RMS over :data:`SMOOTH_REL` and :func:`_bases` (module docstring). Each fold's fit starts
+    from its fit at the previous, smoother, weight (a continuation: on 20 views of the 130° bump lens 571
+    evaluations in place of 665 from the base, 10 s CPU in place of 12, the same choice). A second base is
+    first scored at the first's best weight and searched only when it beats it there (on opencv_left's 13
+    photos both bases reach the same fits: 20 fold fits in place of 40). basis : per-view board-shape rows
+    (each fold solves the board's shape, :func:`_held_out_rms`) or None (a flat board)."""
     k = min(SMOOTH_FOLDS, len(px))
     folds = [np.arange(len(px)) % k != f for f in range(k)]
 
     def score(model, cand, warm):
         if warm is None:
             intr = spline_start(base, model, px, cand.dist)
-            warm = [(intr, np.asarray(poses[0])[t], np.asarray(poses[1])[t]) for t in folds]
-        scored = [_held_out_rms(model, obj, px, *w, t) for w, t in zip(warm, folds)]
-        return float(np.mean([r for r, _ in scored])), [(f.intrinsics, f.rvecs, f.tvecs) for _, f in scored]
+            warm = [(intr, np.asarray(poses[0])[t], np.asarray(poses[1])[t], None) for t in folds]
+        scored = [_held_out_rms(model, obj, px, w, t, basis) for w, t in zip(warm, folds)]
+        rms = np.nanmin(np.stack([r for r, _ in scored]), axis=0)  # each view's one held-out value
+        return held_out_score(rms), [(f.intrinsics, f.rvecs, f.tvecs, f.flex) for _, f in scored]
 
     best = None
     for cand in _bases(base, px):
         if best is not None and not score(splined_name(*layout, best[1]), cand, None)[0] < 0.99 * best[0]:
             continue
-        mine, warm = None, None
+        mine, warm, misses = None, None, 0
         for s in SMOOTH_REL:  # the smoothest first: it keeps a tie
             value, warm = score(splined_name(*layout, s * base.fx), cand, warm)
             if mine is None or value < 0.99 * mine:
-                mine = value
+                mine, misses = value, 0
                 if best is None or value < 0.99 * best[0]:
                     best = (value, s * base.fx, cand.dist)
-            elif value > SMOOTH_STOP * mine:  # past the minimum: less smoothing only fits the noise more
-                break
+            elif value > SMOOTH_STOP * mine or (misses := misses + 1) >= SMOOTH_PATIENCE:
+                break  # past the minimum: less smoothing only fits the noise more
     return best[1], best[2]
 
 
@@ -312,8 +343,11 @@ def fit_splined(model: str, obj, px, image_size, start: Lens | None, rank_strict
     rejects single corners as every solve does (step 6), else it is one bundle fit. Raises CalibrationError
     when the views do not determine a spline or the fit fails."""
     spec = get_model(model)
-    solve_opts = None if views is None else dataclasses.replace(options or SolveOptions(), flex="off", flex_value=None)
+    solve_opts = None if views is None else (options or SolveOptions())
     rejecting = solve_opts is not None and solve_opts.reject_corners
+    basis = None  # the board-shape rows the smoothness folds solve with (step 4), when the solve solves a shape
+    if solve_opts is not None and solve_opts.flex != "off":
+        basis = basis_of_views(views, solve_opts.pattern_size, mode_terms(solve_opts.flex))[0]
 
     def fit(name, intr, poses, keep):
         if solve_opts is None:
@@ -325,7 +359,7 @@ def fit_splined(model: str, obj, px, image_size, start: Lens | None, rank_strict
         if not rejecting:
             return None
         return solve(name, views, obj, px, intr, poses, free=np.ones(len(intr), bool), rank_strict=False,
-                     options=solve_opts, max_nfev=HELD_OUT_NFEV).inliers
+                     options=dataclasses.replace(solve_opts, flex="off"), max_nfev=HELD_OUT_NFEV).inliers
 
     if start is not None and start.spec.FAMILY == spec.FAMILY and (model == FAMILY_NAME or start.model == model):
         poses = poses_from_rays(start, obj, px)
@@ -348,7 +382,7 @@ def fit_splined(model: str, obj, px, image_size, start: Lens | None, rank_strict
     clean = splined_name(*layout, CLEAN_SMOOTH_REL * base.fx) if model == FAMILY_NAME else model
     keep = flagged(clean, spline_start(base, clean, px), poses)
     if model == FAMILY_NAME:
-        smooth, k = _choose_smooth(base, layout, *_kept(obj, px, keep), poses)
+        smooth, k = _choose_smooth(base, layout, *_kept(keep, obj, px, basis), poses)
         model = splined_name(*layout, smooth)
         return fit(model, spline_start(base, model, px, k), poses, keep)
     bases = _bases(base, px)
@@ -361,9 +395,11 @@ def fit_splined(model: str, obj, px, image_size, start: Lens | None, rank_strict
     return fit(model, best.intrinsics, (best.rvecs, best.tvecs), keep)
 
 
-def _kept(obj, px, keep) -> tuple[list, list]:
-    """(obj, px) of each view without the corners ``keep`` ((N,) bool over all views' corners, or None) drops."""
+def _kept(keep, obj, px, basis=None) -> tuple[list, list, list | None]:
+    """(obj, px, basis) of each view without the corners ``keep`` ((N,) bool over all views' corners, or None)
+    drops; basis: per-view (N_v, K) board-shape rows or None."""
     if keep is None:
-        return obj, px
+        return obj, px, basis
     masks = np.split(np.asarray(keep, bool), np.cumsum([len(p) for p in px])[:-1])
-    return [o[m] for o, m in zip(obj, masks)], [np.asarray(p)[m] for p, m in zip(px, masks)]
+    drop = lambda seq: [np.asarray(a)[m] for a, m in zip(seq, masks)]  # noqa: E731
+    return drop(obj), drop(px), None if basis is None else drop(basis)

@@ -118,7 +118,7 @@ class SplinedModel(LensModel):
         m = self.nx * self.ny
         return d[:m].reshape(self.ny, self.nx), d[m:].reshape(self.ny, self.nx)
 
-    def _locate(self, u, v):
+    def locate(self, u, v):
         """Flat (u, v) -> (inside (N,), flat control indices (N, 4, 4), weights (N, 4, 4), d/du (N, 4, 4), d/dv)."""
         eps = 1e-9 * self.h
         inside = (np.abs(u) <= self.U + eps) & (np.abs(v) <= self.V + eps)
@@ -136,9 +136,9 @@ class SplinedModel(LensModel):
         return inside, idx, w, wu, wv
 
     def correction(self, u, v, d):
-        """Flat (u, v) -> (Δx, Δy, G (N, 2, 2) dΔ/d(u, v), inside, idx, w) (:meth:`_locate`'s idx, w)."""
+        """Flat (u, v) -> (Δx, Δy, G (N, 2, 2) dΔ/d(u, v), inside, idx, w) (:meth:`locate`'s idx, w)."""
         cx, cy = (g.ravel() for g in self._grids(d))
-        inside, idx, w, wu, wv = self._locate(u, v)
+        inside, idx, w, wu, wv = self.locate(u, v)
         kx, ky = cx[idx], cy[idx]
         G = np.empty(u.shape + (2, 2))
         G[:, 0, 0], G[:, 0, 1] = np.sum(wu * kx, axis=(1, 2)), np.sum(wv * kx, axis=(1, 2))
