@@ -20,7 +20,8 @@ The exact commands of the shipped models, with their data options, are in models
 A run renders a seeded pool of ``--preset`` images in memory, then trains on crops cut from it
 (see :mod:`aicalib_tf.cnn.training_data`; ``--preset`` may mix presets, e.g. ``train:0.8,distorted:0.2``;
 ``--squeeze P`` warps a share P of the corner-map crops into acute junctions and thin squares;
-``--shrink P`` cuts a share P from the image at half size: squares half as wide).
+``--shrink P`` cuts a share P from the image at half size: squares half as wide; ``--shade P`` puts a
+share P under a random light fall-off, blur and noise: dim, soft corners as at a vignetted rim).
 After each epoch it scores corner precision, recall (a match is within 1 px) and localisation
 error on a fixed validation set (``--preset``, or a mix's first preset; seed 900001, never
 trained on) and saves a checkpoint. RUN_DIR receives:
@@ -88,6 +89,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--shrink", type=float, default=d.shrink,
                     help="default model: share of training crops cut from the image at half size "
                          "(squares half as wide) (default: %(default)s)")
+    ap.add_argument("--shade", type=float, default=d.shade,
+                    help="default model: share of training crops under a random light fall-off, blur and noise "
+                         "(dim, low-contrast, soft corners as at a vignetted rim) (default: %(default)s)")
     ap.add_argument("--data", default=d.data, metavar="GLOB",
                     help="TFRecord shards of data_gen --format tfrecord (globs, comma-separated); default: render a pool in memory")
     ap.add_argument("--deterministic", action="store_true", help="--data: a fixed element order (slower parallel stages)")
@@ -119,7 +123,7 @@ def _run(argv: list[str] | None) -> int:
         out=args.out, arch=args.arch, epochs=args.epochs if args.epochs is not None else d.epochs, steps=args.steps, batch_size=args.batch_size,
         seed=args.seed, preset=args.preset, pool_images=args.pool_images, val_images=args.val_images,
         learning_rate=args.learning_rate, workers=args.workers, threshold=args.threshold, focal_gamma=args.focal_gamma,
-        determinism=not args.no_determinism, squeeze=args.squeeze, shrink=args.shrink,
+        determinism=not args.no_determinism, squeeze=args.squeeze, shrink=args.shrink, shade=args.shade,
         data=args.data, strategy=args.strategy, deterministic_data=args.deterministic, init=args.init,
         connect_timeout=args.connect_timeout,
     )

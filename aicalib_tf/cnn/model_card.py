@@ -64,6 +64,8 @@ def train_command(config: dict) -> str:
     # runs from before --focal-gamma existed used cross-entropy; before --squeeze and --shrink, neither
     config = {"focal_gamma": 0.0, "squeeze": 0.0, "shrink": 0.0, **config}
     parts += [f"--{k.replace('_', '-')} {config[k]}" for k in _FLAGS]
+    if config.get("shade"):  # crops under random light and blur laws (runs before --shade have none)
+        parts.append(f"--shade {config['shade']}")
     if config.get("init"):  # a fine-tune from a trained model's weights
         parts.append(f"--init {config['init']}")
     if config.get("data"):  # runs on TFRecord shards or several devices (older runs have neither)

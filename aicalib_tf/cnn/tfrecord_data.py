@@ -128,17 +128,17 @@ def _check_example(path: str, record: bytes) -> None:
                          f"{n_xy} corner values)")
 
 
-def _crop(image, stats, corners, key, squeeze: float, shrink: float):
+def _crop(image, stats, corners, key, squeeze: float, shrink: float, shade: float = 0.0):
     """numpy side of the map: (H, W) uint8, (2,) mean and std, (2k,) float32, (3,) int64 -> (128, 128, 1), (32, 32, 3)."""
     rng = np.random.default_rng([int(key[0]), int(key[1]), int(key[2]), 13])
     x, y = corner_crop(image, corners.reshape(-1, 2), rng, mean=float(stats[0]), std=float(stats[1]),
-                       squeeze=squeeze, shrink=shrink)
+                       squeeze=squeeze, shrink=shrink, shade=shade)
     return x[:, :, None].astype(np.float32), y.astype(np.float32)
 
 
 def corner_dataset(files: list[str], *, per_replica_batch: int, steps: int, seed: int, first_epoch: int,
                    epochs: int, input_context: tf.distribute.InputContext | None = None, deterministic: bool = True,
-                   squeeze: float = 0.0, shrink: float = 0.0, shuffle_buffer: int = SHUFFLE_BUFFER) -> tf.data.Dataset:
+                   squeeze: float = 0.0, shrink: float = 0.0, shade: float = 0.0, shuffle_buffer: int = SHUFFLE_BUFFER) -> tf.data.Dataset:
     """Batches ((b, 128, 128, 1) float32, (b, 32, 32, 3) float32) of epochs ``first_epoch`` .. ``epochs - 1``.
 
     ``steps`` batches per epoch and replica; ``b = per_replica_batch``. ``input_context`` (from
@@ -173,7 +173,7 @@ def corner_dataset(files: list[str], *, per_replica_batch: int, steps: int, seed
         stats = tf.concat([ex["mean"], ex["std"]], 0)
         corners = tf.sparse.to_dense(ex["corners"])
         key = tf.stack([tf.cast(seed, tf.int64), e, k])
-        x, y = tf.numpy_function(lambda i, st, c, kk: _crop(i, st, c, kk, squeeze, shrink), [image, stats, corners, key],
+        x, y = tf.numpy_function(lambda i, st, c, kk: _crop(i, st, c, kk, squeeze, shrink, shade), [image, stats, corners, key],
                                  [tf.float32, tf.float32], stateful=False)
         x.set_shape((CROP_SIZE, CROP_SIZE, 1))
         y.set_shape((CROP_SIZE // STRIDE, CROP_SIZE // STRIDE, 3))

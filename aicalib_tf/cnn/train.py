@@ -37,6 +37,7 @@ class TrainConfig:
     determinism: bool = True
     squeeze: float = 0.0
     shrink: float = 0.0
+    shade: float = 0.0
     data: str = ""  # TFRecord shards (globs, comma-separated); "" renders the pool in memory
     strategy: str = "default"
     deterministic_data: bool = False
@@ -65,7 +66,7 @@ class TrainConfig:
             raise ValueError(f"--learning-rate must be in (0, 1), got {self.learning_rate}")
         if self.focal_gamma < 0:
             raise ValueError(f"--focal-gamma must be >= 0, got {self.focal_gamma}")
-        for name in ("squeeze", "shrink"):
+        for name in ("squeeze", "shrink", "shade"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"--{name} must be in [0, 1], got {getattr(self, name)}")
         if not 0.0 < self.threshold < 1.0:
@@ -274,14 +275,15 @@ def _training_data(cfg: TrainConfig, strategy, kind: str, global_batch: int, ini
         def per_pipeline(ctx):
             return corner_dataset(files, per_replica_batch=cfg.batch_size, steps=cfg.steps, seed=cfg.seed,
                                   first_epoch=initial_epoch, epochs=cfg.epochs, input_context=ctx,
-                                  deterministic=cfg.deterministic_data, squeeze=cfg.squeeze, shrink=cfg.shrink)
+                                  deterministic=cfg.deterministic_data, squeeze=cfg.squeeze, shrink=cfg.shrink,
+                                  shade=cfg.shade)
 
         if strategy.num_replicas_in_sync == 1 and cfg.strategy == "default":
             return per_pipeline(None)
         return strategy.distribute_datasets_from_function(per_pipeline)
     pool = cached_pool(cfg.pool_images, cfg.seed, preset=cfg.preset, workers=cfg.workers, progress=progress)
     batches_cls = CornerMapBatches if kind == "map" else PatchBatches
-    extra = {"squeeze": cfg.squeeze, "shrink": cfg.shrink} if batches_cls is CornerMapBatches else {}
+    extra = {"squeeze": cfg.squeeze, "shrink": cfg.shrink, "shade": cfg.shade} if batches_cls is CornerMapBatches else {}
     return batches_cls(pool, batch_size=global_batch, steps=cfg.steps, seed=cfg.seed, epoch=initial_epoch, **extra)
 
 

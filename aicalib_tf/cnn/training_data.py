@@ -166,6 +166,25 @@ def _warp_crop(img: np.ndarray, pts: np.ndarray, a: np.ndarray, centre, size: in
     return crop, local.astype(np.float32)
 
 
+def shade_crop(crop: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """``crop`` (H, W) grey 0..255 under a random light and blur law, as at a lens's dark rim:
+    Gaussian blur (σ 0–2.5 px), a smooth light fall-off (gain log-uniform 0.05–1 at the centre,
+    changing up to e^±1.5 across the crop along a random direction, capped at 1), then grey noise
+    (σ 0.5–4 levels) and rounding to whole grey levels, as a camera records them. Returns (H, W)
+    float32 in 0..255. Corners keep their places (the blur is symmetric, the light only scales)."""
+    g = crop.astype(np.float32)
+    sigma = rng.uniform(0.0, 2.5)
+    if sigma > 0.3:
+        g = cv2.GaussianBlur(g, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
+    h, w = g.shape
+    a = rng.uniform(0.0, 2.0 * np.pi)
+    u = ((np.arange(w, dtype=np.float32)[None, :] - (w - 1) / 2) * np.cos(a)
+         + (np.arange(h, dtype=np.float32)[:, None] - (h - 1) / 2) * np.sin(a)) / max(h, w)
+    gain = np.exp(rng.uniform(np.log(0.05), 0.0) + rng.uniform(-3.0, 3.0) * u)
+    g = g * np.minimum(gain, 1.0) + rng.normal(0.0, rng.uniform(0.5, 4.0), g.shape).astype(np.float32)
+    return np.clip(np.rint(g), 0.0, 255.0).astype(np.float32)
+
+
 def halve(img: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``img`` (H, W) at half size, each pixel the mean of a 2×2 block ((H // 2, W // 2), same
     dtype), and its points (n, 2) (x, y) moved with it: x' = (x + 0.5) / 2 − 0.5."""
@@ -199,12 +218,16 @@ class CornerMapBatches(_PoolBatches):
     shrink : share of crops cut from the image shrunk to half size (:func:`halve`, block means):
         boards with squares half as wide, integrated over the pixels as a camera would. 0 (the
         default) draws exactly the crops drawn before the option existed.
+    shade : share of crops under a random light fall-off, blur and noise (:func:`shade_crop`):
+        dim, low-contrast, soft corners as at a fisheye's vignetted rim, whatever the scene's lens.
+        0 (the default) draws exactly the crops drawn before the option existed.
     """
 
     def __init__(self, pool: Pool, *, corner_bias: float = 0.6, squeeze: float = 0.0, max_squeeze: float = 3.0,
-                 shrink: float = 0.0, **kwargs):
+                 shrink: float = 0.0, shade: float = 0.0, **kwargs):
         super().__init__(pool, **kwargs)
         self.corner_bias, self.squeeze, self.max_squeeze, self.shrink = corner_bias, squeeze, max_squeeze, shrink
+        self.shade = shade
 
     def __getitem__(self, idx: int):
         rng = np.random.default_rng([self.seed, self.epoch, idx, 7])
@@ -216,13 +239,13 @@ class CornerMapBatches(_PoolBatches):
             x[b, :, :, 0], y[b] = corner_crop(self.pool.images[i], self.pool.corners[i], rng,
                                               mean=self.pool.mean[i], std=self.pool.std[i],
                                               corner_bias=self.corner_bias, squeeze=self.squeeze,
-                                              max_squeeze=self.max_squeeze, shrink=self.shrink)
+                                              max_squeeze=self.max_squeeze, shrink=self.shrink, shade=self.shade)
         return x, y
 
 
 def corner_crop(img: np.ndarray, pts: np.ndarray, rng: np.random.Generator, *, mean: float, std: float,
                 corner_bias: float = 0.6, squeeze: float = 0.0, max_squeeze: float = 3.0,
-                shrink: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+                shrink: float = 0.0, shade: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """One training pair for the corner-map model from one image (see :class:`CornerMapBatches`).
 
     img : (H, W) uint8, H, W >= 128. pts : (k, 2) float32 visible corners (x, y) px.
@@ -244,6 +267,8 @@ def corner_crop(img: np.ndarray, pts: np.ndarray, rng: np.random.Generator, *, m
         crop, local = _warp_crop(img, pts, a, (x0 + (s - 1) / 2, y0 + (s - 1) / 2), s)
     else:
         crop, local = img[y0 : y0 + s, x0 : x0 + s], pts - np.array([x0, y0], np.float32)
+    if shade > 0 and rng.random() < shade:
+        crop = shade_crop(crop, rng)
     crop, local = _dihedral(standardize(crop, mean, std), local, int(rng.integers(8)))
     if rng.random() < 0.5:
         crop = -crop

@@ -11,6 +11,7 @@ from aicalib_tf.cnn.training_data import (  # noqa: E402
     _warp_crop,
     halve,
     render_pool,
+    shade_crop,
     squeeze_matrix,
 )
 from aicalib_tf.cnn.corner_map import decode_map  # noqa: E402
@@ -43,10 +44,10 @@ def test_dihedral_moves_points_with_the_pixels(k):
     assert out.sum() == 2.0
 
 
-@pytest.mark.parametrize("squeeze, shrink", [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)])
-def test_crop_batches_are_deterministic_and_labels_sit_on_x_junctions(pool, squeeze, shrink):
-    a = CornerMapBatches(pool, batch_size=8, steps=3, seed=5, squeeze=squeeze, shrink=shrink)
-    b = CornerMapBatches(pool, batch_size=8, steps=3, seed=5, squeeze=squeeze, shrink=shrink)
+@pytest.mark.parametrize("squeeze, shrink, shade", [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)])
+def test_crop_batches_are_deterministic_and_labels_sit_on_x_junctions(pool, squeeze, shrink, shade):
+    a = CornerMapBatches(pool, batch_size=8, steps=3, seed=5, squeeze=squeeze, shrink=shrink, shade=shade)
+    b = CornerMapBatches(pool, batch_size=8, steps=3, seed=5, squeeze=squeeze, shrink=shrink, shade=shade)
     x1, y1 = a[1]
     x2, y2 = b[1]
     np.testing.assert_array_equal(x1, x2)
@@ -87,13 +88,32 @@ def test_warped_crop_moves_points_with_the_pixels(angle, ratio):
         np.testing.assert_allclose([(w * xs).sum(), (w * ys).sum()], moved[0], atol=0.01)
 
 
-@pytest.mark.parametrize("option", ["squeeze", "shrink"])
+@pytest.mark.parametrize("option", ["squeeze", "shrink", "shade"])
 def test_squeeze_or_shrink_zero_draws_the_crops_drawn_before(pool, option):
     plain = CornerMapBatches(pool, batch_size=4, steps=1, seed=2)
     off = CornerMapBatches(pool, batch_size=4, steps=1, seed=2, **{option: 0.0})
     on = CornerMapBatches(pool, batch_size=4, steps=1, seed=2, **{option: 1.0})
     np.testing.assert_array_equal(plain[0][0], off[0][0])
     assert not np.array_equal(plain[0][0], on[0][0])
+
+
+def test_shade_dims_blurs_and_quantises_a_crop_without_moving_its_corner():
+    # an X-junction of 20 and 200 grey levels at the crop's centre pixel
+    img = np.full((128, 128), 20, np.uint8)
+    img[:64, :64] = img[64:, 64:] = 200
+    rng = np.random.default_rng(0)
+    contrasts, sharp = [], []
+    for _ in range(200):
+        out = shade_crop(img, rng)
+        assert out.shape == img.shape and out.dtype == np.float32
+        assert out.min() >= 0 and out.max() <= 255 and np.array_equal(out, np.rint(out))
+        q = [out[54:62, 54:62].mean(), out[54:62, 66:74].mean(), out[66:74, 66:74].mean(), out[66:74, 54:62].mean()]
+        contrasts.append((q[0] + q[2] - q[1] - q[3]) / 2)  # the junction stays an X: diagonals alike
+        sharp.append(abs(out[63, 60] - out[64, 60]))  # the step across an edge, near the junction
+    contrasts = np.array(contrasts)
+    assert np.all(contrasts > 0)  # no law turns the junction over or off
+    assert np.percentile(contrasts, 10) < 30 and np.percentile(contrasts, 90) > 80  # dim to nearly full swing (180)
+    assert np.percentile(sharp, 25) < 0.5 * np.percentile(sharp, 90)  # some crops blurred, some sharp
 
 
 def test_halving_moves_points_with_the_pixels():
