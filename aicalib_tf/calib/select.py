@@ -8,8 +8,8 @@ flex) and measure its reprojection error. With ``flex="auto"`` each fit solves t
 terms as fitted; the keep rule of :mod:`~aicalib_tf.calib.flex_check` (a refit per view left out) is the
 chosen model's alone: in every fit it chose the same models on opencv_left, udacity_lane_cal and
 ocam_fisheye (held-out RMS −2% to +8%, every model alike) at 6–14 times the CPU (9–70 s against 1–5 s).
-A fold's score is the RMS over its held-out corners, px; a model's ``cv_rms`` is the mean over folds and ``cv_se`` its standard error
-(sample standard deviation / √k). The choice is the simplest model whose ``cv_rms`` is within one
+A fold's score is the RMS over its held-out corners, px; a model's ``cv_rms`` is the mean over folds and
+``cv_se`` its standard error (sample standard deviation / √k). The choice is the simplest model whose ``cv_rms`` is within one
 standard error of the best, simplest by :data:`COMPLEXITY`. The standard error is that of the best
 model's score, or, when larger, that of the fold-by-fold gain of the best over the candidate (the
 two are scored on the same folds): a held-out gain below its own noise does not count. A candidate
