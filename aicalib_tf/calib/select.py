@@ -9,14 +9,14 @@ terms as fitted; the keep rule of :mod:`~aicalib_tf.calib.flex_check` (a refit p
 chosen model's alone: in every fit it chose the same models on opencv_left, udacity_lane_cal and
 ocam_fisheye (held-out RMS −2% to +8%, every model alike) at 6–14 times the CPU (9–70 s against 1–5 s).
 A fold's score is the RMS over its held-out corners, px; a model's ``cv_rms`` is the mean over folds and
-``cv_se`` its standard error (sample standard deviation / √k). The choice is the simplest model whose ``cv_rms`` is within one
-standard error of the best, simplest by :data:`COMPLEXITY`. The standard error is that of the best
-model's score, or, when larger, that of the fold-by-fold gain of the best over the candidate (the
-two are scored on the same folds): a held-out gain below its own noise does not count. A candidate
-whose fold scores vary more than three times as much as the best's is held to the best's error
+``cv_se`` its standard error (sample standard deviation / √k). The choice is the simplest model whose
+``cv_rms`` is within one standard error of the best, simplest by :data:`COMPLEXITY`. The standard error is
+that of the best model's score, or, when larger, that of the fold-by-fold gain of the best over the
+candidate (the two are scored on the same folds): a held-out gain below its own noise does not count. A
+candidate whose fold scores vary more than three times as much as the best's is held to the best's error
 (erratic folds are no alternative). On the halves (10 views) of mild-lens sequences of
-``benchmarks/fisheye_models.py`` the best's error alone let equidistant beat plumb_bob by 1.7 of
-its standard errors, a gain within the noise of the comparison.
+``benchmarks/fisheye_models.py`` the best's error alone let equidistant beat plumb_bob by 1.7 of its
+standard errors, a gain within the noise of the comparison.
 
 A gain that one fold carries alone does not count either, when the candidate fits all the views as
 well as the best (in-sample RMS no worse than the best's by more than :func:`_chance_rms` px, what

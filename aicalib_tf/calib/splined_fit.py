@@ -33,9 +33,9 @@ A fit of ``splined_equidistant`` (the bare name; :mod:`aicalib_tf.geometry._spli
    views on it). Each view counts by its relative change (a per-view normalisation), so one view held out
    far above the others (posed where no other board reached) cannot decide alone, as it did the mean over
    folds: on 8 views of a 190° fisheye (0.05 px) one view, held out alone at 0.36 px (the others
-   0.06–0.08), rose to 0.52 px at s = 0.3 and stopped the mean's search there. The search along s stops once a score exceeds the base's best by :data:`SMOOTH_STOP`
-   or :data:`SMOOTH_PATIENCE` in a row do not improve on it by 1%; the lowest score wins, the smoother on a
-   tie within 1%. On 10 views of a 130° lens with a bump (``benchmarks/splined_model.py``'s scene, seed 5;
+   0.06–0.08), rose to 0.52 px at s = 0.3 and stopped the mean's search there. The search along s stops
+   once a score exceeds the base's best by :data:`SMOOTH_STOP` or :data:`SMOOTH_PATIENCE` in a row do not
+   improve on it by 1%; the lowest score wins, the smoother on a tie within 1%. On 10 views of a 130° lens with a bump (``benchmarks/splined_model.py``'s scene, seed 5;
    projection error median / p95 over the covered area): one even/odd split on θ_d = θ chose s = 0.01,
    0.22 / 1.08 px; the folds on θ_d = θ 0.3, 0.19 / 0.69; the folds with the fitted base 0.1, 0.07 / 0.19.
 Under ``auto`` (:mod:`aicalib_tf.calib.select`) a spline is fitted only when the best parametric model
