@@ -1,7 +1,7 @@
 """Predicted against measured corner error per condition: the detector's per-corner σ on rendered truth.
 
     python benchmarks/corner_sigma.py [--images 6] [--seeds own,2031,2032,2033] [--conditions named,sweeps] [--cache DIR]
-    python benchmarks/corner_sigma.py --fit [--fit-on sweeps,named] [--leave-out]   # refit COEFFS, LOW, HIGH
+    python benchmarks/corner_sigma.py --fit [--fit-on sweeps,named] [--leave-out]   # refit COEFFS, LOW, HIGH, FOREIGN
     python benchmarks/corner_sigma.py --calibrate [--views 20] [--repeats 3] [--as-rendered]   # calibration with and without σ
 
 Renders the benchmark's conditions (:mod:`aicalib_tf.bench.conditions`) with each of ``--seeds``
@@ -150,18 +150,35 @@ def fit_corner(d: np.ndarray, errors: np.ndarray, groups: np.ndarray) -> np.ndar
     return minimize(loss, np.zeros(d.shape[1]), jac=True, method="BFGS").x
 
 
-def fit_table(train: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(coeffs, low, high) fitted on the collected conditions ``train`` (clip bounds: the
-    ``CLIP_PERCENTILES``): first each corner's columns by :func:`fit_corner`, then the board's by :func:`fit_board`."""
+def fit_foreign(s0: np.ndarray, amplitude: np.ndarray, errors: np.ndarray) -> float:
+    """σ px per px of foreign edge amplitude: the maximum likelihood of the errors (Gaussian, σ per axis) with
+    σ² = s0² + (k · amplitude)². s0 : (K,) px, the model's σ without it. amplitude : (K,) px. errors : (K, 2) px."""
+    from scipy.optimize import minimize_scalar
+
+    e2, b2, a2 = 0.5 * np.einsum("nk,nk->n", errors, errors), s0 * s0, amplitude * amplitude
+
+    def loss(log_k):
+        s2 = b2 + np.exp(2 * log_k) * a2
+        return float(np.sum(np.log(s2) + e2 / s2))
+
+    return float(np.exp(minimize_scalar(loss, bounds=(-12.0, 3.0), method="bounded").x))
+
+
+def fit_table(train: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """(coeffs, low, high, foreign) fitted on the collected conditions ``train`` (clip bounds: the
+    ``CLIP_PERCENTILES``): first each corner's columns by :func:`fit_corner`, then the board's by :func:`fit_board`,
+    then the foreign edge's σ per px of amplitude by :func:`fit_foreign`."""
     x = np.concatenate([v["x"] for v in train.values()])
     err = np.concatenate([v["err"] for v in train.values()])
     groups = np.concatenate([k * 100000 + v["image"] for k, v in enumerate(train.values())])
+    x, amplitude = x[:, :cs.FOREIGN_COLUMN], x[:, cs.FOREIGN_COLUMN]
     low, high = np.percentile(x, CLIP_PERCENTILES[0], axis=0), np.percentile(x, CLIP_PERCENTILES[1], axis=0)
     xc = np.clip(x, low, high)
     nb = cs.BOARD_COLUMNS
     b = fit_corner(xc[:, nb:], err, groups)
     c = fit_board(xc[:, :nb], xc[:, nb:] @ b, err, groups)
-    return np.r_[c, b], low, high
+    coeffs = np.r_[c, b]
+    return coeffs, low, high, fit_foreign(np.exp(coeffs[0] + xc @ coeffs[1:]), amplitude, err)
 
 
 def ratios_of(data: dict, table) -> dict[str, float]:
@@ -185,7 +202,7 @@ def report(data: dict, table=None) -> list[float]:
     """Print one line per condition; return the ratios (measured RMS error / RMS σ over all its renders)."""
     from scipy.stats import spearmanr
 
-    table = table or (cs.COEFFS, cs.LOW, cs.HIGH)
+    table = table or (cs.COEFFS, cs.LOW, cs.HIGH, cs.FOREIGN)
     print(f"{'condition':26s} {'corners':>7s} {'gross':>5s} {'RMS err/axis':>12s} {'RMS σ':>8s} {'ratio':>6s} {'seeds':>11s} "
           f"{'68% over images':>15s} {'rank ρ':>6s}")
     ratios = []
@@ -359,6 +376,7 @@ def main(argv=None) -> int:
             leave_out(train, held)
         for label, arr in zip(("COEFFS", "LOW", "HIGH"), table):
             print(f"{label} = np.array([{', '.join(f'{v:.3f}' for v in arr)}])")
+        print(f"FOREIGN = {table[3]:.3f}")
     report(held, table)
     print(f"{time.perf_counter() - t0:.0f} s")
     return 0

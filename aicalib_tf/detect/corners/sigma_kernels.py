@@ -16,15 +16,16 @@ import numpy as np
 from aicalib_tf.kernels import helper, kernel
 
 
-__all__ = ["window_measures", "lattice_bend", "flat_noise", "square_contrast", "edge_width", "blockiness", "corner_features", "design_columns",
-           "board_columns", "BOARD_COLUMNS", "CORNER_COLUMNS"]
+__all__ = ["window_measures", "lattice_bend", "axis_spacing", "flat_noise", "square_contrast", "edge_width", "blockiness",
+           "corner_features", "design_columns", "board_columns", "BOARD_COLUMNS", "CORNER_COLUMNS", "ASYMMETRY_COLUMN"]
 
 BEND_KNOT = -3.0  # log(bend / spacing) above which lines bend enough to bias the saddle (hinge squared)
 IMPULSE_KNOT = 0.8  # log(RMS / median antisymmetric part) above which the board's noise is impulsive (counted as much
 # as the noise stands above NOISE_KNOT: an almost noise-free image's few grey-level steps look impulsive too)
 NOISE_KNOT = -3.5  # log(noise / contrast) below which the detector's own error floor takes over
-SPREAD_KNOT = 0.05  # (edge width / corner spacing)² above which the blur reaches the neighbouring squares' edges
-# (σ about a fifth of the spacing): the saddle is pulled by what lies beyond the junction (the board's rim)
+SPREAD_KNOT = 0.08  # (edge width / the nearer neighbour's distance along a lattice axis)² above which the blur
+# reaches that side's next edges (σ beyond about 0.28 of the local square): the saddle is pulled by what lies beyond the
+# junction (a foreshortened board's far side, the board's rim); summed over the corner's two axes
 WHITE_EVEN = 1.45  # the window's symmetric part (weighted σ) over its median |antisymmetric part| for white noise
 # (1.42 at radius 2, 1.48 at 3): the noise's share of the contrast, taken out before the edge width
 SHARP_RETENTION = 0.63  # the window's contrast over half the squares' of a sharp render (edge width about 0.9 px):
@@ -35,8 +36,11 @@ WHITE_ODD = -0.95  # log(median |antisymmetric part| / noise σ) of white noise 
 # noise taken where a board has no square with all four corners
 BLOCK = 8  # px, the JPEG block: blockiness compares the steps across its borders with the others
 BLOCK_SAMPLES = 20000  # about this many steps each way at most (every k-th row of a larger box)
-BOARD_COLUMNS = 20  # design columns 0..19: the board's; the next CORNER_COLUMNS: each corner's excess over them
+BOARD_COLUMNS = 20  # design columns 0..19: the board's (19, the blur's reach, each corner's own); the next CORNER_COLUMNS:
+# each corner's excess over them; then ASYMMETRY_COLUMN
 CORNER_COLUMNS = 10
+ASYMMETRY_COLUMN = BOARD_COLUMNS + CORNER_COLUMNS  # log(odd energy / even energy) of the corner's window (not in log σ's sum:
+# :mod:`aicalib_tf.detect.corners.sigma` turns it into the foreign edge's amplitude)
 
 
 @helper
@@ -86,12 +90,8 @@ def window_measures(img, pts, radius, fits, weights):
         a = b = c = d = e = f = 0.0
         for k in range(m):
             v = vals[k]
-            a += fits[r, 0, k] * v
-            b += fits[r, 1, k] * v
-            c += fits[r, 2, k] * v
-            d += fits[r, 3, k] * v
-            e += fits[r, 4, k] * v
-            f += fits[r, 5, k] * v
+            a, b, c = a + fits[r, 0, k] * v, b + fits[r, 1, k] * v, c + fits[r, 2, k] * v
+            d, e, f = d + fits[r, 3, k] * v, e + fits[r, 4, k] * v, f + fits[r, 5, k] * v
         mean = 0.0
         for k in range(m):
             mean += weights[r, k] * 0.5 * (vals[k] + vals[m - 1 - k])
@@ -138,6 +138,22 @@ def _inner_and_smoothed(wide, side, vals, smooth):
 
 
 @helper
+def _id_grid(ids, pad):
+    """(where, c0, r0): where[r − r0, c − c0] the index of the point with ids (c, r) (P, 2) int64, −1 elsewhere; ``pad``
+    more rows and columns of −1 beyond the last. P ≥ 1."""
+    c0, r0 = ids[0, 0], ids[0, 1]
+    for p in range(ids.shape[0]):
+        c0, r0 = min(c0, ids[p, 0]), min(r0, ids[p, 1])
+    cols = rows = 0
+    for p in range(ids.shape[0]):
+        cols, rows = max(cols, ids[p, 0] - c0 + 1), max(rows, ids[p, 1] - r0 + 1)
+    where = np.full((rows + pad, cols + pad), -1, np.int64)
+    for p in range(ids.shape[0]):
+        where[ids[p, 1] - r0, ids[p, 0] - c0] = p
+    return where, c0, r0
+
+
+@helper
 def _square_middles(img, pts, ids):
     """(M, 3) int64 rows (x, y, parity) px: the middle (the mean of its four corners, rounded) of every square with
     its four corners found (ids (c, r), (c+1, r), (c, r+1), (c+1, r+1)) and 2 px inside the image; parity
@@ -147,16 +163,7 @@ def _square_middles(img, pts, ids):
     out = np.zeros((n, 3), np.int64)
     if n == 0:
         return out[:0]
-    c0, r0 = ids[0, 0], ids[0, 1]
-    cols = rows = 0
-    for p in range(n):
-        c0, r0 = min(c0, ids[p, 0]), min(r0, ids[p, 1])
-    for p in range(n):
-        cols = max(cols, ids[p, 0] - c0 + 1)
-        rows = max(rows, ids[p, 1] - r0 + 1)
-    where = np.full((rows + 1, cols + 1), -1, np.int64)
-    for p in range(n):
-        where[ids[p, 1] - r0, ids[p, 0] - c0] = p
+    where, c0, r0 = _id_grid(ids, 1)
     k = 0
     for p in range(n):
         i, j = ids[p, 0] - c0, ids[p, 1] - r0
@@ -300,16 +307,8 @@ def lattice_bend(pts, ids):
     out = np.full(n, -1.0)
     if n == 0:
         return out
-    cols = rows = 0
-    c0, r0 = ids[0, 0], ids[0, 1]
-    for p in range(n):
-        c0, r0 = min(c0, ids[p, 0]), min(r0, ids[p, 1])
-    for p in range(n):
-        cols = max(cols, ids[p, 0] - c0 + 1)
-        rows = max(rows, ids[p, 1] - r0 + 1)
-    where = np.full((rows, cols), -1, np.int64)
-    for p in range(n):
-        where[ids[p, 1] - r0, ids[p, 0] - c0] = p
+    where, c0, r0 = _id_grid(ids, 0)
+    rows, cols = where.shape
     for p in range(n):
         i, j = ids[p, 0] - c0, ids[p, 1] - r0
         total, count = 0.0, 0
@@ -327,22 +326,33 @@ def lattice_bend(pts, ids):
 
 
 @helper
+def axis_spacing(pts, ids):
+    """(P, 2) float64 px: each point's distance to its nearer neighbour along the board's columns' axis (ids (c ± 1, r))
+    and along its rows' axis ((c, r ± 1)); −1 where it has neither. pts (P, 2) px, ids (P, 2) int64 (col, row), distinct."""
+    n = pts.shape[0]
+    out = np.full((n, 2), -1.0)
+    if n == 0:
+        return out
+    where, c0, r0 = _id_grid(ids, 0)
+    rows, cols = where.shape
+    for p in range(n):
+        i, j = ids[p, 0] - c0, ids[p, 1] - r0
+        for a in range(2):
+            for step in (-1, 1):
+                ii, jj = (i + step, j) if a == 0 else (i, j + step)
+                if 0 <= ii < cols and 0 <= jj < rows and where[jj, ii] >= 0:
+                    q = where[jj, ii]
+                    d = math.hypot(pts[q, 0] - pts[p, 0], pts[q, 1] - pts[p, 1])
+                    out[p, a] = d if out[p, a] < 0 else min(out[p, a], d)
+    return out
+
+
+@helper
 def _board_median_fill(bend, tiny):
     """bend (P,) px with −1 (none) replaced by the board's median bend (``tiny`` when no corner has one)."""
-    seen = 0
-    for v in bend:
-        seen += v >= 0
-    present = np.empty(seen)
-    k = 0
-    for v in bend:
-        if v >= 0:
-            present[k] = v
-            k += 1
-    usual = np.median(present) if seen else tiny
-    out = np.empty(bend.shape[0])
-    for p in range(bend.shape[0]):
-        out[p] = bend[p] if bend[p] >= 0 else usual
-    return out
+    present = bend[bend >= 0]
+    usual = np.median(present) if present.shape[0] else tiny
+    return np.where(bend >= 0, bend, usual)
 
 
 @helper
@@ -376,17 +386,32 @@ def corner_features(measures, bend, spacing, scores, min_score, tiny):
 
 
 @helper
-def design_columns(measures, bend, spacing, scores, min_score, tiny, flat, block, width):
-    """The σ model's columns (P, 30) of one board (:func:`aicalib_tf.detect.corners.sigma.design`).
+def _reach(width, spacing, axes, tiny):
+    """(P,) each corner's blur reach: Σ over its two lattice axes of ((board's median edge width / the nearer neighbour's
+    distance along the axis)² − ``SPREAD_KNOT``)⁺; width (P,) px, spacing (P,) px (an axis without neighbours
+    takes it), axes (P, 2) :func:`axis_spacing`."""
+    w = math.exp(np.median(np.log(np.maximum(width, tiny))))
+    out = np.zeros(width.shape[0])
+    for p in range(width.shape[0]):
+        for a in range(2):
+            d = axes[p, a] if axes[p, a] > 0 else spacing[p]
+            out[p] += max((w / max(d, tiny)) ** 2 - SPREAD_KNOT, 0.0)
+    return out
+
+
+@helper
+def design_columns(measures, bend, spacing, scores, min_score, tiny, flat, block, width, axes):
+    """The σ model's columns (P, 31) of one board (:func:`aicalib_tf.detect.corners.sigma.design`).
 
     measures (P, 6) :func:`window_measures`, bend (P,) :func:`lattice_bend` px (−1: none), spacing (P,)
     px, scores (P,), flat :func:`flat_noise` (−1: none; the window's noise over ``WHITE_ODD`` then),
-    block :func:`blockiness`, width (P,) :func:`edge_width` px. Values are floored at ``tiny`` and scores
-    at ``min_score`` before the logarithms. Columns 0–19 are the board's (the same for all its corners),
-    20–29 each corner's excess over the board's median of its feature.
+    block :func:`blockiness`, width (P,) :func:`edge_width` px, axes (P, 2) :func:`axis_spacing` px. Values are
+    floored at ``tiny`` and scores at ``min_score`` before the logarithms. Columns 0–19 are the board's (the same
+    for all its corners but 19, each corner's blur reach :func:`_reach`), 20–29 each corner's excess over the
+    board's median of its feature, 30 (``ASYMMETRY_COLUMN``) log(odd² / even²) of its window.
     """
     n = measures.shape[0]
-    out = np.zeros((n, BOARD_COLUMNS + CORNER_COLUMNS))
+    out = np.zeros((n, BOARD_COLUMNS + CORNER_COLUMNS + 1))
     if n == 0:
         return out
     f, impulsive = corner_features(measures, bend, spacing, scores, min_score, tiny)
@@ -400,24 +425,26 @@ def design_columns(measures, bend, spacing, scores, min_score, tiny, flat, block
     board = np.array([med[0], med[2], impulsive, med[4], med[5], med[0] * med[0], med[6], np.median(np.log(np.maximum(spacing, tiny))),
                       max(med[4] - BEND_KNOT, 0.0) ** 2, q9_noise, q9_bend, max(impulsive - IMPULSE_KNOT, 0.0) * max(med[0] - NOISE_KNOT, 0.0), med[3],
                       max(NOISE_KNOT - med[0], 0.0), np.median(np.log(np.maximum(width, tiny))),
-                      log_flat - noise + med[0], noise - log_flat, math.log(max(block, tiny)), med[8],
-                      max(np.median((width / np.maximum(spacing, tiny)) ** 2) - SPREAD_KNOT, 0.0)])
+                      log_flat - noise + med[0], noise - log_flat, math.log(max(block, tiny)), med[8], 0.0])
+    reach = _reach(width, spacing, axes, tiny)
     for p in range(n):
         out[p, :BOARD_COLUMNS] = board
+        out[p, BOARD_COLUMNS - 1] = reach[p]
         for k in range(CORNER_COLUMNS):
             out[p, BOARD_COLUMNS + k] = f[p, k] - med[k]
+        out[p, ASYMMETRY_COLUMN] = 2.0 * (math.log(max(measures[p, 0], tiny)) - math.log(max(measures[p, 2], tiny)))
     return out
 
 
 @kernel("f4[:, ::1], f8[:, ::1], i8[:, ::1], f8[::1], i8[::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8, f8, f8, i8, i8",
         "u1[:, ::1], f8[:, ::1], i8[:, ::1], f8[::1], i8[::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8, f8, f8, i8, i8")
 def board_columns(img, pts, ids, spacing, radius, scores, fits, weights, min_score, tiny, step, ox, oy):
-    """The σ model's columns (P, 30) of one board in one call: :func:`window_measures`, :func:`lattice_bend`,
-    :func:`flat_noise`, :func:`blockiness`, :func:`edge_width` (of :func:`square_contrast`) and
+    """The σ model's columns (P, 31) of one board in one call: :func:`window_measures`, :func:`lattice_bend`,
+    :func:`axis_spacing`, :func:`flat_noise`, :func:`blockiness`, :func:`edge_width` (of :func:`square_contrast`) and
     :func:`design_columns` of its points (ids shifted to start at 0). step: the grey levels' step in img's
     units (1 for uint8); ox, oy: img's origin in the whole image, px (the JPEG blocks start at the whole image's)."""
     measures = window_measures(img, pts, radius, fits, weights)
     noise = math.exp(np.median(np.log(np.maximum(measures[:, 1], tiny)))) if measures.shape[0] else 0.0
     width = edge_width(measures[:, 2], radius, square_contrast(img, pts, ids), noise)
     return design_columns(measures, lattice_bend(pts, ids), spacing, scores, min_score, tiny,
-                          flat_noise(img, pts, ids, step), blockiness(img, pts, ox, oy, tiny), width)
+                          flat_noise(img, pts, ids, step), blockiness(img, pts, ox, oy, tiny), width, axis_spacing(pts, ids))

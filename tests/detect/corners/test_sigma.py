@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from aicalib_tf.detect.corners import sigma as cs
-from aicalib_tf.detect.corners.sigma_kernels import (SPREAD_KNOT, WHITE_EVEN, blockiness, design_columns, edge_width, flat_noise, lattice_bend,
-                                                     square_contrast, window_measures)
+from aicalib_tf.detect.corners.sigma_kernels import (SPREAD_KNOT, WHITE_EVEN, axis_spacing, blockiness, design_columns, edge_width, flat_noise,
+                                                     lattice_bend, square_contrast, window_measures)
 from aicalib_tf.detect.detection import Detection
 from aicalib_tf.detect.pipeline import detect_corners
 from aicalib_tf.detect.warm import synthetic_board
@@ -109,10 +109,11 @@ def test_design_columns_take_the_boards_medians_and_the_usual_bend_where_a_corne
     measures = np.array([[0.02, 0.01, 0.2, 0.05, 0.1, 0.01], [0.02, 0.04, 0.2, 0.05, 0.1, 0.01],
                          [0.08, 0.01, 0.1, 0.05, 0.2, 0.04]])
     width = np.array([1.0, 4.0, 3.0])
+    axes = np.array([[10.0, 10.0], [10.0, -1.0], [5.0, 10.0]])  # the second has no neighbour along its rows' axis
     x = design_columns(measures, np.array([0.1, -1.0, 0.3]), np.full(3, 10.0), np.array([1.0, 0.0, 0.5]), 0.05, 1e-6, 0.004, 1.5,
-                       width)
+                       width, axes)
     nb = cs.BOARD_COLUMNS
-    assert x.shape == (3, len(cs.COLUMNS)) and np.all(x[:, :nb] == x[0, :nb])  # the board's columns: one row
+    assert x.shape == (3, len(cs.COLUMNS)) and np.all(x[:, :nb - 1] == x[0, :nb - 1])  # the board's columns: one row
     noise = np.log(0.01)  # the median odd_median
     n = noise - np.log([0.2, 0.2, 0.1])
     np.testing.assert_allclose(x[0, 0], np.median(n))
@@ -133,10 +134,42 @@ def test_design_columns_take_the_boards_medians_and_the_usual_bend_where_a_corne
     np.testing.assert_allclose(x[:, nb + 8], smooth - np.median(smooth))
     np.testing.assert_allclose(x[:, nb + 9], [0.0, np.log(4.0) - 0.5, 0.0])  # own asymmetry beyond e^0.5 the board's
     np.testing.assert_allclose(x[0, 14], np.log(3.0))  # the median edge width, px
-    np.testing.assert_allclose(x[0, 19], 0.09 - SPREAD_KNOT)  # (3 px / 10 px)² beyond the knot
+    # each corner's blur reach: (3 px / its nearer neighbour along each axis, or its spacing)² beyond the knot, summed
+    np.testing.assert_allclose(x[:, 19], [2 * (0.09 - SPREAD_KNOT), 2 * (0.09 - SPREAD_KNOT), 0.36 + 0.09 - 2 * SPREAD_KNOT])
+    np.testing.assert_allclose(x[:, cs.FOREIGN_COLUMN], 2 * np.log([0.1, 0.1, 0.8]))  # log(odd² / even²)
     no_square = design_columns(measures, np.array([0.1, -1.0, 0.3]), np.full(3, 10.0), np.ones(3), 0.05, 1e-6, -1.0, 1.0,
-                               width)
+                               width, axes)
     np.testing.assert_allclose(no_square[0, 16], -0.95)  # no flat noise measured: the window's, as white noise
+
+
+def test_axis_spacing_is_the_nearer_neighbours_distance_along_each_lattice_axis():
+    ids = np.array([(0, 0), (1, 0), (2, 0), (0, 1)], np.int64)
+    pts = np.array([(0.0, 0.0), (10.0, 0.0), (16.0, 0.0), (0.0, 12.0)])
+    np.testing.assert_allclose(axis_spacing(pts, ids), [[10.0, 12.0], [6.0, -1.0], [6.0, -1.0], [-1.0, 12.0]])
+
+
+def test_an_objects_edge_beside_a_corner_lifts_its_sigma_and_a_shadows_edge_does_not(board):
+    """An edge that replaces the pattern near a corner leaves asymmetry that no shadow edge explains: the corner's
+    foreign edge amplitude grows, and its σ with it; a shadow's straight edge across another corner adds none."""
+    det = detect_corners(board, PATTERN)
+    pts, k, j = det.corners.astype(np.float64), 20, 31
+    img = _noisy(board, 2.0).astype(np.float64)
+    x0, y0 = np.round(pts[k]).astype(int)
+    img[y0 + 2:y0 + 12, x0 - 10:x0 + 10] = 90.0  # an object's grey edge 2 px below corner k
+    yy, xx = np.mgrid[0:img.shape[0], 0:img.shape[1]]
+    img[(xx - pts[j, 0]) + 0.3 * (yy - pts[j, 1]) > 1.5] *= 0.5  # a shadow edge 1.5 px beside corner j
+    img = np.clip(np.round(img), 0, 255).astype(np.uint8)
+    x = cs.design(img, pts, det.ids, det.scores)
+    amp = x[:, cs.FOREIGN_COLUMN]
+    assert amp[k] > 0.3 and amp[j] < 0.1 * amp[k] and np.sum(amp > 0) <= 3
+    plain = cs.design(_noisy(board, 2.0), pts, det.ids, det.scores)
+    assert np.all(plain[:, cs.FOREIGN_COLUMN] == 0)
+    sig = cs.sigma_from_design(x)
+    assert sig[k] > 3 * np.median(sig)
+    region = lambda x0, y0, x1, y1: img[y0:y1, x0:x1].astype(np.float32) / 255.0  # noqa: E731
+    whole = cs.board_sigmas(region, pts, det.ids, det.scores, (img.shape[1], img.shape[0]), own=True)
+    gate = cs.board_sigmas(region, pts, det.ids, det.scores, (img.shape[1], img.shape[0]))  # the detector's gates: without it
+    assert whole[k] == pytest.approx(sig[k], rel=1e-3) and gate[k] < 0.5 * whole[k]
 
 
 def test_sigma_inside_a_board_spreads_less_than_between_noise_levels(board):
