@@ -174,11 +174,12 @@ def unlike_neighbours(points: np.ndarray, ring_image: np.ndarray) -> np.ndarray:
     its asymmetry share within ``ODD_RATIO`` times theirs (at least ``ODD_FLOOR``). A point where an
     object in front cuts the board is a junction of three regions (object, dark and light square) or
     the object's own edge: its ring is lopsided where its neighbours' are not, or much fainter or
-    stronger than theirs, on rings of any radius. A corner on the grid's outer ring has squares
-    beyond it that no step measures, squeezed at a fisheye's rim to a fraction of the inner ones (a
-    202° lens's board corner 89° off axis: a ring of 0.3 of its inner step crosses them, asymmetry
-    0.96, 0.13 on half that ring): its own asymmetry is the lesser of the two rings' (its neighbours' median
-    stays that of the full rings).
+    stronger than theirs, on rings of any radius. A board corner (a corner of the grid) has three
+    squares beyond it that no step measures, squeezed at a fisheye's rim to a fraction of the inner ones
+    (a 202° lens's board corner 89° off axis: a ring of 0.3 of its inner step crosses them, asymmetry
+    0.96, 0.13 on half that ring): its own asymmetry is the lesser of the two rings' (its neighbours'
+    median stays that of the full rings). Other outer-ring corners keep the full ring: on half of it an
+    EUCM board's rim corner 2.3 px off its junction passed.
     """
     a, b = points.shape[:2]
     d = grid_directions(points)
@@ -187,7 +188,7 @@ def unlike_neighbours(points: np.ndarray, ring_image: np.ndarray) -> np.ndarray:
     amp, odd = amp.reshape(a, b), (asym / np.maximum(amp, 1e-12)).reshape(a, b)
     near_amp, near_odd = neighbour_median(amp), neighbour_median(odd)
     edge = np.zeros((a, b), bool)
-    edge[[0, -1]], edge[:, [0, -1]] = True, True
+    edge[[0, 0, -1, -1], [0, -1, 0, -1]] = True  # a board corner: three of its four squares lie beyond the grid
     half_amp, half_asym = ring_symmetry(ring_image, points[edge], np.maximum(1.5, 0.5 * radius.reshape(a, b)[edge]))
     odd[edge] = np.minimum(odd[edge], half_asym / np.maximum(half_amp, 1e-12))  # outer squares narrower than inner
     return (amp < AMP_RANGE[0] * near_amp) | (amp > AMP_RANGE[1] * near_amp) | (odd > ODD_RATIO * np.maximum(near_odd, ODD_FLOOR))
