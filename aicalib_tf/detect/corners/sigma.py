@@ -104,8 +104,9 @@ SMOOTHED_MIN_SPACING = 10.0  # px: on a board of closer corners the smoothed win
 # neighbouring squares' edges, so its asymmetry is the lattice's, not JPEG's or an object's: the board's
 # smoothed/raw asymmetry column is then taken as white noise's (WHITE_SMOOTHED)
 WHITE_SMOOTHED = -0.95  # log(smoothed / raw antisymmetric part) of white noise in the window
-_SMOOTHED_COLUMN = 18  # COLUMNS' "smoothed/raw asymmetry"
-_SPACING_COLUMN = 7  # COLUMNS' "spacing": the median log corner spacing
+_SMOOTHED_COLUMN = COLUMNS.index("smoothed/raw asymmetry")
+_SPACING_COLUMN = COLUMNS.index("spacing")  # the median log corner spacing
+_REACH_COLUMN = COLUMNS.index("blur reach hinge")  # the one board column that is each corner's own
 _TINY = 1e-6  # grey levels (px for the bend): keeps the logarithms finite in a flat window
 _MAX_RADIUS = 3  # px: the refinement's window radius, at most this (a 7×7 window: the measures' cost)
 
@@ -124,7 +125,7 @@ def _operators() -> tuple[np.ndarray, np.ndarray]:
 
 
 def design(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray,
-           origin: tuple[int, int] = (0, 0)) -> np.ndarray:
+           origin: tuple[int, int] = (0, 0), foreign: bool = True) -> np.ndarray:
     """The model's columns (N, 31) (``COLUMNS``) of one board's corners, unclipped (module docstring).
 
     gray : (H, W) float32 grey in [0, 1] or uint8, unsmoothed (every column is a ratio of grey levels
@@ -133,7 +134,7 @@ def design(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray, scores: np.nd
     Columns 0..``BOARD_COLUMNS`` − 1 are the board's (the same for all its corners but the blur's reach), the next
     each corner's excess over the board's median of its feature (a corner with no row or column through it takes the
     board's median bend: :func:`aicalib_tf.detect.corners.sigma_kernels.design_columns`), the last (``FOREIGN_COLUMN``)
-    its foreign edge amplitude, px (:func:`foreign_amplitude`).
+    its foreign edge amplitude, px (:func:`foreign_amplitude`; 0 without measuring it when ``foreign`` is False).
     origin : (x, y) px of gray's pixel (0, 0) in the whole image (where its JPEG blocks start) when
     gray is a part of it.
     """
@@ -152,7 +153,7 @@ def design(gray: np.ndarray, corners: np.ndarray, ids: np.ndarray, scores: np.nd
                       int(origin[0]), int(origin[1]))
     if x[0, _SPACING_COLUMN] < np.log(SMOOTHED_MIN_SPACING):
         x[:, _SMOOTHED_COLUMN] = WHITE_SMOOTHED
-    x[:, FOREIGN_COLUMN] = foreign_amplitude(img, pts, radius, np.exp(x[:, FOREIGN_COLUMN]))
+    x[:, FOREIGN_COLUMN] = foreign_amplitude(img, pts, radius, np.exp(x[:, FOREIGN_COLUMN])) if foreign else 0.0
     return x
 
 
@@ -204,26 +205,27 @@ def sigma_from_design(x: np.ndarray, coeffs: np.ndarray = COEFFS, low: np.ndarra
     return np.hypot(s0, foreign * x[:, FOREIGN_COLUMN]).astype(np.float32)
 
 
-def board_design(image, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """:func:`design` (N, 30) of a board in ``image``, converting no more of it than needed.
+def board_design(image, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray, size: tuple[int, int],
+                 foreign: bool = True) -> np.ndarray:
+    """:func:`design` (N, 31) of a board in ``image``, converting no more of it than needed.
 
     image : a :class:`~aicalib_tf.detect.pyramid.Frame` (a grey uint8 frame is read as it is, any other
     through its float grey), or ``region(x0, y0, x1, y1) -> (y1 − y0, x1 − x0) float32`` grey of the
     image, asked for the part about the corners. corners : (N, 2) px. ids : (N, 2). scores : (N,).
-    size : (width, height) px.
+    size : (width, height) px. foreign : as :func:`design`.
     """
     pts = np.asarray(corners, np.float64).reshape(-1, 2)
     if len(pts) == 0:
         return np.zeros((0, len(COLUMNS)))
     raw = getattr(image, "raw", None)
     if raw is not None and raw.dtype == np.uint8 and raw.ndim == 2:
-        return design(raw, pts, ids, scores)
+        return design(raw, pts, ids, scores, foreign=foreign)
     region = image.region if raw is not None else image
     pad = _MAX_RADIUS + 2  # the largest window and the bilinear sample's next pixel
     x0, y0 = (max(int(np.floor(v)) - pad, 0) for v in pts.min(axis=0))
     x1 = min(int(np.ceil(pts[:, 0].max())) + pad + 1, size[0])
     y1 = min(int(np.ceil(pts[:, 1].max())) + pad + 1, size[1])
-    return design(region(x0, y0, x1, y1), pts - np.array([x0, y0], np.float64), ids, scores, (x0, y0))
+    return design(region(x0, y0, x1, y1), pts - np.array([x0, y0], np.float64), ids, scores, (x0, y0), foreign)
 
 
 def board_sigmas(image, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray, size: tuple[int, int],
@@ -236,9 +238,9 @@ def board_sigmas(image, corners: np.ndarray, ids: np.ndarray, scores: np.ndarray
     """
     if len(corners) == 0:
         return np.zeros(0, np.float32)
-    x = board_design(image, corners, ids, scores, size)
+    x = board_design(image, corners, ids, scores, size, foreign=own)
     if not own:
-        x[:, FOREIGN_COLUMN], x[:, BOARD_COLUMNS - 1] = 0.0, _median(x[:, BOARD_COLUMNS - 1])
+        x[:, _REACH_COLUMN] = _median(x[:, _REACH_COLUMN])
     return sigma_from_design(x)
 
 
