@@ -27,14 +27,13 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import real_repeatability as rr  # noqa: E402
 
-from aicalib_tf.detect.corners.refine import BOARD_DEGREE, refine_subpix  # noqa: E402
+from aicalib_tf.detect.corners.refine import board_basis, refine_subpix  # noqa: E402
 
 
 def smooth_part(diff: np.ndarray, ids: np.ndarray) -> np.ndarray:
-    """(N, 2) the least-squares degree-``BOARD_DEGREE`` polynomial in the ids (N, 2) of one board's diff (N, 2)."""
-    u = ids.astype(np.float64)
-    u = (u - 0.5 * (u.min(axis=0) + u.max(axis=0))) / np.maximum(0.5 * np.ptp(u, axis=0), 1.0)
-    basis = np.stack([u[:, 0] ** a * u[:, 1] ** b for a in range(BOARD_DEGREE + 1) for b in range(BOARD_DEGREE + 1 - a)], 1)
+    """(N, 2) the least-squares polynomial in the ids (N, 2) of one board's diff (N, 2): the board polish's field
+    (:func:`aicalib_tf.detect.corners.refine.board_basis`)."""
+    basis = board_basis(ids.astype(np.float64))
     coef, *_ = np.linalg.lstsq(basis, diff, rcond=None)
     return basis @ coef
 

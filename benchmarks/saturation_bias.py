@@ -33,7 +33,7 @@ import cv2
 import numpy as np
 
 from aicalib_tf.detect.corners.junctions import nearest_spacing
-from aicalib_tf.detect.corners.refine import BOARD_DEGREE, Smoothed, polish_board, refine_candidates, refine_subpix
+from aicalib_tf.detect.corners.refine import Smoothed, board_basis, polish_board, refine_candidates, refine_subpix
 from aicalib_tf.io import quantize
 from data_gen.degrade import circle_falloff
 from data_gen.presets import get_preset
@@ -61,9 +61,7 @@ REFINERS = {"detector": _detector, "saddle": _saddle,
 
 def _board_stats(err: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, float]:
     """A board's mean error (2,) and the RMS of its smooth part less that mean (px)."""
-    u = ids.astype(np.float64)
-    u = (u - 0.5 * (u.min(axis=0) + u.max(axis=0))) / np.maximum(0.5 * np.ptp(u, axis=0), 1.0)
-    basis = np.stack([u[:, 0] ** a * u[:, 1] ** b for a in range(BOARD_DEGREE + 1) for b in range(BOARD_DEGREE + 1 - a)], 1)
+    basis = board_basis(ids.astype(np.float64))
     coef, *_ = np.linalg.lstsq(basis, err, rcond=None)
     field = basis @ coef
     return err.mean(axis=0), float(np.sqrt(np.mean(np.sum((field - field.mean(axis=0)) ** 2, axis=1))))

@@ -33,7 +33,7 @@ import numpy as np
 from aicalib_tf.detect.corners.saddle import saddle_fit_matrix
 from aicalib_tf.detect.corners.saddle_kernels import ramp_symmetric, saddle_refine
 
-__all__ = ["Smoothed", "gaussian", "polish", "polish_board", "polish_in_region", "ramp_asymmetry", "ramp_inflation", "refine_ramp", "refine_saddle", "refine_subpix", "refine_windowed",
+__all__ = ["Smoothed", "gaussian", "board_basis", "polish", "polish_board", "polish_in_region", "ramp_asymmetry", "ramp_inflation", "refine_ramp", "refine_saddle", "refine_subpix", "refine_windowed",
            "refine_candidates", "window_radius"]
 
 
@@ -310,7 +310,7 @@ def polish_board(smoothed: Smoothed, pts: np.ndarray, ids: np.ndarray, spacing: 
     got, ok = refine_ramp(smoothed, pts, spacing)
     radius = window_radius(spacing) + 1
     ok &= radius <= 0.45 * np.asarray(spacing)  # its window inside the squares, as the saddle's (steep tilts: not)
-    basis = _board_basis(ids)
+    basis = board_basis(ids)
     n, k = int(ok.sum()), basis.shape[1]
     if n < 2 * k:
         return pts.copy()
@@ -349,7 +349,7 @@ def ramp_inflation(img: np.ndarray, pts: np.ndarray, radius: int) -> np.ndarray:
     return both / np.trace(np.linalg.inv(a[:, :2, :2]), axis1=1, axis2=2)
 
 
-def _board_basis(ids: np.ndarray) -> np.ndarray:
+def board_basis(ids: np.ndarray) -> np.ndarray:
     """(N, K) the monomials up to ``BOARD_DEGREE`` of the ids (col, row) (N, 2), each centred and scaled to [-1, 1]."""
     lo, hi = ids.min(axis=0), ids.max(axis=0)
     u = (ids - 0.5 * (lo + hi)) / np.maximum(0.5 * (hi - lo), 1.0)
