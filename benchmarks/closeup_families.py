@@ -18,6 +18,21 @@ drawn as the preset draws them:
 - ``rim-reach``, ``rim-reach-hd``: 180–210° lenses, kept only when the outer squares reach 85° or
   more off the optical axis (squeezed to a few px, darkened to black, up to and past 90°).
 
+The image-formation families are ``rim-reach`` (the same scenes, image by image) with one law of a real
+camera or another renderer added (:mod:`data_gen.sensor`), the others as ``rim-reach`` draws them:
+
+- ``edge-soft``: the image circle's edge a cosine ramp over its outer 2–8%;
+- ``rim-black-early``: the light black at 90–97% of the circle's radius, over a ramp of 10–25%;
+- ``defocus-disc``: the field blur's Gaussian replaced by a disc (pillbox) of the same spread (radius 2σ);
+- ``ca-lateral``: lateral chromatic aberration, R and B 1–3 px apart from G at the rim, turned into grey;
+- ``mosaic``: an RGGB mosaic with a raw colour cast, demosaiced bilinearly or edge-aware, white balanced;
+- ``noise-poisson``: photon noise of 20–200 photons at white under the read noise;
+- ``tone-srgb``: the paper's reflectance (black 0.01–0.1, white 0.3–0.9) and the rim's fall-off in linear
+  light, encoded by the sRGB curve;
+- ``sharpen``: an unsharp mask (amount 0.5–1.5, σ 0.8–2 px) with its halos;
+- ``camera-chain``: all of these at once as a camera makes them (disc defocus, lateral CA, photon
+  noise, mosaic, sRGB, mild sharpening, JPEG at quality 70–95), the circle edge soft.
+
 The lens family is the split: ``tune`` draws equidistant (Kannala–Brandt) lenses, the family the
 detector's rim stages were tuned on; ``held-out`` draws Double Sphere and EUCM lenses. ``--seed``
 draws other scenes (the families' renders are not the evaluate conditions' seed-41 ones).
@@ -49,13 +64,34 @@ SPLITS = {"tune": "fisheye", "held-out": ("ds", "eucm")}
 RIM_DEG = 85.0  # rim-reach families: the least off-axis angle of the outer squares' farthest corner
 
 
-def _rules(vig: dict | None = None, blur: dict | None = None) -> tuple[Rule, ...]:
-    """closeup_laws' rules with the vignetting or the blur rule's parameters replaced."""
+def _rules(vig: dict | None = None, blur: dict | None = None, disc: bool = False,
+           extra: tuple[Rule, ...] = ()) -> tuple[Rule, ...]:
+    """closeup_laws' rules with the vignetting or the blur rule's parameters replaced; with ``disc``, the field
+    blur a disc of radius 2σ (the same draws: both rules draw three parameters in the same order); then ``extra``."""
     out = []
     for r in get_preset("closeup_laws").rules:
         new = vig if r.name == "rim_vignetting" else blur if r.name == "field_blur" else None
+        if disc and r.name == "field_blur":
+            p = dict(r.params)
+            out.append(Rule.of("field_defocus", r.p, power=p["power"], radius_centre=tuple(2 * v for v in p["sigma_centre"]),
+                               radius_rim=tuple(2 * v for v in p["sigma_rim"])))
+            continue
         out.append(r if new is None else Rule.of(r.name, r.p, **{**dict(r.params), **new}))
-    return tuple(out)
+    return tuple(out) + tuple(extra)
+
+
+LINEAR_PAPER = {"paper_black": (0.01, 0.1), "paper_white": (0.3, 0.9)}  # reflectances in linear light
+_SOFT_EDGE = Rule.of("circle_edge", black_at=1.0, width=(0.02, 0.08))
+
+
+def _camera_chain() -> tuple[Rule, ...]:
+    """rim-reach's rules as a camera's: disc defocus, lateral CA, photon noise, mosaic, sRGB, sharpening, JPEG."""
+    return _rules(disc=True, extra=(
+        _SOFT_EDGE, Rule.of("lateral_ca", shift=(0.5, 2.0), power=(1.0, 2.0)),
+        Rule.of("shot_noise", photons=(50.0, 500.0)),
+        Rule.of("bayer_demosaic", gain_r=(0.4, 0.8), gain_b=(0.5, 0.9), method=("bilinear", "edge")),
+        Rule.of("tone_curve", law="srgb", gamma=2.2), Rule.of("unsharp", 0.5, amount=(0.3, 1.0), sigma=1.0),
+        Rule.of("jpeg", quality=(70, 95))))
 
 
 def families() -> dict[str, dict]:
@@ -78,6 +114,25 @@ def families() -> dict[str, dict]:
         "contrast-low": {"paper_black": (0.25, 0.4), "paper_white": (0.5, 0.65)},
         "rim-reach": {"fisheye_fov_deg": (180.0, 210.0), "rim": True},
         "rim-reach-hd": {"fisheye_fov_deg": (180.0, 210.0), "rim": True, "size": (1280, 960)},
+        **{name: {"fisheye_fov_deg": (180.0, 210.0), "rim": True, **spec} for name, spec in image_laws().items()},
+    }
+
+
+def image_laws() -> dict[str, dict]:
+    """{name: overrides of rim-reach}: the image-formation families (one law of :mod:`data_gen.sensor` each)."""
+    def plus(*rules):
+        return {"rules": _rules(extra=rules)}
+
+    return {
+        "edge-soft": plus(_SOFT_EDGE),
+        "rim-black-early": plus(Rule.of("circle_edge", black_at=(0.9, 0.97), width=(0.1, 0.25))),
+        "defocus-disc": {"rules": _rules(disc=True)},
+        "ca-lateral": plus(Rule.of("lateral_ca", shift=(1.0, 3.0), power=(1.0, 2.0))),
+        "mosaic": plus(Rule.of("bayer_demosaic", gain_r=(0.4, 0.8), gain_b=(0.5, 0.9), method=("bilinear", "edge"))),
+        "noise-poisson": plus(Rule.of("shot_noise", photons=(20.0, 200.0))),
+        "tone-srgb": {**plus(Rule.of("tone_curve", law="srgb", gamma=2.2)), **LINEAR_PAPER},
+        "sharpen": plus(Rule.of("unsharp", amount=(0.5, 1.5), sigma=(0.8, 2.0))),
+        "camera-chain": {"rules": _camera_chain(), **LINEAR_PAPER},
     }
 
 

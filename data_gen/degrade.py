@@ -16,6 +16,8 @@ import numpy as np
 
 from aicalib_tf.io import quantize
 
+from .sensor import bayer_demosaic, circle_edge, field_defocus, lateral_ca, tone_curve, unsharp
+
 __all__ = ["gaussian_noise", "shot_noise", "gaussian_blur", "motion_blur", "defocus", "contrast", "illumination_gradient", "vignetting", "shadow", "exposure", "jpeg", "salt_pepper", "circle_falloff", "rim_vignetting", "field_blur", "apply_degradations", "DEGRADATIONS", "PIPELINE_ORDER", "CIRCLE_STEPS"]
 
 
@@ -226,15 +228,21 @@ DEGRADATIONS = {
     "vignetting": vignetting,
     "circle_falloff": circle_falloff,
     "rim_vignetting": rim_vignetting,
+    "circle_edge": circle_edge,
     "shadow": shadow,
     "contrast": contrast,
     "exposure": exposure,
     "defocus": defocus,
     "gaussian_blur": gaussian_blur,
     "field_blur": field_blur,
+    "field_defocus": field_defocus,
+    "lateral_ca": lateral_ca,
     "motion_blur": motion_blur,
     "shot_noise": shot_noise,
     "gaussian_noise": gaussian_noise,
+    "bayer_demosaic": bayer_demosaic,  # after the noise: it lands on the raw samples
+    "tone_curve": tone_curve,
+    "unsharp": unsharp,
     "jpeg": jpeg,
     "salt_pepper": salt_pepper,
 }
@@ -242,7 +250,7 @@ DEGRADATIONS = {
 # Scene light, then lens, then sensor, then encoding and transmission.
 PIPELINE_ORDER = tuple(DEGRADATIONS)
 # Steps that follow a fisheye's image circle: the scene gives them ``cx``, ``cy`` and ``radius`` (px).
-CIRCLE_STEPS = ("circle_falloff", "rim_vignetting", "field_blur")
+CIRCLE_STEPS = ("circle_falloff", "rim_vignetting", "field_blur", "circle_edge", "field_defocus", "lateral_ca")
 
 
 def apply_degradations(img: np.ndarray, steps: list[dict], rng: np.random.Generator) -> np.ndarray:

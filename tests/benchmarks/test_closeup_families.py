@@ -30,3 +30,21 @@ def test_each_family_pins_its_law_and_the_split_pins_the_lens_family():
     assert cf.family_condition("rim-reach-hd", "tune", 5).size == (1280, 960)
     assert set(np.unique([cf.family_condition(n, "tune", 1).preset.name for n in cf.families()]).tolist()) == \
         {f"{n}-tune" for n in cf.families()}
+
+
+def test_the_image_law_families_are_rim_reach_with_one_law_added():
+    from data_gen.sample import draw_steps
+
+    ref = cf.family_condition("rim-reach", "held-out", 7).preset
+    for name in cf.image_laws():
+        p = cf.family_condition(name, "held-out", 7).preset
+        assert (p.lens, p.fisheye_fov_deg, p.pose, p.sizes) == (ref.lens, ref.fisheye_fov_deg, ref.pose, ref.sizes)
+        assert cf.families()[name]["rim"]  # the same scenes kept, image by image
+    ca = cf.family_condition("ca-lateral", "tune", 7).preset.rules
+    assert ca[:len(ref.rules)] == ref.rules and ca[-1].name == "lateral_ca"
+    plain = draw_steps(ref.rules, np.random.default_rng(3))
+    disc = draw_steps(cf.family_condition("defocus-disc", "tune", 7).preset.rules, np.random.default_rng(3))
+    blur = next(s for s in plain if s["name"] == "field_blur")
+    pill = next(s for s in disc if s["name"] == "field_defocus")
+    assert pill["radius_rim"] == pytest.approx(2 * blur["sigma_rim"]) and pill["power"] == blur["power"]
+    assert plain[-1] == disc[-1]  # the noise after it drawn alike
