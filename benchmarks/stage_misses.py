@@ -170,22 +170,23 @@ def stage_figures(t: dict, n: int) -> str:
             f"rim {t['rim_reach']}/{t['rim']}")
 
 
-def traced_misses(samples, model, counts: Counter, looks: bool = True):
-    """Detect each (index, Sample) of ``samples``; add its outcome ("hit" / "wrong" / "miss") and its detection
-    time ("seconds") to ``counts``, and each miss's blamed stage; yield (index, sample, Detection, outcome,
-    :func:`trace` of it) for every board not hit (``looks``: trace the second looks too)."""
+def traced_misses(samples, model, counts: Counter, looks: bool = True, pattern=PATTERN):
+    """Detect each (index, Sample) of ``samples`` (boards of ``pattern`` (cols, rows)); add its outcome ("hit" /
+    "wrong" / "miss") and its detection time ("seconds") to ``counts``, and each miss's blamed stage; yield
+    (index, sample, Detection, outcome, :func:`trace` of it) for every board not hit (``looks``: trace the second
+    looks too)."""
     from aicalib_tf import detect_corners
     from aicalib_tf.io import as_gray_float
 
     for index, s in samples:
         t0 = time.perf_counter()
-        det = detect_corners(s.image, PATTERN, model=model)
+        det = detect_corners(s.image, pattern, model=model)
         counts["seconds"] += time.perf_counter() - t0
-        outcome, _ = board_detection_outcome(det.corners if det.complete else None, s.corners, PATTERN)
+        outcome, _ = board_detection_outcome(det.corners if det.complete else None, s.corners, pattern)
         counts[outcome] += 1
         if outcome == "hit":
             continue
-        t = trace(as_gray_float(s.image), s.corners, model, looks=looks)  # the pipeline's grey in [0, 1]
+        t = trace(as_gray_float(s.image), s.corners, model, pattern, looks=looks)  # the pipeline's grey in [0, 1]
         counts[t["stage"]] += 1
         yield index, s, det, outcome, t
 

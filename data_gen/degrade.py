@@ -18,7 +18,8 @@ from aicalib_tf.io import quantize
 
 from .sensor import bayer_demosaic, circle_edge, field_defocus, lateral_ca, tone_curve, unsharp
 
-__all__ = ["gaussian_noise", "shot_noise", "gaussian_blur", "motion_blur", "defocus", "contrast", "illumination_gradient", "vignetting", "shadow", "exposure", "jpeg", "salt_pepper", "circle_falloff", "rim_vignetting", "field_blur", "apply_degradations", "DEGRADATIONS", "PIPELINE_ORDER", "CIRCLE_STEPS"]
+__all__ = ["gaussian_noise", "shot_noise", "gaussian_blur", "motion_blur", "defocus", "contrast", "illumination_gradient", "vignetting", "shadow", "exposure", "jpeg", "salt_pepper", "circle_falloff", "rim_vignetting", "field_blur", "depth_blur", "glare", "apply_degradations", "DEGRADATIONS", "PIPELINE_ORDER", "CIRCLE_STEPS",
+           "PLANE_STEPS"]
 
 
 def illumination_gradient(img: np.ndarray, rng: np.random.Generator, *, strength: float) -> np.ndarray:
@@ -118,6 +119,51 @@ def field_blur(img: np.ndarray, rng: np.random.Generator, *, sigma_centre: float
     return out
 
 
+def _blur_by(img: np.ndarray, sigma: np.ndarray, levels: int = 6) -> np.ndarray:
+    """img (H, W) float32 blurred pixel by pixel by a Gaussian of σ ``sigma`` (H, W) px: a blend of ``levels``
+    uniformly blurred copies (linear in σ between neighbouring copies)."""
+    lo, hi = float(sigma.min()), float(sigma.max())
+    if hi - lo < 1e-6:
+        return gaussian_blur(img, None, sigma=lo)
+    steps = np.linspace(lo, hi, levels)
+    stack = [gaussian_blur(img, None, sigma=float(s)) for s in steps]
+    pos = np.clip((sigma - lo) / (steps[1] - steps[0]), 0.0, levels - 1.0 - 1e-6)
+    i = pos.astype(np.int32)
+    frac = (pos - i).astype(np.float32)
+    out = np.zeros_like(img, dtype=np.float32)
+    for k in range(levels - 1):
+        m = i == k
+        out[m] = stack[k][m] * (1.0 - frac[m]) + stack[k + 1][m] * frac[m]
+    return out
+
+
+def depth_blur(img: np.ndarray, rng: np.random.Generator, *, focus: float, sigma_min: float, sigma_max: float,
+               w0: float, wu: float, wv: float, w_near: float, w_far: float) -> np.ndarray:
+    """Depth of field across a tilted board: Gaussian blur whose σ (px) grows as |1/z − 1/z_focus|.
+
+    A thin lens's blur circle is proportional to the difference of inverse depths, so a board
+    tilted away from the camera is sharp at the focus distance and blurs towards both its near and
+    its far end. The scene's inverse depth is the board's plane, w(x, y) = w0 + wu·x + wv·y (1/board
+    units, x, y px; exact for a pinhole lens, a least-squares fit under distortion; see
+    :data:`PLANE_STEPS`), ranging from ``w_far`` to ``w_near`` over the board. The focus sits at
+    w_f = w_far + ``focus``·(w_near − w_far) (0: the far end sharp, 1: the near end); σ is
+    ``sigma_min`` there and ``sigma_max`` at the board's end farther from it in 1/z, capped there off the board.
+
+    >>> v = depth_blur(np.eye(5, dtype=np.float32), None, focus=0.0, sigma_min=0.5, sigma_max=0.5, w0=1.0,
+    ...                wu=0.0, wv=0.0, w_near=1.0, w_far=1.0)
+    >>> bool(np.allclose(v, gaussian_blur(np.eye(5, dtype=np.float32), None, sigma=0.5)))
+    True
+    """
+    del rng
+    h, w = img.shape
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    inv = np.float32(w0) + np.float32(wu) * xx + np.float32(wv) * yy
+    wf = w_far + focus * (w_near - w_far)
+    reach = max(abs(w_near - wf), abs(w_far - wf), 1e-12)
+    share = np.minimum(np.abs(inv - np.float32(wf)) / np.float32(reach), 1.0)
+    return _blur_by(img, (sigma_min + (sigma_max - sigma_min) * share).astype(np.float32))
+
+
 def shadow(img: np.ndarray, rng: np.random.Generator, *, strength: float, softness: float = 1.0) -> np.ndarray:
     """A hard-edged shadow: a random polygon whose light is reduced by ``strength``.
 
@@ -136,6 +182,19 @@ def shadow(img: np.ndarray, rng: np.random.Generator, *, strength: float, softne
     if softness > 0:
         m = cv2.GaussianBlur(m, (0, 0), softness)
     return img * (1.0 - strength * m)
+
+
+def glare(img: np.ndarray, rng: np.random.Generator, *, strength: float, radius: float) -> np.ndarray:
+    """A specular sheen (a light's reflection on glossy paper): light added as ``strength``·exp(−r²/2s²),
+    s = ``radius`` of the image's diagonal, about a point drawn over the middle 80% of the image. Added
+    light, not multiplied: it lifts black and white alike (the board's contrast falls under it) and may
+    clip white."""
+    h, w = img.shape
+    cx, cy = rng.uniform(0.1, 0.9) * (w - 1), rng.uniform(0.1, 0.9) * (h - 1)
+    s = radius * math.hypot(w, h)
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    r2 = (xx - np.float32(cx)) ** 2 + (yy - np.float32(cy)) ** 2
+    return (img + np.float32(strength) * np.exp(-r2 / np.float32(2.0 * s * s))).astype(np.float32)
 
 
 def contrast(img: np.ndarray, rng: np.random.Generator, *, factor: float, mid: float = 0.5) -> np.ndarray:
@@ -230,6 +289,7 @@ DEGRADATIONS = {
     "rim_vignetting": rim_vignetting,
     "circle_edge": circle_edge,
     "shadow": shadow,
+    "glare": glare,
     "contrast": contrast,
     "exposure": exposure,
     "defocus": defocus,
@@ -237,6 +297,7 @@ DEGRADATIONS = {
     "field_blur": field_blur,
     "field_defocus": field_defocus,
     "lateral_ca": lateral_ca,
+    "depth_blur": depth_blur,
     "motion_blur": motion_blur,
     "shot_noise": shot_noise,
     "gaussian_noise": gaussian_noise,
@@ -251,6 +312,9 @@ DEGRADATIONS = {
 PIPELINE_ORDER = tuple(DEGRADATIONS)
 # Steps that follow a fisheye's image circle: the scene gives them ``cx``, ``cy`` and ``radius`` (px).
 CIRCLE_STEPS = ("circle_falloff", "rim_vignetting", "field_blur", "circle_edge", "field_defocus", "lateral_ca")
+# Steps that follow the board's depth: the scene gives them its inverse-depth plane ``w0``, ``wu``, ``wv`` and
+# its range over the board ``w_near``, ``w_far`` (:func:`depth_blur`).
+PLANE_STEPS = ("depth_blur",)
 
 
 def apply_degradations(img: np.ndarray, steps: list[dict], rng: np.random.Generator) -> np.ndarray:

@@ -12,6 +12,7 @@ import copy
 import math
 from dataclasses import dataclass, replace
 
+import cv2
 import numpy as np
 
 from aicalib_tf.geometry.camera import Camera
@@ -21,7 +22,7 @@ from .board import Board, sample_board
 from .camera import UNIFIED_MODELS, sample_camera, sample_fisheye, sample_unified_fisheye
 from .aprilgrid import AprilGridTarget
 from .charuco import CharucoTarget
-from .degrade import CIRCLE_STEPS, apply_degradations
+from .degrade import CIRCLE_STEPS, PLANE_STEPS, apply_degradations
 from .occlude import draw_occluders, occluded, sample_occluders
 from .pose import corner_visibility, sample_pose
 from .presets import INT_PARAMS, Preset, Rule, get_preset
@@ -115,6 +116,21 @@ def _circle_px(cam: Camera) -> dict:
     if not cam.fisheye:
         return {"cx": (w - 1) / 2.0, "cy": (h - 1) / 2.0, "radius": math.hypot(w, h) / 2.0}
     return {"cx": float(cam.cx), "cy": float(cam.cy), "radius": float(cam.circle_radius() * math.sqrt(cam.fx * cam.fy))}
+
+
+_FLAT_DEPTH = {"w0": 1.0, "wu": 0.0, "wv": 0.0, "w_near": 1.0, "w_far": 1.0}  # no board: one depth everywhere
+
+
+def _depth_plane(board: Board, rvec: np.ndarray, tvec: np.ndarray, corners: np.ndarray) -> dict:
+    """The board's inverse depth as a plane of the pixel: {"w0", "wu", "wv"} (w = 1/z ≈ w0 + wu·x + wv·y,
+    1/board units, x, y px: the least-squares fit over its inner corners ``corners`` (N, 2) px, exact for a
+    pinhole lens) and its range over them, {"w_near", "w_far"}."""
+    R = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
+    inv = 1.0 / (board.object_points() @ R[2] + float(np.asarray(tvec, np.float64).ravel()[2]))
+    a = np.column_stack([np.ones(len(corners)), np.asarray(corners, np.float64).reshape(-1, 2)])
+    sol = np.linalg.lstsq(a, inv, rcond=None)[0]
+    return {"w0": float(sol[0]), "wu": float(sol[1]), "wv": float(sol[2]), "w_near": float(inv.max()),
+            "w_far": float(inv.min())}
 
 
 def _occluders_leaving_corners(rng, corners, visible, p: Preset, tries: int = 10) -> list[np.ndarray]:
@@ -213,6 +229,8 @@ def draw_scene(
     for step in steps:
         if step["name"] in CIRCLE_STEPS:  # these follow the lens' image circle (the frame's centre for a pinhole)
             step.update(_circle_px(cam))
+        elif step["name"] in PLANE_STEPS:  # these follow the board's depth
+            step.update(_depth_plane(board, rvec, tvec, corners) if has_board else _FLAT_DEPTH)
     return Scene(p, cam, board, background, has_board, framing, rvec, tvec, polys, levels, corners, visible,
                  steps, rng)  # render() copies rng before each use
 
