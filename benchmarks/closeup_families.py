@@ -16,7 +16,10 @@ drawn as the preset draws them:
 - ``margin-narrow``: 0.05–0.2 squares of white paper about the outer squares;
 - ``contrast-low``: black 0.25–0.4, white 0.5–0.65 (a fifth to a third of the full swing);
 - ``rim-reach``, ``rim-reach-hd``: 180–210° lenses, kept only when the outer squares reach 85° or
-  more off the optical axis (squeezed to a few px, darkened to black, up to and past 90°).
+  more off the optical axis (squeezed to a few px, darkened to black, up to and past 90°);
+- ``rim-deep``: 180–210° lenses, kept only when an inner corner itself lies 86° or more off axis;
+- ``margin-none``: ``rim-reach`` with 0–0.03 squares of paper about the outer squares (a printed
+  texture with no border: the outer squares meet the background).
 
 The image-formation families are ``rim-reach`` (the same scenes, image by image) with one law of a real
 camera or another renderer added (:mod:`data_gen.sensor`), the others as ``rim-reach`` draws them:
@@ -25,6 +28,8 @@ camera or another renderer added (:mod:`data_gen.sensor`), the others as ``rim-r
 - ``rim-black-early``: the light black at 90–97% of the circle's radius, over a ramp of 10–25%;
 - ``defocus-disc``: the field blur's Gaussian replaced by a disc (pillbox) of the same spread (radius 2σ);
 - ``ca-lateral``: lateral chromatic aberration, R and B 1–3 px apart from G at the rim, turned into grey;
+- ``astig-radial``: blur along the radius of σ 2–4 px at the rim (0–1 px along the circle), growing as
+  ρ^1.5–ρ^3: a fisheye's astigmatism, or a renderer's radial blur, on top of the field blur;
 - ``mosaic``: an RGGB mosaic with a raw colour cast, demosaiced bilinearly or edge-aware, white balanced;
 - ``noise-poisson``: photon noise of 20–200 photons at white under the read noise;
 - ``tone-srgb``: the paper's reflectance (black 0.01–0.1, white 0.3–0.9) and the rim's fall-off in linear
@@ -62,6 +67,7 @@ from data_gen.presets import Rule, get_preset  # noqa: E402
 
 SPLITS = {"tune": "fisheye", "held-out": ("ds", "eucm")}
 RIM_DEG = 85.0  # rim-reach families: the least off-axis angle of the outer squares' farthest corner
+DEEP_DEG = 86.0  # rim-deep: the least off-axis angle of the farthest inner corner
 
 
 def _rules(vig: dict | None = None, blur: dict | None = None, disc: bool = False,
@@ -114,6 +120,8 @@ def families() -> dict[str, dict]:
         "contrast-low": {"paper_black": (0.25, 0.4), "paper_white": (0.5, 0.65)},
         "rim-reach": {"fisheye_fov_deg": (180.0, 210.0), "rim": True},
         "rim-reach-hd": {"fisheye_fov_deg": (180.0, 210.0), "rim": True, "size": (1280, 960)},
+        "rim-deep": {"fisheye_fov_deg": (180.0, 210.0), "rim": DEEP_DEG},
+        "margin-none": {"fisheye_fov_deg": (180.0, 210.0), "rim": True, "margin_range": (0.0, 0.03)},
         **{name: {"fisheye_fov_deg": (180.0, 210.0), "rim": True, **spec} for name, spec in image_laws().items()},
     }
 
@@ -128,6 +136,8 @@ def image_laws() -> dict[str, dict]:
         "rim-black-early": plus(Rule.of("circle_edge", black_at=(0.9, 0.97), width=(0.1, 0.25))),
         "defocus-disc": {"rules": _rules(disc=True)},
         "ca-lateral": plus(Rule.of("lateral_ca", shift=(1.0, 3.0), power=(1.0, 2.0))),
+        "astig-radial": plus(Rule.of("astigmatism", sigma_radial=(2.0, 4.0), sigma_tangential=(0.0, 1.0),
+                                     power=(1.5, 3.0))),
         "mosaic": plus(Rule.of("bayer_demosaic", gain_r=(0.4, 0.8), gain_b=(0.5, 0.9), method=("bilinear", "edge"))),
         "noise-poisson": plus(Rule.of("shot_noise", photons=(20.0, 200.0))),
         "tone-srgb": {**plus(Rule.of("tone_curve", law="srgb", gamma=2.2)), **LINEAR_PAPER},
@@ -158,9 +168,10 @@ def off_axis_deg(label: dict, squares: bool = False) -> np.ndarray:
     return np.degrees(np.arctan2(np.hypot(p[:, 0], p[:, 1]), p[:, 2]))
 
 
-def samples(cond: Condition, count: int, rim: bool, max_tries: int = 30):
-    """Yield (index, Sample): the first ``count`` renders of ``cond`` (with ``rim``, only those whose outer
-    squares reach ``RIM_DEG`` or more off axis). Raises RuntimeError when too few pass in ``max_tries``·count."""
+def samples(cond: Condition, count: int, rim: bool | float, max_tries: int = 30):
+    """Yield (index, Sample): the first ``count`` renders of ``cond`` (with ``rim`` True, only those whose outer
+    squares reach ``RIM_DEG`` or more off axis; with ``rim`` a number, those whose inner corners reach that many
+    degrees). Raises RuntimeError when too few pass in ``max_tries``·count."""
     from data_gen.sample import make_sample
 
     kept = 0
@@ -168,7 +179,7 @@ def samples(cond: Condition, count: int, rim: bool, max_tries: int = 30):
         if kept >= count:
             return
         s = make_sample(cond.preset, cond.seed, index, size=cond.size, pattern=PATTERN)
-        if rim and off_axis_deg(s.label, squares=True).max() < RIM_DEG:
+        if rim and off_axis_deg(s.label, squares=rim is True).max() < (RIM_DEG if rim is True else rim):
             continue
         kept += 1
         yield index, s
@@ -181,7 +192,7 @@ def run_family(name: str, split: str, seed: int, count: int, model, show: bool) 
 
     cond = family_condition(name, split, seed)
     counts: Counter = Counter()
-    found = samples(cond, count, bool(families()[name].get("rim")))
+    found = samples(cond, count, families()[name].get("rim", False))
     for index, s, det, outcome, t in traced_misses(found, model, counts, looks=False):
         if show:
             lab = s.label

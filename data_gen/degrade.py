@@ -16,7 +16,7 @@ import numpy as np
 
 from aicalib_tf.io import quantize
 
-from .sensor import bayer_demosaic, circle_edge, field_defocus, lateral_ca, tone_curve, unsharp
+from .sensor import astigmatism, bayer_demosaic, circle_edge, field_defocus, lateral_ca, tone_curve, unsharp
 
 __all__ = ["gaussian_noise", "shot_noise", "gaussian_blur", "motion_blur", "defocus", "contrast", "illumination_gradient", "vignetting", "shadow", "exposure", "jpeg", "salt_pepper", "circle_falloff", "rim_vignetting", "field_blur", "depth_blur", "glare", "apply_degradations", "DEGRADATIONS", "PIPELINE_ORDER", "CIRCLE_STEPS",
            "PLANE_STEPS"]
@@ -297,6 +297,7 @@ DEGRADATIONS = {
     "field_blur": field_blur,
     "field_defocus": field_defocus,
     "lateral_ca": lateral_ca,
+    "astigmatism": astigmatism,
     "depth_blur": depth_blur,
     "motion_blur": motion_blur,
     "shot_noise": shot_noise,
@@ -311,7 +312,8 @@ DEGRADATIONS = {
 # Scene light, then lens, then sensor, then encoding and transmission.
 PIPELINE_ORDER = tuple(DEGRADATIONS)
 # Steps that follow a fisheye's image circle: the scene gives them ``cx``, ``cy`` and ``radius`` (px).
-CIRCLE_STEPS = ("circle_falloff", "rim_vignetting", "field_blur", "circle_edge", "field_defocus", "lateral_ca")
+CIRCLE_STEPS = ("circle_falloff", "rim_vignetting", "field_blur", "circle_edge", "field_defocus", "lateral_ca",
+                "astigmatism")
 # Steps that follow the board's depth: the scene gives them its inverse-depth plane ``w0``, ``wu``, ``wv`` and
 # its range over the board ``w_near``, ``w_far`` (:func:`depth_blur`).
 PLANE_STEPS = ("depth_blur",)

@@ -11,6 +11,8 @@ grey does. Units: px for shifts and blur radii; fractions of the image circle's 
   ``black_at``·radius over a cosine ramp), e.g. a soft edge, or a rim that is black before the circle;
 - :func:`field_defocus`: defocus by a disc (pillbox) kernel whose radius grows towards the rim;
 - :func:`lateral_ca`: lateral chromatic aberration, R and B imaged at radially scaled positions;
+- :func:`astigmatism`: blur along the radius and along the circle of different σ, growing towards the rim
+  (a fisheye's sagittal and tangential foci part at wide angles; a renderer's radial "lens blur");
 - :func:`bayer_demosaic`: an RGGB colour filter mosaic, demosaiced (bilinear or edge-aware), white balanced;
 - :func:`tone_curve`: the sRGB transfer curve or a power law, applied to linear light;
 - :func:`unsharp`: an image processor's sharpening (unsharp mask), with its halo at edges.
@@ -23,7 +25,7 @@ import math
 import cv2
 import numpy as np
 
-__all__ = ["circle_edge", "field_defocus", "lateral_ca", "bayer_demosaic", "tone_curve", "unsharp", "disc_kernel",
+__all__ = ["circle_edge", "field_defocus", "lateral_ca", "astigmatism", "bayer_demosaic", "tone_curve", "unsharp", "disc_kernel",
            "GREY_WEIGHTS", "DEMOSAIC_METHODS", "TONE_LAWS"]
 
 GREY_WEIGHTS = (0.299, 0.587, 0.114)  # R, G, B (Rec. 601, OpenCV's BGR2GRAY)
@@ -117,6 +119,65 @@ def lateral_ca(img: np.ndarray, rng: np.random.Generator, *, shift: float, power
         my = (np.float32(cy) + dy * scale).astype(np.float32)
         grey += weight * cv2.remap(src, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
     return grey.astype(np.float32)
+
+
+def _blur_by_column(polar: np.ndarray, sigma: np.ndarray, axis: int, levels: int = 6) -> np.ndarray:
+    """(A, R) float32 ``polar`` blurred along ``axis`` (0: the angle, wrapping round; 1: the radius) by a Gaussian
+    whose σ (in rows or columns) is ``sigma`` (R,) per column: a blend of ``levels`` uniform blurs."""
+    top = float(sigma.max())
+    if top < 0.05:
+        return polar
+    steps = np.linspace(0.0, top, levels)
+    pad = int(math.ceil(4.0 * top)) + 1 if axis == 0 else 0
+    src = np.concatenate([polar[-pad:], polar, polar[:pad]]) if pad else polar
+    stack = [polar]
+    for sg in steps[1:]:
+        # along one axis only (a σ of 0 would take the other's, so the other gets a negligible one)
+        b = cv2.GaussianBlur(src, (0, 0), sigmaX=float(sg) if axis == 1 else 1e-6, sigmaY=float(sg) if axis == 0 else 1e-6,
+                             borderType=cv2.BORDER_REFLECT)
+        stack.append(b[pad:pad + polar.shape[0]] if pad else b)
+    pos = np.clip(sigma / (steps[1] - steps[0]), 0.0, levels - 1.0 - 1e-6)
+    i = pos.astype(np.int32)
+    frac = (pos - i).astype(np.float32)
+    out = np.empty_like(polar)
+    for k in range(levels - 1):
+        cols = i == k
+        out[:, cols] = stack[k][:, cols] * (1.0 - frac[cols]) + stack[k + 1][:, cols] * frac[cols]
+    return out
+
+
+def astigmatism(img: np.ndarray, rng: np.random.Generator, *, sigma_radial: float, sigma_tangential: float,
+                power: float, cx: float, cy: float, radius: float) -> np.ndarray:
+    """Blur along the radius from the image circle's centre (cx, cy) px of σ ``sigma_radial`` px at the circle
+    (``radius`` px) and along the circle of σ ``sigma_tangential`` px, both growing from 0 at the centre as
+    ρ^``power``: a fisheye's astigmatism at wide angles, or a renderer's radial blur (``sigma_tangential`` 0).
+
+    Blurs in polar coordinates (1 px along the radius, ≤ 1 px along the circle at its rim) and maps back; where
+    the larger σ is under 1 px this blends towards the image as it was (0.25 px: unchanged), so that the
+    polar resampling's own softening (about 0.4 px) stays out of the sharp centre.
+    """
+    del rng
+    h, w = img.shape
+    r_max = int(math.ceil(min(max(radius, 1.0), math.hypot(w, h)) * 1.02)) + 2
+    n_ang = int(math.ceil(2.0 * math.pi * r_max))
+    r = np.arange(r_max, dtype=np.float32)
+    ang = np.arange(n_ang, dtype=np.float32) * np.float32(2.0 * math.pi / n_ang)
+    mx = (np.float32(cx) + np.cos(ang)[:, None] * r[None, :]).astype(np.float32)
+    my = (np.float32(cy) + np.sin(ang)[:, None] * r[None, :]).astype(np.float32)
+    src = img.astype(np.float32)
+    polar = cv2.remap(src, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    grow = (np.minimum(r / np.float32(max(radius, 1e-6)), 1.0) ** np.float32(power)).astype(np.float32)
+    rows_per_px = n_ang / (2.0 * math.pi * np.maximum(r, 1.0))  # rows of the polar image per px of arc
+    blurred = _blur_by_column(polar, sigma_radial * grow, axis=1)
+    blurred = _blur_by_column(blurred, np.minimum(sigma_tangential * grow * rows_per_px, n_ang / 8.0), axis=0)
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    dx, dy = xx - np.float32(cx), yy - np.float32(cy)
+    back_r = np.minimum(np.hypot(dx, dy), np.float32(r_max - 1))
+    back_a = (np.mod(np.arctan2(dy, dx), np.float32(2.0 * math.pi)) * np.float32(n_ang / (2.0 * math.pi)))
+    back = cv2.remap(np.concatenate([blurred, blurred[:1]]), back_r, back_a, cv2.INTER_LINEAR)  # the angle wraps
+    reach = max(sigma_radial, sigma_tangential) * np.minimum(back_r / np.float32(max(radius, 1e-6)), 1.0) ** np.float32(power)
+    share = np.clip((reach - 0.25) / 0.75, 0.0, 1.0).astype(np.float32)
+    return (src + share * (back - src)).astype(np.float32)
 
 
 def bayer_demosaic(img: np.ndarray, rng: np.random.Generator, *, gain_r: float, gain_b: float,

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from data_gen.degrade import CIRCLE_STEPS, PIPELINE_ORDER, apply_degradations, gaussian_blur, gaussian_noise, shot_noise
-from data_gen.sensor import (bayer_demosaic, circle_edge, disc_kernel, field_defocus, lateral_ca, tone_curve,
-                             unsharp)
+from data_gen.sensor import (astigmatism, bayer_demosaic, circle_edge, disc_kernel, field_defocus, lateral_ca,
+                             tone_curve, unsharp)
 
 CIRCLE = {"cx": 31.5, "cy": 31.5, "radius": 32.0}
 
@@ -82,6 +82,21 @@ def test_lateral_ca_spreads_a_rim_edge_by_its_shift_and_leaves_the_centre():
                        atol=0.02)
 
 
+def test_astigmatism_blurs_along_the_radius_and_along_the_circle_apart():
+    yy, xx = np.mgrid[0:128, 0:128]
+    rad = np.hypot(xx - 63.5, yy - 63.5)
+    img = np.where((rad > 40) & (rad < 52), 0.8, 0.2).astype(np.float32)  # a ring: edges across the radius
+    img[(np.abs(yy - 63.5) < 10) & (xx < 30)] = 0.8  # a spoke: edges along the radius, 56 px out at column 8
+    circle = {"cx": 63.5, "cy": 63.5, "radius": 56.0}
+    radial = astigmatism(img, None, sigma_radial=3.0, sigma_tangential=0.0, power=1.0, **circle)
+    tangential = astigmatism(img, None, sigma_radial=0.0, sigma_tangential=3.0, power=1.0, **circle)
+    ring, spoke = (slice(63, 64), slice(108, 124)), (slice(46, 62), slice(8, 9))  # profiles across each edge
+    assert _width(radial[ring].ravel()) >= 5 and _width(tangential[ring].ravel()) <= 2  # 2: the polar resampling
+    assert _width(tangential[spoke].ravel()) >= 5 and _width(radial[spoke].ravel()) <= 2
+    assert np.array_equal(astigmatism(img, None, sigma_radial=0.0, sigma_tangential=0.0, power=1.0, **circle), img)
+    assert np.array_equal(radial[54:74, 54:74], img[54:74, 54:74])  # σ under 0.25 px near the centre: unchanged
+
+
 @pytest.mark.parametrize("method", ["bilinear", "edge"])
 def test_the_mosaic_round_trip_keeps_a_flat_field_and_the_mean_grey(method):
     flat = np.full((32, 32), 0.37, np.float32)
@@ -139,7 +154,7 @@ def test_the_laws_run_in_a_camera_order_and_circle_laws_follow_the_circle():
     order = PIPELINE_ORDER.index
     assert order("circle_edge") < order("field_defocus") < order("lateral_ca") < order("shot_noise")
     assert order("gaussian_noise") < order("bayer_demosaic") < order("tone_curve") < order("unsharp") < order("jpeg")
-    assert {"circle_edge", "field_defocus", "lateral_ca"} <= set(CIRCLE_STEPS)
+    assert {"circle_edge", "field_defocus", "lateral_ca", "astigmatism"} <= set(CIRCLE_STEPS)
     steps = [{"name": "tone_curve", "law": "srgb", "gamma": 2.2}, {"name": "bayer_demosaic", "gain_r": 0.5,
              "gain_b": 0.6, "method": "edge"}, {"name": "circle_edge", "black_at": 1.0, "width": 0.1, **CIRCLE}]
     out = apply_degradations(np.full((64, 64), 0.18, np.float32), steps, np.random.default_rng(0))
