@@ -35,6 +35,8 @@ camera or another renderer added (:mod:`data_gen.sensor`), the others as ``rim-r
 - ``tone-srgb``: the paper's reflectance (black 0.01–0.1, white 0.3–0.9) and the rim's fall-off in linear
   light, encoded by the sRGB curve;
 - ``sharpen``: an unsharp mask (amount 0.5–1.5, σ 0.8–2 px) with its halos;
+- ``alias-point``: the board point-sampled, one ray through each pixel's centre (no anti-aliasing: the
+  squeezed outer squares' edges step by whole pixels), then the field blur and noise as drawn;
 - ``camera-chain``: all of these at once as a camera makes them (disc defocus, lateral CA, photon
   noise, mosaic, sRGB, mild sharpening, JPEG at quality 70–95), the circle edge soft.
 
@@ -79,7 +81,8 @@ def _rules(vig: dict | None = None, blur: dict | None = None, disc: bool = False
         new = vig if r.name == "rim_vignetting" else blur if r.name == "field_blur" else None
         if disc and r.name == "field_blur":
             p = dict(r.params)
-            out.append(Rule.of("field_defocus", r.p, power=p["power"], radius_centre=tuple(2 * v for v in p["sigma_centre"]),
+            out.append(Rule.of("field_defocus", r.p, power=p["power"],
+                               radius_centre=tuple(2 * v for v in p["sigma_centre"]),
                                radius_rim=tuple(2 * v for v in p["sigma_rim"])))
             continue
         out.append(r if new is None else Rule.of(r.name, r.p, **{**dict(r.params), **new}))
@@ -142,6 +145,7 @@ def image_laws() -> dict[str, dict]:
         "noise-poisson": plus(Rule.of("shot_noise", photons=(20.0, 200.0))),
         "tone-srgb": {**plus(Rule.of("tone_curve", law="srgb", gamma=2.2)), **LINEAR_PAPER},
         "sharpen": plus(Rule.of("unsharp", amount=(0.5, 1.5), sigma=(0.8, 2.0))),
+        "alias-point": {"antialias": False},
         "camera-chain": {"rules": _camera_chain(), **LINEAR_PAPER},
     }
 

@@ -49,6 +49,8 @@ class Preset:
     flex : (w_x, w_y) every chessboard's parabolic sag in squares (:class:`data_gen.board.Board`'s ``flex``,
     recorded in the label's ``board``); (0, 0): flat boards. shape : every chessboard's shape terms in squares
     (:class:`data_gen.board.Board`'s ``shape``, :mod:`aicalib_tf.geometry.board_shape`); (): none.
+    antialias : the board's edges area-sampled (:func:`data_gen.render.render_board`); False: one sample at each
+    pixel's centre (edges step by whole pixels, as a renderer without supersampling draws them).
     """
 
     name: str
@@ -74,6 +76,7 @@ class Preset:
     fisheye_circular_from_deg: float = 175.0
     flex: tuple[float, float] = (0.0, 0.0)
     shape: tuple[float, ...] = ()
+    antialias: bool = True
     margin_range: tuple[float, float] = (0.15, 1.0)
     paper_black: tuple[float, float] = (0.04, 0.22)
     paper_white: tuple[float, float] = (0.7, 0.95)

@@ -198,7 +198,7 @@ def render_board(
     camera, board : the scene.
     rvec, tvec : (3,) pose of the board in the camera frame (T_cam_board).
     background : (H, W) float32 in [0, 1], H, W matching ``camera.image_size``.
-    samples : supersamples per edge pixel (Fibonacci number, see :func:`fibonacci_lattice`).
+    samples : supersamples per edge pixel (Fibonacci number, :func:`fibonacci_lattice`); 1: each centre alone (steps).
     junction_samples : supersamples per pixel near an X-junction or a paper corner.
 
     Returns
@@ -212,6 +212,8 @@ def render_board(
     box = _active_box(camera, board, rvec, tvec)
     if box is None:
         return out
+    if samples == 1:
+        return _point_sampled(out, camera, board, rvec, tvec, box)
     bx0, by0, bx1, by1 = box
     crop = out[by0:by1, bx0:bx1]  # a view: writes land in ``out``
     bg = background[by0:by1, bx0:bx1]
@@ -238,6 +240,18 @@ def render_board(
     _supersample(crop, bg, q, board, ~uniform & ~junction & ~rim, samples)
     _supersample(crop, bg, q, board, junction & ~rim, junction_samples)
     _supersample_exact(crop, bg, camera, board, rvec, tvec, (bx0, by0), rim, samples)
+    return out
+
+
+def _point_sampled(out: np.ndarray, camera: Camera, board: Board, rvec, tvec, box) -> np.ndarray:
+    """``out`` with the board painted in ``box`` (x0, y0, x1, y1) from one ray through each pixel's centre."""
+    x0, y0, x1, y1 = box
+    uu, vv = np.meshgrid(np.arange(x0, x1, dtype=np.float64), np.arange(y0, y1, dtype=np.float64))
+    X, Y = board_coordinates(camera.pixel_to_ray(np.stack([uu, vv], axis=-1)), rvec, tvec, board)
+    cls = board.classify(X, Y)
+    crop = out[y0:y1, x0:x1]
+    crop[cls == 0] = board.black
+    crop[cls == 1] = board.white
     return out
 
 

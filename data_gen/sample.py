@@ -186,7 +186,8 @@ class Scene:
         if self.has_board:
             rvec = self.rvec if rvec is None else rvec
             tvec = self.tvec if tvec is None else tvec
-            img = render_board(self.camera, self.board, rvec, tvec, self.background)
+            img = render_board(self.camera, self.board, rvec, tvec, self.background,
+                               **({} if self.preset.antialias else {"samples": 1}))
             img = draw_occluders(img, self.occluders, self.occluder_levels)
         return apply_degradations(img, self.steps, copy.deepcopy(self.degrade_rng))
 

@@ -25,7 +25,8 @@ import math
 import cv2
 import numpy as np
 
-__all__ = ["circle_edge", "field_defocus", "lateral_ca", "astigmatism", "bayer_demosaic", "tone_curve", "unsharp", "disc_kernel",
+__all__ = ["circle_edge", "field_defocus", "lateral_ca", "astigmatism", "bayer_demosaic", "tone_curve", "unsharp",
+           "disc_kernel",
            "GREY_WEIGHTS", "DEMOSAIC_METHODS", "TONE_LAWS"]
 
 GREY_WEIGHTS = (0.299, 0.587, 0.114)  # R, G, B (Rec. 601, OpenCV's BGR2GRAY)
@@ -133,8 +134,8 @@ def _blur_by_column(polar: np.ndarray, sigma: np.ndarray, axis: int, levels: int
     stack = [polar]
     for sg in steps[1:]:
         # along one axis only (a σ of 0 would take the other's, so the other gets a negligible one)
-        b = cv2.GaussianBlur(src, (0, 0), sigmaX=float(sg) if axis == 1 else 1e-6, sigmaY=float(sg) if axis == 0 else 1e-6,
-                             borderType=cv2.BORDER_REFLECT)
+        sx, sy = (float(sg), 1e-6) if axis == 1 else (1e-6, float(sg))
+        b = cv2.GaussianBlur(src, (0, 0), sigmaX=sx, sigmaY=sy, borderType=cv2.BORDER_REFLECT)
         stack.append(b[pad:pad + polar.shape[0]] if pad else b)
     pos = np.clip(sigma / (steps[1] - steps[0]), 0.0, levels - 1.0 - 1e-6)
     i = pos.astype(np.int32)
@@ -175,7 +176,8 @@ def astigmatism(img: np.ndarray, rng: np.random.Generator, *, sigma_radial: floa
     back_r = np.minimum(np.hypot(dx, dy), np.float32(r_max - 1))
     back_a = (np.mod(np.arctan2(dy, dx), np.float32(2.0 * math.pi)) * np.float32(n_ang / (2.0 * math.pi)))
     back = cv2.remap(np.concatenate([blurred, blurred[:1]]), back_r, back_a, cv2.INTER_LINEAR)  # the angle wraps
-    reach = max(sigma_radial, sigma_tangential) * np.minimum(back_r / np.float32(max(radius, 1e-6)), 1.0) ** np.float32(power)
+    rho = np.minimum(back_r / np.float32(max(radius, 1e-6)), 1.0)
+    reach = max(sigma_radial, sigma_tangential) * rho ** np.float32(power)
     share = np.clip((reach - 0.25) / 0.75, 0.0, 1.0).astype(np.float32)
     return (src + share * (back - src)).astype(np.float32)
 

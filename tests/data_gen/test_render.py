@@ -78,3 +78,17 @@ def test_background_shape_is_checked():
     cam, board, rvec, tvec = _fronto_parallel(20.0, 20.0)
     with pytest.raises(ValueError, match="background"):
         render_board(cam, board, rvec, tvec, np.zeros((10, 10), np.float32))
+
+
+def test_point_sampling_takes_each_pixel_from_its_centre_alone():
+    # Corner (0, 0) 0.3 px right of and 0.2 px below pixel (20, 20)'s centre: area sampling mixes the edge
+    # pixels; one sample at each centre gives every pixel the class of its centre, so edges step.
+    cam, board, rvec, tvec = _fronto_parallel(20.3, 20.2)
+    bg = np.full((48, 64), BG, np.float32)
+    point = render_board(cam, board, rvec, tvec, bg, samples=1)
+    area = render_board(cam, board, rvec, tvec, bg)
+    assert set(np.unique(point).tolist()) <= {np.float32(BLACK), np.float32(WHITE), np.float32(BG)}
+    mixed = ~np.isin(area, [np.float32(BLACK), np.float32(WHITE), np.float32(BG)])
+    assert mixed.sum() > 50 and np.array_equal(point[~mixed], area[~mixed])
+    # pixel (20, 21)'s centre lies left of the edge x = 20.3: in the white square left of corner (0, 0)'s row
+    assert point[21, 20] == np.float32(WHITE) and point[21, 21] == np.float32(BLACK)

@@ -54,7 +54,8 @@ def test_disc_kernel_is_a_flat_topped_disc_of_its_radius():
 
 def test_field_defocus_grows_towards_the_rim_and_keeps_a_flat_field():
     flat = np.full((64, 64), 0.5, np.float32)
-    assert np.allclose(field_defocus(flat, None, radius_centre=1.0, radius_rim=4.0, power=1.0, **CIRCLE), 0.5, atol=1e-6)
+    out = field_defocus(flat, None, radius_centre=1.0, radius_rim=4.0, power=1.0, **CIRCLE)
+    assert np.allclose(out, 0.5, atol=1e-6)
     img = _step()
     out = field_defocus(img, None, radius_centre=0.5, radius_rim=5.0, power=1.0, **CIRCLE)
     centre = _width(out[32, 24:40])  # the edge crosses the circle's centre ...
