@@ -18,7 +18,12 @@ parallelogram (its two neighbours on the ring and the diagonal one inside). A gr
 than ``MAX_MISSING`` corners, or any inside its outer ring, is left as it is. Where the rim's
 corner is too faint for the noise, or its outer squares are sheared into slivers, the fit can stop
 2–5 px short of the junction, on an edge or on a sliver's ridge: such a point's saddle is far
-flatter than its neighbours' (:func:`flat_placed`), and the grid is then left as it is.
+flatter than its neighbours' (:func:`flat_placed`), and the grid is then left as it is. Started
+far from a board corner whose squares shrink faster than the lines lead, it can stop on the noise
+inside one dark outer square: the ring about it of half the usual radius, which a junction's own
+four squares fill, then keeps a fraction of its neighbours' amplitude (:func:`faint_placed`). Both
+tests also hold for the grid's own corners that no network point marks (the ring test proposed
+them): a rim corner the grid holds 1 px off on an edge leads the completion astray.
 
 A full board claims every corner in view. Where an object in front cuts the board, the grid may
 hold points on the object's edge and miss a corner beside it, which this completion would then
@@ -39,7 +44,7 @@ from aicalib_tf.detect.corners.refine import Smoothed, refine_windowed, window_r
 from aicalib_tf.detect.corners.saddle import saddle_fit_matrix
 
 __all__ = ["complete_rim", "rim_board", "unlike_neighbours", "flat_placed", "saddle_sharpness", "grid_directions",
-           "neighbour_median", "MAX_MISSING", "SHIFT", "PLACED_FLAT"]
+           "neighbour_median", "faint_placed", "MAX_MISSING", "SHIFT", "PLACED_FLAT", "HALF_RING"]
 
 MAX_MISSING = 3  # most corners of the outer ring placed here
 SHIFT = 0.34  # of the smallest local step: the farthest the saddle fit may move a prediction
@@ -48,6 +53,7 @@ RATIO = (0.3, 1.25)  # bounds of a line's step ratio used to extrapolate its nex
 AMP_RANGE = (0.45, 1.4)  # a corner's ring amplitude over its neighbours' median: the least and the most
 ODD_RATIO = 6.0  # a corner's ring asymmetry (of its amplitude) over its neighbours' median: the most ...
 ODD_FLOOR = 0.05  # ... that median taken as at least this (sharp, evenly lit corners leave almost none)
+HALF_RING = 0.5  # of unlike_neighbours' ring radius: the ring faint_placed reads, inside a corner's own squares
 PLACED_FLAT = 0.5  # ln: a placed corner whose saddle_sharpness is this far under its neighbours' median is no junction
 SHARP_RADIUS = 3  # px: the largest window radius of saddle_sharpness (a 7×7 window)
 _NEIGHBOURS = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)]
@@ -241,7 +247,8 @@ def complete_rim(grid: Grid, shape: tuple[int, int], smoothed: Smoothed, ring_im
     Returns a grid with every position of ``shape`` filled (placed corners get index -1), or None
     when the grid's extent is not ``shape``, more than ``MAX_MISSING`` corners are missing, one is
     inside the outer ring, a corner's fit fails, a corner of the full grid is
-    :func:`unlike_neighbours` (an object in front), or a placed one is :func:`flat_placed`.
+    :func:`unlike_neighbours` (an object in front), or a placed one, or one of the grid's without a
+    candidate (index -1), is :func:`flat_placed` or :func:`faint_placed`.
     """
     a, b = shape
     if grid.shape != (a, b) or len(grid) >= a * b or a * b - len(grid) > MAX_MISSING or min(a, b) < 4:
@@ -261,9 +268,31 @@ def complete_rim(grid: Grid, shape: tuple[int, int], smoothed: Smoothed, ring_im
     points = np.array([[full[(i, j)] for j in range(b)] for i in range(a)])
     if unlike_neighbours(points, ring_image).any():
         return None  # an object in front: a full board would claim corners it hides
-    if flat_placed(points, smoothed.gray, [(i, j) for i, j in missing]).any():
+    unsure = missing + [(int(i), int(j)) for (i, j), k in zip(grid.ij, grid.index) if k < 0]  # no network point
+    if flat_placed(points, smoothed.gray, unsure).any():
         return None  # a fit left on an edge or a ridge short of the junction
+    if faint_placed(points, ring_image, unsure).any():
+        return None  # a fit left on the noise inside one square, short of the junction
     return _as_grid(grid, full)
+
+
+def faint_placed(points: np.ndarray, ring_image: np.ndarray, placed: list) -> np.ndarray:
+    """(len(placed),) bool: the placed positions [(i, j)] of a full grid ``points`` (a, b, 2) px whose ring of
+    ``HALF_RING`` of :func:`unlike_neighbours`' radius on ``ring_image`` (H, W) keeps less than ``AMP_RANGE[0]`` of
+    the median amplitude of their neighbours' on the grid, on rings of the same share of their own steps.
+    That ring stays inside the corner's own four squares (a rim corner's outer squares are squeezed to a
+    fraction of its inner step): a saddle fit left on the noise inside one dark square, short of the junction,
+    keeps the junction's edges on the wider ring but almost nothing on this one (a rim corner 16 px off: 0.67 of
+    its neighbours on the wide ring, 0.2 on this; the rim completion's true corners of closeup_families: 0.5 or more)."""
+    if not placed:
+        return np.zeros(0, bool)
+    a, b = points.shape[:2]
+    d = grid_directions(points)
+    radius = np.maximum(1.5, HALF_RING * 0.3 * np.hypot(d[..., 0], d[..., 1]).min(axis=0)).ravel()
+    amp = ring_symmetry(ring_image, points.reshape(-1, 2), radius)[0].reshape(a, b)
+    near = neighbour_median(amp)
+    ii, jj = np.array(placed).T
+    return amp[ii, jj] < AMP_RANGE[0] * near[ii, jj]
 
 
 def flat_placed(points: np.ndarray, gray: np.ndarray, placed: list) -> np.ndarray:

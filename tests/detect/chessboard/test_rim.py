@@ -151,3 +151,48 @@ def test_a_board_corner_whose_outer_squares_the_rim_cuts_is_like_its_neighbours(
     img = ring.copy()
     img[(y > 38) & (x < 60)] = 0.5  # an object's edge through the board corner
     assert unlike_neighbours(points, Smoothed(img).sigma(1.0))[0, 0]
+
+
+def test_a_placed_corner_left_inside_a_dark_square_is_faint_against_its_neighbours():
+    # closeup_laws, a 204° EUCM lens, the outer squares 88° off axis (benchmarks/closeup_families.py, rim-reach-hd,
+    # held-out, seed 301 #5): the rim completion's fit stopped on the noise inside the dark square beyond the board
+    # corner, 16 px off (a wrong board); its ring of 0.3 of a step still crosses the junction's edges, half of it not
+    from aicalib_tf.detect.chessboard.rim import faint_placed
+    from aicalib_tf.io import as_gray_float
+    from data_gen.presets import get_preset
+
+    preset = replace(get_preset("closeup_laws"), name="rim-reach-hd-held-out", lens=("ds", "eucm"),
+                     sizes=((1280, 960),), fisheye_fov_deg=(180.0, 210.0))
+    s = make_sample(preset, 301, 5, size=(1280, 960), pattern=PATTERN)
+    ring = Smoothed(as_gray_float(s.image)).sigma(1.0)
+    points, placed = s.corners.reshape(6, 9, 2).astype(np.float64), [(0, 0), (1, 0)]
+    assert not faint_placed(points, ring, placed).any()
+    assert not unlike_neighbours(points, ring).any()
+    points[0, 0] = [696.23, 136.23]  # where the fit left it
+    assert faint_placed(points, ring, placed).tolist() == [True, False]
+    assert not unlike_neighbours(points, ring)[0, 0]  # the wide ring alone lets it pass
+    assert len(faint_placed(points, ring, [])) == 0
+
+
+def test_the_grids_corners_without_a_network_point_are_checked_like_placed_ones(monkeypatch):
+    # a grid corner the ring test proposed (index -1) rests on no more evidence than one the completion places
+    from aicalib_tf.detect.chessboard import rim
+
+    truth, smoothed, smooth, ref = _scene("closeup-eq", 20)
+    grid = _grid(truth, [8])
+    grid = replace(grid, index=np.where(grid.index == 7, -1, grid.index))
+    seen = {}
+
+    def recorded(name):
+        real = getattr(rim, name)
+
+        def test(points, image, placed):
+            seen[name] = list(placed)
+            return real(points, image, placed)
+        return test
+
+    for name in ("flat_placed", "faint_placed"):
+        monkeypatch.setattr(rim, name, recorded(name))
+    full = rim.complete_rim(grid, (6, 9), smoothed, smooth, ref)
+    assert full is not None and seen == {"flat_placed": [(0, 8), (0, 7)], "faint_placed": [(0, 8), (0, 7)]}
+    assert np.array_equal(full.index[full.index >= 0], grid.index[grid.index >= 0])
