@@ -134,11 +134,10 @@ def trace_unshear(gray: np.ndarray, truth: np.ndarray, model, pattern, threshold
     from aicalib_tf.detect import pipeline as pl
 
     seen = pl._detect_at(gray, pattern, model, threshold)
-    got = pl.unshear_look(gray, pattern, lambda img: pl._detect_at(img, pattern, model, threshold, relative=True),
-                          seen.ids if seen.found else None, seen.corners if seen.found else None)
-    if got is None:
+    got = pl._unsheared(gray, pattern, model, threshold, seen)
+    if got is seen or not got.complete:
         return "none"
-    return board_detection_outcome(np.asarray(got[0], np.float64), truth, pattern)[0]
+    return board_detection_outcome(np.asarray(got.corners, np.float64), truth, pattern)[0]
 
 
 def _in_rim_reach(grid, pattern) -> bool:

@@ -12,7 +12,8 @@ enlarged slivers blurrier) and searched again, and a complete board found there 
 * a partial board (corners with ids) whose axes meet at under ``MAX_ANGLE``, whose steps differ
   by more than ``MAX_STEP_RATIO``, or whose lattice predicts a square thinner than
   ``MIN_THICKNESS`` px next to it (:func:`thinnest_square`: the far rows of a board tilted along one
-  axis): the homography of its ids to its corners (:func:`lattice_map`);
+  axis, or seen close through a wide lens, its near squares 5–10 times its far ones): the homography
+  of its ids to its corners (:func:`lattice_map`);
 * a sliver of texture (:func:`texture_quads`): the network may find no corner at all on the board,
   but its many nearly parallel edges stand out. The image's gradient energy, smoothed, has a
   connected region whose edges are nearly all of one orientation (coherence at least
@@ -30,9 +31,13 @@ each where the found corners' homography predicts it and only where the view sho
 
 Steep tilts (tilt-steep, 55–80°, 100 images a seed): 99 and 98 of 100 on the seeds it was tuned
 on (41, 97), 100, 100, 100 and 98 on others (211, 307, 401, 503), none wrong; the misses are a board
-under text and boards whose far squares are 1.2–1.5 px thick. On a board-free 640×480 frame it costs
-about 9 ms (the texture analysis, its second pass included) and a search of a 200–300 px warp where
-a sliver is found.
+under text and boards whose far squares are 1.2–1.5 px thick. ``benchmarks/tilt_families.py`` (seed
+301, 12 laws of 12 images): 142 of 144 through tilt_steep's lenses, 118 of 144 through strong barrel
+lenses and fisheyes (136 and 112 with a 5 px ``MIN_THICKNESS`` and one energy share of 0.25, coherence
+0.7), none wrong; its misses are squares 1.2–2.5 px thick that the network marks few corners of (a
+barrel lens bends such a sliver into an arc no affine warp straightens). On a board-free 640×480 frame
+the texture analysis costs about 8 ms CPU (both shares; 5 ms with one; 30 evaluate clutter frames),
+and a search of a 200–300 px warp where a sliver is found (4 of those 30).
 
 Coordinates are (x, y) px, OpenCV's convention: the centre of pixel (0, 0) is at (0.0, 0.0), and
 ``cv2.warpAffine`` / ``cv2.warpPerspective`` sample the image at M⁻¹ (x', y') for the pixel centre
@@ -52,15 +57,16 @@ __all__ = ["MAX_ANGLE", "MAX_STEP_RATIO", "lattice_axes", "is_sheared", "lattice
 
 MAX_ANGLE = 30.0  # degrees: a partial board whose axes meet at less than this is looked at again, unsheared
 MAX_STEP_RATIO = 2.5  # ... and so is one whose steps along its two axes differ more than this
-MIN_THICKNESS = 5.0  # px: ... and one whose lattice predicts a square thinner than this (the far squares of a tilted board)
+MIN_THICKNESS = 8.0  # px: ... and one whose lattice predicts a square thinner than this (the far squares of a tilted board)
 STEP = 12.0  # px: a square's side in the warped image (an upsampled board is blurred across: larger is worse)
 SIDE = 120.0  # px: the side of the square a texture sliver's outline is mapped onto (10×7 squares: 12×17 px)
 PAD = 0.4  # of the board's warped extent: margin around it (the outer squares and paper)
 ENERGY_SIGMA = 5.0  # px of the image: smoothing of the gradient energy and orientation (a few stripes of a sliver board)
-ENERGY_SHARE = 0.25  # of the largest smoothed energy: the region of a texture sliver
-MIN_COHERENCE = 0.7  # energy-weighted orientation coherence of a sliver (0: no orientation, 1: all parallel)
+ENERGY_SHARES = (0.25, 0.12)  # of the largest smoothed energy: a texture sliver's region, then a wider one (a faint far end)
+MIN_COHERENCE = 0.6  # energy-weighted orientation coherence of a sliver (0: no orientation, 1: all parallel)
 MIN_ELONGATION = 3.0  # length / width of a sliver (from its second moments)
-MAX_SLIVERS = 2  # texture slivers looked at again
+MAX_SLIVERS = 2  # texture slivers looked at again, at each share of the energy
+SAME_OUTLINE = 0.05  # of a sliver's length: an outline this near another's in every corner is the same sliver
 CANDIDATE_REGIONS = 4  # high-energy regions, by summed energy, that may be one
 ENERGY_PASSES = 2  # the regions taken again without the brightest one while none is a sliver
 MIN_LENGTH = 150.0  # px: a shorter sliver holds no board the network could read once unsheared (10 squares of 15 px)
@@ -172,15 +178,18 @@ def _sliver(xy: np.ndarray, energy: np.ndarray, coherence: np.ndarray, scale: fl
 
 
 def texture_quads(gray: np.ndarray, most: int = MAX_SLIVERS) -> list[np.ndarray]:
-    """Outlines of boards seen nearly edge-on: [(4, 2) float64 px in turn around it], at most ``most``.
+    """Outlines of boards seen nearly edge-on: [(4, 2) float64 px in turn around it], at most ``most`` a share.
 
-    gray : (H, W) float32. The regions where the smoothed gradient energy is at least ``ENERGY_SHARE``
-    of its largest value are taken by their summed energy, the largest ``CANDIDATE_REGIONS`` only;
-    a board's has coherent edges (``MIN_COHERENCE``), is ``MIN_ELONGATION`` times longer than wide
-    and ``MIN_LENGTH`` px long (a small patterned object beside it may hold the largest value). When
-    none is and the largest value's region is no sliver (bold text, say, so bright that a thin board
-    beside it falls apart under that share), the regions are taken again with that one left out
-    (``ENERGY_PASSES``).
+    gray : (H, W) float32. The regions where the smoothed gradient energy is at least a share
+    (``ENERGY_SHARES``, in turn: a board's far end, its squares thinnest, may be too faint for the first
+    and the region then its near part only, whose outline leaves the board sheared; the second may take
+    in the paper around a clear board) of its largest value are taken by their summed energy, the largest
+    ``CANDIDATE_REGIONS`` only; a board's has coherent edges (``MIN_COHERENCE``), is ``MIN_ELONGATION``
+    times longer than wide and ``MIN_LENGTH`` px long (a small patterned object beside it may hold the
+    largest value). When none is and the largest value's region is no sliver (bold text, say, so bright
+    that a thin board beside it falls apart under that share), the regions are taken again with that one
+    left out (``ENERGY_PASSES``). An outline within ``SAME_OUTLINE`` of its length of one found already is left
+    out.
     """
     h, w = gray.shape
     f = max(1.0, max(w, h) / GRADIENT_SIDE)
@@ -193,11 +202,20 @@ def texture_quads(gray: np.ndarray, most: int = MAX_SLIVERS) -> list[np.ndarray]
     energy, coherence = _structure(np.asarray(small, np.float32), ENERGY_SIGMA / f, step)
     f *= step  # image px per px of the energy
     out: list[np.ndarray] = []
+    for share in ENERGY_SHARES:
+        out += [q for q in _slivers(energy, coherence, f, share, most)
+                if all(np.abs(q - seen).max() > SAME_OUTLINE * np.ptp(q, axis=0).max() for seen in out)]
+    return out
+
+
+def _slivers(energy: np.ndarray, coherence: np.ndarray, f: float, share: float, most: int) -> list[np.ndarray]:
+    """:func:`texture_quads`' outlines at one ``share`` of the largest ``energy`` (coherence alike; f image px a px)."""
+    out: list[np.ndarray] = []
     for _ in range(ENERGY_PASSES):
         top = float(energy.max())
         if not top > 0:
             break
-        n, labels, boxes, _ = cv2.connectedComponentsWithStats((energy >= ENERGY_SHARE * top).astype(np.uint8), connectivity=8)
+        n, labels, boxes, _ = cv2.connectedComponentsWithStats((energy >= share * top).astype(np.uint8), connectivity=8)
         sums = np.bincount(labels.ravel(), weights=energy.ravel(), minlength=n)
         sums[0] = 0.0  # the background
         for lab in np.argsort(sums)[::-1][:min(CANDIDATE_REGIONS, n - 1)]:
@@ -258,7 +276,8 @@ def candidate_maps(gray: np.ndarray, pattern_size: tuple[int, int], ids: np.ndar
     """The warps worth a second look, most trusted first: [(M (3, 3), (width, height))].
 
     gray : (H, W) float32. ids (K, 2) int and corners (K, 2) px: a partial board the search found
-    (or None): its lattice when sheared (:func:`is_sheared`), else a texture sliver's outline (:func:`texture_quads`).
+    (or None): its lattice when sheared or thin (:func:`is_sheared`, :func:`thinnest_square`; a board that is
+    neither: none), else a texture sliver's outline (:func:`texture_quads`).
     """
     if _spans(ids):
         _, u, v = lattice_axes(ids, corners)

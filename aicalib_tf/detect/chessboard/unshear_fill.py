@@ -5,8 +5,11 @@ squares were 1.5–3 px thick on the image: enlarged, they are blurred across, a
 come back with all but a few of the board's corners, those few too blurred for the network and the
 grid's own look-ups. When the found corners span the whole pattern (``cols`` × ``rows`` lattice
 positions, either way round) and at most ``MAX_FILL`` of those positions are empty, each empty one is
-predicted by the homography of the found ids to their corners on the view (a planar board seen through
-a lens of mild distortion: an inner position's prediction is good to a fraction of a step). Each must
+predicted by the homography of the ``NEAREST`` found corners nearest it on the lattice (a planar board:
+over a few squares even a strong lens leaves it nearly projective); where those corners are more than
+``MAX_RESIDUAL`` of a step off that homography the lens bends the board too much there, and the board is
+left incomplete (a strong barrel lens put a far corner 2 px off, the board wrong, with the whole board's
+homography). Each must
 show a junction there (its chequer contrast at least ``MIN_CONTRAST`` of the found corners' median; one
 that does not leaves the board incomplete); it is moved by a saddle fit where one lands within
 ``MAX_SHIFT`` px of the prediction, else kept at the prediction (on the blurred far rows the fit mostly
@@ -28,11 +31,13 @@ import numpy as np
 from aicalib_tf.detect.chessboard.board_order import full_board_ids, handed, reading
 from aicalib_tf.detect.corners.sampling import sample_bilinear
 
-__all__ = ["MAX_FILL", "MAX_SHIFT", "pattern_indices", "filled_board"]
+__all__ = ["MAX_FILL", "MAX_SHIFT", "NEAREST", "MAX_RESIDUAL", "pattern_indices", "filled_board", "local_guesses"]
 
 MAX_FILL = 5  # empty lattice positions a board's found corners may leave and still be completed (under a tenth of 9×6)
 MAX_SHIFT = 1.0  # px on the view (squares of unshear.STEP px): an empty position moves to its saddle this near
 MIN_CONTRAST = 0.5  # of the found corners' median junction contrast: an empty position's least
+NEAREST = 12  # found corners, nearest on the lattice, that predict an empty position
+MAX_RESIDUAL = 0.1  # of the found corners' median step: the most a near corner may be off its local lattice
 
 
 def pattern_indices(ids: np.ndarray, points: np.ndarray, pattern_size: tuple[int, int]) -> np.ndarray | None:
@@ -100,7 +105,9 @@ def filled_board(det, pattern_size: tuple[int, int], view: np.ndarray, refine):
     typical = float(np.median(seen))
     if typical == 0 or not np.all(junction_contrast(view, lat, full_ij[empty]) / typical >= MIN_CONTRAST):
         return None
-    guess = cv2.perspectiveTransform(full_ij[empty].reshape(-1, 1, 2), lat).reshape(-1, 2).astype(np.float32)
+    guess = local_guesses(full_ij[idx], pts, full_ij[empty])
+    if guess is None:
+        return None
     found, ok = refine(view, guess, MAX_SHIFT)
     corners, scores = np.zeros((n, 2), np.float32), np.zeros(n, np.float32)
     corners[idx], scores[idx] = pts, np.asarray(det.scores, np.float32).reshape(-1)
@@ -108,3 +115,31 @@ def filled_board(det, pattern_size: tuple[int, int], view: np.ndarray, refine):
     perm = reading(corners, pattern_size, view)
     return replace(det, corners=corners[perm], ids=full_board_ids(pattern_size), scores=scores[perm], complete=True,
                    reason="")
+
+
+def local_guesses(ij: np.ndarray, pts: np.ndarray, empty: np.ndarray) -> np.ndarray | None:
+    """Where the empty lattice positions ``empty`` (M, 2) lie: (M, 2) float32 px, or None when one cannot be trusted.
+
+    ij (K, 2) lattice positions and pts (K, 2) px of the found corners. Each empty position is predicted by the
+    homography of the ``NEAREST`` found corners nearest it on the lattice (a board bent by the lens is nearly
+    projective over a few squares, not over the whole view); None when they do not span 2 steps both ways, or
+    when one of them is further than ``MAX_RESIDUAL`` of the median step off that local lattice (the lens bends
+    the board even there).
+    """
+    ij, pts = np.asarray(ij, np.float64), np.asarray(pts, np.float64)
+    step = float(np.median(np.linalg.norm(pts[:, None] - pts[None], axis=2)[
+        np.abs(ij[:, None] - ij[None]).sum(axis=2) == 1]))
+    out = np.zeros((len(empty), 2), np.float32)
+    for k, target in enumerate(np.asarray(empty, np.float64).reshape(-1, 2)):
+        d = ij - target
+        near = np.lexsort((np.hypot(d[:, 0], d[:, 1]), np.abs(d).max(axis=1)))[:NEAREST]
+        if len(near) < 6 or min(np.ptp(ij[near], axis=0)) < 2:
+            return None
+        lat, _ = cv2.findHomography(ij[near], pts[near], 0)
+        if lat is None or not np.all(np.isfinite(lat)):
+            return None
+        fit = cv2.perspectiveTransform(ij[near].reshape(-1, 1, 2), lat).reshape(-1, 2)
+        if np.linalg.norm(fit - pts[near], axis=1).max() > MAX_RESIDUAL * step:
+            return None
+        out[k] = cv2.perspectiveTransform(target.reshape(1, 1, 2), lat).reshape(2)
+    return out

@@ -103,3 +103,26 @@ def test_a_steep_board_the_search_leaves_a_corner_short_of_is_found_complete(mon
     assert det.complete and board_detection_outcome(det.corners, s.corners, P)[0] == "hit"
     monkeypatch.setattr(unshear_fill, "MAX_FILL", 0)  # no position filled: the search's 50 corners stay a partial board
     assert not pipeline.detect_corners(s.image, P).complete
+
+
+def test_empty_positions_are_predicted_by_their_neighbours_lattice_and_refused_where_the_lens_bends_it():
+    from aicalib_tf.detect.chessboard.unshear_fill import local_guesses
+
+    ij = full_board_ids(PATTERN).astype(np.float64)
+    lat = np.array([[14.0, 3.0, 40.0], [1.0, 12.0, 30.0], [0.004, 0.03, 1.0]])  # a board in perspective
+    pts = cv2.perspectiveTransform(ij.reshape(-1, 1, 2), lat).reshape(-1, 2)
+    empty = np.array([7, 8, 17, 26])  # a far corner's cluster, as a steep board's search leaves it
+    kept = np.setdiff1d(np.arange(len(ij)), empty)
+    got = local_guesses(ij[kept], pts[kept], ij[empty])
+    assert got is not None and np.abs(got - pts[empty]).max() < 1e-3
+    def bent(k):  # barrel distortion k about the board's near corner, r in units of 100 px
+        r2 = ((pts - pts[45]) ** 2).sum(axis=1) / 100.0**2
+        return pts[45] + (pts - pts[45]) * (1.0 - k * r2)[:, None]
+
+    mild = bent(0.05)
+    got = local_guesses(ij[kept], mild[kept], ij[empty])
+    whole, _ = cv2.findHomography(ij[kept], mild[kept], 0)  # the whole board's homography: 3 times further off
+    off = np.linalg.norm(cv2.perspectiveTransform(ij[empty].reshape(-1, 1, 2), whole).reshape(-1, 2) - mild[empty], axis=1)
+    assert got is not None and np.linalg.norm(got - mild[empty], axis=1).max() < off.max() / 2
+    assert local_guesses(ij[kept], bent(0.3)[kept], ij[empty]) is None  # its far squares 3 times thinner: refused
+    assert local_guesses(ij[kept][:5], pts[kept][:5], ij[empty]) is None  # too few corners to span a lattice
