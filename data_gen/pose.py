@@ -35,6 +35,10 @@ class PoseConfig:
         extent in the image over the image circle's diameter); when set it replaces ``fill``, the
         distance is solved to give a drawn value exactly, and the board is aimed so that it may
         reach the rim.
+    rim_share : with ``circle_fill``, the share of close-ups aimed so that the paper's far side lies on the
+        image circle's rim, where its corners sit 80–100° off axis; 0 draws nothing. rim_reach : where those
+        aim, as a share of the farthest aim that keeps the paper inside the circle (above 1: past the rim, for
+        framing "any"; the circle then cuts the paper).
     """
 
     tilt_max_deg: float = 60.0
@@ -44,6 +48,8 @@ class PoseConfig:
     max_view_angle_deg: float = 80.0
     roll_deg: tuple[float, float] = (0.0, 360.0)
     circle_fill: tuple[float, float] | None = None
+    rim_share: float = 0.0
+    rim_reach: tuple[float, float] = (0.9, 1.0)
 
     def __post_init__(self):
         if self.framing not in FRAMING:
@@ -187,7 +193,7 @@ def sample_pose(
         roll = math.radians(rng.uniform(*cfg.roll_deg))
         R = _rotation(tilt, tilt_axis, roll)
         if cfg.circle_fill is not None and camera.fisheye:
-            R, t = _close_up(rng, camera, board, R, cfg.circle_fill)
+            R, t = _close_up(rng, camera, board, R, cfg.circle_fill, cfg.rim_share, cfg.rim_reach)
             if t is not None and _acceptable(camera, board, R, t, cfg):
                 return cv2.Rodrigues(R)[0].ravel(), t
             continue
@@ -214,16 +220,19 @@ def sample_pose(
 
 
 def _close_up(rng: np.random.Generator, camera: Camera, board: Board, R: np.ndarray,
-              circle_fill: tuple[float, float]) -> tuple[np.ndarray, np.ndarray | None]:
+              circle_fill: tuple[float, float], rim_share: float = 0.0,
+              rim_reach: tuple[float, float] = (0.9, 1.0)) -> tuple[np.ndarray, np.ndarray | None]:
     """(R (3, 3), t (3,) or None) for a board held close to a fisheye, filling a drawn fraction of
     its image circle (:func:`paper_circle_fill`). Its centre is aimed at a pixel up to ``1 - fill``
     of the circle's radius from the circle's centre (so its far side may reach the rim), and it
     faces that line of sight as a person holding it towards the lens does: ``R`` (roll and tilt
-    about the optical axis) is turned so that its tilt is measured from the line of sight. t is
-    None when no range gives that fill."""
+    about the optical axis) is turned so that its tilt is measured from the line of sight; a share
+    ``rim_share`` is aimed at ``rim_reach`` of that reach (1: the far side on the rim). t is None when no range
+    gives that fill."""
     fill = rng.uniform(*circle_fill)
     a = rng.uniform(0.0, 2.0 * math.pi)
-    s = (1.0 - fill) * math.sqrt(rng.uniform())
+    rim = rim_share > 0 and rng.random() < rim_share  # no draw without a rim share: other presets' poses stay
+    s = (1.0 - fill) * (rng.uniform(*rim_reach) if rim else math.sqrt(rng.uniform()))
     rho = camera.circle_radius()
     uv = np.array([camera.cx + s * rho * camera.fx * math.cos(a), camera.cy + s * rho * camera.fy * math.sin(a)])
     ray = camera.pixel_to_ray(uv)

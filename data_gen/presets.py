@@ -304,11 +304,25 @@ _RIM_LAWS = (  # domain randomisation of the light and blur laws across the fiel
     Rule.of("rim_vignetting", 0.45, law=("cos4", "poly", "hard"), strength=(0.4, 1.0), edge=(0.5, 0.95)),
     Rule.of("field_blur", 0.7, sigma_centre=(0.4, 1.2), sigma_rim=(0.8, 4.0), power=(0.8, 3.0)),
 )
+# image laws whose families the corner map misses (benchmarks/closeup_families.py noise-poisson, sharpen)
+_MAP_GAPS = (
+    Rule.of("shot_noise", 0.1, photons=(20.0, 100.0)),  # low light: 20-100 photons at white
+    Rule.of("unsharp", 0.1, amount=(0.3, 1.5), sigma=(0.8, 2.0)),
+)
+_OTHER_CAMERAS = (  # image formation of other cameras and renderers (data_gen.sensor), each at 10%
+    Rule.of("circle_edge", 0.1, black_at=1.0, width=(0.02, 0.1)),
+    Rule.of("field_defocus", 0.1, radius_centre=(0.5, 1.5), radius_rim=(1.5, 5.0), power=(1.0, 2.0)),
+    Rule.of("astigmatism", 0.1, sigma_radial=(1.0, 4.0), sigma_tangential=(0.0, 1.5), power=(1.5, 3.0)),
+    Rule.of("lateral_ca", 0.1, shift=(0.5, 2.5), power=(1.0, 2.0)),
+    Rule.of("bayer_demosaic", 0.1, gain_r=(0.4, 0.8), gain_b=(0.5, 0.9), method=("bilinear", "edge")),
+    Rule.of("tone_curve", 0.1, law=("srgb", "gamma"), gamma=(1.8, 2.4)),
+)
 _add(Preset(
     name="train_fisheye",
     description="Training mix of equidistant fisheyes only (120–210°, most of them circular): boards from far to "
                 "close-up, 30–95% of the image circle and up to its rim, tilts to 65°; vignetting, rim "
-                "fall-off and field blur under randomised laws, low contrast, noise, JPEG.",
+                "fall-off and field blur under randomised laws, low contrast, noise, JPEG; at 10% low-light "
+                "photon noise and an image processor's sharpening.",
     lens="fisheye",
     fisheye_fov_deg=(120.0, 210.0),
     fisheye_circular_from_deg=150.0,
@@ -325,7 +339,32 @@ _add(Preset(
         Rule.of("shot_noise", 0.2, photons=(100.0, 2000.0)),
         Rule.of("gaussian_noise", 0.9, sigma=(1.0, 25.0)),
         Rule.of("jpeg", 0.15, quality=(20, 80)),
-    ),
+    ) + _MAP_GAPS,
+))
+_add(Preset(
+    name="train_rim",
+    description="Training mix of close-ups on the rim of circular equidistant fisheyes (180–210°): most boards "
+                "aimed at the image circle's rim and past it (the circle may cut the paper), their outer corners "
+                "80–100° off axis, squeezed and darkened; train_fisheye's laws plus other cameras' and renderers' "
+                "image laws (disc defocus, astigmatism, lateral CA, mosaic, sRGB, sharpening, soft rim) at 10%.",
+    lens="fisheye",
+    fisheye_fov_deg=(180.0, 210.0),
+    fisheye_circular_from_deg=0.0,
+    cols_range=(3, 14),
+    rows_range=(3, 10),
+    pose=PoseConfig(tilt_max_deg=50.0, framing="any", min_visible_fraction=0.6, circle_fill=(0.3, 0.9),
+                    max_view_angle_deg=88.0, rim_share=0.9, rim_reach=(1.0, 1.3)),
+    clutter=(0.5, 2.0),
+    checker_distractors=(0.0, 2.0),
+    margin_range=(0.0, 1.0),
+    paper_black=(0.04, 0.4),
+    paper_white=(0.55, 0.95),
+    rules=_RIM_LAWS + (
+        Rule.of("contrast", 0.3, factor=(0.3, 0.9)),
+        Rule.of("shot_noise", 0.2, photons=(100.0, 2000.0)),
+        Rule.of("gaussian_noise", 0.9, sigma=(1.0, 25.0)),
+        Rule.of("jpeg", 0.15, quality=(20, 80)),
+    ) + _MAP_GAPS + _OTHER_CAMERAS,
 ))
 _add(Preset(
     name="train_steep",
