@@ -24,7 +24,8 @@ distance to a noise saddle). This module measures, in each corner's refinement w
   across it; each of the junction's two lines crosses the window's 2r px, so σ_loc = (noise / contrast) ·
   √(√π σ_b / r) (σ_b = ``EDGE`` px, a sharp render's edge: a lower bound, blur only raises it).
 
-The measure is no floor on which corners a board keeps: on the close-up families (``benchmarks/faint_corners.py``: seed 301, both lens
+A detection's σ is at least this bound (:func:`aicalib_tf.detect.corners.sigma.board_sigmas`). It is no floor on
+which corners a board keeps: on the close-up families (``benchmarks/faint_corners.py``: seed 301, both lens
 splits, the shipped network and a fine-tuned one) corners of cnr 1–2 miss their truth by a median 0.4–0.7 px
 and up to 2.07 px, their saddle fits started a px or two apart end on different noise saddles, and a fine-tuned
 network's two wrong boards (a corner of cnr 1.9 and one of 0.9, 2.07 px off) are the tail of that spread:

@@ -319,3 +319,32 @@ def test_a_board_of_close_corners_takes_white_noises_smoothed_asymmetry():
         x = cs.design(img, _true_corners(square), ids, np.ones(len(ids)))
         assert np.all(x[:, k] == cs.WHITE_SMOOTHED) == close
         assert np.all(x[:, k] == x[0, k])  # a board's column, the same for all its corners
+
+
+def test_a_corner_sigma_is_at_least_the_bound_of_its_contrast_over_the_noise():
+    from aicalib_tf.detect.corners.contrast import board_contrast
+    from tests.detect.corners.test_contrast import _board
+
+    for contrast, noise, raised in ((60.0, 2.0, False), (6.0, 5.0, True)):
+        img, pts, ids = _board(contrast, noise)
+        img = (np.clip(np.round(img), 0, 255) / 255.0).astype(np.float32)
+
+        def region(x0, y0, x1, y1):
+            return img[y0:y1, x0:x1]
+
+        scores = np.ones(len(pts))
+        model = cs.sigma_from_design(cs.board_design(region, pts, ids, scores, (240, 240)))
+        bound = board_contrast(region, pts, ids, (240, 240))["bound"]
+        own = cs.board_sigmas(region, pts, ids, scores, (240, 240), own=True)
+        np.testing.assert_allclose(own, np.maximum(model, bound), rtol=1e-6)
+        # a clear board keeps the model's σ; at cnr 1.2 the bound (about 0.5 px) lifts most corners above it
+        assert (np.mean(own > model) > 0.5) == raised
+        np.testing.assert_array_equal(cs.board_sigmas(region, pts, ids, scores, (240, 240)),  # the gates': the model's
+                                      cs.sigma_from_design(_gates_design(region, pts, ids, scores)))
+
+
+def _gates_design(region, pts, ids, scores):
+    """board_design as the detector's gates take it: no foreign edge, the board's median blur reach for all."""
+    x = cs.board_design(region, pts, ids, scores, (240, 240), foreign=False)
+    x[:, cs._REACH_COLUMN] = np.median(x[:, cs._REACH_COLUMN])
+    return x
