@@ -14,7 +14,7 @@ import numpy as np
 from aicalib_tf.detect.chessboard.grid_growth import TOLERANCE, GrowingGrid
 from aicalib_tf.detect.chessboard.grid_kernels import edge_contrasts, seed_block
 
-__all__ = ["SeedContrast", "edge_contrast", "place_bent_seed", "place_seed"]
+__all__ = ["SeedContrast", "double_step", "edge_contrast", "place_bent_seed", "place_seed"]
 
 MAX_STEP_RATIO = 4.5  # a seed's two steps may differ in length this much (a board tilted 60°+ halves one)
 MAX_CELL_AREA = 1.5  # seed pairs spanning more than this of the smallest cell generate a sub-lattice
@@ -93,16 +93,52 @@ def place_seed(lat: GrowingGrid, k: int, neighbours: np.ndarray, contrast: np.nd
       generate the whole lattice, the board's own edges are the shortest once diagonals are out.
       A longer one such as (col, 2·col − row) is more orthogonal on a board tilted 60°, and it
       seeds where the board's own 3×3 is incomplete, as a sheared grid.
+
+    A block that steps over a corner (:func:`double_step`) seeds nothing.
     """
     blocks, orders = (_OFFS[None], 1) if not strips else (_STRIP_BLOCKS, 2)
     b, _, _, found = seed_block(lat.pts, int(k), neighbours, _NO_CONTRAST if contrast is None else contrast, lat.free,
                                 blocks, orders, TOLERANCE, MAX_STEP_RATIO, MAX_CELL_AREA, MAX_SPAN_RATIO)
     if b < 0:
         return False
-    lat.take((0, 0), k)
-    for (di, dj), q in zip(blocks[b].astype(int).tolist(), found.tolist()):
-        lat.take((di, dj), q)
+    cells = {(0, 0): int(k), **{(di, dj): q for (di, dj), q in zip(blocks[b].astype(int).tolist(), found.tolist())}}
+    if double_step(lat.pts, cells):
+        return False
+    for cell, q in cells.items():
+        lat.take(cell, q)
     return True
+
+
+def double_step(pts: np.ndarray, cells: dict) -> bool:
+    """Whether a seed block steps over a corner: a point of ``pts`` (N, 2) px part-way (20–80%) along
+    the step between two of its cells next to each other, off that step by under ``TOLERANCE`` of the
+    point's own distance from the step's start (the test a seed's own steps pass, :func:`place_seed`).
+    ``cells``: {(i, j): index into pts}.
+
+    Neighbouring corners of a lattice have no corner between them. Where a board's squares shrink
+    fast towards a fisheye's rim (steps 53, 36, then 22 px along a line), the parallelogram about a
+    corner predicts its far neighbour one near step (36 px) on: the corner two steps on (at 44 px)
+    lies within the tolerance, the one between (at 22 px) beyond it, and the block would seed a grid
+    with a line missing, which then grows no further than half the board.
+    """
+    at = np.array(list(cells.values()))
+    centre = pts[at].mean(axis=0)
+    # a point between two cells lies within 1.5 times the farthest cell's distance from the block's centre
+    reach = 1.5**2 * float(((pts[at] - centre) ** 2).sum(axis=1).max())
+    near = np.flatnonzero(((pts - centre) ** 2).sum(axis=1) <= reach)
+    steps = np.array([(a, b) for (i, j), a in cells.items() for nb in ((i + 1, j), (i, j + 1))
+                      if (b := cells.get(nb)) is not None and not np.array_equal(pts[a], pts[b])])
+    if len(steps) == 0:
+        return False
+    a = pts[steps[:, 0]]
+    d = pts[steps[:, 1]] - a  # (E, 2): the block's steps
+    l2 = (d * d).sum(axis=1)[:, None]
+    rel = pts[near][None, :, :] - a[:, None, :]  # (E, M, 2)
+    t = (rel[..., 0] * d[:, None, 0] + rel[..., 1] * d[:, None, 1]) / l2
+    off = np.abs(rel[..., 0] * d[:, None, 1] - rel[..., 1] * d[:, None, 0]) / np.sqrt(l2)
+    between = (t > 0.2) & (t < 0.8) & (off < TOLERANCE * np.sqrt((rel * rel).sum(axis=2)))
+    between &= (near[None, :] != steps[:, :1]) & (near[None, :] != steps[:, 1:])  # not the step's own ends
+    return bool(between.any())
 
 
 def _bent_pairs(steps: np.ndarray, ln: np.ndarray, contrast: np.ndarray | None) -> list[tuple]:
@@ -163,7 +199,7 @@ def place_bent_seed(lat: GrowingGrid, k: int, neighbours: np.ndarray, contrast: 
         if np.any(found < 0):
             continue
         got.update({c: int(q) for c, q in zip(diag, found)})
-        if len(set(got.values()) | {k}) < 9:
+        if len(set(got.values()) | {k}) < 9 or double_step(lat.pts, {(0, 0): k, **got}):
             continue
         lat.take((0, 0), k)
         for cell, q in got.items():
