@@ -121,22 +121,22 @@ def double_step(pts: np.ndarray, cells: dict) -> bool:
     lies within the tolerance, the one between (at 22 px) beyond it, and the block would seed a grid
     with a line missing, which then grows no further than half the board.
     """
-    at = np.array(list(cells.values()))
-    centre = pts[at].mean(axis=0)
-    # a point between two cells lies within 1.5 times the farthest cell's distance from the block's centre
-    reach = 1.5**2 * float(((pts[at] - centre) ** 2).sum(axis=1).max())
-    near = np.flatnonzero(((pts - centre) ** 2).sum(axis=1) <= reach)
-    steps = np.array([(a, b) for (i, j), a in cells.items() for nb in ((i + 1, j), (i, j + 1))
-                      if (b := cells.get(nb)) is not None and not np.array_equal(pts[a], pts[b])])
+    steps = np.array([(a, b) for (i, j), a in cells.items() for b in (cells.get((i + 1, j)), cells.get((i, j + 1)))
+                      if b is not None])
     if len(steps) == 0:
         return False
+    block = pts[np.array(list(cells.values()))]
+    centre = block.mean(axis=0)
+    # a point between two cells lies within 1.5 times the farthest cell's distance from the block's centre
+    reach = 1.5**2 * float(((block - centre) ** 2).sum(axis=1).max())
+    near = np.flatnonzero(((pts - centre) ** 2).sum(axis=1) <= reach)
     a = pts[steps[:, 0]]
     d = pts[steps[:, 1]] - a  # (E, 2): the block's steps
     l2 = (d * d).sum(axis=1)[:, None]
     rel = pts[near][None, :, :] - a[:, None, :]  # (E, M, 2)
-    t = (rel[..., 0] * d[:, None, 0] + rel[..., 1] * d[:, None, 1]) / l2
-    off = np.abs(rel[..., 0] * d[:, None, 1] - rel[..., 1] * d[:, None, 0]) / np.sqrt(l2)
-    between = (t > 0.2) & (t < 0.8) & (off < TOLERANCE * np.sqrt((rel * rel).sum(axis=2)))
+    t = (rel[..., 0] * d[:, None, 0] + rel[..., 1] * d[:, None, 1]) / np.maximum(l2, 1e-12)
+    off = np.abs(rel[..., 0] * d[:, None, 1] - rel[..., 1] * d[:, None, 0]) / np.sqrt(np.maximum(l2, 1e-12))
+    between = (t > 0.2) & (t < 0.8) & (off < TOLERANCE * np.sqrt((rel * rel).sum(axis=2))) & (l2 >= 1e-12)
     between &= (near[None, :] != steps[:, :1]) & (near[None, :] != steps[:, 1:])  # not the step's own ends
     return bool(between.any())
 
