@@ -8,7 +8,9 @@ aligned to the truth as evaluate scores it (a hit: every corner within 2 px; wro
 gets its contrast over the noise about it (``cnr``, :func:`aicalib_tf.detect.corners.contrast.corner_contrast`) and its
 error. Prints per split: the corners per cnr band (their errors' median, 90th percentile, largest, RMS per axis, and
 the median localisation bound), then per floor the full boards that refusing the corners under it would turn into
-partial boards (hits and wrong boards), and the CPU time of the measure per board. ``--show`` lists each wrong
+partial boards (hits and wrong boards), the least ``z`` of a hit's corner and of each wrong board's (a corner under
+−``REVERSED_Z`` is refused: :func:`aicalib_tf.detect.corners.contrast.without_reversed`), and the CPU time of the
+measure per board. ``--show`` lists each wrong
 board's worst corner and each refused hit's faintest.
 """
 
@@ -30,7 +32,7 @@ BANDS = (-np.inf, 1.0, 2.0, 3.0, 5.0, 10.0, np.inf)
 
 
 def board_rows(split: str, names: list[str], seed: int, count: int, model):
-    """Yield (family, index, errors (N,), cnr (N,), bound (N,), CPU s of the measure) for each full board found."""
+    """Yield (family, index, errors (N,), cnr (N,), bound (N,), CPU s of the measure, z (N,)) for each full board found."""
     import closeup_families as cf
     from aicalib_tf import detect_corners
     from aicalib_tf.bench.metrics import align_to_truth
@@ -51,7 +53,7 @@ def board_rows(split: str, names: list[str], seed: int, count: int, model):
             t0 = time.process_time()
             m = corner_contrast(gray, aligned, ids)
             cpu = time.process_time() - t0
-            yield name, index, np.linalg.norm(aligned - truth, axis=1), m["cnr"], m["bound"], cpu
+            yield name, index, np.linalg.norm(aligned - truth, axis=1), m["cnr"], m["bound"], cpu, m["z"]
 
 
 def report(split: str, boards: list, floors: list[float], show: bool) -> None:
@@ -71,6 +73,10 @@ def report(split: str, boards: list, floors: list[float], show: bool) -> None:
     for f in floors:
         low = [b for b in boards if np.nanmin(np.append(b[3], np.inf)) < f]
         print(f"| {f:g} | {sum(b[2].max() <= 2.0 for b in low)} | {sum(b[2].max() > 2.0 for b in low)} |")
+    least = [np.nanmin(np.append(b[6], np.inf)) for b in boards]
+    hits = [z for z, b in zip(least, boards) if b[2].max() <= 2.0]
+    print(f"least z of a corner: hits {min(hits, default=np.inf):.2f}; wrong boards "
+          + ", ".join(f"{z:.2f}" for z, b in zip(least, boards) if b[2].max() > 2.0))
     cpu = np.array([b[5] for b in boards])
     print(f"measure CPU per board: median {1e6 * np.median(cpu):.0f} us, largest {1e6 * cpu.max():.0f} us")
     if show:

@@ -92,8 +92,9 @@ them where its homography predicts a junction, :mod:`aicalib_tf.detect.chessboar
 (:func:`aicalib_tf.detect.chessboard.occlusion.object_in_front`: sectors out of the board's alternation
 and a ring unlike its neighbours') is passed over, on its scale and again at full size. A full board's corners
 off the smooth grid of their neighbours (:func:`aicalib_tf.detect.chessboard.smooth_grid.without_off_grid`: over
-1.5 px and 0.1 of a step from their lines' cubic interpolation, a point on an object's edge) are left out: it
-comes back a partial board.
+1.5 px and 0.1 of a step from their lines' cubic interpolation, a point on an object's edge) are left out, and so are
+its corners whose squares have the colours of the other parity (:func:`aicalib_tf.detect.corners.contrast.without_reversed`:
+a rim corner placed a square off): it comes back a partial board.
 
 Without ``pattern_size``, the largest grid with every corner found is returned, complete, its
 size taken as the pattern (columns counted along the grid direction nearer the image's x axis,
@@ -114,6 +115,7 @@ import numpy as np
 from aicalib_tf.cnn.spec import DETECTOR_NETWORK
 from aicalib_tf.detect.chessboard.board_order import full_board, order_full_board
 from aicalib_tf.detect.corners.sigma import with_sigmas
+from aicalib_tf.detect.corners.contrast import without_reversed
 from aicalib_tf.detect.detection import NO_CANDIDATES, NO_GRID, NO_MATCH, REASONS, UNDECIDED, Detection, from_charuco
 from aicalib_tf.detect.chessboard.grid import MIN_CORNERS, Grid, assemble_grids, full_subgrid
 from aicalib_tf.detect.corners.junctions import dedupe, nearest_spacing, proposer, typical_amplitude
@@ -216,7 +218,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
             if det.complete and pattern_size is not None and object_in_front_at(frame.region, (w, h), corners, pattern_size):
                 continue  # at full size, a corner on an object's edge: the finer scales
         if det.complete and pattern_size is not None:  # less its corners off the grid of their neighbours
-            return without_off_grid(with_sigmas(_polished(det, frame), frame), NO_MATCH)
+            return without_reversed(without_off_grid(with_sigmas(_polished(det, frame), frame), NO_MATCH), frame)
         if f in quick:  # a quick pass counts only with a complete board
             continue
         if not det.found:

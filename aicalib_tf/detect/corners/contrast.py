@@ -24,12 +24,14 @@ distance to a noise saddle). This module measures, in each corner's refinement w
   across it; each of the junction's two lines crosses the window's 2r px, so σ_loc = (noise / contrast) ·
   √(√π σ_b / r) (σ_b = ``EDGE`` px, a sharp render's edge: a lower bound, blur only raises it).
 
-A detection's σ is at least this bound (:func:`aicalib_tf.detect.corners.sigma.board_sigmas`). It is no floor on
+A detection's σ is at least this bound (:func:`aicalib_tf.detect.corners.sigma.board_sigmas`). The cnr is no floor on
 which corners a board keeps: on the close-up families (``benchmarks/faint_corners.py``: seed 301, both lens
 splits, the shipped network and a fine-tuned one) corners of cnr 1–2 miss their truth by a median 0.4–0.7 px
-and up to 2.07 px, their saddle fits started a px or two apart end on different noise saddles, and a fine-tuned
-network's two wrong boards (a corner of cnr 1.9 and one of 0.9, 2.07 px off) are the tail of that spread:
-every floor that refuses them refuses as many boards or more whose corners as faint ended within 2 px.
+and up to 2.07 px, their saddle fits started a px or two apart end on different noise saddles, and the fine-tuned
+network's two wrong boards there (a corner of cnr 1.9 and one of 0.9, 2.07 px off) are the tail of that spread:
+a floor of 2 that refuses both also refuses 16 of its 296 hits (the shipped network's: 12 of 292). A corner whose
+sectors show the other colour order (``z`` under −``REVERSED_Z``) is no junction of the board in that place, and
+:func:`without_reversed` leaves it out of a full board.
 
 Coordinates are (x, y) px with the centre of pixel (0, 0) at (0.0, 0.0).
 """
@@ -42,8 +44,8 @@ import numpy as np
 
 from aicalib_tf.detect.corners.refine import window_radius
 
-__all__ = ["GAP", "EDGE", "MIN_SECTOR", "local_noise", "lattice_directions", "sector_contrast", "corner_contrast",
-           "board_contrast"]
+__all__ = ["GAP", "EDGE", "MIN_SECTOR", "REVERSED_Z", "local_noise", "lattice_directions", "sector_contrast",
+           "corner_contrast", "board_contrast", "without_reversed"]
 
 GAP = 0.75  # px: pixels nearer than this to either line through the corner are left out of the sector means
 EDGE = 1.0  # px: the edge σ the bound takes (a sharp render's; blur only raises the bound)
@@ -206,3 +208,25 @@ def board_contrast(image, corners: np.ndarray, ids: np.ndarray, size: tuple[int,
     return corner_contrast(region(x0, y0, x1, y1), pts - np.array([x0, y0], np.float64), ids, nearest_spacing(pts),
                            step=1.0 / 255.0)
 
+
+
+REVERSED_Z = 3.0  # standard errors: a corner whose sectors show the other colour order by more is not this board's junction
+
+
+def without_reversed(det, image):
+    """A complete detection (:class:`~aicalib_tf.detect.detection.Detection`) without its corners whose sectors have the
+    colours of the other parity (``z`` under −``REVERSED_Z``, :func:`board_contrast`): a junction of the board's
+    neighbouring order, or none, in the place of this one (a close-up's rim corner placed a square off: 8 px). As it is
+    when it has none (or is not complete), else a partial board (complete False) without them. image : as
+    :func:`board_contrast`. Over the close-up families (seeds 301 and 97, both lens splits, the shipped network and a
+    fine-tuned one) no hit has such a corner: the least z of a hit's corner is positive.
+    """
+    from dataclasses import replace
+
+    if not det.complete or not len(det.corners):
+        return det
+    keep = ~(board_contrast(image, det.corners, det.ids, det.image_size)["z"] < -REVERSED_Z)  # NaN: unmeasured, stays
+    if keep.all():
+        return det
+    return replace(det, corners=det.corners[keep], ids=det.ids[keep], scores=det.scores[keep], complete=False,
+                   sigmas=None if det.sigmas is None else det.sigmas[keep])

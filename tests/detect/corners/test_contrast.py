@@ -71,3 +71,25 @@ def test_sharply_meeting_lines_leave_the_contrast_unmeasured_not_refused():
     thin = counts.min(axis=1) < cc.MIN_SECTOR
     assert thin.any() and not thin.all()
     assert np.all(np.isnan(contrast[thin])) and np.all(np.isfinite(contrast[~thin]))
+
+
+def test_a_full_board_loses_only_its_corners_of_the_other_colour_order():
+    from aicalib_tf.detect.detection import Detection
+
+    img, pts, ids = _board(40.0, 3.0)
+    gray = (np.clip(np.round(img), 0, 255) / 255.0).astype(np.float32)
+
+    def region(x0, y0, x1, y1):
+        return gray[y0:y1, x0:x1]
+
+    det = Detection(pts.astype(np.float32), ids.astype(np.int32), np.ones(len(pts), np.float32), (5, 5), True, (240, 240),
+                    sigmas=np.full(len(pts), 0.1, np.float32))
+    assert cc.without_reversed(det, region) is det  # every corner a junction of the board's order
+    moved = pts.copy()
+    moved[12] += 0.5 * ((pts[13] - pts[12]) + (pts[17] - pts[12]))  # a square's middle: no junction there
+    moved[0] = pts[0] - (pts[1] - pts[0])  # a square beyond the board: the next junction, of the other colour order
+    kept = cc.without_reversed(Detection(moved.astype(np.float32), ids.astype(np.int32), det.scores, (5, 5), True,
+                                         (240, 240), sigmas=det.sigmas), region)
+    assert not kept.complete and len(kept.corners) == len(pts) - 1
+    np.testing.assert_array_equal(kept.ids, ids[1:])  # the one in a square's middle is faint, not reversed
+    assert len(kept.sigmas) == len(kept.corners)
