@@ -21,9 +21,11 @@ corner is too faint for the noise, or its outer squares are sheared into slivers
 flatter than its neighbours' (:func:`flat_placed`), and the grid is then left as it is. Started
 far from a board corner whose squares shrink faster than the lines lead, it can stop on the noise
 inside one dark outer square: the ring about it of half the usual radius, which a junction's own
-four squares fill, then keeps a fraction of its neighbours' amplitude (:func:`faint_placed`). Both
-tests also hold for the grid's own corners that no network point marks (the ring test proposed
-them): a rim corner the grid holds 1 px off on an edge leads the completion astray.
+four squares fill, then keeps a fraction of its neighbours' amplitude (:func:`faint_placed`). Where
+the fit slid along an edge of its light square, that ring's four arcs between the grid's lines do
+not alternate light and dark (:func:`quadrant_split`). These tests also hold for the grid's own
+corners that no network point marks (the ring test proposed them): a rim corner the grid holds
+1 px off on an edge leads the completion astray.
 
 A full board claims every corner in view. Where an object in front cuts the board, the grid may
 hold points on the object's edge and miss a corner beside it, which this completion would then
@@ -44,7 +46,7 @@ from aicalib_tf.detect.corners.refine import Smoothed, refine_windowed, window_r
 from aicalib_tf.detect.corners.saddle import saddle_fit_matrix
 
 __all__ = ["complete_rim", "rim_board", "unlike_neighbours", "flat_placed", "saddle_sharpness", "grid_directions",
-           "neighbour_median", "faint_placed", "MAX_MISSING", "SHIFT", "PLACED_FLAT", "HALF_RING"]
+           "neighbour_median", "faint_placed", "quadrant_split", "MAX_MISSING", "SHIFT", "PLACED_FLAT", "HALF_RING"]
 
 MAX_MISSING = 3  # most corners of the outer ring placed here
 SHIFT = 0.34  # of the smallest local step: the farthest the saddle fit may move a prediction
@@ -248,7 +250,8 @@ def complete_rim(grid: Grid, shape: tuple[int, int], smoothed: Smoothed, ring_im
     when the grid's extent is not ``shape``, more than ``MAX_MISSING`` corners are missing, one is
     inside the outer ring, a corner's fit fails, a corner of the full grid is
     :func:`unlike_neighbours` (an object in front), or a placed one, or one of the grid's without a
-    candidate (index -1), is :func:`flat_placed` or :func:`faint_placed`.
+    candidate (index -1), is :func:`flat_placed` or :func:`faint_placed`, or splits no quadrants
+    (:func:`quadrant_split` 0 or less).
     """
     a, b = shape
     if grid.shape != (a, b) or len(grid) >= a * b or a * b - len(grid) > MAX_MISSING or min(a, b) < 4:
@@ -273,6 +276,8 @@ def complete_rim(grid: Grid, shape: tuple[int, int], smoothed: Smoothed, ring_im
         return None  # a fit left on an edge or a ridge short of the junction
     if faint_placed(points, ring_image, unsure).any():
         return None  # a fit left on the noise inside one square, short of the junction
+    if (quadrant_split(points, ring_image, unsure) <= 0.0).any():
+        return None  # no X-junction: an outer square darkened to black leaves an L-corner, and the fit slides along its edge
     return _as_grid(grid, full)
 
 
@@ -293,6 +298,36 @@ def faint_placed(points: np.ndarray, ring_image: np.ndarray, placed: list) -> np
     near = neighbour_median(amp)
     ii, jj = np.array(placed).T
     return amp[ii, jj] < AMP_RANGE[0] * near[ii, jj]
+
+
+def quadrant_split(points: np.ndarray, ring_image: np.ndarray, placed: list) -> np.ndarray:
+    """(len(placed),): how clearly each placed position [(i, j)] of a full grid ``points`` (a, b, 2) px is an
+    X-junction on ``ring_image`` (H, W): on the ring of :func:`faint_placed`, the mean grey of each of the four
+    arcs between the grid's lines through it (:func:`grid_directions`), the lighter opposite pair's darker arc
+    less the darker pair's lighter one, over the two pairs' difference of means. About 1 at a clean junction,
+    0 or less where one of the four squares is not the colour the order says: where the light falls to black
+    at a fisheye's rim, a board corner's outer square goes dark, the junction is an L-corner with no saddle,
+    and the fit slides along its edge (a rim corner 3.9 px off: -0.21; every other corner of that board 0.44
+    or more)."""
+    if not placed:
+        return np.zeros(0)
+    d = grid_directions(points)
+    k = 48
+    ang = np.arange(k) * (2 * np.pi / k)
+    ring = np.stack([np.cos(ang), np.sin(ang)], 1)
+    out = np.zeros(len(placed))
+    for n, (i, j) in enumerate(placed):
+        r = max(1.5, HALF_RING * 0.3 * float(np.hypot(*d[:, i, j].T).min()))
+        xy = (points[i, j] + r * ring).astype(np.float32)
+        grey = cv2.remap(ring_image, xy[:, :1], xy[:, 1:], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()
+        lines = np.sort(np.arctan2(d[:, i, j, 1], d[:, i, j, 0]) % (2 * np.pi))
+        arc = np.searchsorted(lines, ang, side="right") % 4  # arc t lies between lines t - 1 and t (mod 4)
+        means = np.array([grey[arc == t].mean() if (arc == t).any() else np.nan for t in range(4)])
+        pairs = means[[0, 2]], means[[1, 3]]
+        light, dark = pairs if pairs[0].sum() > pairs[1].sum() else pairs[::-1]
+        spread = light.mean() - dark.mean()
+        out[n] = (light.min() - dark.max()) / spread if spread > 0 else -1.0
+    return np.nan_to_num(out, nan=-1.0)
 
 
 def flat_placed(points: np.ndarray, gray: np.ndarray, placed: list) -> np.ndarray:

@@ -196,3 +196,39 @@ def test_the_grids_corners_without_a_network_point_are_checked_like_placed_ones(
     full = rim.complete_rim(grid, (6, 9), smoothed, smooth, ref)
     assert full is not None and seen == {"flat_placed": [(0, 8), (0, 7)], "faint_placed": [(0, 8), (0, 7)]}
     assert np.array_equal(full.index[full.index >= 0], grid.index[grid.index >= 0])
+
+
+def test_a_placed_corner_slid_along_an_edge_off_its_x_junction_splits_no_quadrants():
+    # closeup_laws with a full-strength cos⁴ fall-off (closeup_families.py vig-cos4, equidistant, seed 97 #11): the
+    # board corner (0, 8), step 20 px, was placed 3.9 px off along the edge of its light square, where the arcs
+    # of its ring do not alternate; sharpness, amplitude and asymmetry all passed there (a wrong board)
+    from aicalib_tf.detect.chessboard.rim import faint_placed, flat_placed, quadrant_split
+    from aicalib_tf.io import as_gray_float
+    from data_gen.presets import Rule, get_preset
+
+    laws = get_preset("closeup_laws")
+    rules = tuple(Rule.of(r.name, r.p, **{**dict(r.params), "law": "cos4", "strength": (0.97, 1.0)})
+                  if r.name == "rim_vignetting" else r for r in laws.rules)
+    preset = replace(laws, name="vig-cos4-tune", lens="fisheye", sizes=((640, 480),), rules=rules)
+    s = make_sample(preset, 97, 11, size=(640, 480), pattern=PATTERN)
+    gray = as_gray_float(s.image)
+    ring = Smoothed(gray).sigma(1.0)
+    points, placed = s.corners.reshape(6, 9, 2).astype(np.float64), [(0, 8), (5, 8), (0, 0), (5, 0)]
+    assert (quadrant_split(points, ring, [(i, j) for i in range(6) for j in range(9)]) > 0.4).all()
+    points[0, 8] = [450.44, 289.80]  # where the fit left it
+    assert quadrant_split(points, ring, placed)[0] < 0 and (quadrant_split(points, ring, placed)[1:] > 0.4).all()
+    assert not (unlike_neighbours(points, ring)[0, 8] or faint_placed(points, ring, placed[:1])[0]
+                or flat_placed(points, gray, placed[:1])[0])
+    assert len(quadrant_split(points, ring, [])) == 0
+
+
+def test_a_board_corner_whose_outer_square_is_black_splits_no_quadrants():
+    # an L-corner: the fit has no saddle to hold it; a clean X-junction splits its arcs by about 0.9
+    from aicalib_tf.detect.chessboard.rim import quadrant_split
+
+    points, ring = _rim_cut_board(-1.0)
+    assert (quadrant_split(points, ring, [(0, 0), (2, 2), (4, 4)]) > 0.8).all()
+    y, x = np.mgrid[:240, :240]
+    img = ring.copy()
+    img[(x < 40) & (y < 40)] = 0.2  # the square beyond the board corner (40, 40) as dark as its neighbours
+    assert quadrant_split(points, Smoothed(img).sigma(1.0), [(0, 0), (2, 2)]).tolist()[0] < 0
