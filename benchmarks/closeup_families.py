@@ -51,7 +51,6 @@ the total; ``--show`` one line per miss.
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from collections import Counter
@@ -207,41 +206,9 @@ def run_family(name: str, split: str, seed: int, count: int, model, show: bool) 
 
 
 def main(argv=None) -> int:
-    from stage_misses import STAGES
+    from stage_misses import families_main
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--split", choices=("tune", "held-out", "both"), default="both")
-    ap.add_argument("--count", type=int, default=12, help="images per family")
-    ap.add_argument("--seed", type=int, default=301, help="data_gen seed of the families' renders")
-    ap.add_argument("--families", default=None, help="comma-separated family names (default: all)")
-    ap.add_argument("--model", default=None, help="corner model (default: the shipped one)")
-    ap.add_argument("--show", action="store_true", help="one line per miss")
-    args = ap.parse_args(argv)
-    names = list(families()) if args.families is None else args.families.split(",")
-    unknown = [n for n in names if n not in families()]
-    if unknown or args.count < 1:
-        print(f"closeup_families: unknown families {unknown} (known: {', '.join(families())})" if unknown
-              else f"closeup_families: --count must be >= 1, got {args.count}", file=sys.stderr)
-        return 2
-    from aicalib_tf.cnn.model import load_model
-    from aicalib_tf.cnn.spec import DETECTOR_NETWORK
-
-    model = load_model(args.model or DETECTOR_NETWORK)
-    splits = ("tune", "held-out") if args.split == "both" else (args.split,)
-    print(f"| family | split | hit | wrong | miss | {' | '.join(STAGES)} | ms/image |\n|---|---|---|---|---|{'---|' * len(STAGES)}---|")
-    for split in splits:
-        total: Counter = Counter()
-        for name in names:
-            c = run_family(name, split, args.seed, args.count, model, args.show)
-            total.update(c)
-            n = c["hit"] + c["wrong"] + c["miss"]
-            print(f"| {name} | {split} | {c['hit']} | {c['wrong']} | {c['miss']} | "
-                  + " | ".join(str(c[s]) for s in STAGES) + f" | {1000 * c['seconds'] / n:.0f} |", flush=True)
-        n = total["hit"] + total["wrong"] + total["miss"]
-        print(f"| **all** | {split} | {total['hit']}/{n} ({100 * total['hit'] / n:.1f}%) | {total['wrong']} | "
-              f"{total['miss']} | " + " | ".join(str(total[s]) for s in STAGES)
-              + f" | {1000 * total['seconds'] / n:.0f} |", flush=True)
-    return 0
+    return families_main("closeup_families", __doc__, families(), run_family, argv)
 
 
 if __name__ == "__main__":

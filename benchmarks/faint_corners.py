@@ -16,7 +16,6 @@ board's worst corner and each refused hit's faintest.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -89,35 +88,28 @@ def report(split: str, boards: list, floors: list[float], show: bool) -> None:
                 print(f"  hit {b[0]} #{b[1]}: faintest corner {k} cnr {b[3][k]:.2f}, {b[2][k]:.2f} px off (board's largest {b[2].max():.2f})")
 
 
+def _floors(text: str) -> list[float]:
+    """The comma-separated cnr floors of ``text``; [] where one is not a number."""
+    try:
+        return [float(v) for v in text.split(",")]
+    except ValueError:
+        return []
+
+
 def main(argv=None) -> int:
     import closeup_families as cf
+    from stage_misses import family_parser, family_setup
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--split", choices=("tune", "held-out", "both"), default="both")
-    ap.add_argument("--count", type=int, default=12, help="images per family")
-    ap.add_argument("--seed", type=int, default=301, help="data_gen seed of the families' renders")
-    ap.add_argument("--families", default=None, help="comma-separated family names (default: all)")
-    ap.add_argument("--model", default=None, help="corner model (default: the shipped one)")
-    ap.add_argument("--floors", default="0.5,1,1.5,2,2.5", help="comma-separated cnr floors to count refusals for")
-    ap.add_argument("--show", action="store_true", help="each wrong board's worst corner, each refused hit's faintest")
-    args = ap.parse_args(argv)
-    names = list(cf.families()) if args.families is None else args.families.split(",")
-    unknown = [n for n in names if n not in cf.families()]
-    try:
-        floors = [float(v) for v in args.floors.split(",")]
-    except ValueError:
-        floors = []
-    if unknown or args.count < 1 or not floors:
-        why = (f"unknown families {unknown} (known: {', '.join(cf.families())})" if unknown else
-               f"--count must be >= 1, got {args.count}" if args.count < 1 else f"--floors must be numbers, got {args.floors!r}")
-        print(f"faint_corners: {why}", file=sys.stderr)
+    ap = family_parser(__doc__, ("--floors", {"default": "0.5,1,1.5,2,2.5",
+                                              "help": "comma-separated cnr floors to count refusals for"}),
+                       show="each wrong board's worst corner, each refused hit's faintest")
+    got = family_setup("faint_corners", ap, argv, cf.families(),
+                       check=lambda a: None if _floors(a.floors) else f"--floors must be numbers, got {a.floors!r}")
+    if got is None:
         return 2
-    from aicalib_tf.cnn.model import load_model
-    from aicalib_tf.cnn.spec import DETECTOR_NETWORK
-
-    model = load_model(args.model or DETECTOR_NETWORK)
-    for split in (("tune", "held-out") if args.split == "both" else (args.split,)):
-        report(split, list(board_rows(split, names, args.seed, args.count, model)), floors, args.show)
+    args, names, splits, model = got
+    for split in splits:
+        report(split, list(board_rows(split, names, args.seed, args.count, model)), _floors(args.floors), args.show)
     return 0
 
 

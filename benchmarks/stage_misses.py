@@ -232,5 +232,75 @@ def main(argv=None) -> int:
     return 0
 
 
+
+def family_parser(doc: str, *more: tuple[str, dict], show: str = "one line per miss") -> argparse.ArgumentParser:
+    """The family benchmarks' options (--split, --count, --seed, --families, --model), then each (flag, keywords)
+    of ``more``, then --show with the help ``show``; the description is ``doc``'s first line."""
+    ap = argparse.ArgumentParser(description=doc.split("\n")[0])
+    ap.add_argument("--split", choices=("tune", "held-out", "both"), default="both")
+    ap.add_argument("--count", type=int, default=12, help="images per family")
+    ap.add_argument("--seed", type=int, default=301, help="data_gen seed of the families' renders")
+    ap.add_argument("--families", default=None, help="comma-separated family names (default: all)")
+    ap.add_argument("--model", default=None, help="corner model (default: the shipped one)")
+    for flag, keywords in more:
+        ap.add_argument(flag, **keywords)
+    ap.add_argument("--show", action="store_true", help=show)
+    return ap
+
+
+def family_setup(prog: str, ap: argparse.ArgumentParser, argv, known: dict, check=None):
+    """Parse ``argv`` with ``ap`` (:func:`family_parser`): (args, family names, splits, the corner model), or None
+    after one line "``prog``: why" on stderr for a family not in ``known``, --count under 1 or ``check(args)``'s
+    message (None where the arguments are right)."""
+    args = ap.parse_args(argv)
+    names = list(known) if args.families is None else args.families.split(",")
+    unknown = [n for n in names if n not in known]
+    why = (f"unknown families {unknown} (known: {', '.join(known)})" if unknown else
+           f"--count must be >= 1, got {args.count}" if args.count < 1 else check(args) if check else None)
+    if why:
+        print(f"{prog}: {why}", file=sys.stderr)
+        return None
+    from aicalib_tf.cnn.model import load_model
+    from aicalib_tf.cnn.spec import DETECTOR_NETWORK
+
+    splits = ("tune", "held-out") if args.split == "both" else (args.split,)
+    return args, names, splits, load_model(args.model or DETECTOR_NETWORK)
+
+
+def print_family_tables(names: list[str], splits, run, extra: tuple[tuple[str, str], ...] = ()) -> None:
+    """One table row per family of ``names`` and split of ``splits`` (``run(name, split)``: its Counter of hit /
+    wrong / miss, blamed stages and "seconds") and each split's total: the outcomes, the stages, a column per
+    (header, Counter key) of ``extra``, and ms per image."""
+    heads = list(STAGES) + [head for head, _ in extra]
+    print(f"| family | split | hit | wrong | miss | {' | '.join(heads)} | ms/image |\n"
+          f"|---|---|---|---|---|{'---|' * len(heads)}---|")
+
+    def row(c: Counter, first: str) -> str:
+        n = c["hit"] + c["wrong"] + c["miss"]
+        cells = [str(c[s]) for s in STAGES] + [str(c[key]) for _, key in extra] + [f"{1000 * c['seconds'] / n:.0f}"]
+        return f"| {first} | {c['wrong']} | {c['miss']} | " + " | ".join(cells) + " |"
+
+    for split in splits:
+        total: Counter = Counter()
+        for name in names:
+            c = run(name, split)
+            total.update(c)
+            print(row(c, f"{name} | {split} | {c['hit']}"), flush=True)
+        n = total["hit"] + total["wrong"] + total["miss"]
+        print(row(total, f"**all** | {split} | {total['hit']}/{n} ({100 * total['hit'] / n:.1f}%)"), flush=True)
+
+
+def families_main(prog: str, doc: str, known: dict, run_family, argv=None, extra: tuple[tuple[str, str], ...] = ()) -> int:
+    """A family benchmark's main: :func:`family_parser` options, then :func:`print_family_tables` of
+    ``run_family(name, split, seed, count, model, show)`` over the chosen families of ``known``; 2 on bad arguments."""
+    got = family_setup(prog, family_parser(doc), argv, known)
+    if got is None:
+        return 2
+    args, names, splits, model = got
+    print_family_tables(names, splits, lambda name, split: run_family(name, split, args.seed, args.count, model, args.show),
+                        extra)
+    return 0
+
+
 if __name__ == "__main__":
     sys.exit(main())
