@@ -127,7 +127,7 @@ from aicalib_tf.detect.chessboard.smooth_grid import without_off_grid
 from aicalib_tf.detect.chessboard.shading import flattened_look
 from aicalib_tf.detect.pyramid import Frame, boards_coarse_to_fine, quick_scales, quick_shift, refine_full, scales, to_full
 from aicalib_tf.detect.corners.refine import Smoothed, polish_in_region, refine_candidates
-from aicalib_tf.detect.chessboard.unshear import refine_rectified, second_look as unshear_look
+from aicalib_tf.detect.chessboard.unshear import refine_rectified, second_look as unshear_look, thin_not_sheared
 from aicalib_tf.detect.chessboard.zoom import zoomed_look
 from aicalib_tf.io import read_image
 
@@ -208,7 +208,7 @@ def detect_corners(image, pattern_size: tuple[int, int] | None = None, *, model=
         look = bind(_second_looks, frame.gray, pattern_size, model, threshold) if f == 1 and pattern_size is not None else None
         net = (getattr(model, "quick", None) or model) if f in quick else model  # the quick passes' own network
         det = _detect_at(frame.reduced(f), pattern_size, net, threshold, second_look=look, relative=relative, full_only=f in quick)
-        det = _unsheared(frame.gray, pattern_size, model, threshold, det) if look and not (det.complete or relative) else det
+        det = _unsheared_clear(frame, pattern_size, model, threshold, det) if look and not (det.complete or relative) else det
         if det.found and f > 1:
             corners, ok = refine_full(frame, to_full(det.corners, f), max_shift=quick_shift(f) if f in quick else 2.0)
             if not ok.all():  # a corner left at its coarse place may be px off: try the finer scales
@@ -255,6 +255,18 @@ def _second_looks(gray: np.ndarray, pattern_size: tuple[int, int], model, thresh
     full = bind(_detect_at, pattern_size=pattern_size, model=model, threshold=threshold, partial_above=sum(pattern_size) ** 2)
     marks = bind(weak_corner_points, model, threshold=threshold, weak=WEAK * threshold)
     return look if look is not None and look.complete else (flattened_look(gray, pattern_size, largest, others, full, marks) or look)
+
+
+def _unsheared_clear(frame: Frame, pattern_size: tuple[int, int], model, threshold: float, seen: Detection) -> Detection:
+    """:func:`_unsheared` on the full-size ``frame``; a board looked at for a thin square alone (a close-up's squeezed
+    rim, :func:`~aicalib_tf.detect.chessboard.unshear.thin_not_sheared`) is kept only where no corner lies on an
+    object's edge (:func:`~aicalib_tf.detect.chessboard.occlusion.object_in_front_at`: a corner filled under an object,
+    say), else ``seen``. A sheared board's thin junctions are beyond that test."""
+    det = _unsheared(frame.gray, pattern_size, model, threshold, seen)
+    if det is not seen and thin_not_sheared(seen.ids if seen.found else None, seen.corners if seen.found else None) \
+            and object_in_front_at(frame.region, frame.size, det.corners, pattern_size):
+        return seen
+    return det
 
 
 def _unsheared(gray: np.ndarray, pattern_size: tuple[int, int], model, threshold: float, seen: Detection) -> Detection:

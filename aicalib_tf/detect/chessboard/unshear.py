@@ -51,7 +51,7 @@ import numpy as np
 
 from aicalib_tf.detect.chessboard.unshear_fill import filled_board
 
-__all__ = ["MAX_ANGLE", "MAX_STEP_RATIO", "lattice_axes", "is_sheared", "lattice_map", "texture_quads", "quad_map",
+__all__ = ["MAX_ANGLE", "MAX_STEP_RATIO", "lattice_axes", "is_sheared", "thin_not_sheared", "lattice_map", "texture_quads", "quad_map",
            "warp", "from_warp", "candidate_maps", "second_look",
            "refine_rectified"]
 
@@ -306,6 +306,17 @@ def thinnest_square(ids: np.ndarray, points: np.ndarray) -> float:
     area = 0.5 * (np.abs(a[..., 0] * d[..., 1] - a[..., 1] * d[..., 0]) + np.abs(d[..., 0] * b[..., 1] - d[..., 1] * b[..., 0]))
     side = np.maximum.reduce([np.linalg.norm(x, axis=-1) for x in (a, b, g[1:, 1:] - g[1:, :-1], g[1:, 1:] - g[:-1, 1:])])
     return float((area / np.maximum(side, 1e-9)).min())
+
+
+def thin_not_sheared(ids: np.ndarray | None, corners: np.ndarray | None) -> bool:
+    """Whether a partial board, ids (K, 2) int and corners (K, 2) px (or None), gets the lattice warp for a thin
+    square alone (:func:`candidate_maps`): it spans the lattice and its steps are not sheared (:func:`is_sheared`),
+    as a close-up's squeezed rim; its junctions are then square enough for the object test of a steep board's
+    look to read them (:func:`aicalib_tf.detect.chessboard.occlusion.object_in_front`)."""
+    if not _spans(ids):
+        return False
+    _, u, v = lattice_axes(ids, corners)
+    return not is_sheared(u, v)
 
 
 def _spans(ids) -> bool:
