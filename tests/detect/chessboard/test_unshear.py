@@ -200,3 +200,14 @@ def test_a_small_board_seen_nearly_edge_on_is_found_whole_by_its_texture_sliver(
     assert det.complete and board_detection_outcome(det.corners, s.corners, PATTERN)[0] == "hit"
     monkeypatch.setattr(unshear, "ENERGY_SHARES", (0.25,))
     assert not pipeline.detect_corners(s.image, PATTERN).complete
+
+
+def test_only_a_board_thin_but_not_sheared_is_held_to_the_object_test():
+    from aicalib_tf.detect.chessboard.unshear import thin_not_sheared
+
+    ids = np.stack(np.meshgrid(np.arange(4), np.arange(3)), -1).reshape(-1, 2)
+    square = 10.0 + 20.0 * ids.astype(np.float64)  # a close-up's lattice: square steps
+    sheared = 10.0 + ids @ np.array([[20.0, 0.0], [18.0, 4.0]])  # axes meeting at about 13°: a steep board
+    assert thin_not_sheared(ids, square)
+    assert not thin_not_sheared(ids, sheared)
+    assert not thin_not_sheared(None, None) and not thin_not_sheared(ids[:4], square[:4])  # no lattice to judge
