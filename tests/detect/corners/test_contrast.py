@@ -93,3 +93,17 @@ def test_a_full_board_loses_only_its_corners_of_the_other_colour_order():
     assert not kept.complete and len(kept.corners) == len(pts) - 1
     np.testing.assert_array_equal(kept.ids, ids[1:])  # the one in a square's middle is faint, not reversed
     assert len(kept.sigmas) == len(kept.corners)
+
+
+def test_a_frames_board_is_measured_once_and_another_frame_afresh():
+    from aicalib_tf.detect.pyramid import Frame
+
+    img, pts, ids = _board(40.0, 3.0)
+    gray = np.clip(np.round(img), 0, 255).astype(np.uint8)
+    frame, other = Frame(gray), Frame(gray.copy())
+    first = cc.board_contrast(frame, pts, ids, (240, 240))
+    assert cc.board_contrast(frame, pts, ids, (240, 240)) is first  # the detector's second question: the memo
+    again = cc.board_contrast(other, pts, ids, (240, 240))
+    assert again is not first and np.array_equal(again["z"], first["z"], equal_nan=True)
+    moved = cc.board_contrast(frame, pts + 0.5, ids, (240, 240))  # other corners: measured again
+    assert moved is not first and not np.array_equal(moved["contrast"], first["contrast"])
