@@ -16,7 +16,8 @@ import numpy as np
 
 from aicalib_tf.io import quantize
 
-from .sensor import astigmatism, bayer_demosaic, circle_edge, field_defocus, lateral_ca, tone_curve, unsharp
+from .sensor import (astigmatism, bayer_demosaic, blend_blurred, circle_edge, field_defocus, lateral_ca, tone_curve,
+                     unsharp)
 
 __all__ = ["gaussian_noise", "shot_noise", "gaussian_blur", "motion_blur", "defocus", "contrast", "illumination_gradient", "vignetting", "shadow", "exposure", "jpeg", "salt_pepper", "circle_falloff", "rim_vignetting", "field_blur", "depth_blur", "glare", "apply_degradations", "DEGRADATIONS", "PIPELINE_ORDER", "CIRCLE_STEPS",
            "PLANE_STEPS"]
@@ -106,17 +107,7 @@ def field_blur(img: np.ndarray, rng: np.random.Generator, *, sigma_centre: float
     rho = np.minimum(_circle_rho(img.shape, cx, cy, radius), 1.0)
     sigma = sigma_centre + (sigma_rim - sigma_centre) * rho ** np.float32(power)
     levels = np.linspace(min(sigma_centre, sigma_rim), max(sigma_centre, sigma_rim), 6)
-    if levels[-1] - levels[0] < 1e-6:
-        return gaussian_blur(img, None, sigma=float(levels[0]))
-    stack = [gaussian_blur(img, None, sigma=float(s)) for s in levels]
-    pos = np.clip((sigma - levels[0]) / (levels[1] - levels[0]), 0.0, len(levels) - 1.0 - 1e-6)
-    i = pos.astype(np.int32)
-    frac = (pos - i).astype(np.float32)
-    out = np.zeros_like(img, dtype=np.float32)
-    for k in range(len(levels) - 1):
-        m = i == k
-        out[m] = stack[k][m] * (1.0 - frac[m]) + stack[k + 1][m] * frac[m]
-    return out
+    return blend_blurred(sigma, levels, lambda s: gaussian_blur(img, None, sigma=s))
 
 
 def _blur_by(img: np.ndarray, sigma: np.ndarray, levels: int = 6) -> np.ndarray:

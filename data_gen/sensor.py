@@ -91,13 +91,20 @@ def field_defocus(img: np.ndarray, rng: np.random.Generator, *, radius_centre: f
             return img.astype(np.float32, copy=True)
         return cv2.filter2D(img.astype(np.float32), -1, disc_kernel(rad), borderType=cv2.BORDER_REFLECT)
 
+    return blend_blurred(r, levels, blurred)
+
+
+def blend_blurred(value: np.ndarray, levels: np.ndarray, blurred) -> np.ndarray:
+    """(H, W) float32: an image blurred pixel by pixel by a varying amount ``value`` (H, W), as a blend of uniformly
+    blurred copies ``blurred(level) -> (H, W) float32`` at ``levels`` (L,), evenly spaced and increasing, linear
+    between the two copies about each pixel's value (clipped to the levels' range); one copy when they are equal."""
     if levels[-1] - levels[0] < 1e-6:
         return blurred(float(levels[0]))
     stack = [blurred(float(v)) for v in levels]
-    pos = np.clip((r - levels[0]) / (levels[1] - levels[0]), 0.0, len(levels) - 1.0 - 1e-6)
+    pos = np.clip((value - levels[0]) / (levels[1] - levels[0]), 0.0, len(levels) - 1.0 - 1e-6)
     i = pos.astype(np.int32)
     frac = (pos - i).astype(np.float32)
-    out = np.zeros_like(img, dtype=np.float32)
+    out = np.zeros_like(stack[0], dtype=np.float32)
     for k in range(len(levels) - 1):
         m = i == k
         out[m] = stack[k][m] * (1.0 - frac[m]) + stack[k + 1][m] * frac[m]
